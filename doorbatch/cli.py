@@ -1,0 +1,187 @@
+"""The ``doorbatch`` command line: thin click commands, one library call each.
+
+Errors: a :class:`~doorbatch.errors.DoorbatchError` becomes one ``error:`` line on stderr and its exit
+code (DESIGN.md: 2 usage/config, 3 bad input, 4 partial batch); any other exception is a bug: one line
+on stderr and the traceback in the log file.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import logging
+import sys
+import tempfile
+import traceback
+from collections.abc import Callable
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any, TypeVar
+
+import click
+
+from doorbatch import __version__
+from doorbatch.config import DoorbatchConfig, load_config
+from doorbatch.errors import DoorbatchError, ExitCode, LogContentError
+from doorbatch.progress import set_progress_enabled
+
+log = logging.getLogger("doorbatch")
+F = TypeVar("F", bound=Callable[..., Any])
+CRASH_LOG = Path(tempfile.gettempdir()) / "doorbatch-crash.log"
+
+
+class Context:
+    """What every command gets from the common options."""
+
+    def __init__(self, config: DoorbatchConfig, as_json: bool, quiet: bool) -> None:
+        self.config = config
+        self.as_json = as_json
+        self.quiet = quiet
+
+    def summary(self, line: str, data: dict[str, Any]) -> None:
+        """The one-line summary at the end of a command, or the JSON summary with ``--json``."""
+        if self.as_json:
+            click.echo(json.dumps(data, indent=2, default=str))
+        elif not self.quiet:
+            click.echo(line)
+
+
+def _setup_logging(verbosity: int) -> None:
+    level = logging.WARNING - 10 * verbosity
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("%(levelname)s: %(message)s"))
+    root = logging.getLogger("doorbatch")
+    root.handlers[:] = [handler]
+    root.setLevel(max(logging.DEBUG, min(logging.ERROR, level)))
+
+
+def common_options(func: F) -> F:
+    """``--config``, ``--set``, ``-v/-q``, ``--json``; resolves the config into a :class:`Context`."""
+
+    @click.option("--config", "config_file", type=click.Path(path_type=Path, dir_okay=False),
+                  help="YAML merged over the defaults.")
+    @click.option("--set", "overrides", multiple=True, metavar="SECTION.KEY=VALUE", help="Override one key.")
+    @click.option("-v", "--verbose", count=True, help="More log output (repeatable).")
+    @click.option("-q", "--quiet", count=True, help="Less output.")
+    @click.option("--json", "as_json", is_flag=True, help="Machine-readable summary on stdout.")
+    @functools.wraps(func)
+    def wrapper(config_file: Path | None, overrides: tuple[str, ...], verbose: int, quiet: int, as_json: bool,
+                **kwargs: Any) -> Any:
+        _setup_logging(verbose - quiet)
+        set_progress_enabled(not quiet and not as_json)
+        config = load_config(config_file, overrides)
+        return func(Context(config, as_json, quiet > 0), **kwargs)
+
+    return wrapper  # type: ignore[return-value]
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="doorbatch")
+def cli() -> None:
+    """doorbatch: door-aware maps, localization with door states, door poses and metrics from robot logs."""
+
+
+@cli.command("inspect")
+@click.argument("log_path", metavar="LOG", type=click.Path(path_type=Path))
+@common_options
+def inspect_cmd(ctx: Context, log_path: Path) -> None:
+    """Topics, types, counts, rates, duration, detected roles and problems of LOG."""
+    from doorbatch.io.inspect import inspect_log
+    from doorbatch.progress import progress_bar
+
+    with progress_bar(None, f"inspect {log_path.name}") as bar:
+        report = inspect_log(log_path, ctx.config, progress=bar.update)
+    if ctx.as_json:
+        click.echo(json.dumps(report.to_dict(), indent=2))
+    elif not ctx.quiet:
+        click.echo(_format_report(report))
+    if report.errors:
+        first = report.errors[0]
+        more = f" (+{len(report.errors) - 1} more)" if len(report.errors) > 1 else ""
+        raise LogContentError(first.message + more, path=log_path, topic=first.topic)
+
+
+def _format_report(report: Any) -> str:
+    lines = [
+        f"Files:      {report.path}",
+        f"Storage:    {report.storage}",
+        f"Size:       {report.size_bytes / 1024:.1f} KiB",
+        f"Duration:   {report.duration_s:.3f} s",
+        f"Start:      {report.start_ns / 1e9:.6f} s",
+        f"End:        {report.end_ns / 1e9:.6f} s",
+        f"Messages:   {report.message_count}",
+        "Topics:",
+    ]
+    width = max((len(t.name) for t in report.topics), default=10)
+    for t in report.topics:
+        role = f"role {t.role} ({t.why})" if t.role else "unused"
+        lines.append(f"  {t.name:<{width}}  {t.msgtype:<36} {t.count:>8} msgs {t.rate_hz:8.2f} Hz  {role}")
+    lines.append(f"Frames:     {', '.join(report.frames) or '-'}")
+    lines.append("Problems:" if report.problems else "Problems:   none")
+    for p in report.problems:
+        lines.append(f"  {p.severity.value:<7} {p.topic + ': ' if p.topic else ''}{p.message}")
+    return "\n".join(lines)
+
+
+@cli.command("convert")
+@click.argument("source", metavar="IN", type=click.Path(path_type=Path))
+@click.option("-o", "--output", type=click.Path(path_type=Path), required=True, help="Output .mcap file.")
+@common_options
+def convert_cmd(ctx: Context, source: Path, output: Path) -> None:
+    """Convert a CARMEN log or a ROS 1/2 bag to MCAP (ROS 2 CDR)."""
+    from doorbatch.io.convert import convert_log
+
+    if output.suffix != ".mcap":
+        raise click.BadParameter("the output must be a .mcap file", param_hint="-o")
+    summary = convert_log(source, output, ctx.config)
+    for warning in summary.warnings:
+        log.warning("%s: %s", source, warning)
+    ctx.summary(f"converted {summary.messages} messages on {len(summary.topics)} topics from "
+                f"{summary.storage} to {output}", asdict(summary))
+
+
+@cli.command("config")
+@click.option("--dump", is_flag=True, help="Print the resolved configuration as YAML.")
+@common_options
+def config_cmd(ctx: Context, dump: bool) -> None:
+    """Show the resolved configuration (defaults merged with --config and --set)."""
+    import yaml
+
+    if ctx.as_json:
+        click.echo(json.dumps(ctx.config.as_dict(), indent=2))
+    else:
+        click.echo(yaml.safe_dump(ctx.config.as_dict(), sort_keys=False))
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Console entry point: run the CLI, map errors to one line and an exit code."""
+    try:
+        cli.main(args=argv, prog_name="doorbatch", standalone_mode=False)
+    except DoorbatchError as err:
+        click.echo(f"error: {err}", err=True)
+        return int(err.exit_code)
+    except click.exceptions.Exit as err:
+        return int(err.exit_code)
+    except click.exceptions.Abort:
+        click.echo("aborted", err=True)
+        return 130
+    except click.ClickException as err:
+        err.show()
+        return int(ExitCode.USAGE)
+    except KeyboardInterrupt:
+        click.echo("interrupted", err=True)
+        return 130
+    except Exception as err:  # a bug: one line here, the traceback in the crash log
+        CRASH_LOG.write_text(traceback.format_exc())
+        click.echo(f"error: internal error ({type(err).__name__}: {err}); traceback in {CRASH_LOG}", err=True)
+        return 1
+    return 0
+
+
+def run() -> None:
+    """Console script: exit with :func:`main`'s code."""
+    sys.exit(main())
+
+
+if __name__ == "__main__":
+    run()

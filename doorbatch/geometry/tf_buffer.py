@@ -1,0 +1,120 @@
+"""A TF buffer: static and dynamic transforms, lookups through the frame tree, interpolation in time.
+
+Each child frame has one parent (as in tf2). A dynamic edge keeps its stamped transforms sorted by
+time; a lookup at time t interpolates translation linearly and rotation by slerp between the two
+neighbouring stamps, and clamps to the end stamp within ``extrapolation_limit_ns`` (tf2 would refuse).
+"""
+
+from __future__ import annotations
+
+import bisect
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from doorbatch.errors import TransformError
+from doorbatch.geometry.rotations import FloatArray, invert_transform, slerp, transform_matrix
+from doorbatch.records import Transform
+
+
+@dataclass
+class _Edge:
+    parent: str
+    static: bool
+    stamps: list[int] = field(default_factory=list)
+    translations: list[FloatArray] = field(default_factory=list)
+    rotations: list[FloatArray] = field(default_factory=list)
+
+    def add(self, tf: Transform) -> None:
+        i = bisect.bisect_right(self.stamps, tf.stamp_ns)
+        if i > 0 and self.stamps[i - 1] == tf.stamp_ns:
+            self.translations[i - 1], self.rotations[i - 1] = tf.translation, tf.rotation_xyzw
+            return
+        self.stamps.insert(i, tf.stamp_ns)
+        self.translations.insert(i, tf.translation)
+        self.rotations.insert(i, tf.rotation_xyzw)
+
+    def at(self, stamp_ns: int, limit_ns: int, child: str) -> FloatArray:
+        if self.static or len(self.stamps) == 1 and self.static:
+            return transform_matrix(self.translations[-1], self.rotations[-1])
+        stamps = self.stamps
+        i = bisect.bisect_left(stamps, stamp_ns)
+        if i < len(stamps) and stamps[i] == stamp_ns:
+            return transform_matrix(self.translations[i], self.rotations[i])
+        if i == 0 or i == len(stamps):
+            end = 0 if i == 0 else len(stamps) - 1
+            if abs(stamps[end] - stamp_ns) > limit_ns:
+                span = f"[{stamps[0] / 1e9:.3f}, {stamps[-1] / 1e9:.3f}] s"
+                raise TransformError(
+                    f"transform {self.parent}→{child} requested at {stamp_ns / 1e9:.3f} s, outside {span}"
+                )
+            return transform_matrix(self.translations[end], self.rotations[end])
+        t0, t1 = stamps[i - 1], stamps[i]
+        f = (stamp_ns - t0) / (t1 - t0)
+        trans = (1.0 - f) * self.translations[i - 1] + f * self.translations[i]
+        return transform_matrix(trans, slerp(self.rotations[i - 1], self.rotations[i], f))
+
+
+class TfBuffer:
+    """Holds a log's transforms and answers ``lookup(target, source, stamp_ns)``."""
+
+    def __init__(self, extrapolation_limit_ns: int = 100_000_000) -> None:
+        self.extrapolation_limit_ns = extrapolation_limit_ns
+        self._edges: dict[str, _Edge] = {}
+
+    def add(self, tf: Transform) -> None:
+        """Insert one transform (a static one replaces an earlier static one of the same child)."""
+        edge = self._edges.get(tf.child)
+        if edge is None or edge.parent != tf.parent or edge.static != tf.static:
+            edge = _Edge(tf.parent, tf.static)
+            self._edges[tf.child] = edge
+        if tf.static:
+            edge.stamps, edge.translations, edge.rotations = [tf.stamp_ns], [tf.translation], [tf.rotation_xyzw]
+        else:
+            edge.add(tf)
+
+    @property
+    def frames(self) -> set[str]:
+        """Every frame named by a transform."""
+        return set(self._edges) | {e.parent for e in self._edges.values()}
+
+    def edges(self) -> list[tuple[str, str, bool]]:
+        """(parent, child, static) for every edge."""
+        return [(e.parent, child, e.static) for child, e in self._edges.items()]
+
+    def _chain(self, frame: str) -> list[str]:
+        chain = [frame]
+        seen = {frame}
+        while chain[-1] in self._edges:
+            parent = self._edges[chain[-1]].parent
+            if parent in seen:
+                raise TransformError(f"transform tree has a cycle through {parent}")
+            chain.append(parent)
+            seen.add(parent)
+        return chain
+
+    def can_transform(self, target: str, source: str) -> bool:
+        """Whether the two frames are connected (ignoring time)."""
+        if target == source:
+            return True
+        return bool(set(self._chain(target)) & set(self._chain(source)))
+
+    def lookup(self, target: str, source: str, stamp_ns: int) -> FloatArray:
+        """4×4 transform taking points in ``source`` to ``target`` at ``stamp_ns``.
+
+        Raises:
+            TransformError: the frames are not connected, or a dynamic edge has no data near the time.
+        """
+        if target == source:
+            return np.eye(4)
+        up_src, up_tgt = self._chain(source), self._chain(target)
+        common = next((f for f in up_src if f in set(up_tgt)), None)
+        if common is None:
+            raise TransformError(f"no transform from frame {source!r} to {target!r}")
+        src_to_common = np.eye(4)
+        for child in up_src[: up_src.index(common)]:
+            src_to_common = self._edges[child].at(stamp_ns, self.extrapolation_limit_ns, child) @ src_to_common
+        tgt_to_common = np.eye(4)
+        for child in up_tgt[: up_tgt.index(common)]:
+            tgt_to_common = self._edges[child].at(stamp_ns, self.extrapolation_limit_ns, child) @ tgt_to_common
+        return invert_transform(tgt_to_common) @ src_to_common

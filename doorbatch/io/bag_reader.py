@@ -1,0 +1,95 @@
+"""ROS 1 ``.bag`` files and ROS 2 bag folders (sqlite3 or mcap storage) through rosbags' AnyReader."""
+
+from __future__ import annotations
+
+from collections.abc import Collection, Iterator
+from typing import Any
+
+from rosbags.highlevel import AnyReader
+
+from doorbatch.errors import LogReadError
+from doorbatch.io.reader import LogReader, RawMessage
+from doorbatch.io.roles import TopicInfo
+from doorbatch.io.typestore import normalize_msgtype, ros1_typestore, ros2_typestore
+
+
+class _AnyBagReader(LogReader):
+    _ros1 = False
+
+    def open(self) -> None:
+        store = ros1_typestore() if self._ros1 else ros2_typestore()
+        self._reader: AnyReader | None = AnyReader([self.path], default_typestore=store)
+        self._reader.open()
+        if self._reader.connections:
+            self.storage = self._storage_name()
+        topics: dict[str, TopicInfo] = {}
+        for conn in self._reader.connections:
+            prev = topics.get(conn.topic)
+            count = conn.msgcount + (prev.count if prev else 0)
+            topics[conn.topic] = TopicInfo(conn.topic, normalize_msgtype(conn.msgtype), count,
+                                           "ros1" if self._ros1 else "cdr")
+        self._topics = topics
+
+    def _storage_name(self) -> str:
+        return "rosbag1"
+
+    def close(self) -> None:
+        reader = getattr(self, "_reader", None)
+        if reader is not None:
+            reader.close()
+            self._reader = None
+
+    @property
+    def topics(self) -> dict[str, TopicInfo]:
+        return self._topics
+
+    @property
+    def start_ns(self) -> int:
+        return int(self._reader.start_time) if self._reader and self._topics else 0
+
+    @property
+    def end_ns(self) -> int:
+        return int(self._reader.end_time) if self._reader and self._topics else 0
+
+    def _raw(self, topics: Collection[str] | None, start_ns: int | None, stop_ns: int | None
+             ) -> Iterator[RawMessage]:
+        reader = self._reader
+        if reader is None:
+            raise LogReadError("reader is not open", path=self.path)
+        conns = [c for c in reader.connections if topics is None or c.topic in topics]
+        if not conns:
+            return
+        for conn, log_time, data in reader.messages(connections=conns, start=start_ns, stop=stop_ns):
+            msg: Any = reader.deserialize(data, conn.msgtype)
+            yield RawMessage(conn.topic, normalize_msgtype(conn.msgtype), int(log_time), msg, self._ros1,
+                             reader.typestore)
+
+
+class Rosbag1Reader(_AnyBagReader):
+    """A ROS 1 ``.bag`` file (format 2.0)."""
+
+    storage = "rosbag1"
+    _ros1 = True
+
+
+class Rosbag2Reader(_AnyBagReader):
+    """A ROS 2 bag folder with ``metadata.yaml`` (sqlite3 or mcap storage)."""
+
+    storage = "rosbag2"
+
+    def open(self) -> None:
+        if not (self.path / "metadata.yaml").exists():
+            raise LogReadError("folder is not a ROS 2 bag (no metadata.yaml)", path=self.path)
+        super().open()
+
+    def _storage_name(self) -> str:
+        reader = self._reader
+        ident = "unknown"
+        if reader is not None:
+            sub = reader.readers[0]
+            ident = str(getattr(getattr(sub, "metadata", None), "get", lambda *_: None)("storage_identifier")
+                        or "")
+            if not ident:
+                files = [p.suffix for p in self.path.iterdir()]
+                ident = "mcap" if ".mcap" in files else "sqlite3"
+        return f"rosbag2 ({ident})"

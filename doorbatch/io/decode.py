@@ -1,0 +1,294 @@
+"""Turn deserialized ROS messages (rosbags objects, ROS 1 or ROS 2 layout) into doorbatch records.
+
+Field names of the types we read are the same in ROS 1 and ROS 2 as rosbags represents them (time is
+``sec``/``nanosec`` in both), except vision_msgs, whose ROS 1 and ROS 2 layouts differ; both are handled.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from typing import Any
+
+import cv2
+import numpy as np
+
+from doorbatch.errors import LogContentError
+from doorbatch.records import (
+    BeamColors,
+    CameraInfo,
+    Detection,
+    Detections,
+    Image,
+    Pose2D,
+    Role,
+    Scan,
+    Transform,
+)
+
+LASERSCAN = "sensor_msgs/msg/LaserScan"
+ODOMETRY = "nav_msgs/msg/Odometry"
+POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
+POSE_COV_STAMPED = "geometry_msgs/msg/PoseWithCovarianceStamped"
+TF_MESSAGE = "tf2_msgs/msg/TFMessage"
+POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
+IMAGE = "sensor_msgs/msg/Image"
+COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
+CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
+DETECTION2D_ARRAY = "vision_msgs/msg/Detection2DArray"
+
+# Tolerance on the beam count implied by (angle_max − angle_min) / angle_increment + 1.
+_BEAM_COUNT_SLACK = 1
+
+
+def stamp_to_ns(stamp: Any) -> int:
+    """builtin_interfaces/Time (or ROS 1 time as rosbags gives it) → int64 nanoseconds."""
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def yaw_from_quaternion(x: float, y: float, z: float, w: float) -> float:
+    """Heading (rotation about z) of a unit quaternion, in (−π, π]."""
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def expected_beam_count(angle_min: float, angle_max: float, angle_increment: float) -> int:
+    """Number of beams a LaserScan's angles describe (``round((max − min) / inc) + 1``)."""
+    if angle_increment == 0.0 or not math.isfinite(angle_increment):
+        return -1
+    return round((angle_max - angle_min) / angle_increment) + 1
+
+
+def decode_scan(msg: Any, log_time_ns: int, topic: str) -> Scan:
+    """sensor_msgs/LaserScan → :class:`Scan`, checking that ranges match the angles.
+
+    Raises:
+        LogContentError: zero angle increment, or a ranges length that disagrees with the angles.
+    """
+    ranges = np.asarray(msg.ranges, dtype=np.float32)
+    expected = expected_beam_count(msg.angle_min, msg.angle_max, msg.angle_increment)
+    if expected < 0:
+        raise LogContentError(f"scan has angle_increment {msg.angle_increment}", topic=topic)
+    if abs(ranges.shape[0] - expected) > _BEAM_COUNT_SLACK:
+        raise LogContentError(
+            f"scan ranges length {ranges.shape[0]} does not match the {expected} beams of "
+            f"angle_min {msg.angle_min:.4f}, angle_max {msg.angle_max:.4f}, "
+            f"angle_increment {msg.angle_increment:.6f}",
+            topic=topic,
+        )
+    intensities = np.asarray(msg.intensities, dtype=np.float32)
+    return Scan(
+        stamp_ns=stamp_to_ns(msg.header.stamp),
+        log_time_ns=log_time_ns,
+        frame_id=msg.header.frame_id.lstrip("/"),
+        angle_min=float(msg.angle_min),
+        angle_increment=float(msg.angle_increment),
+        range_min=float(msg.range_min),
+        range_max=float(msg.range_max),
+        ranges=ranges,
+        intensities=intensities if intensities.shape[0] == ranges.shape[0] else None,
+    )
+
+
+def _pose2d(header: Any, child: str, pose: Any, log_time_ns: int) -> Pose2D:
+    q = pose.orientation
+    return Pose2D(
+        stamp_ns=stamp_to_ns(header.stamp),
+        log_time_ns=log_time_ns,
+        frame_id=header.frame_id.lstrip("/"),
+        child_frame_id=child.lstrip("/"),
+        x=float(pose.position.x),
+        y=float(pose.position.y),
+        yaw=yaw_from_quaternion(q.x, q.y, q.z, q.w),
+    )
+
+
+def decode_pose(msg: Any, msgtype: str, log_time_ns: int) -> Pose2D:
+    """nav_msgs/Odometry, PoseStamped or PoseWithCovarianceStamped → planar :class:`Pose2D`."""
+    if msgtype == ODOMETRY:
+        return _pose2d(msg.header, msg.child_frame_id, msg.pose.pose, log_time_ns)
+    if msgtype == POSE_COV_STAMPED:
+        return _pose2d(msg.header, "", msg.pose.pose, log_time_ns)
+    return _pose2d(msg.header, "", msg.pose, log_time_ns)
+
+
+def decode_transforms(msg: Any, static: bool) -> Iterator[Transform]:
+    """tf2_msgs/TFMessage → one :class:`Transform` per TransformStamped."""
+    for ts in msg.transforms:
+        t, r = ts.transform.translation, ts.transform.rotation
+        quat = np.array([r.x, r.y, r.z, r.w], dtype=np.float64)
+        norm = float(np.linalg.norm(quat))
+        yield Transform(
+            stamp_ns=stamp_to_ns(ts.header.stamp),
+            parent=ts.header.frame_id.lstrip("/"),
+            child=ts.child_frame_id.lstrip("/"),
+            translation=np.array([t.x, t.y, t.z], dtype=np.float64),
+            rotation_xyzw=quat / norm if norm > 0 else np.array([0.0, 0.0, 0.0, 1.0]),
+            static=static,
+        )
+
+
+_PC2_DTYPES = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
+
+
+def decode_pointcloud_colors(msg: Any, log_time_ns: int, topic: str) -> BeamColors:
+    """sensor_msgs/PointCloud2 with x, y, z and rgb (packed float32 or uint32) → :class:`BeamColors`.
+
+    Raises:
+        LogContentError: the cloud has no x, y, z or no rgb/rgba field.
+    """
+    fields = {f.name: f for f in msg.fields}
+    missing = [n for n in ("x", "y", "z") if n not in fields]
+    color_name = "rgb" if "rgb" in fields else ("rgba" if "rgba" in fields else None)
+    if missing or color_name is None:
+        raise LogContentError(
+            f"PointCloud2 lacks fields {missing + ([] if color_name else ['rgb'])} needed for beam colors",
+            topic=topic,
+        )
+    endian = ">" if msg.is_bigendian else "<"
+    names = ["x", "y", "z", color_name]
+    dtype = np.dtype(
+        {
+            "names": names,
+            "formats": [endian + ("u4" if n == color_name else _PC2_DTYPES[fields[n].datatype]) for n in names],
+            "offsets": [fields[n].offset for n in names],
+            "itemsize": msg.point_step,
+        }
+    )
+    count = msg.width * msg.height
+    data = np.asarray(msg.data, dtype=np.uint8)
+    if msg.row_step * msg.height != data.shape[0] or msg.point_step * msg.width > msg.row_step:
+        raise LogContentError("PointCloud2 data size does not match its width and steps", topic=topic)
+    rows = data.reshape(msg.height, msg.row_step)[:, : msg.point_step * msg.width]
+    cloud = np.frombuffer(np.ascontiguousarray(rows).tobytes(), dtype=dtype, count=count)
+    packed = cloud[color_name].astype(np.uint32)
+    rgb = np.stack([(packed >> 16) & 0xFF, (packed >> 8) & 0xFF, packed & 0xFF], axis=1).astype(np.uint8)
+    points = np.stack([cloud["x"], cloud["y"], cloud["z"]], axis=1).astype(np.float32)
+    return BeamColors(
+        stamp_ns=stamp_to_ns(msg.header.stamp),
+        log_time_ns=log_time_ns,
+        frame_id=msg.header.frame_id.lstrip("/"),
+        points=points,
+        rgb=rgb,
+    )
+
+
+def decode_image(msg: Any, msgtype: str, log_time_ns: int, topic: str) -> Image:
+    """sensor_msgs/Image (mono8, rgb8, bgr8, rgba8, bgra8) or CompressedImage → RGB or mono array.
+
+    Raises:
+        LogContentError: an encoding we do not read, or a compressed image OpenCV cannot decode.
+    """
+    data = np.asarray(msg.data, dtype=np.uint8)
+    if msgtype == COMPRESSED_IMAGE:
+        decoded = cv2.imdecode(data, cv2.IMREAD_COLOR)
+        if decoded is None:
+            raise LogContentError(f"cannot decode compressed image ({msg.format})", topic=topic)
+        pixels = cv2.cvtColor(decoded, cv2.COLOR_BGR2RGB)
+        encoding = "rgb8"
+    else:
+        encoding = msg.encoding
+        channels = {"mono8": 1, "8UC1": 1, "rgb8": 3, "bgr8": 3, "rgba8": 4, "bgra8": 4, "8UC3": 3}
+        if encoding not in channels:
+            raise LogContentError(f"image encoding {encoding!r} is not supported", topic=topic)
+        c = channels[encoding]
+        rows = data.reshape(msg.height, msg.step)[:, : msg.width * c]
+        pixels = rows.reshape(msg.height, msg.width, c) if c > 1 else rows.reshape(msg.height, msg.width)
+        if encoding in ("bgr8", "8UC3"):
+            pixels = pixels[:, :, ::-1]
+        elif encoding == "rgba8":
+            pixels = pixels[:, :, :3]
+        elif encoding == "bgra8":
+            pixels = pixels[:, :, 2::-1]
+        pixels = np.ascontiguousarray(pixels)
+        encoding = "mono8" if c == 1 else "rgb8"
+    return Image(
+        stamp_ns=stamp_to_ns(msg.header.stamp),
+        log_time_ns=log_time_ns,
+        frame_id=msg.header.frame_id.lstrip("/"),
+        pixels=pixels,
+        encoding=encoding,
+    )
+
+
+def decode_camera_info(msg: Any, log_time_ns: int) -> CameraInfo:
+    """sensor_msgs/CameraInfo (ROS 1 ``K``/``D``/``P`` or ROS 2 ``k``/``d``/``p``) → :class:`CameraInfo`."""
+    k = getattr(msg, "k", None)
+    k = k if k is not None else msg.K
+    d = getattr(msg, "d", None)
+    d = d if d is not None else msg.D
+    p = getattr(msg, "p", None)
+    p = p if p is not None else msg.P
+    return CameraInfo(
+        stamp_ns=stamp_to_ns(msg.header.stamp),
+        log_time_ns=log_time_ns,
+        frame_id=msg.header.frame_id.lstrip("/"),
+        width=int(msg.width),
+        height=int(msg.height),
+        distortion_model=str(msg.distortion_model),
+        d=np.asarray(d, dtype=np.float64),
+        k=np.asarray(k, dtype=np.float64).reshape(3, 3),
+        p=np.asarray(p, dtype=np.float64).reshape(3, 4),
+    )
+
+
+# ROS 1 vision_msgs carries integer class ids; doorbatch writes and reads them as indices of this list.
+ROS1_CLASS_NAMES = ("door", "handle")
+
+
+def ros1_class_name(class_id: int) -> str:
+    """Class name of a ROS 1 integer class id (its index in :data:`ROS1_CLASS_NAMES`, else the number)."""
+    return ROS1_CLASS_NAMES[class_id] if 0 <= class_id < len(ROS1_CLASS_NAMES) else str(class_id)
+
+
+def ros1_class_id(name: str) -> int:
+    """Inverse of :func:`ros1_class_name`."""
+    return ROS1_CLASS_NAMES.index(name) if name in ROS1_CLASS_NAMES else int(name)
+
+
+def _detection(det: Any) -> Detection:
+    best_id, best_score = "", 0.0
+    for hyp in det.results:
+        inner = getattr(hyp, "hypothesis", None)  # ROS 2: results[i].hypothesis.class_id
+        class_id = str(inner.class_id) if inner is not None else ros1_class_name(int(hyp.id))
+        score = float(inner.score if inner is not None else hyp.score)
+        if score >= best_score:
+            best_id, best_score = class_id, score
+    center = det.bbox.center
+    position = getattr(center, "position", None)  # ROS 2 vision_msgs/Pose2D has position.x/y
+    cx, cy = (position.x, position.y) if position is not None else (center.x, center.y)
+    return Detection(
+        class_id=best_id,
+        score=best_score,
+        center_x=float(cx),
+        center_y=float(cy),
+        size_x=float(det.bbox.size_x),
+        size_y=float(det.bbox.size_y),
+    )
+
+
+def decode_detections(msg: Any, log_time_ns: int) -> Detections:
+    """vision_msgs/Detection2DArray (ROS 1 or ROS 2 layout) → :class:`Detections`."""
+    return Detections(
+        stamp_ns=stamp_to_ns(msg.header.stamp),
+        log_time_ns=log_time_ns,
+        frame_id=msg.header.frame_id.lstrip("/"),
+        detections=tuple(_detection(d) for d in msg.detections),
+    )
+
+
+def decode(role: Role, msg: Any, msgtype: str, log_time_ns: int, topic: str) -> Iterator[object]:
+    """Decode one message of a topic with a known role into its records (TF gives several)."""
+    if role is Role.SCAN:
+        yield decode_scan(msg, log_time_ns, topic)
+    elif role in (Role.ODOMETRY, Role.REFERENCE):
+        yield decode_pose(msg, msgtype, log_time_ns)
+    elif role is Role.TRANSFORMS:
+        yield from decode_transforms(msg, static=topic.rstrip("/").endswith("tf_static"))
+    elif role is Role.COLORS:
+        yield decode_pointcloud_colors(msg, log_time_ns, topic)
+    elif role is Role.IMAGE:
+        yield decode_image(msg, msgtype, log_time_ns, topic)
+    elif role is Role.CAMERA_INFO:
+        yield decode_camera_info(msg, log_time_ns)
+    elif role is Role.DETECTIONS:
+        yield decode_detections(msg, log_time_ns)

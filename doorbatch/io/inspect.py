@@ -1,0 +1,217 @@
+"""What ``ros2 bag info`` shows, plus what doorbatch makes of a log: roles, and problems found.
+
+One streaming pass over every message: counts and rates per topic, header stamps going backwards,
+gaps, scans whose ranges disagree with their angles, the transform tree (is the laser frame connected to
+base_link? is there odom→base_link?). Problems carry a severity: an ``error`` makes the log unusable for
+doorbatch's stages, a ``warning`` is worth knowing.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from enum import StrEnum
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from doorbatch.config import DoorbatchConfig
+from doorbatch.errors import LogContentError
+from doorbatch.geometry.tf_buffer import TfBuffer
+from doorbatch.io.decode import decode_scan, decode_transforms, stamp_to_ns
+from doorbatch.io.reader import open_log
+from doorbatch.records import Role
+
+
+class Severity(StrEnum):
+    """How bad a problem is."""
+
+    ERROR = "error"
+    WARNING = "warning"
+
+
+@dataclass(frozen=True)
+class Problem:
+    """One finding: severity, topic (or None) and what is wrong."""
+
+    severity: Severity
+    topic: str | None
+    message: str
+
+
+@dataclass
+class TopicReport:
+    """Per-topic statistics."""
+
+    name: str
+    msgtype: str
+    count: int
+    rate_hz: float
+    role: str | None
+    why: str | None
+
+
+@dataclass
+class LogReport:
+    """The result of :func:`inspect_log`."""
+
+    path: str
+    storage: str
+    size_bytes: int
+    start_ns: int
+    end_ns: int
+    duration_s: float
+    message_count: int
+    topics: list[TopicReport]
+    frames: list[str]
+    problems: list[Problem] = field(default_factory=list)
+
+    @property
+    def errors(self) -> list[Problem]:
+        """The problems that make the log unusable."""
+        return [p for p in self.problems if p.severity is Severity.ERROR]
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data for ``--json``."""
+        data = asdict(self)
+        data["problems"] = [{**asdict(p), "severity": p.severity.value} for p in self.problems]
+        return data
+
+
+@dataclass
+class _TopicStats:
+    count: int = 0
+    first_ns: int | None = None
+    last_ns: int | None = None
+    last_stamp_ns: int | None = None
+    backwards: int = 0
+    first_backwards: str = ""
+    periods: list[int] = field(default_factory=list)
+
+
+def _size(path: Path) -> int:
+    if path.is_dir():
+        return sum(p.stat().st_size for p in path.rglob("*") if p.is_file())
+    return path.stat().st_size
+
+
+def _header_stamp(msg: Any) -> int | None:
+    header = getattr(msg, "header", None)
+    return stamp_to_ns(header.stamp) if header is not None else None
+
+
+def inspect_log(path: Path, config: DoorbatchConfig | None = None,
+                progress: Callable[[int], None] | None = None) -> LogReport:
+    """Read a whole log once and report topics, roles and problems.
+
+    Raises:
+        LogReadError: the file is not a readable log (empty, truncated, unknown format).
+    """
+    config = config or DoorbatchConfig()
+    path = Path(path)
+    problems: list[Problem] = []
+    stats: dict[str, _TopicStats] = {}
+    tf = TfBuffer()
+    scan_frames: set[str] = set()
+    with open_log(path, config.topics, config.frames) as reader:
+        roles = reader.roles
+        role_of = roles.role_of()
+        scan_topic = roles.topic(Role.SCAN)
+        mismatch_reported = False
+        for raw in reader.raw_messages():
+            st = stats.setdefault(raw.topic, _TopicStats())
+            st.count += 1
+            if st.last_ns is not None:
+                st.periods.append(raw.log_time_ns - st.last_ns)
+            st.first_ns = raw.log_time_ns if st.first_ns is None else st.first_ns
+            st.last_ns = raw.log_time_ns
+            if role_of.get(raw.topic) is Role.TRANSFORMS:
+                for t in decode_transforms(raw.msg, static=raw.topic.rstrip("/").endswith("tf_static")):
+                    tf.add(t)
+                continue
+            stamp = _header_stamp(raw.msg)
+            if stamp is not None:
+                if st.last_stamp_ns is not None and stamp < st.last_stamp_ns:
+                    st.backwards += 1
+                    if st.backwards == 1:
+                        st.first_backwards = (f"header stamp {stamp / 1e9:.6f} s after "
+                                              f"{st.last_stamp_ns / 1e9:.6f} s (message {st.count})")
+                st.last_stamp_ns = stamp
+            if raw.topic == scan_topic:
+                try:
+                    scan_frames.add(decode_scan(raw.msg, raw.log_time_ns, raw.topic).frame_id)
+                except LogContentError as err:
+                    if not mismatch_reported:
+                        problems.append(Problem(Severity.ERROR, raw.topic, err.reason))
+                        mismatch_reported = True
+            if progress is not None:
+                progress(1)
+        problems.extend(Problem(Severity.WARNING, None, w) for w in reader.warnings)
+        topics = [
+            TopicReport(info.name, info.msgtype, stats.get(info.name, _TopicStats()).count,
+                        _rate(stats.get(info.name)), role_of[info.name].value if info.name in role_of else None,
+                        roles.reasons.get(info.name))
+            for info in sorted(reader.topics.values(), key=lambda t: t.name)
+        ]
+        report = LogReport(
+            path=str(path), storage=reader.storage, size_bytes=_size(path),
+            start_ns=min((s.first_ns for s in stats.values() if s.first_ns is not None), default=0),
+            end_ns=max((s.last_ns for s in stats.values() if s.last_ns is not None), default=0),
+            duration_s=0.0, message_count=sum(s.count for s in stats.values()), topics=topics,
+            frames=sorted(tf.frames | scan_frames), problems=problems,
+        )
+    report.duration_s = (report.end_ns - report.start_ns) / 1e9
+    _check_roles(report, roles.topics, scan_frames, tf, config, stats)
+    _check_stamps(report, stats, role_of, config.io.gap_factor)
+    return report
+
+
+def _rate(st: _TopicStats | None) -> float:
+    if st is None or st.count < 2 or st.first_ns is None or st.last_ns is None or st.last_ns == st.first_ns:
+        return 0.0
+    return (st.count - 1) / ((st.last_ns - st.first_ns) / 1e9)
+
+
+def _check_roles(report: LogReport, chosen: dict[Role, tuple[str, ...]], scan_frames: set[str], tf: TfBuffer,
+                 config: DoorbatchConfig, stats: dict[str, _TopicStats]) -> None:
+    frames = config.frames
+    add = report.problems.append
+    scan = chosen.get(Role.SCAN)
+    if not scan:
+        add(Problem(Severity.ERROR, None, "no sensor_msgs/LaserScan topic: doorbatch needs a 2D laser scan"))
+    elif stats.get(scan[0], _TopicStats()).count == 0:
+        add(Problem(Severity.ERROR, scan[0], "scan topic has no messages"))
+    has_odom_tf = tf.can_transform(frames.odom, frames.base_link) and frames.odom in tf.frames
+    if Role.ODOMETRY not in chosen and not has_odom_tf:
+        add(Problem(Severity.WARNING, None,
+                    f"no odometry: no nav_msgs/Odometry topic and no TF {frames.odom}→{frames.base_link}"))
+    assume = config.io.assume_identity_laser_tf
+    for frame in sorted(scan_frames):
+        if frame != frames.base_link and not tf.can_transform(frames.base_link, frame):
+            message = f"no transform from the laser frame {frame!r} to {frames.base_link!r}"
+            if assume:
+                add(Problem(Severity.WARNING, scan[0] if scan else None, message + "; assuming identity"))
+            else:
+                add(Problem(Severity.ERROR, scan[0] if scan else None,
+                            message + " (io.assume_identity_laser_tf=true assumes the laser at the base origin)"))
+
+
+def _check_stamps(report: LogReport, stats: dict[str, _TopicStats], role_of: dict[str, Role],
+                  gap_factor: float) -> None:
+    for name, st in sorted(stats.items()):
+        role = role_of.get(name)
+        if st.backwards:
+            severity = Severity.ERROR if role in (Role.SCAN, Role.ODOMETRY, Role.REFERENCE) else Severity.WARNING
+            report.problems.append(Problem(severity, name, f"stamps go backwards {st.backwards} time(s): "
+                                                           f"first {st.first_backwards}"))
+        if len(st.periods) >= 10:
+            periods = np.asarray(st.periods, dtype=np.float64)
+            nominal = float(np.median(periods))
+            if nominal > 0:
+                gaps = periods[periods > gap_factor * nominal]
+                if gaps.size:
+                    report.problems.append(Problem(
+                        Severity.WARNING, name,
+                        f"{gaps.size} gap(s) in time longer than {gap_factor:g}× the {nominal / 1e9:.3f} s period "
+                        f"(longest {gaps.max() / 1e9:.3f} s)"))

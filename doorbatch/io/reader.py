@@ -1,0 +1,237 @@
+"""The one entry point that opens any supported log, and the reader protocol behind it.
+
+``open_log(path)`` picks a reader by suffix (or ``dir`` for a ROS 2 bag folder) after checking the file's
+magic bytes, so a misnamed or non-log file gets a clear :class:`~doorbatch.errors.LogReadError`.
+Readers stream: ``raw_messages`` deserializes one message at a time with rosbags; ``messages`` decodes the
+topics of the requested roles into records (:mod:`doorbatch.records`).
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Collection, Iterable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+from typing import Any, Self
+
+from rosbags.typesys.store import Typestore
+
+from doorbatch.config import FramesConfig, TopicsConfig
+from doorbatch.errors import DoorbatchError, LogReadError
+from doorbatch.io.decode import decode, yaw_from_quaternion
+from doorbatch.io.roles import RoleAssignment, TopicInfo, assign_roles
+from doorbatch.records import Pose2D, Role, RoleMessage, Transform
+
+log = logging.getLogger(__name__)
+
+MCAP_MAGIC = b"\x89MCAP"
+BAG1_MAGIC = b"#ROSBAG V2.0"
+
+
+@dataclass(frozen=True, slots=True)
+class RawMessage:
+    """One deserialized message as rosbags represents it; ``ros1`` says which type layout it has."""
+
+    topic: str
+    msgtype: str
+    log_time_ns: int
+    msg: Any
+    ros1: bool
+    store: Typestore | None = None  # the typestore whose classes built ``msg`` (None: ROS 2 Humble's)
+
+
+class LogReader(ABC):
+    """A context manager over one log: topics, time span, and streaming access to its messages."""
+
+    storage: str = "unknown"
+
+    def __init__(self, path: Path, topics_config: TopicsConfig | None = None,
+                 frames: FramesConfig | None = None) -> None:
+        self.path = path
+        self.topics_config = topics_config or TopicsConfig()
+        self.frames = frames or FramesConfig()
+        self._roles: RoleAssignment | None = None
+        self.warnings: list[str] = []  # repairs a reader made (e.g. CARMEN stamps), shown by inspect
+
+    def __enter__(self) -> Self:
+        try:
+            self.open()
+        except DoorbatchError:
+            self.close()
+            raise
+        except Exception as err:  # a library's own error for a corrupt file
+            self.close()
+            raise LogReadError(f"cannot open {self.storage} log: {err}", path=self.path) from err
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+    @abstractmethod
+    def open(self) -> None:
+        """Open the file and read its topic index."""
+
+    @abstractmethod
+    def close(self) -> None:
+        """Release the file."""
+
+    @property
+    @abstractmethod
+    def topics(self) -> dict[str, TopicInfo]:
+        """Topic name → :class:`TopicInfo`."""
+
+    @property
+    @abstractmethod
+    def start_ns(self) -> int:
+        """Log time of the first message (ns)."""
+
+    @property
+    @abstractmethod
+    def end_ns(self) -> int:
+        """Log time of the last message (ns)."""
+
+    @abstractmethod
+    def _raw(self, topics: Collection[str] | None, start_ns: int | None, stop_ns: int | None
+             ) -> Iterator[RawMessage]:
+        """Messages of ``topics`` (all when None) in log-time order within [start_ns, stop_ns)."""
+
+    def raw_messages(self, topics: Collection[str] | None = None, start_ns: int | None = None,
+                     stop_ns: int | None = None) -> Iterator[RawMessage]:
+        """Deserialized messages in log-time order; library errors become :class:`LogReadError`."""
+        topic = None
+        try:
+            for raw in self._raw(topics, start_ns, stop_ns):
+                topic = raw.topic
+                yield raw
+        except DoorbatchError:
+            raise
+        except Exception as err:
+            raise LogReadError(f"log is truncated or corrupt ({type(err).__name__}: {err})",
+                               path=self.path, topic=topic) from err
+
+    @property
+    def roles(self) -> RoleAssignment:
+        """The role assignment for this log (config overrides, then detection)."""
+        if self._roles is None:
+            self._roles = assign_roles(self.topics, self.topics_config)
+        return self._roles
+
+    def messages(self, roles: Iterable[Role] | None = None, start_ns: int | None = None,
+                 stop_ns: int | None = None) -> Iterator[RoleMessage]:
+        """Records of the requested roles (all assigned roles when None) in log-time order.
+
+        When odometry is requested and the log has no odometry topic, the TF transforms
+        odom→base_link stand in for it (DESIGN.md, Inputs), as :class:`Pose2D` records.
+        """
+        wanted = set(Role) if roles is None else set(roles)
+        role_of = {t: r for t, r in self.roles.role_of().items() if r in wanted}
+        odom_from_tf = Role.ODOMETRY in wanted and self.roles.topic(Role.ODOMETRY) is None
+        topics = set(role_of)
+        if odom_from_tf:
+            topics.update(self.roles.topics.get(Role.TRANSFORMS, ()))
+        if not topics:
+            return
+        for raw in self.raw_messages(topics, start_ns, stop_ns):
+            role = role_of.get(raw.topic, Role.TRANSFORMS)
+            try:
+                records = list(decode(role, raw.msg, raw.msgtype, raw.log_time_ns, raw.topic))
+            except DoorbatchError as err:
+                if getattr(err, "path", "") is None:
+                    err.path = str(self.path)  # type: ignore[attr-defined]
+                    err.args = (f"{self.path}: {err.args[0]}",)
+                raise
+            for record in records:
+                if raw.topic in role_of:
+                    yield RoleMessage(role, raw.topic, record)
+                if odom_from_tf and isinstance(record, Transform):
+                    pose = self._odometry_from_tf(record, raw.log_time_ns)
+                    if pose is not None:
+                        yield RoleMessage(Role.ODOMETRY, raw.topic, pose)
+
+    def _odometry_from_tf(self, tf: Transform, log_time_ns: int) -> Pose2D | None:
+        if tf.parent != self.frames.odom or tf.child != self.frames.base_link:
+            return None
+        x, y, z, w = (float(v) for v in tf.rotation_xyzw)
+        return Pose2D(tf.stamp_ns, log_time_ns, tf.parent, tf.child, float(tf.translation[0]),
+                      float(tf.translation[1]), yaw_from_quaternion(x, y, z, w))
+
+
+ReaderFactory = Callable[[Path, TopicsConfig | None, FramesConfig | None], LogReader]
+_READERS: dict[str, ReaderFactory] = {}
+
+
+def register_reader(key: str, factory: ReaderFactory) -> None:
+    """Register a reader for a suffix (``.mcap``) or ``dir`` (a folder)."""
+    _READERS[key] = factory
+
+
+def supported_formats() -> list[str]:
+    """The registered suffixes (and ``dir``)."""
+    return sorted(_READERS)
+
+
+def _format_key(path: Path) -> str:
+    """The registry key of a path, from its suffix and checked against its first bytes."""
+    if path.is_dir():
+        return "dir"
+    suffixes = [s.lower() for s in path.suffixes]
+    key = suffixes[-1] if suffixes else ""
+    if key == ".gz" and len(suffixes) >= 2:
+        key = suffixes[-2] + ".gz"
+    try:
+        with path.open("rb") as f:
+            head = f.read(16)
+    except OSError as err:
+        raise LogReadError(f"cannot read: {err.strerror or err}", path=path) from err
+    if not head:
+        raise LogReadError("file is empty (0 bytes)", path=path)
+    if head.startswith(MCAP_MAGIC):
+        return ".mcap"
+    if head.startswith(BAG1_MAGIC):
+        return ".bag"
+    if key in (".mcap", ".bag"):
+        raise LogReadError(f"not a valid {key[1:].upper()} file (bad magic bytes)", path=path)
+    if key not in _READERS:
+        raise LogReadError(
+            f"not a log doorbatch can read (supported: {', '.join(supported_formats())})", path=path
+        )
+    return key
+
+
+def open_log(path: Path | str, topics: TopicsConfig | None = None,
+             frames: FramesConfig | None = None) -> LogReader:
+    """A reader for any supported log; use it as a context manager.
+
+    Raises:
+        LogReadError: missing, empty, or unrecognized file.
+    """
+    _register_builtin_readers()
+    path = Path(path)
+    if not path.exists():
+        raise LogReadError("no such file or folder", path=path)
+    return _READERS[_format_key(path)](path, topics, frames)
+
+
+def _lazy(module: str, cls: str) -> ReaderFactory:
+    """A factory that imports its reader module on first use (keeps ``import doorbatch`` light)."""
+
+    def make(path: Path, topics: TopicsConfig | None, frames: FramesConfig | None) -> LogReader:
+        reader_cls = getattr(importlib.import_module(module), cls)
+        reader: LogReader = reader_cls(path, topics, frames)
+        return reader
+
+    return make
+
+
+def _register_builtin_readers() -> None:
+    if _READERS:
+        return
+    register_reader(".mcap", _lazy("doorbatch.io.mcap_reader", "McapLogReader"))
+    register_reader(".bag", _lazy("doorbatch.io.bag_reader", "Rosbag1Reader"))
+    register_reader("dir", _lazy("doorbatch.io.bag_reader", "Rosbag2Reader"))
+    for suffix in (".log", ".clf", ".log.gz", ".clf.gz"):
+        register_reader(suffix, _lazy("doorbatch.io.carmen", "CarmenReader"))

@@ -1,0 +1,149 @@
+"""Which topic plays which role (DESIGN.md, Inputs): by message type, names tried first, config overrides."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+from doorbatch.config import TopicsConfig
+from doorbatch.errors import LogContentError
+from doorbatch.io import decode as d
+from doorbatch.records import Role
+
+
+@dataclass(frozen=True, slots=True)
+class TopicInfo:
+    """One topic of a log: name, normalized message type (``pkg/msg/Name``), message count, encoding."""
+
+    name: str
+    msgtype: str
+    count: int
+    encoding: str
+
+
+@dataclass(frozen=True)
+class RoleAssignment:
+    """The topic(s) chosen for each role and, per topic, why."""
+
+    topics: dict[Role, tuple[str, ...]] = field(default_factory=dict)
+    reasons: dict[str, str] = field(default_factory=dict)
+
+    def topic(self, role: Role) -> str | None:
+        """The single topic of a role, or None."""
+        chosen = self.topics.get(role, ())
+        return chosen[0] if chosen else None
+
+    def role_of(self) -> dict[str, Role]:
+        """Topic → role, for every assigned topic."""
+        return {t: role for role, names in self.topics.items() for t in names}
+
+
+_TYPES: dict[Role, tuple[str, ...]] = {
+    Role.SCAN: (d.LASERSCAN,),
+    Role.ODOMETRY: (d.ODOMETRY,),
+    Role.REFERENCE: (d.ODOMETRY, d.POSE_STAMPED, d.POSE_COV_STAMPED),
+    Role.TRANSFORMS: (d.TF_MESSAGE,),
+    Role.COLORS: (d.POINTCLOUD2,),
+    Role.IMAGE: (d.IMAGE, d.COMPRESSED_IMAGE),
+    Role.CAMERA_INFO: (d.CAMERA_INFO,),
+    Role.DETECTIONS: (d.DETECTION2D_ARRAY,),
+}
+
+_NAMES: dict[Role, tuple[str, ...]] = {
+    Role.SCAN: ("/scan", "/base_scan"),
+    Role.ODOMETRY: ("/odom",),
+    Role.REFERENCE: ("/ground_truth", "/gt", "/pose"),
+    Role.TRANSFORMS: ("/tf", "/tf_static"),
+    Role.COLORS: ("/scan_colors",),
+    Role.IMAGE: ("/camera/image_raw", "/camera/image_raw/compressed"),
+    Role.CAMERA_INFO: ("/camera/camera_info",),
+    Role.DETECTIONS: ("/detections",),
+}
+
+# Words that mark an Odometry topic as a reference (ground truth / SLAM) rather than wheel odometry.
+_REFERENCE_WORDS = ("truth", "gt", "reference", "slam", "amcl", "pose")
+
+
+def _looks_like_reference(name: str) -> bool:
+    words = name.lower().replace("-", "_").replace("/", "_").split("_")
+    return any(w in _REFERENCE_WORDS for w in words)
+
+
+def _pick(role: Role, candidates: list[TopicInfo]) -> tuple[TopicInfo, str] | None:
+    """The preferred topic among candidates of the right type: a name tried first, else the busiest."""
+    if not candidates:
+        return None
+    by_name = {c.name: c for c in candidates}
+    for name in _NAMES[role]:
+        if name in by_name:
+            return by_name[name], f"type {by_name[name].msgtype}, name {name} is tried first"
+    best = max(candidates, key=lambda c: (c.count, c.name))
+    why = f"type {best.msgtype}" + (f", most messages of {len(candidates)}" if len(candidates) > 1 else "")
+    return best, why
+
+
+def assign_roles(topics: Mapping[str, TopicInfo], overrides: TopicsConfig | None = None) -> RoleAssignment:
+    """Choose the topic for each role.
+
+    Raises:
+        LogContentError: a topic named in the config is not in the log, or has a type that cannot
+            play the role.
+    """
+    overrides = overrides or TopicsConfig()
+    chosen: dict[Role, tuple[str, ...]] = {}
+    reasons: dict[str, str] = {}
+
+    for role in Role:
+        wanted = getattr(overrides, role.value)
+        if wanted is None:
+            continue
+        names = [wanted] if isinstance(wanted, str) else list(wanted)
+        for name in names:
+            info = topics.get(name)
+            if info is None:
+                raise LogContentError(f"config topics.{role.value} names a topic the log does not have", topic=name)
+            if info.msgtype not in _TYPES[role]:
+                raise LogContentError(
+                    f"config topics.{role.value}: type {info.msgtype} cannot be the {role.value} role",
+                    topic=name,
+                )
+            reasons[name] = f"set by config topics.{role.value}"
+        chosen[role] = tuple(names)
+
+    taken = {n for names in chosen.values() for n in names}
+
+    def free(role: Role) -> list[TopicInfo]:
+        return [t for t in topics.values() if t.msgtype in _TYPES[role] and t.name not in taken]
+
+    # Reference first among the pose roles, so that /ground_truth never becomes odometry.
+    if Role.REFERENCE not in chosen:
+        refs = [
+            t
+            for t in free(Role.REFERENCE)
+            if t.name in _NAMES[Role.REFERENCE] or t.msgtype != d.ODOMETRY or _looks_like_reference(t.name)
+        ]
+        refs = [t for t in refs if t.name not in _NAMES[Role.ODOMETRY]]
+        pick = _pick(Role.REFERENCE, refs)
+        if pick:
+            chosen[Role.REFERENCE] = (pick[0].name,)
+            reasons[pick[0].name] = pick[1]
+            taken.add(pick[0].name)
+
+    for role in Role:
+        if role in chosen or role is Role.REFERENCE:
+            continue
+        if role is Role.TRANSFORMS:
+            tfs = sorted(t.name for t in free(role))
+            if tfs:
+                chosen[role] = tuple(tfs)
+                for name in tfs:
+                    kind = "static" if name.rstrip("/").endswith("tf_static") else "dynamic"
+                    reasons[name] = f"type {d.TF_MESSAGE} ({kind} transforms)"
+                taken.update(tfs)
+            continue
+        pick = _pick(role, free(role))
+        if pick:
+            chosen[role] = (pick[0].name,)
+            reasons[pick[0].name] = pick[1]
+            taken.add(pick[0].name)
+    return RoleAssignment(topics=chosen, reasons=reasons)

@@ -1,0 +1,73 @@
+"""rosbags typestores with the message definitions the default stores lack.
+
+DESIGN.md, Known pitfalls: the ROS 1 Noetic store lacks ``tf2_msgs/TFMessage`` and no default store has
+``vision_msgs``. We register them from ``.msg`` text (ROS 2 Humble's vision_msgs 4.x layout for ROS 2, and
+Noetic's vision_msgs 1.x layout for ROS 1), parsed by rosbags itself.
+"""
+
+from __future__ import annotations
+
+from functools import cache
+
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+from rosbags.typesys.store import Typestore
+
+_VISION_ROS2 = {
+    "vision_msgs/msg/Point2D": "float64 x\nfloat64 y\n",
+    "vision_msgs/msg/Pose2D": "vision_msgs/Point2D position\nfloat64 theta\n",
+    "vision_msgs/msg/BoundingBox2D": "vision_msgs/Pose2D center\nfloat64 size_x\nfloat64 size_y\n",
+    "vision_msgs/msg/ObjectHypothesis": "string class_id\nfloat64 score\n",
+    "vision_msgs/msg/ObjectHypothesisWithPose": (
+        "vision_msgs/ObjectHypothesis hypothesis\ngeometry_msgs/PoseWithCovariance pose\n"
+    ),
+    "vision_msgs/msg/Detection2D": (
+        "std_msgs/Header header\nvision_msgs/ObjectHypothesisWithPose[] results\n"
+        "vision_msgs/BoundingBox2D bbox\nstring id\n"
+    ),
+    "vision_msgs/msg/Detection2DArray": "std_msgs/Header header\nvision_msgs/Detection2D[] detections\n",
+}
+
+_VISION_ROS1 = {
+    "vision_msgs/msg/BoundingBox2D": "geometry_msgs/Pose2D center\nfloat64 size_x\nfloat64 size_y\n",
+    "vision_msgs/msg/ObjectHypothesisWithPose": (
+        "int64 id\nfloat64 score\ngeometry_msgs/PoseWithCovariance pose\n"
+    ),
+    "vision_msgs/msg/Detection2D": (
+        "std_msgs/Header header\nvision_msgs/ObjectHypothesisWithPose[] results\n"
+        "vision_msgs/BoundingBox2D bbox\nsensor_msgs/Image source_img\n"
+    ),
+    "vision_msgs/msg/Detection2DArray": "std_msgs/Header header\nvision_msgs/Detection2D[] detections\n",
+}
+
+_TF2_ROS1 = {"tf2_msgs/msg/TFMessage": "geometry_msgs/TransformStamped[] transforms\n"}
+
+
+def _register(store: Typestore, defs: dict[str, str]) -> None:
+    for name, text in defs.items():
+        if name not in store.types:
+            store.register(get_types_from_msg(text, name))
+
+
+@cache
+def ros2_typestore() -> Typestore:
+    """ROS 2 Humble types plus vision_msgs; what doorbatch writes (CDR) is described by this store."""
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    _register(store, _VISION_ROS2)
+    return store
+
+
+@cache
+def ros1_typestore() -> Typestore:
+    """ROS 1 Noetic types plus tf2_msgs/TFMessage and vision_msgs (for bags without definitions)."""
+    store = get_typestore(Stores.ROS1_NOETIC)
+    _register(store, _TF2_ROS1)
+    _register(store, _VISION_ROS1)
+    return store
+
+
+def normalize_msgtype(name: str) -> str:
+    """``sensor_msgs/LaserScan`` or ``sensor_msgs/msg/LaserScan`` → ``sensor_msgs/msg/LaserScan``."""
+    parts = name.strip().split("/")
+    if len(parts) == 2:
+        return f"{parts[0]}/msg/{parts[1]}"
+    return name.strip()
