@@ -25,7 +25,8 @@ from rosbags.rosbag2 import Writer as Bag2Writer
 from rosbags.typesys.store import Typestore
 
 from doorbatch.errors import UsageError
-from doorbatch.io.decode import DETECTION2D_ARRAY, ros1_class_id
+from doorbatch.io.decode import DETECTION2D_ARRAY, decode_detections, ros1_class_id
+from doorbatch.io.ros_messages import detection_array
 from doorbatch.io.reader import RawMessage
 from doorbatch.io.typestore import ros1_typestore, ros2_typestore
 
@@ -51,6 +52,10 @@ def to_ros2(raw: RawMessage, cache: dict[str, object]) -> tuple[Any, Typestore]:
             return raw.msg, target
         return raw.msg, raw.store
     src = raw.store or ros1_typestore()
+    if raw.msgtype == DETECTION2D_ARRAY:  # layouts differ beyond renames; keeps each box's best hypothesis
+        rec = decode_detections(raw.msg, raw.log_time_ns)
+        boxes = [(d.class_id, d.score, d.center_x, d.center_y, d.size_x, d.size_y) for d in rec.detections]
+        return detection_array(rec.stamp_ns, rec.frame_id, boxes), target
     if raw.msgtype not in target.types:
         return raw.msg, src
     return migrate_message(src, target, raw.msgtype, raw.msgtype, cache, raw.msg), target

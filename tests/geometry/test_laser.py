@@ -1,0 +1,51 @@
+"""Laser conventions: upside-down lasers, NaN/inf/range limits, points in base_link."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from doorbatch.geometry.laser import beam_masks, scan_points
+from doorbatch.geometry.rotations import transform_matrix
+from doorbatch.records import Scan
+
+
+def _scan(ranges: np.ndarray, angle_min: float, inc: float) -> Scan:
+    return Scan(0, 0, "laser", angle_min, inc, 0.1, 20.0, ranges.astype(np.float32))
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.integers(10, 400), st.floats(0.5, 3.0), st.floats(-0.5, 0.5), st.floats(-math.pi, math.pi),
+       st.integers(0, 2**31))
+def test_upside_down_laser_with_negative_increment_gives_upright_points(
+    n: int, fov: float, tx: float, yaw: float, seed: int
+) -> None:
+    rng = np.random.default_rng(seed)
+    ranges = rng.uniform(0.2, 15.0, n)
+    inc = fov / (n - 1)
+    upright = _scan(ranges, -fov / 2, inc)
+    mount_up = transform_matrix([tx, 0.1, 0.4], [0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)])
+    # Rotated 180° about x: laser y points to base −y. The same physical beams then have angles −θ,
+    # listed in the same physical order, i.e. starting at +fov/2 with a negative increment.
+    flip_x = transform_matrix([0, 0, 0], [1.0, 0.0, 0.0, 0.0])
+    flipped = _scan(ranges, fov / 2, -inc)
+    a = scan_points(upright, mount_up)
+    b = scan_points(flipped, mount_up @ flip_x)
+    np.testing.assert_allclose(a.points, b.points, atol=1e-9)
+    np.testing.assert_array_equal(a.beam_index, b.beam_index)
+
+
+def test_beam_masks_follow_the_conventions() -> None:
+    ranges = np.array([np.nan, np.inf, 20.0, 25.0, 0.05, 5.0], dtype=np.float32)
+    hit, no_return = beam_masks(_scan(ranges, 0.0, 0.1))
+    assert hit.tolist() == [False, False, False, False, False, True]
+    assert no_return.tolist() == [False, True, True, True, False, False]
+
+
+def test_points_of_a_known_scan() -> None:
+    scan = _scan(np.array([1.0, 2.0, 3.0]), -math.pi / 2, math.pi / 2)
+    pts = scan_points(scan, transform_matrix([1.0, 0.0, 0.0], [0, 0, 0, 1])).points
+    np.testing.assert_allclose(pts, [[1.0, -1.0], [3.0, 0.0], [1.0, 3.0]], atol=1e-12)

@@ -1,0 +1,118 @@
+"""The same content written as MCAP, ROS 1 bag and ROS 2 bag (sqlite3, mcap) reads back identically."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.writer import Writer as McapWriter
+
+from doorbatch.io.annotated_mcap import Annotation, write_annotated_mcap
+from doorbatch.io.convert import convert_log
+from doorbatch.io.reader import open_log
+from doorbatch.io.typestore import ros1_typestore
+from doorbatch.records import Role, RoleMessage
+from tests.conftest import sample_messages
+
+FORMATS = {"mcap": "log.mcap", "bag": "log.bag", "rosbag2": "log_sqlite3", "rosbag2-mcap": "log_mcapstore"}
+
+
+def _read(path: Path) -> tuple[dict[Role, tuple[str, ...]], list[RoleMessage]]:
+    with open_log(path) as reader:
+        return reader.roles.topics, list(reader.messages())
+
+
+def _assert_same_records(a: list[RoleMessage], b: list[RoleMessage]) -> None:
+    assert len(a) == len(b)
+    for x, y in zip(a, b, strict=True):
+        assert (x.role, x.topic, type(x.record)) == (y.role, y.topic, type(y.record))
+        for name in x.record.__slots__:  # type: ignore[union-attr]
+            va, vb = getattr(x.record, name), getattr(y.record, name)
+            if isinstance(va, np.ndarray):
+                np.testing.assert_array_equal(va, vb, err_msg=f"{x.topic}.{name}")
+            else:
+                assert va == vb, f"{x.topic}.{name}: {va!r} != {vb!r}"
+
+
+@pytest.mark.parametrize("fmt", ["bag", "rosbag2", "rosbag2-mcap"])
+def test_every_format_reads_back_like_mcap(write_log: Callable[..., Path], fmt: str) -> None:
+    ref_roles, ref = _read(write_log(FORMATS["mcap"]))
+    roles, records = _read(write_log(FORMATS[fmt], fmt=fmt))
+    assert roles == ref_roles
+    assert set(ref_roles) == set(Role)  # every role was detected
+    _assert_same_records(records, ref)
+
+
+def test_records_hold_the_written_values(write_log: Callable[..., Path]) -> None:
+    messages = sample_messages(n_scans=5, beams=91)
+    with open_log(write_log("a.mcap", messages)) as reader:
+        scans = [rm.record for rm in reader.messages([Role.SCAN])]
+        dets = [rm.record for rm in reader.messages([Role.DETECTIONS])]
+    written = [msg for topic, _, _, msg in messages if topic == "/scan"]
+    assert len(scans) == 5
+    for scan, msg in zip(scans, written, strict=True):
+        assert scan.stamp_ns == msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+        np.testing.assert_array_equal(scan.ranges, msg.ranges)
+        assert scan.frame_id == "laser"
+    assert [d.class_id for d in dets[0].detections] == ["door", "handle"]
+    assert dets[0].detections[0].center_x == 30.0
+
+
+def test_ros1_messages_inside_mcap_read_like_ros2(write_log: Callable[..., Path], tmp_path: Path) -> None:
+    """An MCAP holding ROS 1 payloads (ros1msg schemas), as the ROS 1 mcap recorder writes."""
+    bag = write_log("src.bag", fmt="bag")
+    store = ros1_typestore()
+    path = tmp_path / "ros1.mcap"
+    from doorbatch.io.reader import open_log as _open
+
+    with _open(bag) as reader, path.open("wb") as f:
+        writer = McapWriter(f)
+        writer.start(profile="ros1", library="test")
+        channels: dict[str, int] = {}
+        for raw in reader.raw_messages():
+            if raw.topic not in channels:
+                text, _ = raw.store.generate_msgdef(raw.msgtype, ros_version=1)  # type: ignore[union-attr]
+                sid = writer.register_schema(raw.msgtype.replace("/msg/", "/"), "ros1msg", text.encode())
+                channels[raw.topic] = writer.register_channel(raw.topic, "ros1", sid)
+            data = raw.store.serialize_ros1(raw.msg, raw.msgtype)  # type: ignore[union-attr]
+            writer.add_message(channels[raw.topic], log_time=raw.log_time_ns, publish_time=raw.log_time_ns,
+                               data=data)
+        writer.finish()
+    assert store is not None
+    _, ref = _read(bag)
+    _, records = _read(path)
+    _assert_same_records(records, ref)
+
+
+@pytest.mark.parametrize("fmt", ["bag", "rosbag2"])
+def test_convert_to_mcap_keeps_every_record(write_log: Callable[..., Path], tmp_path: Path, fmt: str) -> None:
+    src = write_log(FORMATS[fmt], fmt=fmt)
+    summary = convert_log(src, tmp_path / "out.mcap")
+    assert summary.messages == len(sample_messages())
+    _, ref = _read(src)
+    _, records = _read(tmp_path / "out.mcap")
+    _assert_same_records(records, ref)
+
+
+def test_annotated_mcap_keeps_inputs_and_adds_annotations(write_log: Callable[..., Path], tmp_path: Path) -> None:
+    from doorbatch.io import ros_messages as m
+
+    src = write_log("in.bag", fmt="bag")
+    t0 = sample_messages()[2][2]
+    notes = [Annotation("/doorbatch/pose", "geometry_msgs/msg/PoseWithCovarianceStamped", t0 + k,
+                        m.pose_with_covariance_stamped(t0 + k, "map", 1.0 * k, 2.0, 0.5, np.eye(6)))
+             for k in range(3)]
+    out = tmp_path / "annotated.mcap"
+    count = write_annotated_mcap(src, out, notes)
+    assert count == len(sample_messages()) + 3
+    with open_log(out) as reader:
+        assert reader.topics["/doorbatch/pose"].count == 3
+        raws = list(reader.raw_messages(["/doorbatch/pose"]))
+        times = [r.log_time_ns for r in reader.raw_messages()]
+    assert [r.msg.pose.pose.position.x for r in raws] == [0.0, 1.0, 2.0]
+    assert times == sorted(times)
+    _, ref = _read(src)
+    _, records = _read(out)
+    _assert_same_records(records, ref)

@@ -1,0 +1,117 @@
+"""Bad input: each case gives its exit code and one line naming the file (and topic), no traceback."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+from doorbatch.cli import main
+from tests.conftest import sample_messages
+
+
+def _run(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str]:
+    code = main(list(args))
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    return code, err
+
+
+def _one_line(err: str) -> str:
+    lines = [line for line in err.splitlines() if line.startswith("error:")]
+    assert len(lines) == 1, err
+    return lines[0]
+
+
+def test_zero_byte_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "empty.mcap"
+    path.touch()
+    code, err = _run(capsys, "inspect", str(path))
+    assert code == 3
+    assert str(path) in _one_line(err) and "empty" in err
+
+
+def test_truncated_mcap(write_log: Callable[..., Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    whole = write_log("whole.mcap").read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(whole[: len(whole) // 2])
+    code, err = _run(capsys, "inspect", str(cut))
+    assert code == 3
+    assert str(cut) in _one_line(err)
+
+
+def test_file_that_is_not_a_log(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "notes.txt"
+    path.write_text("hello\n")
+    code, err = _run(capsys, "inspect", str(path))
+    assert code == 3
+    assert str(path) in _one_line(err) and "supported" in err
+
+
+def test_mcap_suffix_with_wrong_content(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "fake.mcap"
+    path.write_bytes(b"PK\x03\x04 this is a zip")
+    code, err = _run(capsys, "inspect", str(path))
+    assert code == 3 and "magic" in _one_line(err)
+
+
+def test_bag_with_no_laserscan(write_log: Callable[..., Path], capsys: pytest.CaptureFixture[str]) -> None:
+    path = write_log("noscan.bag", [m for m in sample_messages(3) if m[0] != "/scan"], fmt="bag")
+    code, err = _run(capsys, "inspect", str(path))
+    assert code == 3
+    line = _one_line(err)
+    assert str(path) in line and "LaserScan" in line
+
+
+def test_scan_ranges_length_does_not_match_angles(write_log: Callable[..., Path],
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    messages = sample_messages(3)
+    for topic, _, _, msg in messages:
+        if topic == "/scan":
+            msg.angle_max = msg.angle_min + msg.angle_increment * (len(msg.ranges) + 9)
+    path = write_log("mismatch.mcap", messages)
+    code, err = _run(capsys, "inspect", str(path))
+    assert code == 3
+    line = _one_line(err)
+    assert str(path) in line and "/scan" in line and "does not match" in line
+
+
+def test_scan_stamps_going_backwards(write_log: Callable[..., Path], capsys: pytest.CaptureFixture[str]) -> None:
+    messages = sample_messages(5)
+    scans = [msg for topic, _, _, msg in messages if topic == "/scan"]
+    scans[3].header.stamp, scans[2].header.stamp = scans[2].header.stamp, scans[3].header.stamp
+    path = write_log("backwards.bag", messages, fmt="bag")
+    code, err = _run(capsys, "inspect", str(path))
+    assert code == 3
+    line = _one_line(err)
+    assert str(path) in line and "/scan" in line and "backwards" in line
+
+
+def test_unknown_config_key_names_the_closest(write_log: Callable[..., Path],
+                                              capsys: pytest.CaptureFixture[str]) -> None:
+    code, err = _run(capsys, "inspect", str(write_log("ok.mcap")), "--set", "io.gap_factr=3")
+    assert code == 2
+    line = _one_line(err)
+    assert "io.gap_factr" in line and "io.gap_factor" in line
+
+
+def test_unknown_key_in_config_file(tmp_path: Path, write_log: Callable[..., Path],
+                                    capsys: pytest.CaptureFixture[str]) -> None:
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text("laser:\n  no_return_clear: 4\n")
+    code, err = _run(capsys, "inspect", str(write_log("ok.mcap")), "--config", str(cfg))
+    assert code == 2
+    assert str(cfg) in _one_line(err) and "laser.no_return_clear_m" in err
+
+
+def test_a_good_log_inspects_cleanly(write_log: Callable[..., Path], capsys: pytest.CaptureFixture[str]) -> None:
+    import json
+
+    code = main(["inspect", str(write_log("ok.mcap")), "--json"])
+    out = capsys.readouterr().out
+    assert code == 0
+    report = json.loads(out)
+    roles = {t["name"]: t["role"] for t in report["topics"]}
+    assert roles["/scan"] == "scan" and roles["/odom"] == "odometry" and roles["/ground_truth"] == "reference"
+    assert report["problems"] == []

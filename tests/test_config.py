@@ -1,0 +1,45 @@
+"""Config: defaults file equals the models, overrides are typed, unknown keys name the closest."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import yaml
+
+from doorbatch.config import DoorbatchConfig, load_config
+from doorbatch.errors import ConfigError
+from tests.conftest import REPO
+
+
+def test_configs_default_yaml_equals_the_model_defaults() -> None:
+    on_disk = yaml.safe_load((REPO / "configs" / "default.yaml").read_text())
+    assert on_disk == DoorbatchConfig().as_dict()
+
+
+def test_set_overrides_are_typed_and_merge(tmp_path: Path) -> None:
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text("laser:\n  beam_stride: 2\nio:\n  gap_factor: 7\n")
+    config = load_config(cfg, ["laser.beam_stride=3", "topics.scan=/front_scan"])
+    assert config.laser.beam_stride == 3
+    assert config.io.gap_factor == 7.0
+    assert config.topics.scan == "/front_scan"
+    assert config.hash() != DoorbatchConfig().hash()
+    assert load_config().hash() == DoorbatchConfig().hash()
+
+
+@pytest.mark.parametrize(("override", "expected"), [
+    ("laser.beam_strid=2", "laser.beam_stride"),
+    ("framse.map=x", "frames"),
+    ("seeed=3", "seed"),
+])
+def test_unknown_key_names_closest_valid(override: str, expected: str) -> None:
+    with pytest.raises(ConfigError, match=expected):
+        load_config(overrides=[override])
+
+
+def test_wrong_type_is_a_config_error() -> None:
+    with pytest.raises(ConfigError, match="laser.beam_stride"):
+        load_config(overrides=["laser.beam_stride=zero"])
+    with pytest.raises(ConfigError, match="expected section.key=value"):
+        load_config(overrides=["laser.beam_stride"])
