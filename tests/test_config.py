@@ -39,7 +39,7 @@ def test_unknown_key_names_closest_valid(override: str, expected: str) -> None:
 
 
 def test_wrong_type_is_a_config_error() -> None:
-    with pytest.raises(ConfigError, match="laser.beam_stride"):
+    with pytest.raises(ConfigError, match=r"laser\.beam_stride"):
         load_config(overrides=["laser.beam_stride=zero"])
-    with pytest.raises(ConfigError, match="expected section.key=value"):
+    with pytest.raises(ConfigError, match=r"expected section\.key=value"):
         load_config(overrides=["laser.beam_stride"])

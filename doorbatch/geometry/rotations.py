@@ -47,10 +47,11 @@ def slerp(q0: FloatArray, q1: FloatArray, fraction: float) -> FloatArray:
         q1, dot = -q1, -dot
     if dot > 1.0 - 1e-12:
         out = q0 + fraction * (q1 - q0)
-        return out / np.linalg.norm(out)
+        return np.asarray(out / np.linalg.norm(out), dtype=np.float64)
     theta = np.arccos(min(dot, 1.0))
     s = np.sin(theta)
-    return (np.sin((1.0 - fraction) * theta) * q0 + np.sin(fraction * theta) * q1) / s
+    out = (np.sin((1.0 - fraction) * theta) * q0 + np.sin(fraction * theta) * q1) / s
+    return np.asarray(out, dtype=np.float64)
 
 
 def yaw_of_matrix(mat: FloatArray) -> float:

@@ -35,7 +35,7 @@ class _Edge:
         self.rotations.insert(i, tf.rotation_xyzw)
 
     def at(self, stamp_ns: int, limit_ns: int, child: str) -> FloatArray:
-        if self.static or len(self.stamps) == 1 and self.static:
+        if self.static or (len(self.stamps) == 1 and self.static):
             return transform_matrix(self.translations[-1], self.rotations[-1])
         stamps = self.stamps
         i = bisect.bisect_left(stamps, stamp_ns)

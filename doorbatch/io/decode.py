@@ -21,6 +21,7 @@ from doorbatch.records import (
     Detections,
     Image,
     Pose2D,
+    Record,
     Role,
     Scan,
     Transform,
@@ -205,7 +206,7 @@ def decode_image(msg: Any, msgtype: str, log_time_ns: int, topic: str) -> Image:
         stamp_ns=stamp_to_ns(msg.header.stamp),
         log_time_ns=log_time_ns,
         frame_id=msg.header.frame_id.lstrip("/"),
-        pixels=pixels,
+        pixels=np.asarray(pixels, dtype=np.uint8),
         encoding=encoding,
     )
 
@@ -276,7 +277,7 @@ def decode_detections(msg: Any, log_time_ns: int) -> Detections:
     )
 
 
-def decode(role: Role, msg: Any, msgtype: str, log_time_ns: int, topic: str) -> Iterator[object]:
+def decode(role: Role, msg: Any, msgtype: str, log_time_ns: int, topic: str) -> Iterator[Record]:
     """Decode one message of a topic with a known role into its records (TF gives several)."""
     if role is Role.SCAN:
         yield decode_scan(msg, log_time_ns, topic)

@@ -102,7 +102,7 @@ def _header_stamp(msg: Any) -> int | None:
 
 
 def inspect_log(path: Path, config: DoorbatchConfig | None = None,
-                progress: Callable[[int], None] | None = None) -> LogReport:
+                progress: Callable[[int], object] | None = None) -> LogReport:
     """Read a whole log once and report topics, roles and problems.
 
     Raises:

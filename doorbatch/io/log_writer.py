@@ -26,8 +26,8 @@ from rosbags.typesys.store import Typestore
 
 from doorbatch.errors import UsageError
 from doorbatch.io.decode import DETECTION2D_ARRAY, decode_detections, ros1_class_id
-from doorbatch.io.ros_messages import detection_array
 from doorbatch.io.reader import RawMessage
+from doorbatch.io.ros_messages import detection_array
 from doorbatch.io.typestore import ros1_typestore, ros2_typestore
 
 
@@ -98,7 +98,7 @@ class LogWriter:
             channel = self._channels.get((topic, msgtype))
             if channel is None:
                 channel = self._mcap_channel(topic, msgtype, store)
-            data = store.serialize_cdr(msg, msgtype)
+            data = bytes(store.serialize_cdr(msg, msgtype))
             self._mcap.add_message(channel, log_time=log_time_ns, publish_time=log_time_ns, data=data)
             return
         bag = self._bag
@@ -145,7 +145,7 @@ class LogWriter:
                  tb: TracebackType | None) -> None:
         try:
             if self._mcap is not None:
-                self._mcap.finish()
+                self._mcap.finish()  # type: ignore[no-untyped-call]
             if self._file is not None:
                 self._file.flush()
                 os.fsync(self._file.fileno())
