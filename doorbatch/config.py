@@ -91,8 +91,13 @@ class DoorbatchConfig(Section):
 
     def hash(self) -> str:
         """SHA-256 of the resolved tree in canonical JSON: equal configs hash equally."""
-        text = json.dumps(self.as_dict(), sort_keys=True, separators=(",", ":"))
-        return hashlib.sha256(text.encode()).hexdigest()
+        return tree_hash(self.as_dict())
+
+
+def tree_hash(tree: Mapping[str, Any]) -> str:
+    """SHA-256 of a config tree (plain data) in canonical JSON."""
+    text = json.dumps(tree, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()
 
 
 def default_config_yaml() -> str:

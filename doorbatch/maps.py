@@ -1,0 +1,107 @@
+"""Occupancy maps as nav_msgs/OccupancyGrid holds them, with the cell ↔ world conversions.
+
+The array is indexed ``occupancy[i, j]``: row ``i`` grows with the map's y axis (row 0 is the lowest y,
+like OccupancyGrid data, unlike an image), column ``j`` with its x axis. The origin is the pose of the
+outer corner of cell (0, 0) in the world (map frame), as in map_server's ``origin: [x, y, yaw]``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+UNKNOWN = -1
+FREE = 0
+OCCUPIED = 100
+
+Int8Array = npt.NDArray[np.int8]
+IntArray = npt.NDArray[np.int64]
+FloatArray = npt.NDArray[np.float64]
+BoolArray = npt.NDArray[np.bool_]
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class OccupancyMap:
+    """A 2D occupancy grid in the ROS OccupancyGrid convention.
+
+    Attributes:
+        occupancy: (height, width) int8: -1 unknown, 0..100 occupied probability in percent; row 0 is
+            the lowest y.
+        resolution_m: Cell edge length (m).
+        origin_x_m: World x of the outer corner of cell (0, 0) (m).
+        origin_y_m: World y of that corner (m).
+        origin_yaw_rad: Rotation of the grid about that corner (rad, CCW).
+
+    Equality is identity (the array makes ``==`` ambiguous); compare fields with NumPy.
+    """
+
+    occupancy: Int8Array
+    resolution_m: float
+    origin_x_m: float = 0.0
+    origin_y_m: float = 0.0
+    origin_yaw_rad: float = 0.0
+
+    def __post_init__(self) -> None:
+        """Check shape, dtype, value range, and a positive finite resolution.
+
+        Raises:
+            ValueError: Any of these is wrong.
+        """
+        grid = self.occupancy
+        if not isinstance(grid, np.ndarray) or grid.ndim != 2 or grid.dtype != np.int8:
+            raise ValueError("occupancy must be a 2-D int8 array")
+        if grid.size and (int(grid.min()) < UNKNOWN or int(grid.max()) > OCCUPIED):
+            raise ValueError("occupancy values must be -1 (unknown) or 0..100")
+        if not (math.isfinite(self.resolution_m) and self.resolution_m > 0.0):
+            raise ValueError(f"resolution_m must be positive and finite, got {self.resolution_m}")
+        origin = (self.origin_x_m, self.origin_y_m, self.origin_yaw_rad)
+        if not all(math.isfinite(v) for v in origin):
+            raise ValueError(f"origin must be finite, got {origin}")
+
+    @property
+    def width(self) -> int:
+        """Number of columns (cells along x)."""
+        return int(self.occupancy.shape[1])
+
+    @property
+    def height(self) -> int:
+        """Number of rows (cells along y)."""
+        return int(self.occupancy.shape[0])
+
+    def _rotation(self) -> FloatArray:
+        c, s = math.cos(self.origin_yaw_rad), math.sin(self.origin_yaw_rad)
+        return np.array([[c, -s], [s, c]], dtype=np.float64)
+
+    def world_to_cell(self, xy_m: npt.ArrayLike) -> IntArray:
+        """The cell (row i, column j) holding each world point.
+
+        Args:
+            xy_m: (..., 2) world points (x, y) in m.
+
+        Returns:
+            (..., 2) int64 indices ``[i, j]`` so that ``occupancy[ij[..., 0], ij[..., 1]]`` is the cell;
+            points outside the grid give indices outside it (see :meth:`contains`).
+        """
+        xy = np.asarray(xy_m, dtype=np.float64)
+        local = (xy - (self.origin_x_m, self.origin_y_m)) @ self._rotation()  # R^T · (p − o)
+        ji = np.floor(local / self.resolution_m).astype(np.int64)
+        return ji[..., ::-1]
+
+    def cell_to_world(self, ij: npt.ArrayLike) -> FloatArray:
+        """The world point (x, y) in m of the center of each cell.
+
+        Args:
+            ij: (..., 2) cell indices ``[i, j]`` (row, column); fractional indices are allowed.
+        """
+        cells = np.asarray(ij, dtype=np.float64)
+        local = (cells[..., ::-1] + 0.5) * self.resolution_m
+        return local @ self._rotation().T + (self.origin_x_m, self.origin_y_m)
+
+    def contains(self, ij: npt.ArrayLike) -> BoolArray:
+        """Whether each cell index ``[i, j]`` lies inside the grid."""
+        cells = np.asarray(ij)
+        i, j = cells[..., 0], cells[..., 1]
+        return np.asarray((i >= 0) & (i < self.height) & (j >= 0) & (j < self.width), dtype=np.bool_)

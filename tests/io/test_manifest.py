@@ -1,0 +1,119 @@
+"""manifest.json: fingerprints, stage times, UTC times, JSON round trip, rejection of foreign files."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from datetime import UTC, datetime
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import doorbatch
+from doorbatch.config import DoorbatchConfig
+from doorbatch.errors import InputDataError
+from doorbatch.io.manifest import BLOCK_BYTES, Manifest, StageTimer, config_hash, file_fingerprint
+
+
+def test_file_fingerprint_is_sha256_of_content_across_blocks(tmp_path: Path) -> None:
+    data = np.random.default_rng(1).bytes(BLOCK_BYTES * 2 + 123)
+    path = tmp_path / "log.mcap"
+    path.write_bytes(data)
+    assert file_fingerprint(path) == {"path": str(path), "size": len(data),
+                                      "sha256": hashlib.sha256(data).hexdigest()}
+
+
+def test_folder_fingerprint_covers_every_file_in_sorted_order(tmp_path: Path) -> None:
+    bag = tmp_path / "bag"
+    (bag / "sub").mkdir(parents=True)
+    (bag / "metadata.yaml").write_text("version: 5\n")
+    (bag / "bag_0.db3").write_bytes(b"\x01" * 1000)
+    (bag / "sub" / "x").write_bytes(b"xyz")
+    first = file_fingerprint(bag)
+    assert first["size"] == 11 + 1000 + 3
+    expected = hashlib.sha256()
+    for name, content in [("bag_0.db3", b"\x01" * 1000), ("metadata.yaml", b"version: 5\n"), ("sub/x", b"xyz")]:
+        expected.update(f"{name}\0{len(content)}\0".encode() + content)
+    assert first["sha256"] == expected.hexdigest()
+    (bag / "sub" / "x").rename(bag / "sub" / "y")  # same bytes, another name: another fingerprint
+    assert file_fingerprint(bag)["sha256"] != first["sha256"]
+
+
+def test_fingerprint_of_missing_input_names_it(tmp_path: Path) -> None:
+    with pytest.raises(InputDataError) as info:
+        file_fingerprint(tmp_path / "gone.bag")
+    assert info.value.path == str(tmp_path / "gone.bag")
+
+
+def test_stage_timer_accumulates_per_stage_also_on_error() -> None:
+    timer = StageTimer()
+    with timer.stage("grid"):
+        time.sleep(0.01)
+    with timer("grid"):
+        time.sleep(0.01)
+    with pytest.raises(RuntimeError), timer.stage("em"):
+        raise RuntimeError
+    assert set(timer.seconds) == {"grid", "em"}
+    assert timer.seconds["grid"] >= 0.02
+    assert timer.seconds["em"] >= 0.0
+
+
+def test_config_hash_equals_the_config_models_hash() -> None:
+    config = DoorbatchConfig()
+    assert config_hash(config.as_dict()) == config.hash()
+    assert Manifest.start(config.as_dict()).config_hash == config.hash()
+
+
+def test_manifest_write_read_round_trip(tmp_path: Path) -> None:
+    log = tmp_path / "a.mcap"
+    log.write_bytes(b"\x89MCAP0\r\n")
+    config = DoorbatchConfig().as_dict()
+    manifest = Manifest.start(config, [log], command="map")
+    manifest.warn("stamps repaired in a.mcap")
+    timer = StageTimer()
+    with timer.stage("grid"):
+        pass
+    manifest.finish(timer)
+    manifest.extra["n_doors"] = np.int32(3)
+    manifest.write(tmp_path / "out" / "manifest.json")
+
+    data = json.loads((tmp_path / "out" / "manifest.json").read_text())
+    assert list(data) == ["manifest_version", "doorbatch_version", "config", "config_hash", "inputs",
+                          "started_at", "finished_at", "stage_seconds", "warnings", "extra"]
+    assert data["doorbatch_version"] == doorbatch.__version__
+    assert data["config"] == config
+    assert data["inputs"] == [file_fingerprint(log)]
+    assert data["warnings"] == ["stamps repaired in a.mcap"]
+    assert data["extra"] == {"command": "map", "n_doors": 3}
+    assert set(data["stage_seconds"]) == {"grid"}
+    started = datetime.fromisoformat(data["started_at"])
+    finished = datetime.fromisoformat(data["finished_at"])
+    assert started.tzinfo == UTC and data["started_at"].endswith("Z")
+    assert started <= finished
+
+    back = Manifest.read(tmp_path / "out" / "manifest.json")
+    assert back.to_dict() == data
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [("{not json", "cannot read manifest"), ("[1, 2]", "not a JSON object"),
+     ('{"config": {}}', "missing"), ('{"config": [], "config_hash": "", "doorbatch_version": "", '
+                                    '"started_at": ""}', "wrong kind")],
+)
+def test_read_rejects_foreign_files(tmp_path: Path, text: str, message: str) -> None:
+    path = tmp_path / "manifest.json"
+    path.write_text(text)
+    with pytest.raises(InputDataError, match=message) as info:
+        Manifest.read(path)
+    assert info.value.path == str(path)
+
+
+def test_unserializable_extra_fails_before_writing(tmp_path: Path) -> None:
+    manifest = Manifest.start({})
+    manifest.extra["bad"] = object()
+    with pytest.raises(TypeError):
+        manifest.write(tmp_path / "manifest.json")
+    assert list(tmp_path.iterdir()) == []
