@@ -33,6 +33,7 @@ from typing import Any, Self
 import numpy as np
 
 import doorbatch
+from doorbatch.config import tree_hash
 from doorbatch.errors import InputDataError
 from doorbatch.io.atomic import atomic_write_text
 
