@@ -63,6 +63,8 @@ class IoConfig(Section):
     carmen_fov_deg: float = Field(180.0, gt=0.0, le=360.0)
     # CARMEN: maximum range used when the log gives none and no reading exceeds it.
     carmen_default_max_range_m: float = Field(80.0, gt=0.0)
+    # CARMEN: range_min of the scans (the logs give none; their readings are never 0).
+    carmen_range_min_m: float = Field(0.0, ge=0.0)
     # CARMEN: nominal scan period used to synthesize stamps when the logged ones are unusable.
     carmen_scan_period_s: float = Field(0.2, gt=0.0)
 

@@ -45,7 +45,7 @@ def write_annotated_mcap(source: Path, output: Path, annotations: Iterable[Annot
     """
     config = config or DoorbatchConfig()
     written = 0
-    with open_log(source, config.topics, config.frames) as reader, LogWriter(output, LogFormat.MCAP) as writer:
+    with open_log(source, config) as reader, LogWriter(output, LogFormat.MCAP) as writer:
         inputs: Iterator[tuple[int, int, RawMessage | Annotation]] = (
             (raw.log_time_ns, 0, raw) for raw in reader.raw_messages()
         )

@@ -32,7 +32,7 @@ def convert_log(source: Path, output: Path, config: DoorbatchConfig | None = Non
     """
     config = config or DoorbatchConfig()
     counts: dict[str, int] = {}
-    with open_log(source, config.topics, config.frames) as reader:
+    with open_log(source, config) as reader:
         total = sum(t.count for t in reader.topics.values())
         with LogWriter(output, fmt) as writer, progress_bar(total, f"convert {source.name}") as bar:
             for raw in reader.raw_messages():

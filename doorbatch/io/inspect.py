@@ -114,7 +114,7 @@ def inspect_log(path: Path, config: DoorbatchConfig | None = None,
     stats: dict[str, _TopicStats] = {}
     tf = TfBuffer()
     scan_frames: set[str] = set()
-    with open_log(path, config.topics, config.frames) as reader:
+    with open_log(path, config) as reader:
         roles = reader.roles
         role_of = roles.role_of()
         scan_topic = roles.topic(Role.SCAN)

@@ -19,7 +19,7 @@ from typing import Any, Self
 
 from rosbags.typesys.store import Typestore
 
-from doorbatch.config import FramesConfig, TopicsConfig
+from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import DoorbatchError, LogReadError
 from doorbatch.io.decode import decode, yaw_from_quaternion
 from doorbatch.io.roles import RoleAssignment, TopicInfo, assign_roles
@@ -48,11 +48,12 @@ class LogReader(ABC):
 
     storage: str = "unknown"
 
-    def __init__(self, path: Path, topics_config: TopicsConfig | None = None,
-                 frames: FramesConfig | None = None) -> None:
+    def __init__(self, path: Path, config: DoorbatchConfig | None = None) -> None:
+        config = config or DoorbatchConfig()
         self.path = path
-        self.topics_config = topics_config or TopicsConfig()
-        self.frames = frames or FramesConfig()
+        self.topics_config = config.topics
+        self.frames = config.frames
+        self.io_config = config.io
         self._roles: RoleAssignment | None = None
         self.warnings: list[str] = []  # repairs a reader made (e.g. CARMEN stamps), shown by inspect
 
@@ -160,7 +161,7 @@ class LogReader(ABC):
                       float(tf.translation[1]), yaw_from_quaternion(x, y, z, w))
 
 
-ReaderFactory = Callable[[Path, TopicsConfig | None, FramesConfig | None], LogReader]
+ReaderFactory = Callable[[Path, DoorbatchConfig | None], LogReader]
 _READERS: dict[str, ReaderFactory] = {}
 
 
@@ -202,8 +203,7 @@ def _format_key(path: Path) -> str:
     return key
 
 
-def open_log(path: Path | str, topics: TopicsConfig | None = None,
-             frames: FramesConfig | None = None) -> LogReader:
+def open_log(path: Path | str, config: DoorbatchConfig | None = None) -> LogReader:
     """A reader for any supported log; use it as a context manager.
 
     Raises:
@@ -213,15 +213,15 @@ def open_log(path: Path | str, topics: TopicsConfig | None = None,
     path = Path(path)
     if not path.exists():
         raise LogReadError("no such file or folder", path=path)
-    return _READERS[_format_key(path)](path, topics, frames)
+    return _READERS[_format_key(path)](path, config)
 
 
 def _lazy(module: str, cls: str) -> ReaderFactory:
     """A factory that imports its reader module on first use (keeps ``import doorbatch`` light)."""
 
-    def make(path: Path, topics: TopicsConfig | None, frames: FramesConfig | None) -> LogReader:
+    def make(path: Path, config: DoorbatchConfig | None) -> LogReader:
         reader_cls = getattr(importlib.import_module(module), cls)
-        reader: LogReader = reader_cls(path, topics, frames)
+        reader: LogReader = reader_cls(path, config)
         return reader
 
     return make

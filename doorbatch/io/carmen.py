@@ -1,0 +1,670 @@
+"""CARMEN text logs (``.log``, ``.clf``, optionally gzipped): the classic public 2D laser datasets.
+
+A CARMEN log is one message per line (``FLASER``, ``ODOM``, ``ROBOTLASER1``, ``PARAM``, ...). The reader
+exposes it as synthetic ROS 2 topics built with the classes of :func:`ros2_typestore`, so that decoding,
+role detection and MCAP conversion treat it like any bag:
+
+==============  ==========================  =====================================================
+topic           type                        from
+==============  ==========================  =====================================================
+/scan           sensor_msgs/LaserScan       FLASER and ROBOTLASER1 readings, frame ``laser``
+/odom           nav_msgs/Odometry           FLASER odometry fields (one per scan), ODOM lines, and
+                                            ROBOTLASER1 robot pose
+/ground_truth   nav_msgs/Odometry           FLASER and ROBOTLASER1 laser pose (the corrected pose in
+                                            corrected logs), moved back to base_link
+/tf             tf2_msgs/TFMessage          odom→base_link, one per odometry pose
+/tf_static      tf2_msgs/TFMessage          base_link→laser from ``robot_frontlaser_offset``
+==============  ==========================  =====================================================
+
+The file has no index, so :meth:`CarmenReader.open` makes one pass over it: it validates every line,
+counts messages, reads the PARAMs, finds the largest reading and repairs the time stamps
+(:func:`repair_stamps`); :meth:`CarmenReader.raw_messages` then streams a second pass.
+"""
+
+from __future__ import annotations
+
+import gzip
+import logging
+import math
+import zlib
+from collections import Counter
+from collections.abc import Collection, Iterator, Sequence
+from dataclasses import dataclass
+from decimal import ROUND_HALF_EVEN, Decimal, InvalidOperation
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+import numpy.typing as npt
+
+from doorbatch.config import DoorbatchConfig
+from doorbatch.errors import LogReadError
+from doorbatch.io import ros_messages as rm
+from doorbatch.io.decode import LASERSCAN, ODOMETRY, TF_MESSAGE
+from doorbatch.io.reader import LogReader, RawMessage
+from doorbatch.io.roles import TopicInfo
+
+log = logging.getLogger(__name__)
+
+Int64Array = npt.NDArray[np.int64]
+BoolArray = npt.NDArray[np.bool_]
+Float32Array = npt.NDArray[np.float32]
+
+SCAN_TOPIC = "/scan"
+ODOM_TOPIC = "/odom"
+REFERENCE_TOPIC = "/ground_truth"
+TF_TOPIC = "/tf"
+TF_STATIC_TOPIC = "/tf_static"
+LASER_FRAME = "laser"
+ENCODING = "carmen"
+
+_FLASER = "FLASER"
+_ODOM = "ODOM"
+_ROBOTLASER1 = "ROBOTLASER1"
+_TIMED = frozenset({_FLASER, _ODOM, _ROBOTLASER1})
+
+_NS = 1_000_000_000
+_MAX_STAMP_S = Decimal(2**62) / _NS  # beyond this a "stamp" is garbage, not a time
+# Readings this close below the largest one are the scanner's no-return codes too (orebro: 32.759–32.767).
+_NO_RETURN_BAND_M = 0.01
+# Stamp repair: above this fraction of out-of-order or missing stamps, synthesize instead of nudging.
+_MAX_NUDGED_FRACTION = 0.25
+# Stamp repair: at or above this fraction of consecutive scans sharing one stamp, stamps are coarse.
+_COARSE_FRACTION = 0.5
+_MAX_PARAMS = ("robot_front_laser_max",)
+
+
+class _MalformedError(ValueError):
+    """A line that does not have the layout of its keyword (turned into LogReadError with the line)."""
+
+
+# --------------------------------------------------------------------------------------------------
+# Pure helpers
+
+
+def carmen_scan_geometry(n_readings: int, fov_deg: float) -> tuple[float, float]:
+    """Beam angles of a FLASER scan: ``(angle_min, angle_increment)`` in radians.
+
+    The readings span ``fov_deg`` centred on the laser's x axis. An odd count has a beam at each end
+    (181 over 180° → −90°..+90° at 1°); an even count has one beam per increment of the field of view
+    (180 over 180° → −90°..+89° at 1°; 360 → −90°..+89.5° at 0.5°).
+
+    Raises:
+        ValueError: no readings, or a field of view that is not positive.
+    """
+    if n_readings < 1:
+        raise ValueError(f"a scan needs at least one reading, got {n_readings}")
+    if not fov_deg > 0.0:
+        raise ValueError(f"field of view must be positive, got {fov_deg}")
+    fov = math.radians(fov_deg)
+    if n_readings == 1:
+        return 0.0, fov
+    steps = n_readings - 1 if n_readings % 2 == 1 else n_readings
+    return -fov / 2.0, fov / steps
+
+
+def parse_stamp_ns(text: str) -> int:
+    """A decimal seconds string → int nanoseconds, exactly (half-even); −1 if it cannot be a time.
+
+    Negative, non-finite and absurdly large values (uninitialized memory in some logs) give −1.
+
+    Raises:
+        ValueError: the text is not a number.
+    """
+    try:
+        value = Decimal(text)
+    except InvalidOperation as err:
+        raise ValueError(f"time stamp {text!r} is not a number") from err
+    if not value.is_finite() or value < 0 or value > _MAX_STAMP_S:
+        return -1
+    return int((value * _NS).to_integral_value(rounding=ROUND_HALF_EVEN))
+
+
+@dataclass(frozen=True, slots=True)
+class StampRepair:
+    """Repaired stamps (non-decreasing, one per timed line), how they were made, and what to tell."""
+
+    stamps_ns: Int64Array
+    method: str  # "logged" (unchanged), "nudged" or "synthesized"
+    warnings: tuple[str, ...]
+
+
+def heaviest_nondecreasing(values: Sequence[int], weights: Sequence[int]) -> list[int]:
+    """Indices of a non-decreasing subsequence of ``values`` with the largest total weight.
+
+    Dynamic programming over the values in index order with a Fenwick tree of prefix maxima over the
+    value ranks: O(n log n). Ties go to the earliest chain, so the result is deterministic.
+    """
+    n = len(values)
+    if n == 0:
+        return []
+    ranks = (np.unique(np.asarray(values), return_inverse=True)[1] + 1).tolist()
+    size = max(ranks)
+    tree_weight = [0] * (size + 1)
+    tree_index = [-1] * (size + 1)
+    total = [0] * n
+    previous = [-1] * n
+    for i, (rank, weight) in enumerate(zip(ranks, weights, strict=True)):
+        best, best_index, k = 0, -1, rank
+        while k > 0:  # the heaviest chain ending in a value <= this one
+            if tree_weight[k] > best:
+                best, best_index = tree_weight[k], tree_index[k]
+            k -= k & -k
+        total[i], previous[i] = best + weight, best_index
+        k = rank
+        while k <= size:
+            if total[i] > tree_weight[k]:
+                tree_weight[k], tree_index[k] = total[i], i
+            k += k & -k
+    chain: list[int] = []
+    i = int(np.argmax(total))
+    while i >= 0:
+        chain.append(i)
+        i = previous[i]
+    return chain[::-1]
+
+
+def _usable_indices(stamps: Int64Array, is_scan: BoolArray) -> tuple[Int64Array, int, int]:
+    """Indices of the stamps kept as they are, and the counts of missing and out-of-order stamps.
+
+    Missing: negative (unparseable as a time), or 0 after a positive stamp (leading zeros are a log that
+    starts at t = 0). Out of order: valid stamps outside the heaviest non-decreasing run through them,
+    where a scan outweighs all other lines together (keep as many scan stamps as possible, then as many
+    of the others).
+    """
+    n = stamps.shape[0]
+    missing = stamps < 0
+    positive = np.flatnonzero(stamps > 0)
+    if positive.size:
+        missing |= (stamps == 0) & (np.arange(n) > positive[0])
+    valid = np.flatnonzero(~missing)
+    values = stamps[valid]
+    if values.size < 2 or bool(np.all(np.diff(values) >= 0)):
+        kept = valid
+    else:
+        heavy = int(np.count_nonzero(~is_scan)) + 1
+        weights = np.where(is_scan[valid], heavy, 1).tolist()
+        kept = valid[np.asarray(heaviest_nondecreasing(values.tolist(), weights), dtype=np.int64)]
+    return kept.astype(np.int64), int(missing.sum()), int(valid.size - kept.size)
+
+
+def _synthesize(n: int, is_scan: BoolArray, t0_ns: int, period_s: float) -> Int64Array:
+    """Scan k at ``t0 + k·period``; other lines spread evenly between the scans around them."""
+    scans = np.flatnonzero(is_scan)
+    if scans.size == 0:
+        position = np.arange(n, dtype=np.float64)
+    else:
+        xp = np.concatenate([[-1.0], scans.astype(np.float64), [float(n)]])
+        fp = np.arange(-1.0, scans.size + 1.0)
+        position = np.interp(np.arange(n, dtype=np.float64), xp, fp)
+    offsets = np.rint((position - position[0]) * (period_s * _NS)).astype(np.int64)
+    return np.maximum.accumulate(t0_ns + offsets)
+
+
+def _coarse_fraction(scan_stamps: Int64Array) -> float:
+    """The fraction of consecutive scans that share one stamp."""
+    if scan_stamps.size < 2:
+        return 0.0
+    return float(np.mean(np.diff(scan_stamps) == 0))
+
+
+def _interpolate_bad(stamps: Int64Array, kept: Int64Array) -> Int64Array:
+    """Stamps not in ``kept`` replaced by linear interpolation (by line index) between kept neighbours."""
+    n = stamps.shape[0]
+    if kept.size in (0, n):
+        return stamps.copy()
+    base = int(stamps[kept[0]])  # interpolate offsets from it: exact in float64 for any log's span
+    filled = np.interp(np.arange(n, dtype=np.float64), kept.astype(np.float64),
+                       (stamps[kept] - base).astype(np.float64))
+    repaired = base + np.rint(filled).astype(np.int64)
+    repaired[kept] = stamps[kept]
+    return np.maximum.accumulate(repaired)
+
+
+def _coarse_message(scan_stamps: Int64Array, coarse: float) -> str:
+    steps = np.diff(np.unique(scan_stamps))
+    resolution = float(np.median(steps)) / _NS if steps.size else 0.0
+    per_scan = float(scan_stamps[-1] - scan_stamps[0]) / _NS / max(scan_stamps.size - 1, 1)
+    return (f"time stamps are coarse: {coarse:.0%} of consecutive scans share a stamp (resolution about "
+            f"{resolution:g} s; the logged stamps average {per_scan:.3g} s per scan)")
+
+
+def repair_stamps(stamps_ns: Int64Array, is_scan: BoolArray, scan_period_s: float) -> StampRepair:
+    """Make the stamps of a CARMEN log's timed lines (in file order) usable and non-decreasing.
+
+    - A few stamps out of order or missing (0 or garbage): they are replaced by linear interpolation
+      between the nearest kept stamps before and after them ("nudged"); the kept ones are the longest
+      non-decreasing run (scans first), so one wild stamp does not drag the others along.
+    - More than a quarter of them bad, or coarse stamps (at least half of the consecutive scans share a
+      stamp, as in logs printed at 10 s resolution): scan k gets ``t0 + k·scan_period_s`` (t0: the first
+      kept stamp) and the other lines are spread evenly between the scans around them ("synthesized").
+
+    Args:
+        stamps_ns: one stamp per timed line in file order, −1 where the line's stamp is not a time.
+        is_scan: which of those lines are laser scans.
+        scan_period_s: the nominal scan period for synthesized stamps.
+    """
+    stamps = np.asarray(stamps_ns, dtype=np.int64)
+    is_scan = np.asarray(is_scan, dtype=bool)
+    n = stamps.shape[0]
+    if n == 0:
+        return StampRepair(stamps.copy(), "logged", ())
+    kept, n_missing, n_backward = _usable_indices(stamps, is_scan)
+    repaired = _interpolate_bad(stamps, kept)
+    bad = np.ones(n, dtype=bool)
+    bad[kept] = False
+    n_bad = int(np.count_nonzero(bad))
+    what = (f"{n_backward} out of order and {n_missing} missing (0 or not a time) of {n} stamps, "
+            f"{int(np.count_nonzero(bad & is_scan))} of them scans")
+    coarse = _coarse_fraction(repaired[is_scan]) if kept.size else 0.0
+    too_many_bad = kept.size == 0 or n_bad > _MAX_NUDGED_FRACTION * n
+    if too_many_bad or coarse >= _COARSE_FRACTION:
+        why = f"time stamps are unusable: {what}" if too_many_bad else _coarse_message(repaired[is_scan], coarse)
+        message = (f"{why}; synthesized them from the scan period {scan_period_s:g} s "
+                   f"(io.carmen_scan_period_s) over {int(np.count_nonzero(is_scan))} scans")
+        t0 = int(repaired[0]) if kept.size else 0
+        return StampRepair(_synthesize(n, is_scan, t0, scan_period_s), "synthesized", (message,))
+    if n_bad:
+        message = (f"time stamps repaired: {what}; replaced them by interpolation between their "
+                   f"neighbours so that they are non-decreasing")
+        return StampRepair(repaired, "nudged", (message,))
+    return StampRepair(repaired, "logged", ())
+
+
+# --------------------------------------------------------------------------------------------------
+# Line parsing
+
+
+@dataclass(frozen=True, slots=True)
+class _Laser:
+    """A FLASER or ROBOTLASER1 line."""
+
+    ranges: Float32Array
+    laser_pose: tuple[float, float, float]
+    robot_pose: tuple[float, float, float]
+    stamp_ns: int
+    # ROBOTLASER1 only: its own geometry, range and remissions.
+    angle_min: float | None = None
+    angle_increment: float | None = None
+    range_max: float | None = None
+    intensities: Float32Array | None = None
+    tv: float = 0.0
+    rv: float = 0.0
+
+
+@dataclass(frozen=True, slots=True)
+class _Odom:
+    """An ODOM line."""
+
+    pose: tuple[float, float, float]
+    tv: float
+    rv: float
+    stamp_ns: int
+
+
+def _floats(parts: list[str], what: str, dtype: type[np.floating[Any]] = np.float64) -> npt.NDArray[Any]:
+    try:
+        return np.array(parts, dtype=dtype)
+    except ValueError as err:
+        bad = next((p for p in parts if not _is_number(p)), "?")
+        raise _MalformedError(f"{what}: {bad!r} is not a number") from err
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _count(text: str, what: str) -> int:
+    try:
+        value = int(text)
+    except ValueError as err:
+        raise _MalformedError(f"{what} {text!r} is not an integer") from err
+    if value < 0:
+        raise _MalformedError(f"{what} {value} is negative")
+    return value
+
+
+def _pose(values: npt.NDArray[Any], what: str) -> tuple[float, float, float]:
+    if not bool(np.all(np.isfinite(values))):
+        raise _MalformedError(f"{what} is not finite")
+    x, y, theta = values.tolist()
+    return float(x), float(y), float(theta)
+
+
+def _tail_stamp(parts: list[str], start: int, keyword: str) -> int:
+    """The ipc timestamp after the fixed fields (then optionally hostname and logger timestamp)."""
+    tail = len(parts) - start
+    if not 1 <= tail <= 3:
+        expected = f"{start + 1} to {start + 3}"
+        raise _MalformedError(f"{keyword} line has {len(parts)} fields, its counts ask for {expected}")
+    try:
+        return parse_stamp_ns(parts[start])
+    except ValueError as err:
+        raise _MalformedError(str(err)) from err
+
+
+def _parse_flaser(parts: list[str]) -> _Laser:
+    """``FLASER n r1..rn x y theta odom_x odom_y odom_theta timestamp [hostname logger_timestamp]``."""
+    if len(parts) < 2:
+        raise _MalformedError("FLASER line has no reading count")
+    n = _count(parts[1], "reading count")
+    stamp = _tail_stamp(parts, 2 + n + 6, _FLASER)
+    ranges = _floats(parts[2 : 2 + n], "reading", np.float32)
+    poses = _floats(parts[2 + n : 8 + n], "pose")
+    return _Laser(ranges, _pose(poses[:3], "laser pose"), _pose(poses[3:], "odometry pose"), stamp)
+
+
+def _parse_robotlaser1(parts: list[str]) -> _Laser:
+    """``ROBOTLASER1 type start fov res max_range accuracy remission_mode n r.. n_rem rem.. laser_pose
+    robot_pose tv rv forward_safety side_safety turn_axis timestamp [host logger_timestamp]``."""
+    if len(parts) < 9:
+        raise _MalformedError(f"ROBOTLASER1 line has {len(parts)} fields, too few for its header")
+    header = _floats(parts[1:8], "laser header")
+    n = _count(parts[8], "reading count")
+    if len(parts) < 10 + n:
+        raise _MalformedError(f"ROBOTLASER1 line has {len(parts)} fields, fewer than its {n} readings need")
+    n_rem = _count(parts[9 + n], "remission count")
+    rest = 10 + n + n_rem
+    stamp = _tail_stamp(parts, rest + 11, _ROBOTLASER1)
+    ranges = _floats(parts[9 : 9 + n], "reading", np.float32)
+    remissions = _floats(parts[10 + n : rest], "remission", np.float32)
+    poses = _floats(parts[rest : rest + 8], "pose")
+    _, start, fov, res, max_range = header[:5].tolist()
+    if not (math.isfinite(start) and math.isfinite(fov) and math.isfinite(res)):
+        raise _MalformedError("ROBOTLASER1 start angle, field of view or resolution is not finite")
+    if res == 0.0:
+        if n < 2 or fov == 0.0:
+            raise _MalformedError("ROBOTLASER1 has zero angular resolution and no field of view")
+        res = fov / (n - 1)
+    return _Laser(
+        ranges,
+        _pose(poses[:3], "laser pose"),
+        _pose(poses[3:6], "robot pose"),
+        stamp,
+        angle_min=float(start),
+        angle_increment=float(res),
+        range_max=float(max_range) if math.isfinite(max_range) and max_range > 0 else None,
+        intensities=remissions if n_rem == n else None,
+        tv=float(poses[6]),
+        rv=float(poses[7]),
+    )
+
+
+def _parse_odom(parts: list[str]) -> _Odom:
+    """``ODOM x y theta tv rv accel timestamp [hostname logger_timestamp]``."""
+    stamp = _tail_stamp(parts, 7, _ODOM)
+    values = _floats(parts[1:7], "odometry")
+    return _Odom(_pose(values[:3], "odometry pose"), float(values[3]), float(values[4]), stamp)
+
+
+def _parse(parts: list[str]) -> _Laser | _Odom:
+    if parts[0] == _ODOM:
+        return _parse_odom(parts)
+    if parts[0] == _FLASER:
+        return _parse_flaser(parts)
+    return _parse_robotlaser1(parts)
+
+
+def base_from_laser(laser_pose: tuple[float, float, float],
+                    offset: tuple[float, float, float]) -> tuple[float, float, float]:
+    """The base_link pose whose laser (mounted at ``offset`` = x, y, yaw in base_link) is at ``laser_pose``."""
+    lx, ly, ltheta = laser_pose
+    ox, oy, oyaw = offset
+    theta = ltheta - oyaw
+    c, s = math.cos(theta), math.sin(theta)
+    return lx - (c * ox - s * oy), ly - (s * ox + c * oy), math.atan2(math.sin(theta), math.cos(theta))
+
+
+# --------------------------------------------------------------------------------------------------
+# The reader
+
+
+class CarmenReader(LogReader):
+    """A CARMEN text log (``.log``, ``.clf``, gzipped or not) as synthetic ROS 2 topics.
+
+    After :meth:`open`: ``warnings`` (stamp repairs and other problems, for ``inspect``), ``params``
+    (the PARAM lines), ``range_max_m`` and ``range_max_source`` (where the no-return value came from),
+    ``stamp_method`` (``logged``, ``nudged`` or ``synthesized``) and ``ignored_lines`` (keyword → count).
+    """
+
+    storage = "carmen"
+
+    def __init__(self, path: Path, config: DoorbatchConfig | None = None) -> None:
+        super().__init__(path, config)
+        self.params: dict[str, str] = {}
+        self.ignored_lines: dict[str, int] = {}
+        self.range_max_m = self.io_config.carmen_default_max_range_m
+        self.range_max_source = "io.carmen_default_max_range_m"
+        self.stamp_method = "logged"
+        self.laser_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        self._stamps: Int64Array = np.empty(0, dtype=np.int64)
+        self._topics: dict[str, TopicInfo] = {}
+        self._fov_deg = self.io_config.carmen_fov_deg
+        self._resolution_deg: float | None = None  # PARAM laser_front_laser_resolution
+
+    # ---- reading lines
+
+    def _open_text(self) -> IO[str]:
+        with self.path.open("rb") as f:
+            gzipped = f.read(2) == b"\x1f\x8b"
+        if gzipped:
+            return gzip.open(self.path, "rt", encoding="utf-8", errors="replace")
+        return self.path.open("r", encoding="utf-8", errors="replace")
+
+    def _lines(self) -> Iterator[tuple[int, list[str]]]:
+        """(line number, fields) of every line that is not blank or a comment."""
+        lineno = 0
+        try:
+            with self._open_text() as text:
+                for lineno, line in enumerate(text, start=1):
+                    parts = line.split()
+                    if parts and not parts[0].startswith("#"):
+                        yield lineno, parts
+        except (EOFError, zlib.error, gzip.BadGzipFile) as err:
+            raise LogReadError(f"compressed log is truncated or corrupt after line {lineno}: {err}",
+                               path=self.path) from err
+        except OSError as err:
+            raise LogReadError(f"cannot read: {err.strerror or err}", path=self.path) from err
+
+    def _error(self, lineno: int, parts: list[str], reason: str) -> LogReadError:
+        preview = " ".join(parts[:4]) + (" ..." if len(parts) > 4 else "")
+        return LogReadError(f"line {lineno}: {reason} ({preview!r})", path=self.path)
+
+    # ---- the pre-pass
+
+    def open(self) -> None:
+        self.warnings, self.params = [], {}
+        stamps: list[int] = []
+        is_scan: list[bool] = []
+        counts: Counter[str] = Counter()
+        ignored: Counter[str] = Counter()
+        largest = -math.inf
+        band: Float32Array = np.empty(0, dtype=np.float32)  # distinct readings near the largest
+        for lineno, parts in self._lines():
+            keyword = parts[0]
+            if keyword == "PARAM":
+                if len(parts) < 3:
+                    raise self._error(lineno, parts, "PARAM line needs a name and a value")
+                self.params[parts[1]] = parts[2]
+                continue
+            if keyword not in _TIMED:
+                ignored[keyword] += 1
+                continue
+            try:
+                record = _parse(parts)
+            except _MalformedError as err:
+                raise self._error(lineno, parts, str(err)) from err
+            counts[keyword] += 1
+            stamps.append(record.stamp_ns)
+            is_scan.append(isinstance(record, _Laser))
+            if keyword == _FLASER and isinstance(record, _Laser):
+                largest, band = _update_band(largest, band, record.ranges)
+        n_scans = counts[_FLASER] + counts[_ROBOTLASER1]
+        if n_scans == 0:
+            raise LogReadError("no laser scans (FLASER or ROBOTLASER1 lines) in this CARMEN log",
+                               path=self.path)
+        self.ignored_lines = dict(sorted(ignored.items()))
+        self._read_params(counts[_FLASER], largest, band)
+        repair = repair_stamps(np.array(stamps, dtype=np.int64), np.array(is_scan, dtype=bool),
+                               self.io_config.carmen_scan_period_s)
+        self._stamps = repair.stamps_ns
+        self.stamp_method = repair.method
+        for message in repair.warnings:
+            self._warn(message)
+        n_odom = n_scans + counts[_ODOM]
+        self._topics = {
+            SCAN_TOPIC: TopicInfo(SCAN_TOPIC, LASERSCAN, n_scans, ENCODING),
+            ODOM_TOPIC: TopicInfo(ODOM_TOPIC, ODOMETRY, n_odom, ENCODING),
+            REFERENCE_TOPIC: TopicInfo(REFERENCE_TOPIC, ODOMETRY, n_scans, ENCODING),
+            TF_TOPIC: TopicInfo(TF_TOPIC, TF_MESSAGE, n_odom, ENCODING),
+            TF_STATIC_TOPIC: TopicInfo(TF_STATIC_TOPIC, TF_MESSAGE, 1, ENCODING),
+        }
+
+    def _warn(self, message: str) -> None:
+        log.warning("%s: %s", self.path, message)
+        self.warnings.append(message)
+
+    def _param_float(self, name: str) -> float | None:
+        text = self.params.get(name)
+        if text is None:
+            return None
+        try:
+            value = float(text)
+        except ValueError as err:
+            raise LogReadError(f"PARAM {name} {text!r} is not a number", path=self.path) from err
+        if not math.isfinite(value):
+            raise LogReadError(f"PARAM {name} {text!r} is not finite", path=self.path)
+        return value
+
+    def _read_params(self, n_flaser: int, largest: float, band: Float32Array) -> None:
+        """Laser offset, FLASER field of view and the no-return value, from PARAMs or the readings."""
+        self.laser_offset = (
+            self._param_float("robot_frontlaser_offset") or 0.0,
+            self._param_float("robot_frontlaser_side_offset") or 0.0,
+            math.radians(self._param_float("robot_frontlaser_angular_offset") or 0.0),
+        )
+        names = [*_MAX_PARAMS, *sorted(p for p in self.params if p.startswith("laser_")
+                                         and "max_range" in p and "rear" not in p)]
+        for name in names:
+            value = self._param_float(name)
+            if value is not None and value > 0:
+                self.range_max_m, self.range_max_source = value, f"PARAM {name}"
+                break
+        else:
+            if n_flaser and largest > 0:
+                self.range_max_m = float(band.min())
+                self.range_max_source = (
+                    f"largest reading {largest:g} m" + ("" if band.size == 1 else
+                                                        f" (and readings down to {band.min():g} m)")
+                )
+                log.info("%s: no max-range PARAM; %s is the no-return value", self.path, self.range_max_source)
+        resolution = self._param_float("laser_front_laser_resolution")
+        self._resolution_deg = resolution if resolution is not None and resolution > 0 else None
+
+    def _flaser_geometry(self, n: int) -> tuple[float, float]:
+        fov = self._fov_deg
+        if self._resolution_deg is not None:
+            steps = n - 1 if n % 2 == 1 else n
+            if 0 < self._resolution_deg * steps <= 360.0:
+                fov = self._resolution_deg * steps
+        return carmen_scan_geometry(max(n, 1), fov)
+
+    def close(self) -> None:
+        """Nothing stays open between calls: each pass opens the file itself."""
+
+    @property
+    def topics(self) -> dict[str, TopicInfo]:
+        return self._topics
+
+    @property
+    def start_ns(self) -> int:
+        return int(self._stamps[0]) if self._stamps.size else 0
+
+    @property
+    def end_ns(self) -> int:
+        return int(self._stamps[-1]) if self._stamps.size else 0
+
+    # ---- the streaming pass
+
+    def _raw(self, topics: Collection[str] | None, start_ns: int | None, stop_ns: int | None
+             ) -> Iterator[RawMessage]:
+        wanted = set(self._topics) if topics is None else set(topics) & set(self._topics)
+        if not wanted or not self._stamps.size:
+            return
+        lo = self.start_ns if start_ns is None else start_ns
+        hi = None if stop_ns is None else stop_ns
+        frames = self.frames
+        first = self.start_ns
+        if TF_STATIC_TOPIC in wanted and lo <= first and (hi is None or first < hi):
+            ox, oy, oyaw = self.laser_offset
+            static = rm.tf_message([rm.planar_transform(first, frames.base_link, LASER_FRAME, ox, oy, oyaw)])
+            yield RawMessage(TF_STATIC_TOPIC, TF_MESSAGE, first, static, False)
+        odometry_wanted = bool(wanted & {ODOM_TOPIC, TF_TOPIC})
+        laser_wanted = bool(wanted & {SCAN_TOPIC, REFERENCE_TOPIC}) or odometry_wanted
+        index = -1
+        for lineno, parts in self._lines():
+            if parts[0] not in _TIMED:
+                continue
+            index += 1
+            if index >= self._stamps.size:
+                raise LogReadError(f"line {lineno}: the log changed since it was opened", path=self.path)
+            stamp = int(self._stamps[index])
+            if stamp < lo:
+                continue
+            if hi is not None and stamp >= hi:
+                break
+            is_odom = parts[0] == _ODOM
+            if (is_odom and not odometry_wanted) or (not is_odom and not laser_wanted):
+                continue
+            try:
+                record = _parse(parts)
+            except _MalformedError as err:
+                raise self._error(lineno, parts, str(err)) from err
+            yield from self._messages_of(record, stamp, wanted)
+
+    def _messages_of(self, record: _Laser | _Odom, stamp: int, wanted: set[str]) -> Iterator[RawMessage]:
+        frames = self.frames
+        if isinstance(record, _Odom):
+            odom_pose, tv, rv = record.pose, record.tv, record.rv
+        else:
+            odom_pose, tv, rv = record.robot_pose, record.tv, record.rv
+            if SCAN_TOPIC in wanted:
+                yield RawMessage(SCAN_TOPIC, LASERSCAN, stamp, self._scan(record, stamp), False)
+        if ODOM_TOPIC in wanted:
+            odom = rm.odometry(stamp, frames.odom, frames.base_link, *odom_pose, vx=tv, wz=rv)
+            yield RawMessage(ODOM_TOPIC, ODOMETRY, stamp, odom, False)
+        if TF_TOPIC in wanted:
+            tf = rm.tf_message([rm.planar_transform(stamp, frames.odom, frames.base_link, *odom_pose)])
+            yield RawMessage(TF_TOPIC, TF_MESSAGE, stamp, tf, False)
+        if isinstance(record, _Laser) and REFERENCE_TOPIC in wanted:
+            pose = base_from_laser(record.laser_pose, self.laser_offset)
+            ref = rm.odometry(stamp, frames.map, frames.base_link, *pose)
+            yield RawMessage(REFERENCE_TOPIC, ODOMETRY, stamp, ref, False)
+
+    def _scan(self, record: _Laser, stamp: int) -> Any:
+        n = record.ranges.shape[0]
+        if record.angle_min is not None and record.angle_increment is not None:
+            angle_min, increment = record.angle_min, record.angle_increment
+        else:
+            angle_min, increment = self._flaser_geometry(n)
+        range_max = record.range_max if record.range_max is not None else self.range_max_m
+        return rm.laser_scan(stamp, LASER_FRAME, angle_min, increment, self.io_config.carmen_range_min_m, range_max,
+                             record.ranges, record.intensities)
+
+
+def _update_band(largest: float, band: Float32Array, ranges: Float32Array) -> tuple[float, Float32Array]:
+    """Track the largest finite reading and the distinct readings within 1 cm below it."""
+    finite = ranges[np.isfinite(ranges)]
+    if finite.size == 0:
+        return largest, band
+    top = float(finite.max())
+    if top < largest - _NO_RETURN_BAND_M:
+        return largest, band
+    largest = max(largest, top)
+    floor = largest - _NO_RETURN_BAND_M
+    merged = np.unique(np.concatenate([band, finite[finite >= floor]]))
+    return largest, merged[merged >= floor]
