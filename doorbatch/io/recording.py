@@ -1,0 +1,170 @@
+"""A log loaded into compact arrays for the stages: scans, odometry, reference poses, beam colors.
+
+Scans keep their ranges as float32 plus, per scan, the planar affine map laser→base_link (a 2×3 matrix
+from the TF tree at the scan's stamp: rotation or reflection for an upside-down laser, and translation).
+Images are never loaded here; stages that need them stream the log themselves.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+
+from doorbatch.config import DoorbatchConfig
+from doorbatch.errors import LogContentError, TransformError
+from doorbatch.geometry.tf_buffer import TfBuffer
+from doorbatch.io.reader import open_log
+from doorbatch.records import BeamColors, Pose2D, Role, Scan, Transform
+
+FloatArray = npt.NDArray[np.float64]
+Int64Array = npt.NDArray[np.int64]
+
+
+@dataclass(frozen=True)
+class PoseSeries:
+    """Stamped planar poses: ``stamps_ns`` (N,) int64 sorted, ``poses`` (N, 3) x, y, yaw."""
+
+    stamps_ns: Int64Array
+    poses: FloatArray
+    frame_id: str
+
+    def __len__(self) -> int:
+        return int(self.stamps_ns.shape[0])
+
+
+@dataclass(frozen=True)
+class ScanSet:
+    """All scans of a log (S scans). ``ranges[i]`` is float32 (B_i,); beam j of scan i points at
+    ``angle_min[i] + j · angle_increment[i]`` in the laser frame; ``laser_to_base[i]`` is 2×3."""
+
+    stamps_ns: Int64Array
+    ranges: list[npt.NDArray[np.float32]]
+    angle_min: FloatArray
+    angle_increment: FloatArray
+    range_min: FloatArray
+    range_max: FloatArray
+    laser_to_base: FloatArray  # (S, 2, 3)
+    frame_id: str
+
+    def __len__(self) -> int:
+        return int(self.stamps_ns.shape[0])
+
+    def scan(self, i: int) -> Scan:
+        """Scan i as a :class:`Scan` record."""
+        return Scan(int(self.stamps_ns[i]), int(self.stamps_ns[i]), self.frame_id, float(self.angle_min[i]),
+                    float(self.angle_increment[i]), float(self.range_min[i]), float(self.range_max[i]),
+                    self.ranges[i])
+
+    def endpoints_base(self, i: int) -> tuple[FloatArray, npt.NDArray[np.bool_]]:
+        """(B_i, 2) beam end points of scan i in base_link (NaN where the range is not finite), and
+        the hit mask (finite, range_min ≤ r < range_max)."""
+        r = self.ranges[i].astype(np.float64)
+        angles = self.angle_min[i] + self.angle_increment[i] * np.arange(r.shape[0])
+        local = np.stack([r * np.cos(angles), r * np.sin(angles)], axis=1)
+        affine = self.laser_to_base[i]
+        with np.errstate(invalid="ignore"):
+            hit = np.isfinite(r) & (r >= self.range_min[i]) & (r < self.range_max[i])
+            points = local @ affine[:, :2].T + affine[:, 2]
+        return points, hit
+
+
+@dataclass(frozen=True)
+class Recording:
+    """One log as arrays. ``colors[i]`` is (B_i, 3) uint8 aligned with scan i, when the log has colors."""
+
+    path: str
+    scans: ScanSet
+    odometry: PoseSeries | None
+    reference: PoseSeries | None
+    colors: list[npt.NDArray[np.uint8]] | None = None
+    warnings: list[str] = field(default_factory=list)
+
+
+def _series(poses: list[Pose2D]) -> PoseSeries | None:
+    if not poses:
+        return None
+    poses = sorted(poses, key=lambda p: p.stamp_ns)
+    return PoseSeries(np.array([p.stamp_ns for p in poses], dtype=np.int64),
+                      np.array([[p.x, p.y, p.yaw] for p in poses], dtype=np.float64), poses[0].frame_id)
+
+
+def _planar_affine(tf: TfBuffer, base: str, frame: str, stamp_ns: int, assume_identity: bool) -> FloatArray:
+    if frame == base:
+        return np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    try:
+        mat = tf.lookup(base, frame, stamp_ns)
+    except TransformError:
+        if assume_identity:
+            return np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+        raise
+    return np.concatenate([mat[:2, :2], mat[:2, 3:4]], axis=1)
+
+
+def load_recording(path: Path, config: DoorbatchConfig | None = None, with_colors: bool = False) -> Recording:
+    """Read the scans, odometry, reference poses (and beam colors) of a log into arrays.
+
+    Transforms are read first (a pass over the TF topics only), so that each scan's laser→base_link
+    transform is known at its own stamp even when the TF arrives later in the log.
+
+    Raises:
+        LogContentError: no scans, or no transform from the laser frame to base_link.
+        LogReadError: the log cannot be read.
+    """
+    config = config or DoorbatchConfig()
+    tf = TfBuffer(int(config.io.tf_extrapolation_limit_s * 1e9))
+    roles = [Role.SCAN, Role.ODOMETRY, Role.REFERENCE] + ([Role.COLORS] if with_colors else [])
+    scans: list[Scan] = []
+    odom: list[Pose2D] = []
+    ref: list[Pose2D] = []
+    colors: dict[int, BeamColors] = {}
+    with open_log(path, config) as reader:
+        for item in reader.messages([Role.TRANSFORMS]):
+            if isinstance(item.record, Transform):
+                tf.add(item.record)
+        scan_topic = reader.roles.topic(Role.SCAN)
+        if scan_topic is None:
+            raise LogContentError("no sensor_msgs/LaserScan topic: doorbatch needs a 2D laser scan", path=path)
+        for item in reader.messages(roles):
+            rec = item.record
+            if item.role is Role.SCAN and isinstance(rec, Scan):
+                scans.append(rec)
+            elif item.role is Role.ODOMETRY and isinstance(rec, Pose2D):
+                odom.append(rec)
+            elif item.role is Role.REFERENCE and isinstance(rec, Pose2D):
+                ref.append(rec)
+            elif item.role is Role.COLORS and isinstance(rec, BeamColors):
+                colors[rec.stamp_ns] = rec
+        warnings = list(reader.warnings)
+    if not scans:
+        raise LogContentError("scan topic has no messages", path=path, topic=scan_topic)
+    base = config.frames.base_link
+    try:
+        affines = np.stack([_planar_affine(tf, base, s.frame_id, s.stamp_ns, config.io.assume_identity_laser_tf)
+                            for s in scans])
+    except TransformError as err:
+        raise LogContentError(f"{err.reason} (io.assume_identity_laser_tf=true assumes the laser at the base "
+                              "origin)", path=path, topic=scan_topic) from err
+    scan_set = ScanSet(
+        stamps_ns=np.array([s.stamp_ns for s in scans], dtype=np.int64),
+        ranges=[s.ranges for s in scans],
+        angle_min=np.array([s.angle_min for s in scans]),
+        angle_increment=np.array([s.angle_increment for s in scans]),
+        range_min=np.array([s.range_min for s in scans]),
+        range_max=np.array([s.range_max for s in scans]),
+        laser_to_base=affines,
+        frame_id=scans[0].frame_id,
+    )
+    aligned = None
+    if with_colors and colors:
+        aligned = [_aligned_colors(colors.get(s.stamp_ns), s.ranges.shape[0]) for s in scans]
+    return Recording(str(path), scan_set, _series(odom), _series(ref), aligned, warnings)
+
+
+def _aligned_colors(colors: BeamColors | None, beams: int) -> npt.NDArray[np.uint8]:
+    """The scan's colors, or a zero array flagged by shape when the cloud is missing or misaligned."""
+    if colors is None or colors.rgb.shape[0] != beams:
+        return np.zeros((0, 3), dtype=np.uint8)
+    return colors.rgb
