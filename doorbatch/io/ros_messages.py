@@ -183,8 +183,12 @@ def marker_array(markers: Sequence[Any]) -> Any:
     return _t("visualization_msgs/msg/MarkerArray")(markers=list(markers))
 
 
-def pointcloud_xyzrgb(stamp_ns: int, frame_id: str, points: npt.ArrayLike, rgb: npt.ArrayLike) -> Any:
-    """sensor_msgs/PointCloud2 with float32 x, y, z and a packed float32 ``rgb`` field (PCL layout)."""
+def pointcloud_xyzrgb(stamp_ns: int, frame_id: str, points: npt.ArrayLike, rgb: npt.ArrayLike,
+                      is_dense: bool = True) -> Any:
+    """sensor_msgs/PointCloud2 with float32 x, y, z and a packed float32 ``rgb`` field (PCL layout).
+
+    ``is_dense=False`` declares that some points are invalid (NaN), as in a cloud with one point per beam.
+    """
     pts = np.asarray(points, dtype=np.float32).reshape(-1, 3)
     col = np.asarray(rgb, dtype=np.uint8).reshape(-1, 3).astype(np.uint32)
     packed = (col[:, 0] << 16) | (col[:, 1] << 8) | col[:, 2]
@@ -195,7 +199,7 @@ def pointcloud_xyzrgb(stamp_ns: int, frame_id: str, points: npt.ArrayLike, rgb: 
     return _t("sensor_msgs/msg/PointCloud2")(
         header=header(stamp_ns, frame_id), height=1, width=pts.shape[0], fields=fields, is_bigendian=False,
         point_step=16, row_step=16 * pts.shape[0], data=np.frombuffer(cloud.tobytes(), dtype=np.uint8),
-        is_dense=True,
+        is_dense=bool(is_dense),
     )
 
 

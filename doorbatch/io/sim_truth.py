@@ -1,0 +1,195 @@
+"""The simulator's truth file (``<log stem>.truth.yaml``): the world, door angles over time, passes.
+
+Written next to every simulated log by :func:`doorbatch.sim.simulate.run_simulation`; read by evaluation
+(and by anyone else) with :func:`read_truth`. SI units, map frame, angles in radians. Layout (exact keys)::
+
+    format: doorbatch-sim-truth/1
+    generator: {doorbatch_version, world, world_file, scenario, scenario_file, seed}
+    frame_id: map
+    start_ns, end_ns                 # int, header stamps of the first and last message
+    files: {log, trajectory, map_closed, map_static}   # names relative to this file's folder
+    world:
+      name, wall_height_m
+      segments: [[x0, y0, x1, y1], ...]                # static segments (door leaves excluded)
+      segment_kinds: [wall | room | pillar | niche, ...]
+      doors: [{door_id, name, hinge_x, hinge_y, length, closed_yaw, opening_sign, max_angle, height,
+               color_mean_rgb, color_std_rgb, handle: null | {height, from_free_end, width, size_z}}]
+    passes: [{index, name, begin_ns, stationary_ns, end_ns}]
+    door_angles:                     # knots of piecewise-linear angles; constant before the first knot
+      columns: [stamp_ns, door_id, angle]   # and after the last; angle = opening_sign · opening (CCW +)
+      rows: [[stamp_ns, door_id, angle], ...]           # sorted by door_id, then stamp_ns
+    people: [{name, radius, height, speed, start_ns, mode, path: [[x, y], ...]}]
+    sensors: {laser: {frame_id, x, y, z, yaw}, camera: {frame_id, x, y, z, yaw, width, height, k}}
+    scenario: {...}                  # the resolved scenario, as validated
+
+Door fields use the column names of ``doors.parquet`` (DESIGN.md). ``door_angles`` holds the doors' angles
+exactly: ``np.interp(t, stamps_of_door, angles_of_door)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import yaml
+
+from doorbatch.errors import InputDataError
+from doorbatch.io.atomic import atomic_write_text
+
+FORMAT = "doorbatch-sim-truth/1"
+FloatArray = npt.NDArray[np.float64]
+Int64Array = npt.NDArray[np.int64]
+
+
+@dataclass(frozen=True)
+class TruthDoor:
+    """One door of the truth world (fields as in doors.parquet; angles in rad)."""
+
+    door_id: int
+    name: str
+    hinge_x: float
+    hinge_y: float
+    length: float
+    closed_yaw: float
+    opening_sign: int
+    max_angle: float
+    height: float
+    color_mean_rgb: tuple[float, float, float]
+    color_std_rgb: tuple[float, float, float]
+    handle: dict[str, float] | None = None
+
+
+@dataclass(frozen=True)
+class TruthPass:
+    """One pass: begins, doors stationary from ``stationary_ns``, ends."""
+
+    index: int
+    name: str
+    begin_ns: int
+    stationary_ns: int
+    end_ns: int
+
+
+@dataclass(frozen=True)
+class SimTruth:
+    """The content of a truth file."""
+
+    generator: dict[str, Any]
+    start_ns: int
+    end_ns: int
+    files: dict[str, str]
+    world_name: str
+    wall_height_m: float
+    segments: FloatArray  # (N, 2, 2)
+    segment_kinds: tuple[str, ...]
+    doors: tuple[TruthDoor, ...]
+    passes: tuple[TruthPass, ...]
+    angle_stamp_ns: Int64Array  # (K,) knots
+    angle_door_id: Int64Array  # (K,)
+    angle_rad: FloatArray  # (K,) signed CCW relative to closed_yaw
+    people: tuple[dict[str, Any], ...] = ()
+    sensors: dict[str, Any] = field(default_factory=dict)
+    scenario: dict[str, Any] = field(default_factory=dict)
+    frame_id: str = "map"
+
+    def door_angles_at(self, stamps_ns: npt.ArrayLike) -> FloatArray:
+        """(K, D) signed door angles at the given stamps (linear between knots, constant outside)."""
+        t = np.asarray(stamps_ns, dtype=np.int64).reshape(-1)
+        cols = []
+        for door in self.doors:
+            sel = self.angle_door_id == door.door_id
+            ref = int(self.angle_stamp_ns[sel][0]) if sel.any() else 0
+            xp = (self.angle_stamp_ns[sel] - ref).astype(np.float64)
+            cols.append(np.interp((t - ref).astype(np.float64), xp, self.angle_rad[sel]) if sel.any()
+                        else np.zeros(t.shape[0]))
+        return np.stack(cols, axis=1) if cols else np.zeros((t.shape[0], 0))
+
+    def to_dict(self) -> dict[str, Any]:
+        """The YAML document (plain Python types)."""
+        rows = [[int(s), int(d), float(a)] for s, d, a in
+                zip(self.angle_stamp_ns.tolist(), self.angle_door_id.tolist(), self.angle_rad.tolist(), strict=True)]
+        return {
+            "format": FORMAT,
+            "generator": self.generator,
+            "frame_id": self.frame_id,
+            "start_ns": int(self.start_ns),
+            "end_ns": int(self.end_ns),
+            "files": dict(self.files),
+            "world": {
+                "name": self.world_name,
+                "wall_height_m": float(self.wall_height_m),
+                "segments": [[float(v) for v in s.ravel()] for s in self.segments],
+                "segment_kinds": list(self.segment_kinds),
+                "doors": [_door_dict(d) for d in self.doors],
+            },
+            "passes": [{"index": p.index, "name": p.name, "begin_ns": p.begin_ns, "stationary_ns": p.stationary_ns,
+                        "end_ns": p.end_ns} for p in self.passes],
+            "door_angles": {"columns": ["stamp_ns", "door_id", "angle"], "rows": rows},
+            "people": [dict(p) for p in self.people],
+            "sensors": self.sensors,
+            "scenario": self.scenario,
+        }
+
+
+def _door_dict(d: TruthDoor) -> dict[str, Any]:
+    return {
+        "door_id": d.door_id, "name": d.name, "hinge_x": d.hinge_x, "hinge_y": d.hinge_y, "length": d.length,
+        "closed_yaw": d.closed_yaw, "opening_sign": d.opening_sign, "max_angle": d.max_angle, "height": d.height,
+        "color_mean_rgb": list(d.color_mean_rgb), "color_std_rgb": list(d.color_std_rgb), "handle": d.handle,
+    }
+
+
+def write_truth(truth: SimTruth, path: Path) -> None:
+    """Write the truth YAML atomically (deterministic: same content, same bytes)."""
+    text = "# doorbatch simulator ground truth (SI units, map frame, radians)\n"
+    text += yaml.safe_dump(truth.to_dict(), sort_keys=False, default_flow_style=None, width=100)
+    atomic_write_text(path, text)
+
+
+def read_truth(path: Path) -> SimTruth:
+    """Read a truth file.
+
+    Raises:
+        InputDataError: unreadable, not YAML, another format, or a missing key.
+    """
+    try:
+        doc = yaml.safe_load(Path(path).read_text())
+    except (OSError, yaml.YAMLError) as err:
+        raise InputDataError(f"cannot read truth file: {err}", path=path) from err
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        raise InputDataError(f"not a doorbatch truth file (expected format {FORMAT})", path=path)
+    try:
+        world = doc["world"]
+        rows = np.asarray(doc["door_angles"]["rows"], dtype=object).reshape(-1, 3)
+        doors = tuple(
+            TruthDoor(int(d["door_id"]), str(d["name"]), float(d["hinge_x"]), float(d["hinge_y"]),
+                      float(d["length"]), float(d["closed_yaw"]), int(d["opening_sign"]), float(d["max_angle"]),
+                      float(d["height"]), tuple(d["color_mean_rgb"]), tuple(d["color_std_rgb"]), d.get("handle"))
+            for d in world["doors"]
+        )
+        return SimTruth(
+            generator=dict(doc["generator"]),
+            start_ns=int(doc["start_ns"]),
+            end_ns=int(doc["end_ns"]),
+            files=dict(doc["files"]),
+            world_name=str(world["name"]),
+            wall_height_m=float(world["wall_height_m"]),
+            segments=np.asarray(world["segments"], dtype=np.float64).reshape(-1, 2, 2),
+            segment_kinds=tuple(world["segment_kinds"]),
+            doors=doors,
+            passes=tuple(TruthPass(int(p["index"]), str(p["name"]), int(p["begin_ns"]), int(p["stationary_ns"]),
+                                   int(p["end_ns"])) for p in doc["passes"]),
+            angle_stamp_ns=np.array([int(v) for v in rows[:, 0]], dtype=np.int64),
+            angle_door_id=np.array([int(v) for v in rows[:, 1]], dtype=np.int64),
+            angle_rad=np.array([float(v) for v in rows[:, 2]], dtype=np.float64),
+            people=tuple(doc.get("people") or ()),
+            sensors=dict(doc.get("sensors") or {}),
+            scenario=dict(doc.get("scenario") or {}),
+            frame_id=str(doc.get("frame_id", "map")),
+        )
+    except (KeyError, TypeError, ValueError, IndexError) as err:
+        raise InputDataError(f"truth file is incomplete or malformed ({type(err).__name__}: {err})",
+                             path=path) from err
