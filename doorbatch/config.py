@@ -13,7 +13,7 @@ import hashlib
 import json
 from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
@@ -78,6 +78,54 @@ class LaserConfig(Section):
     beam_stride: int = Field(1, ge=1)
 
 
+class ScanMatchConfig(Section):
+    """Config section ``scanmatch`` (frozen, unknown keys forbidden)."""
+
+    # Each scan is voxel-downsampled before matching (one centroid per voxel; evens out the beam density).
+    scan_voxel_m: float = Field(0.05, gt=0.0)
+    # Submap: the last K keyframes in the map frame, voxel-downsampled (one centroid per voxel).
+    submap_keyframes: int = Field(10, ge=1)
+    submap_voxel_m: float = Field(0.05, gt=0.0)
+    # A scan becomes a keyframe when it moved or turned this much since the last keyframe.
+    keyframe_min_d_m: float = Field(0.3, ge=0.0)
+    keyframe_min_a_deg: float = Field(10.0, ge=0.0)
+    # Correlative search (Olson 2009): window half-widths around the prior, yaw step; x/y step = grid cell.
+    correlative_window_m: float = Field(0.5, ge=0.0)
+    correlative_window_deg: float = Field(15.0, ge=0.0)
+    correlative_step_deg: float = Field(1.0, gt=0.0)
+    # The search scores an evenly strided subset of at most this many scan points (PLICP uses them all).
+    correlative_max_points: int = Field(200, ge=1)
+    grid_resolution_m: float = Field(0.05, gt=0.0)
+    grid_sigma_m: float = Field(0.05, gt=0.0)
+    coarse_cells: int = Field(6, ge=1)
+    # Point-to-line ICP (Censi 2008).
+    icp_max_iterations: int = Field(30, ge=1)
+    max_correspondence_m: float = Field(0.3, gt=0.0)
+    trim_fraction: float = Field(0.9, gt=0.0, le=1.0)
+    icp_min_step_m: float = Field(1e-3, gt=0.0)
+    icp_min_step_deg: float = Field(0.05, gt=0.0)
+    normal_neighbors: int = Field(8, ge=3)
+    # Acceptance: fewer inliers, or a smaller dimensionless Hessian eigenvalue, falls back to odometry.
+    min_inliers: int = Field(30, ge=3)
+    min_degeneracy: float = Field(0.02, ge=0.0)
+
+
+class MappingConfig(Section):
+    """``doorbatch map``: where the poses come from and how logs become passes."""
+
+    # auto: reference if the log has one, else scan matching on odometry (recorded in the manifest).
+    pose_source: Literal["auto", "reference", "odometry", "scanmatch"] = "auto"
+    # A scan whose pose must be interpolated across a gap longer than this is skipped (with a warning).
+    max_pose_gap_s: float = Field(0.5, gt=0.0)
+    # Passes after the first must start within this distance of where the previous one's odometry ended
+    # when poses come from odometry or scan matching (one odometry frame), else the frames are disjoint.
+    odometry_continuity_m: float = Field(1.0, gt=0.0)
+    # Split one log into passes at time gaps longer than this (0: one log is one pass).
+    split_passes_gap_s: float = Field(0.0, ge=0.0)
+    # Integrate every n-th scan (1: all).
+    scan_stride: int = Field(1, ge=1)
+
+
 class DoorbatchConfig(Section):
     """The whole configuration tree."""
 
@@ -86,6 +134,8 @@ class DoorbatchConfig(Section):
     frames: FramesConfig = FramesConfig()
     io: IoConfig = IoConfig()
     laser: LaserConfig = LaserConfig()
+    scanmatch: ScanMatchConfig = ScanMatchConfig()
+    mapping: MappingConfig = MappingConfig()
 
     def as_dict(self) -> dict[str, Any]:
         """The resolved tree as plain data (what goes into manifests)."""

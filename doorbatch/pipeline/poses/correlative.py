@@ -1,0 +1,229 @@
+"""Coarse correlative scan matching after Olson, "Real-time correlative scan matching", ICRA 2009.
+
+The reference points are rasterized into a likelihood grid L(c) = exp(−d(c)² / 2σ²), d the distance from
+cell c to the nearest occupied cell (the Euclidean distance transform, truncated at 3σ and computed by
+splatting the Gaussian kernel around occupied cells). A candidate pose
+(x, y, θ) scores the mean of L over the cells its scan points fall in,
+
+    s(x, y, θ) = (1/N) Σ_i L(cell(R(θ) p_i + (x, y))),
+
+and the search is exhaustive over a window around the prior: yaw in steps of ``step_deg``, x and y in
+steps of one cell, so that for one yaw every translation is an integer shift of the points' cell
+indices. Olson's two-level multi-resolution search makes that exhaustive search cheap: a coarse cell of
+r × r fine shifts is bounded by U = (1/N) Σ_i B(cell_i + coarse shift), B(c) = max of L over the r × r
+block at c (a sliding-window maximum), so U ≥ s for every fine shift inside. Coarse candidates are
+expanded best bound first; the search stops when the best fine score is at least every remaining bound,
+which returns the same optimum as the full fine search (the prior itself wins ties, so a scan that
+carries no information, e.g. one straight wall, stays at the prior).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+FloatArray = npt.NDArray[np.float64]
+Float32Array = npt.NDArray[np.float32]
+IntArray = npt.NDArray[np.int64]
+
+# Coarse candidates expanded at once (a small batch keeps the loop in NumPy without much wasted work).
+EXPAND_BATCH = 4
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class LikelihoodGrid:
+    """Gaussian-blurred occupancy of reference points and its r × r block maximum, zero-padded.
+
+    Padded cell (i, j) covers x ∈ [x0 + j·res, x0 + (j+1)·res), y ∈ [y0 + i·res, y0 + (i+1)·res) (row i
+    along y, as in :mod:`doorbatch.maps`). The grid proper starts ``pad_cells`` cells in from the corner
+    (x0, y0); the zero padding lets every shift of the search window index the arrays without clipping.
+    ``bound[i, j] = max values[i : i + r, j : j + r]``.
+    """
+
+    values: Float32Array  # (H, W) including the padding
+    bound: Float32Array  # (H, W)
+    origin_xy: FloatArray  # (2,) world position of the outer corner of padded cell (0, 0)
+    resolution_m: float
+    coarse_cells: int
+    max_shift_cells: int  # largest window half-width (cells) the padding allows
+    pad_cells: int
+
+    @property
+    def inner_shape(self) -> tuple[int, int]:
+        """(rows, columns) of the grid without its padding."""
+        h, w = self.values.shape
+        return h - 2 * self.pad_cells, w - 2 * self.pad_cells
+
+
+@dataclass(frozen=True, slots=True)
+class CorrelativeResult:
+    """Best pose of the exhaustive search and its score (mean likelihood in [0, 1])."""
+
+    pose: FloatArray
+    score: float
+
+
+def _block_max(values: Float32Array, r: int) -> Float32Array:
+    """B[i, j] = max values[i : i + r, j : j + r] (zero beyond the array), as r − 1 shifted maxima per axis."""
+    h, w = values.shape
+    padded = np.pad(values, ((0, r - 1), (0, r - 1)))
+    rows = padded[:h].copy()
+    for k in range(1, r):
+        np.maximum(rows, padded[k : k + h], out=rows)
+    out = rows[:, :w].copy()
+    for k in range(1, r):
+        np.maximum(out, rows[:, k : k + w], out=out)
+    return out
+
+
+def _gaussian_kernel(sigma_cells: float) -> tuple[IntArray, IntArray, Float32Array]:
+    """Offsets (di, dj) within 3σ and their weights exp(−(di² + dj²)/2σ²) (σ in cells)."""
+    radius = max(math.ceil(3.0 * sigma_cells), 0)
+    di, dj = np.mgrid[-radius : radius + 1, -radius : radius + 1]
+    d2 = (di * di + dj * dj).ravel()
+    keep = d2 <= (3.0 * sigma_cells) ** 2 + 1e-9
+    weights = np.exp(-0.5 * d2[keep] / max(sigma_cells, 1e-9) ** 2).astype(np.float32)
+    return di.ravel()[keep].astype(np.int64), dj.ravel()[keep].astype(np.int64), weights
+
+
+def build_likelihood_grid(
+    points: npt.ArrayLike, *, resolution_m: float = 0.05, sigma_m: float = 0.05, window_m: float = 0.5,
+    coarse_cells: int = 4,
+) -> LikelihoodGrid:
+    """Rasterize reference points (map frame) into L = exp(−d²/2σ²) for searches up to ±``window_m``.
+
+    d is the distance from a cell to the nearest occupied cell (what ``distance_transform_edt`` gives),
+    truncated at 3σ; L is computed by splatting the Gaussian kernel around the occupied cells with a
+    running maximum, which costs O(occupied cells · kernel) instead of O(grid). The grid covers the
+    points' bounding box plus √2·window + 3σ (a point outside it stays farther than 3σ from every
+    reference point under any shift of the window), and is zero-padded for the shifts.
+    """
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    n_max = math.ceil(window_m / resolution_m - 1e-9)
+    pad = 2 * (n_max + coarse_cells) + 1
+    empty = pts.shape[0] == 0
+    if empty:
+        pts = np.zeros((1, 2))
+    margin = math.sqrt(2.0) * window_m + 3.0 * sigma_m
+    origin = pts.min(axis=0) - margin - pad * resolution_m
+    cells = np.floor((pts - origin) / resolution_m).astype(np.int64)
+    width = int(np.floor((pts[:, 0].max() + margin - origin[0]) / resolution_m)) + 1 + pad
+    height = int(np.floor((pts[:, 1].max() + margin - origin[1]) / resolution_m)) + 1 + pad
+    values = np.zeros(height * width, dtype=np.float32)
+    if not empty:
+        occupied = np.unique(cells[:, 1] * width + cells[:, 0])
+        di, dj, weights = _gaussian_kernel(sigma_m / resolution_m)
+        index = occupied[:, None] + (di * width + dj)[None, :]
+        np.maximum.at(values, index.ravel(), np.broadcast_to(weights, index.shape).ravel())
+    grid = values.reshape(height, width)
+    return LikelihoodGrid(grid, _block_max(grid, coarse_cells), origin, resolution_m, coarse_cells, n_max, pad)
+
+
+def _flat_cells(grid: LikelihoodGrid, scan: FloatArray, xy: FloatArray, yaws: FloatArray) -> IntArray:
+    """(Y, N) flat padded-cell index of every scan point under each yaw at translation ``xy``.
+
+    Points outside the grid proper go to a "sink" cell in the padding whose whole search neighbourhood is
+    zero, so they count as misses for every shift.
+    """
+    c, s = np.cos(yaws)[:, None], np.sin(yaws)[:, None]
+    x, y = scan[:, 0], scan[:, 1]
+    inv_res = 1.0 / grid.resolution_m
+    col = np.floor((c * x - s * y + (xy[0] - grid.origin_xy[0])) * inv_res).astype(np.int64)
+    row = np.floor((s * x + c * y + (xy[1] - grid.origin_xy[1])) * inv_res).astype(np.int64)
+    rows, cols = grid.inner_shape
+    p = grid.pad_cells
+    inside = (col >= p) & (col < p + cols) & (row >= p) & (row < p + rows)
+    sink = (grid.max_shift_cells + grid.coarse_cells) * (grid.values.shape[1] + 1)
+    out: IntArray = np.where(inside, row * grid.values.shape[1] + col, sink)
+    return out
+
+
+def _scores(table: Float32Array, cells: IntArray, dx: IntArray, dy: IntArray) -> FloatArray:
+    """Mean of ``table`` over the points for every shift: cells (B, N) flat, dx/dy (B, K) → (B, K)."""
+    offsets = dy * table.shape[1] + dx
+    gathered = np.take(table, cells[:, None, :] + offsets[:, :, None])  # (B, K, N)
+    out: FloatArray = gathered.sum(axis=-1).astype(np.float64) / cells.shape[1]
+    return out
+
+
+def _coarse_shifts(n: int, r: int) -> IntArray:
+    """Lower corners c of the coarse blocks [c, c + r) that tile the fine shifts [−n, n]."""
+    return np.arange(-n, n + 1, r, dtype=np.int64)
+
+
+def _fine_offsets(corner_x: IntArray, corner_y: IntArray, n: int, r: int) -> tuple[IntArray, IntArray]:
+    """All fine shifts inside each coarse block, clamped into [−n, n] (duplicates are harmless)."""
+    b = np.arange(r, dtype=np.int64)
+    fx = np.minimum(corner_x[:, None, None] + b[None, None, :], n)
+    fy = np.minimum(corner_y[:, None, None] + b[None, :, None], n)
+    fx, fy = np.broadcast_arrays(fx, fy)
+    return fx.reshape(len(corner_x), -1), fy.reshape(len(corner_y), -1)
+
+
+def correlative_match(
+    grid: LikelihoodGrid, scan_xy: npt.ArrayLike, prior: npt.ArrayLike, *, window_m: float = 0.5,
+    window_deg: float = 15.0, step_deg: float = 1.0,
+) -> CorrelativeResult:
+    """Exhaustive search of (x, y, yaw) within ±window around ``prior`` for the best-scoring scan pose.
+
+    Args:
+        grid: Likelihood grid of the reference (:func:`build_likelihood_grid`).
+        scan_xy: (N, 2) scan points in the sensor (base) frame.
+        prior: (3,) prior pose x, y, yaw in the grid's frame.
+        window_m: Half-width of the translation window (m); the x/y step is the grid resolution.
+        window_deg: Half-width of the yaw window (deg).
+        step_deg: Yaw step (deg).
+
+    Returns:
+        The best pose on the search lattice and its score (mean likelihood; 0 without points).
+
+    Raises:
+        ValueError: ``window_m`` exceeds the window the grid was built for.
+    """
+    scan = np.asarray(scan_xy, dtype=np.float64).reshape(-1, 2)
+    prior_arr = np.asarray(prior, dtype=np.float64)
+    n, r = round(window_m / grid.resolution_m), grid.coarse_cells
+    if n > grid.max_shift_cells:
+        raise ValueError(f"window_m={window_m} exceeds the grid's {grid.max_shift_cells * grid.resolution_m} m")
+    if scan.shape[0] == 0:
+        return CorrelativeResult(prior_arr.copy(), 0.0)
+    n_yaw = math.floor(window_deg / step_deg + 1e-9)
+    yaws = prior_arr[2] + np.deg2rad(step_deg) * np.arange(-n_yaw, n_yaw + 1)
+    cells = _flat_cells(grid, scan, prior_arr[:2], yaws)
+    corners = _coarse_shifts(n, r)
+    cx, cy = (a.ravel() for a in np.meshgrid(corners, corners))
+    bounds = _scores(grid.bound, cells, np.broadcast_to(cx, (len(yaws), cx.size)),
+                     np.broadcast_to(cy, (len(yaws), cy.size))).ravel()
+    yaw_i, sx, sy, score = _expand(grid, cells, bounds, cx, cy, n)
+    pose = np.array([prior_arr[0] + sx * grid.resolution_m, prior_arr[1] + sy * grid.resolution_m, yaws[yaw_i]])
+    return CorrelativeResult(pose, score)
+
+
+def _expand(
+    grid: LikelihoodGrid, cells: IntArray, bounds: FloatArray, cx: IntArray, cy: IntArray, n: int
+) -> tuple[int, int, int, float]:
+    """Best-bound-first expansion of coarse candidates into their fine shifts (branch and bound).
+
+    Returns:
+        (yaw index, x shift, y shift, score) of the best fine candidate.
+    """
+    order = np.argsort(-bounds, kind="stable")
+    n_coarse = cx.size
+    centre = cells.shape[0] // 2  # the prior's yaw; the prior wins ties (no information: stay put)
+    zero = np.zeros((1, 1), dtype=np.int64)
+    best: tuple[int, int, int, float] = (centre, 0, 0, float(_scores(grid.values, cells[centre : centre + 1],
+                                                                      zero, zero)[0, 0]))
+    for start in range(0, order.size, EXPAND_BATCH):
+        batch = order[start : start + EXPAND_BATCH]
+        if bounds[batch[0]] <= best[3]:
+            break
+        yaw_i, coarse_i = np.divmod(batch, n_coarse)
+        fx, fy = _fine_offsets(cx[coarse_i], cy[coarse_i], n, grid.coarse_cells)
+        scores = _scores(grid.values, cells[yaw_i], fx, fy)
+        b, k = np.unravel_index(int(np.argmax(scores)), scores.shape)
+        if scores[b, k] > best[3]:
+            best = (int(yaw_i[b]), int(fx[b, k]), int(fy[b, k]), float(scores[b, k]))
+    return best

@@ -1,0 +1,105 @@
+"""The scan-matching pose source on simulated sequences with drifting odometry (fixed seeds)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pydantic import ValidationError
+from scanmatch_sim import (
+    ate_rmse_m,
+    corridor_segments,
+    corridor_truth,
+    drifting_odometry,
+    polyline,
+    simulate_scan,
+)
+
+from doorbatch.geometry.se2 import compose, relative
+from doorbatch.pipeline.poses import ScanMatchConfig, scan_match_trajectory
+from doorbatch.pipeline.poses.scanmatch import voxel_downsample
+
+JUMPS = {60: (0.3, 0.0, np.deg2rad(10.0)), 140: (-0.2, 0.1, np.deg2rad(-8.0))}  # wheel slip, a bump
+
+
+def _corridor_run(n: int = 200, seed: int = 1) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
+    rng = np.random.default_rng(seed)
+    truth = corridor_truth(n)
+    scans = [simulate_scan(corridor_segments(), pose, rng) for pose in truth]
+    return truth, scans, drifting_odometry(truth, rng, jumps={k: v for k, v in JUMPS.items() if k < n})
+
+
+def test_scan_matching_removes_odometry_drift_along_a_corridor() -> None:
+    truth, scans, odom = _corridor_run()
+    result = scan_match_trajectory(scans, odom, ScanMatchConfig())
+    assert ate_rmse_m(odom, truth) > 0.3
+    assert ate_rmse_m(result.poses, truth) < 0.05
+    assert np.allclose(result.poses[0], odom[0])
+    assert not result.fallback.any()
+    assert 30 < result.keyframe.sum() < 120
+    yaw_err = np.abs(np.angle(np.exp(1j * (result.poses[:, 2] - truth[:, 2]))))
+    assert np.rad2deg(yaw_err).max() < 0.5
+    assert np.all(result.n_inliers[1:] > 100) and np.nanmax(result.residual_m) < 0.02
+    std = np.sqrt(np.diagonal(result.covariances[1:], axis1=1, axis2=2))
+    assert np.all(np.isfinite(std)) and np.all(std[:, :2] < 0.01)
+
+
+def test_single_straight_wall_falls_back_to_odometry_and_flags_it() -> None:
+    rng = np.random.default_rng(3)
+    wall = polyline([(-50.0, 1.0), (50.0, 1.0)])
+    truth = corridor_truth(40)
+    scans = [simulate_scan(wall, pose, rng) for pose in truth]
+    odom = drifting_odometry(truth, rng)
+    result = scan_match_trajectory(scans, odom, ScanMatchConfig())
+    assert result.fallback[1:].all()
+    assert np.allclose(result.poses, odom, atol=1e-9)  # the odometry increments, nothing invented
+    assert np.isnan(result.covariances[1:]).all()
+
+
+def test_too_few_points_fall_back_and_matching_resumes_after() -> None:
+    truth, scans, odom = _corridor_run(n=60, seed=4)
+    scans[20] = scans[20][:10]
+    scans[21] = np.zeros((0, 2))
+    scans[22] = np.full((50, 2), np.nan)
+    result = scan_match_trajectory(scans, odom, ScanMatchConfig())
+    assert np.flatnonzero(result.fallback).tolist() == [20, 21, 22]
+    assert result.n_inliers[21] == 0 and np.isnan(result.residual_m[21])
+    step = relative(result.poses[20], result.poses[21])
+    assert np.allclose(step, relative(odom[20], odom[21]), atol=1e-9)
+    assert ate_rmse_m(result.poses, truth) < 0.05
+
+
+def test_result_moves_rigidly_with_the_odometry_frame() -> None:
+    _, scans, odom = _corridor_run(n=40, seed=5)
+    frame = np.array([-3.0, 7.0, 2.0])
+    moved = scan_match_trajectory(scans, compose(frame, odom), ScanMatchConfig())
+    base = scan_match_trajectory(scans, odom, ScanMatchConfig())
+    expected = compose(frame, base.poses)
+    assert np.abs(moved.poses[:, :2] - expected[:, :2]).max() < 0.005
+    assert np.abs(np.angle(np.exp(1j * (moved.poses[:, 2] - expected[:, 2])))).max() < np.deg2rad(0.1)
+
+
+def test_inputs_are_checked() -> None:
+    with pytest.raises(ValueError, match=r"\(2, 3\)"):
+        scan_match_trajectory([np.zeros((5, 2))] * 2, np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="NaN"):
+        scan_match_trajectory([np.zeros((5, 2))], np.full((1, 3), np.nan))
+    empty = scan_match_trajectory([], np.zeros((0, 3)))
+    assert empty.poses.shape == (0, 3) and empty.covariances.shape == (0, 3, 3)
+
+
+def test_config_is_frozen_and_rejects_unknown_keys() -> None:
+    with pytest.raises(ValidationError, match="window_mm"):
+        ScanMatchConfig(window_mm=1.0)  # type: ignore[call-arg]
+    with pytest.raises(ValidationError):
+        ScanMatchConfig(trim_fraction=1.5)
+    config = ScanMatchConfig()
+    with pytest.raises(ValidationError):
+        config.keyframe_min_d_m = 1.0  # type: ignore[misc]
+
+
+def test_voxel_downsample_keeps_one_centroid_per_voxel() -> None:
+    points = np.array([[0.01, 0.01], [0.03, 0.04], [0.26, 0.0], [-0.01, 0.0]])
+    out = voxel_downsample(points, 0.05)
+    assert len(out) == 3
+    assert any(np.allclose(p, [0.02, 0.025]) for p in out)
+    assert any(np.allclose(p, [-0.01, 0.0]) for p in out)
