@@ -138,6 +138,28 @@ def convert_cmd(ctx: Context, source: Path, output: Path) -> None:
                 f"{summary.storage} to {output}", asdict(summary))
 
 
+@cli.command("simulate")
+@click.argument("world", type=click.Path(path_type=Path, dir_okay=False))
+@click.option("-o", "--output", type=click.Path(path_type=Path), required=True,
+              help="Output log: FILE.mcap, FILE.bag, or a folder for rosbag2.")
+@click.option("--scenario", default=None, help="A scenario name in configs/scenarios/ or a YAML path.")
+@click.option("--seed", type=int, default=None, help="Random seed (default: the config's seed).")
+@click.option("--format", "fmt", type=click.Choice(["mcap", "bag", "rosbag2", "rosbag2-mcap"]), default="mcap",
+              show_default=True)
+@click.option("--split-passes", is_flag=True, help="Also write one log per pass (what doorbatch map takes).")
+@common_options
+def simulate_cmd(ctx: Context, world: Path, output: Path, scenario: str | None, seed: int | None, fmt: str,
+                 split_passes: bool) -> None:
+    """Simulate a log with ground truth in WORLD (a YAML file of configs/worlds/)."""
+    from doorbatch.sim.simulate import run_simulation
+
+    summary = run_simulation(world, output, scenario, ctx.config.seed if seed is None else seed, fmt,
+                             split_passes=split_passes)
+    ctx.summary(f"simulated {summary.world}/{summary.scenario}: {summary.duration_s:.1f} s, "
+                f"{sum(summary.message_counts.values())} messages, {summary.passes} passes → {summary.log_path}",
+                summary.as_dict())
+
+
 @cli.command("config")
 @click.option("--dump", is_flag=True, help="Print the resolved configuration as YAML.")
 @common_options

@@ -31,6 +31,7 @@ from doorbatch.io import ros_messages as m
 from doorbatch.io.log_writer import LogFormat, LogWriter
 from doorbatch.io.map_server import write_map
 from doorbatch.io.sim_truth import SimTruth, TruthDoor, TruthPass, write_truth
+from doorbatch.io.split import copy_window
 from doorbatch.io.tum import write_tum
 from doorbatch.sim.motion import OdometryNoise, PoseSamples, sample_trajectory, simulate_odometry
 from doorbatch.sim.raycast import RayBuffers
@@ -92,10 +93,13 @@ class SimulationSummary:
     passes: int
     doors: int
     message_counts: dict[str, int] = field(default_factory=dict)
+    pass_logs: list[Path] = field(default_factory=list)
 
     def as_dict(self) -> dict[str, Any]:
         """Plain data (paths as strings) for ``--json``."""
-        return {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(self).items()}
+        data = {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(self).items()}
+        data["pass_logs"] = [str(p) for p in self.pass_logs]
+        return data
 
 
 def random_streams(seed: int) -> dict[str, np.random.Generator]:
@@ -254,9 +258,12 @@ def output_paths(out: Path) -> dict[str, Path]:
 
 
 def run_simulation(world_path: Path, out: Path, scenario: str | Path | None = None, seed: int = 0,
-                   fmt: str = "mcap", map_resolution_m: float = 0.05) -> SimulationSummary:
+                   fmt: str = "mcap", map_resolution_m: float = 0.05, split_passes: bool = False
+                   ) -> SimulationSummary:
     """Simulate ``scenario`` (a shipped name, a path, or None for ``default``) in the world file and write
     the log at ``out`` in ``fmt`` (mcap, bag, rosbag2, rosbag2-mcap) with its truth files beside it.
+    With ``split_passes``, each pass's stationary interval (doors still) is also written as its own log,
+    ``<stem>_pass<k><suffix>``, because ``doorbatch map`` takes one log per pass.
 
     Raises:
         ConfigError: bad world or scenario file, or a scenario that does not fit the world.
@@ -286,12 +293,27 @@ def run_simulation(world_path: Path, out: Path, scenario: str | Path | None = No
                  "scenario": sc.name, "scenario_file": str(scenario_file), "seed": int(seed)}
     write_truth(truth_of(plan, generator, {k: p.name for k, p in paths.items()}), paths["truth"])
     end = start + round(plan.end_s * NS_PER_S)
+    pass_logs = _split_passes(paths["log"], plan, start, log_format) if split_passes else []
     summary = SimulationSummary(paths["log"], paths["truth"], paths["trajectory"], paths["map_closed"],
                                 paths["map_static"], log_format.value, int(seed), world.name, sc.name, start, end,
-                                float(plan.end_s), len(plan.passes), world.doors.count, dict(sorted(counts.items())))
+                                float(plan.end_s), len(plan.passes), world.doors.count, dict(sorted(counts.items())),
+                                pass_logs)
     log.info("simulated %s / %s: %.1f s, %d messages → %s", world.name, sc.name, plan.end_s, sum(counts.values()),
              paths["log"])
     return summary
+
+
+def _split_passes(log_path: Path, plan: Plan, start_ns: int, fmt: LogFormat) -> list[Path]:
+    """One log per pass, cut from the whole log at the pass's stationary interval."""
+    outs = []
+    for k, window in enumerate(plan.passes, start=1):
+        stem, suffix = (log_path.stem, log_path.suffix) if log_path.suffix else (log_path.name, "")
+        out = log_path.with_name(f"{stem}_pass{k}{suffix}")
+        begin = start_ns + round(window.stationary_s * NS_PER_S)
+        end = start_ns + round(window.end_s * NS_PER_S)
+        copy_window(log_path, out, begin, end, fmt)
+        outs.append(out)
+    return outs
 
 
 def _bad_format(fmt: str) -> LogFormat:
