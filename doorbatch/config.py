@@ -11,12 +11,13 @@ from __future__ import annotations
 import difflib
 import hashlib
 import json
+import math
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any, Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from doorbatch.errors import ConfigError
 
@@ -72,8 +73,6 @@ class IoConfig(Section):
 class LaserConfig(Section):
     """Laser conventions: how no-return beams and short ranges are treated."""
 
-    # A +inf or ≥ range_max beam clears free space up to this distance (m); 0 disables clearing.
-    no_return_clear_m: float = Field(5.0, ge=0.0)
     # Keep every n-th beam when a stage decimates scans.
     beam_stride: int = Field(1, ge=1)
 
@@ -110,6 +109,117 @@ class ScanMatchConfig(Section):
     min_degeneracy: float = Field(0.02, ge=0.0)
 
 
+def logit(p: float) -> float:
+    """log(p / (1 − p))."""
+    return math.log(p / (1.0 - p))
+
+
+class GridConfig(Section):
+    """Occupancy grid mapping (config section ``grid``)."""
+
+    resolution_m: float = Field(0.05, gt=0.0)
+    # Inverse sensor model: log-odds added at a beam's end cell (p = 0.7) and along the beam (p = 0.4).
+    l_occ: float = Field(0.85, gt=0.0)
+    l_free: float = Field(-0.4, lt=0.0)
+    # Log-odds clamp, so that a changed cell (a door that moved between passes) can flip in a few scans.
+    l_min: float = Field(-3.5, lt=0.0)
+    l_max: float = Field(3.5, gt=0.0)
+    # Paper 000 Sec. III: a cell below this is free with high likelihood; it is transient when its whole
+    # neighbourhood was below it too. The same level is the "low" that a seen-occupied cell must reach for
+    # its cell mean to join the second set of dynamic points.
+    p_transient_below: float = Field(0.12, gt=0.0, lt=0.5)
+    # Paper 000 Sec. III: a cell is seen-occupied once p exceeds this.
+    p_seen_occupied_above: float = Field(0.88, gt=0.5, lt=1.0)
+    # Chebyshev radius (cells) of the neighbourhood that must have been seen free for a cell to be transient:
+    # 2 → 5×5, so registration errors up to about two cells (0.1 m) at wall borders never mark wall points
+    # dynamic (with 1, pose noise of 2 cm / 0.5° already put false "leaves" along walls in simulation).
+    transient_neighborhood_cells: int = Field(2, ge=0, le=5)
+    # A no-return beam (+inf or ≥ range_max) clears free space up to this distance; 0 disables clearing.
+    no_return_clear_m: float = Field(5.0, ge=0.0)
+    # Hits farther than this are cut here and only clear free space (no occupied end cell).
+    max_range_m: float = Field(30.0, gt=0.0)
+    # Side of the square grid allocated around the first scan, and the margin added when it grows.
+    initial_size_m: float = Field(20.0, gt=0.0)
+    growth_margin_m: float = Field(5.0, ge=0.0)
+
+    @model_validator(mode="after")
+    def _check_order(self) -> GridConfig:
+        if not self.l_min < logit(self.p_transient_below):
+            raise ValueError("l_min must be below logit(p_transient_below), or no cell can become transient")
+        if not logit(self.p_seen_occupied_above) < self.l_max:
+            raise ValueError("l_max must exceed logit(p_seen_occupied_above), or no cell can be seen occupied")
+        return self
+
+    @property
+    def l_low(self) -> float:
+        """Log-odds of ``p_transient_below``."""
+        return logit(self.p_transient_below)
+
+    @property
+    def l_high(self) -> float:
+        """Log-odds of ``p_seen_occupied_above``."""
+        return logit(self.p_seen_occupied_above)
+
+
+class DoorDetectionConfig(Section):
+    """Door detection (config section ``doors``); lengths in m, angles in degrees."""
+
+    # ε of eq. (1): points closer than this belong to one object.
+    cluster_distance_m: float = Field(0.15, gt=0.0)
+    # δ of eq. (2): minimal length of the point pairs that define a cluster's lines.
+    min_line_length_m: float = Field(0.4, gt=0.0)
+    # A cluster whose eq. (2) lines differ in angle by more than this is a non-line object.
+    max_line_angle_deg: float = Field(20.0, gt=0.0, le=90.0)
+    # [λmin, λmax]: line objects of this length are potential door leaves.
+    door_length_min_m: float = Field(0.6, gt=0.0)
+    door_length_max_m: float = Field(1.2, gt=0.0)
+    # Leaf end points closer than this share a hinge.
+    hinge_distance_m: float = Field(0.25, gt=0.0)
+    # Two leaf angles are distinguishable when they differ by at least this.
+    min_opening_deg: float = Field(15.0, gt=0.0, lt=180.0)
+    # Leaf directions closer than this (sorted around the hinge) form one observed angle.
+    angle_cluster_gap_deg: float = Field(6.0, gt=0.0)
+    # Office doors rotate at most this far about the hinge (less min_opening_deg: leaves 180° apart are a
+    # straight line, e.g. two wall pieces end to end); allow_swinging lifts the limit for swinging doors.
+    max_rotation_deg: float = Field(180.0, gt=0.0, le=360.0)
+    allow_swinging: bool = False
+    # A rigid leaf: the longest observation at each angle is at least this fraction of the longest overall.
+    min_length_ratio: float = Field(0.7, ge=0.0, le=1.0)
+    # Two of the distinguishable angles must come from different passes (doors are stationary within a
+    # pass; set-2 leaves stood there before their pass). Off: the paper's rule alone.
+    require_distinct_passes: bool = True
+    # Leaf length: this quantile of the hinge → free end distances (robust to partly occluded views).
+    length_quantile: float = Field(0.9, gt=0.0, le=1.0)
+    # Cap on the points of one cluster (evenly subsampled) so eq. (2)'s all-pairs stays cheap.
+    max_cluster_points: int = Field(200, ge=2)
+    # Extension (the paper's flags cannot see it): a leaf seen at one angle only may have its other
+    # state in cells that were never seen free (a door opened into an unexplored room); search the static
+    # grid for an occupied segment of the same length hinged at the same end point, which must end there.
+    static_partner_search: bool = True
+    partner_min_fraction: float = Field(0.85, gt=0.0, le=1.0)
+    partner_end_clear_m: float = Field(0.2, ge=0.0)
+    # The partner's free end: the last occupied cell along it before a gap longer than this (a slanted
+    # leaf's cells are hit from grazing angles and some stay below p_occupied).
+    partner_gap_m: float = Field(0.2, ge=0.0)
+    # Closed direction: the wall continues behind the hinge; probe this far for occupied cells.
+    wall_probe_m: float = Field(0.4, gt=0.0)
+    wall_min_fraction: float = Field(0.6, gt=0.0, le=1.0)
+    # Removing the leaf: cells within this distance of the swept sector are cleared; occupied cells
+    # within hinge_keep_m of the hinge are kept (the hinge stays in the static map, paper 000 Sec. IV).
+    sweep_margin_m: float = Field(0.04, ge=0.0)
+    hinge_keep_m: float = Field(0.075, ge=0.0)
+    # Static cells above this probability count as occupied when probing walls and partners.
+    p_occupied: float = Field(0.65, gt=0.5, lt=1.0)
+
+    @model_validator(mode="after")
+    def _check_lengths(self) -> DoorDetectionConfig:
+        if not self.door_length_min_m < self.door_length_max_m:
+            raise ValueError("door_length_min_m must be below door_length_max_m")
+        if not self.hinge_distance_m < self.door_length_min_m / 2:
+            raise ValueError("hinge_distance_m must be below half of door_length_min_m")
+        return self
+
+
 class MappingConfig(Section):
     """``doorbatch map``: where the poses come from and how logs become passes."""
 
@@ -136,6 +246,8 @@ class DoorbatchConfig(Section):
     laser: LaserConfig = LaserConfig()
     scanmatch: ScanMatchConfig = ScanMatchConfig()
     mapping: MappingConfig = MappingConfig()
+    grid: GridConfig = GridConfig()
+    doors: DoorDetectionConfig = DoorDetectionConfig()
 
     def as_dict(self) -> dict[str, Any]:
         """The resolved tree as plain data (what goes into manifests)."""

@@ -1,0 +1,105 @@
+"""A small simulated corridor for the grid stage tests: walls, rooms, a pillar, hinged doors, a walking person.
+
+Scans are cast exactly against segments (vectorized over beams × segments), with seeded range noise.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+from doorbatch.pipeline.gridmap.build import MapScan
+
+FloatArray = npt.NDArray[np.float64]
+
+
+def cast(origin: FloatArray, dirs: FloatArray, segments: FloatArray) -> FloatArray:
+    """Range of the first hit of each ray o + t·d among segments a→b (+inf on a miss).
+
+    With c(v, w) = v_x w_y − v_y w_x: t = c(a − o, e) / c(d, e), u = c(a − o, d) / c(d, e), e = b − a.
+    """
+    a = segments[:, 0]
+    e = segments[:, 1] - a
+    w = a - origin
+    den = dirs[:, None, 0] * e[None, :, 1] - dirs[:, None, 1] * e[None, :, 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (w[None, :, 0] * e[None, :, 1] - w[None, :, 1] * e[None, :, 0]) / den
+        u = (w[None, :, 0] * dirs[:, None, 1] - w[None, :, 1] * dirs[:, None, 0]) / den
+    ok = (den != 0) & (t > 1e-9) & (u >= 0) & (u <= 1)
+    return np.asarray(np.where(ok, t, np.inf).min(axis=1), dtype=np.float64)
+
+
+def square(center: tuple[float, float], size: float) -> FloatArray:
+    """The four sides of an axis-aligned square as (4, 2, 2) segments."""
+    cx, cy = center
+    h = size / 2
+    c = np.array([[cx - h, cy - h], [cx + h, cy - h], [cx + h, cy + h], [cx - h, cy + h]])
+    return np.stack([c, np.roll(c, -1, axis=0)], axis=1)
+
+
+@dataclass(frozen=True)
+class Door:
+    """A hinged leaf: free end = hinge + L·(cos φ, sin φ), φ = closed_yaw + sign·α."""
+
+    hinge: tuple[float, float]
+    length: float
+    closed_yaw: float
+    sign: int
+
+    def leaf(self, alpha: float) -> FloatArray:
+        phi = self.closed_yaw + self.sign * alpha
+        h = np.asarray(self.hinge)
+        return np.stack([h, h + self.length * np.array([math.cos(phi), math.sin(phi)])])[None]
+
+
+@dataclass(frozen=True)
+class Corridor:
+    """Corridor y ∈ [0, 3], x ∈ [0, 14]; door A at (5, 3) and door B at (10, 3) in the top wall, each with a
+    3 × 3 m room behind; a 0.4 m pillar at (8, 1)."""
+
+    door_a: Door = Door((5.0, 3.0), 0.9, 0.0, +1)
+    door_b: Door = Door((10.0, 3.0), 0.8, 0.0, +1)
+    pillar_center: tuple[float, float] = (8.0, 1.0)
+    static: FloatArray = field(init=False)
+
+    def __post_init__(self) -> None:
+        segs = [
+            [(0, 0), (14, 0)], [(0, 0), (0, 3)], [(14, 0), (14, 3)],
+            [(0, 3), (5.0, 3)], [(5.9, 3), (10.0, 3)], [(10.8, 3), (14, 3)],
+            [(4, 3), (4, 6)], [(7, 3), (7, 6)], [(4, 6), (7, 6)],
+            [(9, 3), (9, 6)], [(12, 3), (12, 6)], [(9, 6), (12, 6)],
+        ]
+        static = np.concatenate([np.asarray(segs, dtype=np.float64), square(self.pillar_center, 0.4)])
+        object.__setattr__(self, "static", static)
+
+
+def scan_pass(world: Corridor, alpha_a: float, alpha_b: float, *, reverse: bool, seed: int, n_scans: int = 240,
+              beams: int = 360, max_range: float = 10.0, sigma: float = 0.01,
+              person: tuple[tuple[float, float], tuple[float, float]] | None = None) -> list[MapScan]:
+    """One pass along y = 1.8 (left → right, or back), doors held at the given angles (rad).
+
+    ``person``: start and end of a 0.3 m square walking at constant speed during the pass.
+    """
+    rng = np.random.default_rng(seed)
+    xs = np.linspace(0.8, 13.2, n_scans)
+    if reverse:
+        xs = xs[::-1]
+    segs = np.concatenate([world.static, world.door_a.leaf(alpha_a), world.door_b.leaf(alpha_b)])
+    angles = np.linspace(-math.pi, math.pi, beams, endpoint=False)
+    scans = []
+    for k, x in enumerate(xs):
+        origin = np.array([x, 1.8])
+        yaw = 0.02 * math.sin(k / 7.0)
+        dirs = np.stack([np.cos(angles + yaw), np.sin(angles + yaw)], axis=1)
+        all_segs = segs
+        if person is not None:
+            f = k / max(1, n_scans - 1)
+            centre = (1 - f) * np.asarray(person[0]) + f * np.asarray(person[1])
+            all_segs = np.concatenate([segs, square((float(centre[0]), float(centre[1])), 0.3)])
+        r = cast(origin, dirs, all_segs) + rng.normal(0.0, sigma, beams)
+        hit = r < max_range
+        scans.append(MapScan(origin, origin + r[hit, None] * dirs[hit], dirs[~hit]))
+    return scans

@@ -1,0 +1,144 @@
+"""Door detection pieces: eq. (1) clusters, eq. (2) line objects, leaves with a common hinge, leaf removal."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from doorbatch.config import DoorDetectionConfig, GridConfig
+from doorbatch.pipeline.gridmap.doors import (
+    DetectedDoor,
+    Leaves,
+    angle_modes,
+    cluster_points,
+    extract_leaves,
+    fit_leaf,
+    group_doors,
+    remove_leaves,
+    swept_cells,
+)
+from doorbatch.pipeline.gridmap.occupancy import new_grid
+
+CFG = DoorDetectionConfig()
+
+
+def _line(a: tuple[float, float], b: tuple[float, float], n: int, sigma: float = 0.0, seed: int = 0) -> np.ndarray:
+    t = np.linspace(0.0, 1.0, n)[:, None]
+    pts = (1 - t) * np.asarray(a) + t * np.asarray(b)
+    return pts + np.random.default_rng(seed).normal(0.0, sigma, pts.shape)
+
+
+def _leaf(hinge: tuple[float, float], length: float, yaw: float, cut: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    u = np.array([math.cos(yaw), math.sin(yaw)])
+    return np.asarray(hinge) + cut * u, np.asarray(hinge) + length * u
+
+
+def _leaves(segs: list[tuple[np.ndarray, np.ndarray]], passes: list[int] | None = None) -> Leaves:
+    """Set-1 leaves; by default the first half seen in pass 0, the rest in pass 1."""
+    n = len(segs)
+    pass_index = np.asarray(passes if passes is not None else [2 * k // n for k in range(n)], dtype=np.int64)
+    return Leaves(np.array([s[0] for s in segs]), np.array([s[1] for s in segs]), np.arange(n),
+                  pass_index, np.ones(n, np.int64))
+
+
+def test_clusters_link_chains_of_close_points_eq1() -> None:
+    pts = np.array([[0, 0], [0.1, 0], [0.2, 0], [0.5, 0], [0.6, 0.05], [3, 3]], dtype=float)
+    labels = cluster_points(pts, eps=0.15)
+    assert labels[0] == labels[1] == labels[2]
+    assert labels[3] == labels[4] != labels[0]
+    assert len(set(labels.tolist())) == 3
+
+
+def test_a_straight_cluster_gives_the_mean_line_with_the_longest_length_eq2() -> None:
+    seg = fit_leaf(_line((1.0, 1.0), (1.0 + 0.9 * math.cos(0.5), 1.0 + 0.9 * math.sin(0.5)), 30, 0.005), CFG)
+    assert seg is not None
+    d = seg[1] - seg[0]
+    assert np.hypot(*d) == pytest.approx(0.9, abs=0.02)
+    assert abs(math.sin(math.atan2(d[1], d[0]) - 0.5)) < math.radians(1.0)
+    assert np.min(np.hypot(*(seg - [1.0, 1.0]).T)) < 0.02
+
+
+def test_an_l_shaped_cluster_is_a_non_line_object() -> None:
+    pts = np.vstack([_line((0, 0), (0.6, 0), 13), _line((0.6, 0.05), (0.6, 0.6), 12)])
+    assert fit_leaf(pts, CFG) is None
+
+
+def test_a_cluster_shorter_than_delta_has_no_line() -> None:
+    assert fit_leaf(_line((0, 0), (0.3, 0), 8), CFG) is None
+
+
+def test_only_lines_of_leaf_length_become_leaves() -> None:
+    pts = np.vstack([_line((0, 0), (0.9, 0), 20), _line((0, 2), (2.5, 2), 50), _line((0, 4), (0.45, 4), 10)])
+    leaves = extract_leaves(pts, CFG, instance=4, pass_index=1)
+    assert len(leaves) == 1
+    assert leaves.lengths()[0] == pytest.approx(0.9, abs=0.01)
+    assert (leaves.instance[0], leaves.pass_index[0]) == (4, 1)
+
+
+def test_angle_modes_split_at_gaps_and_not_across_zero() -> None:
+    yaw = np.radians([-2.0, 1.0, 359.0 - 360.0, 60.0, 61.0, 62.0])
+    labels = angle_modes(yaw, math.radians(6.0))
+    assert labels[0] == labels[1] == labels[2] != labels[3]
+    assert labels[3] == labels[4] == labels[5]
+
+
+def test_leaves_rotating_about_a_common_hinge_make_a_door() -> None:
+    hinge = (2.0, 3.0)
+    segs = [_leaf(hinge, 0.9, 0.0, cut=0.05)] * 3 + [_leaf(hinge, 0.88, math.radians(60), cut=0.1)] * 5
+    (door,) = group_doors(_leaves(segs, [0, 0, 0, 1, 1, 1, 1, 1]), CFG)
+    assert math.hypot(door.hinge_x - 2.0, door.hinge_y - 3.0) < 0.01
+    assert door.length == pytest.approx(0.9, abs=0.03)
+    assert door.closed_yaw == pytest.approx(0.0, abs=1e-6)
+    assert (door.angle_min, math.degrees(door.angle_max)) == (pytest.approx(0.0, abs=1e-6), pytest.approx(60.0))
+    assert door.n_observations == 8 and door.moved
+
+
+def test_leaves_seen_at_one_angle_or_indistinguishable_angles_make_no_door() -> None:
+    hinge = (2.0, 3.0)
+    assert group_doors(_leaves([_leaf(hinge, 0.9, 0.3)] * 4), CFG) == []
+    assert group_doors(_leaves([_leaf(hinge, 0.9, 0.3), _leaf(hinge, 0.9, 0.3 + math.radians(8))]), CFG) == []
+
+
+def test_a_leaf_that_turns_within_one_pass_is_no_door() -> None:
+    hinge = (2.0, 3.0)
+    segs = [_leaf(hinge, 0.9, 0.0), _leaf(hinge, 0.9, math.radians(60))]
+    assert group_doors(_leaves(segs, [1, 1]), CFG) == []
+    assert len(group_doors(_leaves(segs, [1, 1]), CFG.model_copy(update={"require_distinct_passes": False}))) == 1
+    fallen = Leaves(np.array([s[0] for s in segs]), np.array([s[1] for s in segs]), np.arange(2),
+                    np.array([1, 1]), np.array([2, 1]))  # set 2 of pass 1: the leaf stood there before
+    assert len(group_doors(fallen, CFG)) == 1
+
+
+def test_leaves_without_a_common_end_make_no_door() -> None:
+    segs = [_leaf((2.0, 3.0), 0.9, 0.0), _leaf((2.6, 3.0), 0.9, math.radians(70))]
+    assert group_doors(_leaves(segs), CFG) == []
+
+
+def test_rotation_beyond_180_degrees_needs_allow_swinging() -> None:
+    hinge = (0.0, 0.0)
+    segs = [_leaf(hinge, 0.8, math.radians(a)) for a in (0.0, 100.0, 200.0, 200.0)]
+    assert group_doors(_leaves(segs), CFG) == []
+    (door,) = group_doors(_leaves(segs), CFG.model_copy(update={"allow_swinging": True, "max_rotation_deg": 360}))
+    assert math.degrees(door.angle_max - door.angle_min) == pytest.approx(200.0, abs=0.5)
+
+
+def test_removing_a_leaf_clears_the_swept_cells_and_keeps_the_hinge_occupied() -> None:
+    gcfg = GridConfig(resolution_m=0.05, initial_size_m=4.0)
+    grid = new_grid(gcfg, (0.0, 0.0))
+    grid.log_odds[:] = gcfg.l_min
+    door = DetectedDoor(0.0, 0.0, 0.9, 0.0, 0.0, math.radians(60.0), 2)
+    for a in (0.0, math.radians(30.0), math.radians(60.0)):
+        pts = np.stack([np.linspace(0.05, 0.9, 30) * math.cos(a), np.linspace(0.05, 0.9, 30) * math.sin(a)], 1)
+        grid.log_odds.reshape(-1)[grid.flat_index(pts)] = gcfg.l_max
+    outside = grid.flat_index([[0.6 * math.cos(1.4), 0.6 * math.sin(1.4)], [-0.5, 0.0]])
+    grid.log_odds.reshape(-1)[outside] = gcfg.l_max
+    swept = swept_cells(grid, door, 0.04)
+    remove_leaves(grid, [door], CFG, gcfg)
+    assert swept.sum() > 0.9 * (math.pi / 6 * 0.9**2) / 0.05**2
+    (hinge,) = grid.flat_index([[0.0, 0.0]])
+    flat = grid.log_odds.reshape(-1)
+    assert flat[hinge] == pytest.approx(gcfg.l_max)
+    assert np.all(grid.log_odds[swept] <= gcfg.l_max) and np.sum(grid.log_odds[swept] > 0) == 1
+    assert np.all(flat[outside] == np.float32(gcfg.l_max))
