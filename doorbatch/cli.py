@@ -160,6 +160,29 @@ def simulate_cmd(ctx: Context, world: Path, output: Path, scenario: str | None, 
                 summary.as_dict())
 
 
+@cli.command("map")
+@click.argument("logs", metavar="LOG...", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.option("-o", "--output", type=click.Path(path_type=Path, file_okay=False), required=True,
+              help="Map directory to write.")
+@click.option("--pose-source", type=click.Choice(["reference", "odometry", "scanmatch"]), default=None,
+              help="Where robot poses come from (default: reference if every log has one, else scanmatch).")
+@click.option("--stages", default="grid", show_default=True, help="Comma-separated stages to run.")
+@common_options
+def map_cmd(ctx: Context, logs: tuple[Path, ...], output: Path, pose_source: str | None, stages: str) -> None:
+    """Occupancy grid map with doors from LOG... (each log one pass; doors may move between passes)."""
+    from doorbatch.pipeline.map_run import run_map
+    from doorbatch.progress import progress_bar
+
+    config = ctx.config
+    if pose_source is not None:
+        config = config.model_copy(update={"mapping": config.mapping.model_copy(update={"pose_source": pose_source})})
+    with progress_bar(len(logs), "map", unit="pass") as bar:
+        _, summary = run_map(list(logs), output, config, [s.strip() for s in stages.split(",") if s.strip()],
+                             progress=bar.update)
+    ctx.summary(f"map of {summary.passes} pass(es) from {summary.pose_source} poses: {summary.doors} door(s) "
+                f"→ {summary.map_dir}", asdict(summary))
+
+
 @cli.command("config")
 @click.option("--dump", is_flag=True, help="Print the resolved configuration as YAML.")
 @common_options

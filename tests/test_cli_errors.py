@@ -99,10 +99,10 @@ def test_unknown_config_key_names_the_closest(write_log: Callable[..., Path],
 def test_unknown_key_in_config_file(tmp_path: Path, write_log: Callable[..., Path],
                                     capsys: pytest.CaptureFixture[str]) -> None:
     cfg = tmp_path / "c.yaml"
-    cfg.write_text("laser:\n  no_return_clear: 4\n")
+    cfg.write_text("grid:\n  resolution: 0.1\n")
     code, err = _run(capsys, "inspect", str(write_log("ok.mcap")), "--config", str(cfg))
     assert code == 2
-    assert str(cfg) in _one_line(err) and "laser.no_return_clear_m" in err
+    assert str(cfg) in _one_line(err) and "grid.resolution_m" in err
 
 
 def test_a_good_log_inspects_cleanly(write_log: Callable[..., Path], capsys: pytest.CaptureFixture[str]) -> None:

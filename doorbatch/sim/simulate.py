@@ -147,8 +147,60 @@ def simulate(world: World, scenario: Scenario, seed: int) -> Iterator[SimMessage
     yield from plan_messages(plan, streams)
 
 
-def plan_messages(plan: Plan, streams: dict[str, np.random.Generator]) -> Iterator[SimMessage]:
-    """Messages of a planned simulation, drawing noise from ``streams`` (see :func:`random_streams`)."""
+# A leaf counts as seen in a scan when at least this many beams return from it (a short visible piece of a
+# leaf is not a line a mapper could measure the door's angle from).
+MIN_LEAF_BEAMS = 10
+
+
+@dataclass
+class LeafObservations:
+    """Per pass and door (stationary interval only): laser returns on the leaf, scans in which the leaf was
+    seen (≥ MIN_LEAF_BEAMS returns), and the range of signed door angles over those scans."""
+
+    windows_ns: npt.NDArray[np.int64]  # (P, 2) stationary_ns, end_ns
+    opening_sign: npt.NDArray[np.float64]  # (D,)
+    hits: npt.NDArray[np.int64] = field(init=False)
+    scans: npt.NDArray[np.int64] = field(init=False)
+    angle_min: npt.NDArray[np.float64] = field(init=False)
+    angle_max: npt.NDArray[np.float64] = field(init=False)
+
+    def __post_init__(self) -> None:
+        shape = (self.windows_ns.shape[0], self.opening_sign.shape[0])
+        self.hits = np.zeros(shape, dtype=np.int64)
+        self.scans = np.zeros(shape, dtype=np.int64)
+        self.angle_min = np.full(shape, np.inf)
+        self.angle_max = np.full(shape, -np.inf)
+
+    def add(self, stamp_ns: int, surface: npt.NDArray[np.int64], n_static: int,
+            angles_rad: npt.NDArray[np.float64]) -> None:
+        """Count one scan's returns per leaf (``surface`` indices n_static … n_static + D − 1 are leaves)."""
+        inside = np.flatnonzero((self.windows_ns[:, 0] <= stamp_ns) & (stamp_ns < self.windows_ns[:, 1]))
+        if not inside.size:
+            return
+        k = int(inside[0])
+        n_doors = self.opening_sign.shape[0]
+        leaf = surface[(surface >= n_static) & (surface < n_static + n_doors)] - n_static
+        counts = np.bincount(leaf, minlength=n_doors)
+        self.hits[k] += counts
+        seen = counts >= MIN_LEAF_BEAMS
+        signed = self.opening_sign * angles_rad
+        self.scans[k] += seen
+        self.angle_min[k] = np.where(seen, np.minimum(self.angle_min[k], signed), self.angle_min[k])
+        self.angle_max[k] = np.where(seen, np.maximum(self.angle_max[k], signed), self.angle_max[k])
+
+    def rows(self) -> list[list[float]]:
+        """[pass, door_id, laser_hits, scans_seen, angle_min, angle_max] for every pass and door seen."""
+        out = []
+        for k, d in zip(*np.nonzero(self.scans), strict=True):
+            out.append([int(k), int(d), int(self.hits[k, d]), int(self.scans[k, d]), float(self.angle_min[k, d]),
+                        float(self.angle_max[k, d])])
+        return out
+
+
+def plan_messages(plan: Plan, streams: dict[str, np.random.Generator],
+                  observations: LeafObservations | None = None) -> Iterator[SimMessage]:
+    """Messages of a planned simulation, drawing noise from ``streams`` (see :func:`random_streams`);
+    ``observations`` (if given) collects which door leaves the laser saw."""
     sc = plan.scenario
     s = sc.sensors
     start = sc.start_time_s * NS_PER_S
@@ -202,6 +254,8 @@ def plan_messages(plan: Plan, streams: dict[str, np.random.Generator]) -> Iterat
             scene = make_scene(plan.world, angles[i], plan.people, people_xy[i])
             pose = np.array([p.x[i], p.y[i], p.yaw[i]])
             sample = simulate_scan(pose, scene, laser, streams["laser"], buffers)
+            if observations is not None:
+                observations.add(t, sample.surface, scene.n_static, angles[i])
             yield SimMessage(s.laser.topic, LASERSCAN, t, m.laser_scan(
                 t, s.laser.frame_id, laser.angle_min_rad, laser.angle_increment_rad, laser.range_min_m,
                 laser.range_max_m, sample.ranges.astype(np.float32), scan_time_s=1.0 / s.laser.rate_hz))
@@ -278,11 +332,15 @@ def run_simulation(world_path: Path, out: Path, scenario: str | Path | None = No
     streams = random_streams(seed)
     plan = plan_scenario(world, sc, streams["scenario"])
     counts: dict[str, int] = {}
+    start = sc.start_time_s * NS_PER_S
+    observations = LeafObservations(
+        np.array([[start + round(p.stationary_s * NS_PER_S), start + round(p.end_s * NS_PER_S)] for p in plan.passes],
+                 dtype=np.int64).reshape(-1, 2),
+        world.doors.opening_sign.astype(np.float64))
     with LogWriter(paths["log"], log_format) as writer:
-        for msg in plan_messages(plan, streams):
+        for msg in plan_messages(plan, streams, observations):
             writer.write(msg.topic, msg.msgtype, msg.log_time_ns, msg.msg)
             counts[msg.topic] = counts.get(msg.topic, 0) + 1
-    start = sc.start_time_s * NS_PER_S
     gt = sensor_stamps_ns(start, sc.sensors.ground_truth.rate_hz, plan.end_s)
     poses = sample_trajectory(plan.trajectory, _seconds(gt, start))
     write_tum(paths["trajectory"], gt, poses.x, poses.y, poses.yaw)
@@ -291,7 +349,7 @@ def run_simulation(world_path: Path, out: Path, scenario: str | Path | None = No
     write_map(static, paths["map_static"])
     generator = {"doorbatch_version": doorbatch.__version__, "world": world.name, "world_file": str(world_path),
                  "scenario": sc.name, "scenario_file": str(scenario_file), "seed": int(seed)}
-    write_truth(truth_of(plan, generator, {k: p.name for k, p in paths.items()}), paths["truth"])
+    write_truth(truth_of(plan, generator, {k: p.name for k, p in paths.items()}, observations), paths["truth"])
     end = start + round(plan.end_s * NS_PER_S)
     pass_logs = _split_passes(paths["log"], plan, start, log_format) if split_passes else []
     summary = SimulationSummary(paths["log"], paths["truth"], paths["trajectory"], paths["map_closed"],
@@ -320,7 +378,8 @@ def _bad_format(fmt: str) -> LogFormat:
     raise UsageError(f"unknown log format {fmt!r} (use one of: {', '.join(f.value for f in LogFormat)})")
 
 
-def truth_of(plan: Plan, generator: dict[str, Any], files: dict[str, str]) -> SimTruth:
+def truth_of(plan: Plan, generator: dict[str, Any], files: dict[str, str],
+             observations: LeafObservations | None = None) -> SimTruth:
     """The truth record of a plan (door fields as in doors.parquet, signed angles, ns stamps)."""
     world, sc = plan.world, plan.scenario
     start = sc.start_time_s * NS_PER_S
@@ -371,6 +430,7 @@ def truth_of(plan: Plan, generator: dict[str, Any], files: dict[str, str]) -> Si
         angle_stamp_ns=np.asarray(stamps, dtype=np.int64), angle_door_id=np.asarray(ids, dtype=np.int64),
         angle_rad=np.asarray(angles, dtype=np.float64), people=people, sensors=sensors,
         scenario=sc.model_dump(mode="json"),
+        leaf_observations=tuple(tuple(r) for r in observations.rows()) if observations is not None else (),
     )
 
 

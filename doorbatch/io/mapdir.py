@@ -1,0 +1,52 @@
+"""The map directory of ``doorbatch map``: map.yaml + map.pgm, doors.parquet, preview.png, manifest.json."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from doorbatch.geometry.rotations import wrap_angle
+from doorbatch.io.map_server import write_map
+from doorbatch.io.parquet import read_table, write_table
+from doorbatch.io.preview import PreviewDoor, render_preview, write_preview
+from doorbatch.maps import OccupancyMap
+
+
+def doors_columns(doors: Sequence[PreviewDoor], n_observations: Sequence[int], source: str,
+                  ) -> dict[str, object]:
+    """doors.parquet columns (DESIGN schema), door_id in the given order, angles wrapped to (−π, π]."""
+    n = len(doors)
+    return {
+        "door_id": np.arange(n, dtype=np.int32),
+        "hinge_x": [d.hinge_x for d in doors],
+        "hinge_y": [d.hinge_y for d in doors],
+        "length": [d.length for d in doors],
+        "closed_yaw": wrap_angle([d.closed_yaw for d in doors]) if n else [],
+        "angle_min": [d.angle_min for d in doors],
+        "angle_max": [d.angle_max for d in doors],
+        "n_observations": np.asarray(n_observations, dtype=np.int32),
+        "source": [source] * n,
+        "moved": [d.moved for d in doors],
+    }
+
+
+def write_map_dir(out: Path, static_map: OccupancyMap, doors: Sequence[PreviewDoor], n_observations: Sequence[int],
+                  source: str, trajectories: Sequence[np.ndarray]) -> list[Path]:
+    """Write map.yaml/map.pgm, doors.parquet and preview.png into ``out``; returns the files written."""
+    out.mkdir(parents=True, exist_ok=True)
+    write_map(static_map, out / "map.yaml")
+    write_table("doors", doors_columns(doors, n_observations, source), out / "doors.parquet")
+    write_preview(out / "preview.png", render_preview(static_map, doors, trajectories))
+    return [out / "map.yaml", out / "map.pgm", out / "doors.parquet", out / "preview.png"]
+
+
+def read_doors(map_dir: Path) -> list[PreviewDoor]:
+    """The doors of a map directory (grid or em source)."""
+    table = read_table("doors", map_dir / "doors.parquet").to_pydict()
+    return [
+        PreviewDoor(table["hinge_x"][i], table["hinge_y"][i], table["length"][i], table["closed_yaw"][i],
+                    table["angle_min"][i], table["angle_max"][i], table["moved"][i])
+        for i in range(len(table["door_id"]))
+    ]

@@ -1,0 +1,1 @@
+"""Metrics against a reference: door maps, static maps, trajectories."""

@@ -1,0 +1,165 @@
+"""Door-map scoring against ground truth: match by hinge distance, then hinge, length and range errors.
+
+A detected door matches the nearest unmatched truth door whose hinge lies within ``max_hinge_distance_m``
+(greedy by distance). Only truth doors seen at two or more distinguishable angles (``moved``) should be
+found by the grid stage; a detection matched to a door that never moved counts as a false positive, and
+so does a detection matched to nothing.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from doorbatch.geometry.rotations import wrap_angle
+from doorbatch.io.sim_truth import SimTruth
+from doorbatch.maps import OccupancyMap
+
+FloatArray = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class DoorSet:
+    """Doors as arrays: hinge (N, 2), leaf length, closed_yaw, and the opening range relative to it."""
+
+    hinge: FloatArray
+    length: FloatArray
+    closed_yaw: FloatArray
+    angle_min: FloatArray
+    angle_max: FloatArray
+
+    def __len__(self) -> int:
+        return int(self.hinge.shape[0])
+
+    @property
+    def range_global(self) -> tuple[FloatArray, FloatArray]:
+        """Leaf directions at the two ends of the opening range, in the map frame."""
+        return wrap_angle(self.closed_yaw + self.angle_min), wrap_angle(self.closed_yaw + self.angle_max)
+
+
+@dataclass(frozen=True)
+class DoorScore:
+    """Matches and errors. ``matches`` pairs (detected index, truth index) of true positives."""
+
+    precision: float
+    recall: float
+    matches: list[tuple[int, int]]
+    false_positives: list[int]
+    missed: list[int]
+    hinge_error_m: FloatArray
+    length_error_m: FloatArray
+    range_error_rad: FloatArray
+
+
+def _range_error(det: DoorSet, i: int, truth: DoorSet, j: int) -> float:
+    """Largest difference between the ends of the two opening ranges (either orientation of the range)."""
+    d_lo, d_hi = (a[i] for a in det.range_global)
+    t_lo, t_hi = (a[j] for a in truth.range_global)
+    same = max(abs(float(wrap_angle(d_lo - t_lo))), abs(float(wrap_angle(d_hi - t_hi))))
+    swapped = max(abs(float(wrap_angle(d_lo - t_hi))), abs(float(wrap_angle(d_hi - t_lo))))
+    return min(same, swapped)
+
+
+def score_doors(detected: DoorSet, truth: DoorSet, moved: npt.ArrayLike,
+                max_hinge_distance_m: float = 0.3) -> DoorScore:
+    """Precision over all detections, recall over the truth doors that moved, and errors of the matches."""
+    moved_mask = np.asarray(moved, dtype=bool)
+    dist = np.linalg.norm(detected.hinge[:, None, :] - truth.hinge[None, :, :], axis=2) if len(detected) and len(
+        truth) else np.zeros((len(detected), len(truth)))
+    pairs = sorted((float(dist[i, j]), i, j) for i in range(len(detected)) for j in range(len(truth))
+                    if dist[i, j] <= max_hinge_distance_m)
+    used_d: set[int] = set()
+    used_t: set[int] = set()
+    matched: list[tuple[int, int]] = []
+    for _, i, j in pairs:
+        if i not in used_d and j not in used_t:
+            used_d.add(i)
+            used_t.add(j)
+            matched.append((i, j))
+    true_pos = [(i, j) for i, j in matched if moved_mask[j]]
+    false_pos = sorted(set(range(len(detected))) - {i for i, _ in true_pos})
+    missed = [j for j in np.flatnonzero(moved_mask) if j not in {t for _, t in true_pos}]
+    n_moved = int(moved_mask.sum())
+    return DoorScore(
+        precision=len(true_pos) / len(detected) if len(detected) else 1.0,
+        recall=len(true_pos) / n_moved if n_moved else 1.0,
+        matches=true_pos,
+        false_positives=false_pos,
+        missed=[int(j) for j in missed],
+        hinge_error_m=np.array([dist[i, j] for i, j in true_pos]),
+        length_error_m=np.array([detected.length[i] - truth.length[j] for i, j in true_pos]),
+        range_error_rad=np.array([_range_error(detected, i, truth, j) for i, j in true_pos]),
+    )
+
+
+@dataclass(frozen=True)
+class StaticMapScore:
+    """Agreement of a static occupancy map with the truth's door-less static map on observed cells."""
+
+    agreement: float
+    observed_cells: int
+    spurious_occupied_cells: int
+
+
+def score_static_map(estimate: npt.NDArray[np.int8], truth: npt.NDArray[np.int8], tolerance_cells: int = 1,
+                     occupied_above: int = 65, free_below: int = 20) -> StaticMapScore:
+    """Fraction of observed cells (known in the estimate) whose state agrees with the truth map, both on the
+    same grid. An occupied estimate agrees when a truth-occupied cell lies within ``tolerance_cells`` (the
+    truth is drawn at the same resolution, so a wall may fall in the neighbouring cell); a free estimate
+    agrees when the truth cell is not occupied. ``spurious_occupied_cells`` counts occupied estimate cells
+    with no truth wall nearby (what walking people or a left-behind door leaf would leave)."""
+    from scipy.ndimage import maximum_filter
+
+    est_occ = estimate >= occupied_above
+    est_free = (estimate >= 0) & (estimate < free_below)
+    truth_occ = truth >= occupied_above
+    near_truth = maximum_filter(truth_occ, size=2 * tolerance_cells + 1)
+    observed = est_occ | est_free
+    agree = (est_occ & near_truth) | (est_free & ~truth_occ)
+    n = int(observed.sum())
+    return StaticMapScore(float(agree.sum()) / n if n else 1.0, n, int((est_occ & ~near_truth).sum()))
+
+
+def resample_onto(truth: OccupancyMap, grid: OccupancyMap) -> npt.NDArray[np.int8]:
+    """The truth map's value at the centre of every cell of ``grid`` (−1 outside the truth map)."""
+    rows, cols = np.mgrid[0: grid.height, 0: grid.width]
+    xy = grid.cell_to_world(np.stack([rows.ravel(), cols.ravel()], axis=1))
+    ij = truth.world_to_cell(xy)  # (row, column)
+    inside = truth.contains(ij)
+    out = np.full(xy.shape[0], -1, dtype=np.int8)
+    out[inside] = truth.occupancy[ij[inside, 0], ij[inside, 1]]
+    return out.reshape(grid.height, grid.width)
+
+
+def score_static_occupancy(estimate: OccupancyMap, truth: OccupancyMap, tolerance_cells: int = 1) -> StaticMapScore:
+    """:func:`score_static_map` for two maps on different grids (the truth is resampled onto the estimate)."""
+    return score_static_map(estimate.occupancy, resample_onto(truth, estimate), tolerance_cells)
+
+
+def truth_doors(truth: SimTruth, min_opening_rad: float) -> tuple[DoorSet, npt.NDArray[np.bool_]]:
+    """The simulator's doors with the opening range the laser *saw* over the passes, and which doors were
+    seen at two or more distinguishable angles (range ≥ ``min_opening_rad``).
+
+    Uses the truth's ``leaf_observations`` (per pass, the angles at which the leaf returned enough beams);
+    a door never seen gets an empty range at its first pass's angle and does not count as moved.
+    """
+    doors = truth.doors
+    mids = np.array([(p.stationary_ns + p.end_ns) // 2 for p in truth.passes], dtype=np.int64)
+    first = np.atleast_2d(truth.door_angles_at(mids))[0]
+    lo = np.full(len(doors), np.inf)
+    hi = np.full(len(doors), -np.inf)
+    for _, door_id, _, _, a_min, a_max in truth.leaf_observations:
+        d = int(door_id)
+        lo[d], hi[d] = min(lo[d], a_min), max(hi[d], a_max)
+    never = ~np.isfinite(lo)
+    lo[never], hi[never] = first[never], first[never]
+    door_set = DoorSet(
+        hinge=np.array([[d.hinge_x, d.hinge_y] for d in doors]).reshape(-1, 2),
+        length=np.array([d.length for d in doors]),
+        closed_yaw=np.array([d.closed_yaw for d in doors]),
+        angle_min=lo,
+        angle_max=hi,
+    )
+    return door_set, (hi - lo) >= min_opening_rad

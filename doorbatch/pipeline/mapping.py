@@ -1,0 +1,210 @@
+"""``doorbatch map``: a door-augmented occupancy grid from one or more logs, each log one pass.
+
+The stage in outline (paper 000, Sec. III)::
+
+    recordings = load the logs
+    source     = choose the pose source (reference > scan matching on odometry)
+    passes     = robot poses at every scan, per pass, in one map frame
+    grid       = integrate every pass into the grid, collecting dynamic points and door leaves
+    doors      = doors from leaves that rotate about a common hinge; leaves removed from the static map
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+
+from doorbatch.config import DoorbatchConfig
+from doorbatch.errors import PipelineError
+from doorbatch.geometry.se2 import interpolate_poses, rotation_matrix
+from doorbatch.io.preview import PreviewDoor
+from doorbatch.io.recording import Recording, load_recording
+from doorbatch.maps import OccupancyMap
+from doorbatch.pipeline.gridmap.build import GridMapper
+from doorbatch.pipeline.gridmap.doors import DetectedDoor
+from doorbatch.pipeline.poses import scan_match_trajectory
+
+log = logging.getLogger(__name__)
+FloatArray = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class PassPoses:
+    """The robot (base_link) pose in the map frame at each scan of one pass; ``valid`` marks scans that
+    have a pose (within the pose source's time span, no long gap)."""
+
+    log: str
+    stamps_ns: npt.NDArray[np.int64]
+    poses: FloatArray
+    valid: npt.NDArray[np.bool_]
+    source: str
+
+
+@dataclass(frozen=True)
+class DoorMap:
+    """What ``build_map`` returns: the static map, the doors, the poses it used, and notes."""
+
+    static_map: OccupancyMap
+    doors: list[DetectedDoor]
+    passes: list[PassPoses]
+    pose_source: str
+    n_dynamic_points: int
+    warnings: list[str] = field(default_factory=list)
+    stage_seconds: dict[str, float] = field(default_factory=dict)
+
+
+def choose_pose_source(recordings: Sequence[Recording], wanted: str) -> str:
+    """The pose source: the one asked for, or ``reference`` when every log has one, else ``scanmatch``.
+
+    Raises:
+        PipelineError: a log lacks what the source needs, or has neither a reference nor odometry.
+    """
+    for rec in recordings:
+        if rec.reference is None and rec.odometry is None and wanted in ("auto", "odometry", "reference"):
+            raise PipelineError(f"{rec.path}: no usable pose source: no reference pose topic and no odometry "
+                                "(nav_msgs/Odometry or TF odom→base_link); try --pose-source scanmatch")
+    if wanted == "auto":
+        return "reference" if all(r.reference is not None for r in recordings) else "scanmatch"
+    need = {"reference": "reference", "odometry": "odometry"}.get(wanted)
+    for rec in recordings:
+        if need and getattr(rec, need) is None:
+            raise PipelineError(f"{rec.path}: --pose-source {wanted} but the log has no {need} poses")
+    return wanted
+
+
+def _hits_base(rec: Recording, i: int) -> FloatArray:
+    pts, hit = rec.scans.endpoints_base(i)
+    return pts[hit]
+
+
+def pass_poses(rec: Recording, source: str, config: DoorbatchConfig) -> PassPoses:
+    """Poses at the scan stamps from the chosen source (interpolated, or scan matched on odometry)."""
+    stamps = rec.scans.stamps_ns
+    gap_ns = int(config.mapping.max_pose_gap_s * 1e9)
+    if source == "reference" and rec.reference is not None:
+        poses, valid = interpolate_poses(rec.reference.stamps_ns, rec.reference.poses, stamps, gap_ns)
+        return PassPoses(rec.path, stamps, poses, valid, source)
+    if rec.odometry is not None:
+        odom, valid = interpolate_poses(rec.odometry.stamps_ns, rec.odometry.poses, stamps, gap_ns)
+    else:  # scan matching alone, from a constant-position prior
+        odom, valid = np.zeros((stamps.shape[0], 3)), np.ones(stamps.shape[0], dtype=bool)
+    if source == "odometry":
+        return PassPoses(rec.path, stamps, odom, valid, source)
+    idx = np.flatnonzero(valid)
+    matched = scan_match_trajectory([_hits_base(rec, int(i)) for i in idx], odom[idx], config.scanmatch)
+    poses = odom.copy()
+    poses[idx] = matched.poses
+    return PassPoses(rec.path, stamps, poses, valid, source)
+
+
+def check_common_frame(recordings: Sequence[Recording], source: str, config: DoorbatchConfig) -> None:
+    """Passes must share one map frame.
+
+    Raises:
+        PipelineError: reference poses in different frames, or odometry that jumps between passes.
+    """
+    if len(recordings) < 2:
+        return
+    if source == "reference":
+        frames = {r.reference.frame_id for r in recordings if r.reference is not None}
+        if len(frames) > 1:
+            raise PipelineError(f"passes have disjoint coordinate frames: reference poses in {sorted(frames)}")
+        return
+    for prev, nxt in itertools.pairwise(recordings):
+        if prev.odometry is None or nxt.odometry is None:
+            raise PipelineError(f"{nxt.path}: passes have disjoint coordinate frames: without a reference, "
+                                "several passes need one continuous odometry frame")
+        jump = float(np.hypot(*(nxt.odometry.poses[0, :2] - prev.odometry.poses[-1, :2])))
+        if jump > config.mapping.odometry_continuity_m:
+            raise PipelineError(
+                f"{nxt.path}: passes have disjoint coordinate frames: its odometry starts {jump:.2f} m from where "
+                f"{Path(prev.path).name} ended (mapping.odometry_continuity_m = "
+                f"{config.mapping.odometry_continuity_m}); give a reference pose topic, or map the logs separately")
+
+
+def _chain_scanmatch(recordings: Sequence[Recording], config: DoorbatchConfig) -> list[PassPoses]:
+    """Scan matching over all passes as one sequence (one odometry frame, the submap carries over)."""
+    per_pass = [pass_poses(rec, "odometry", config) for rec in recordings]
+    idx = [np.flatnonzero(p.valid) for p in per_pass]
+    scans = [_hits_base(rec, int(i)) for rec, ii in zip(recordings, idx, strict=True) for i in ii]
+    odom = np.concatenate([p.poses[ii] for p, ii in zip(per_pass, idx, strict=True)])
+    matched = scan_match_trajectory(scans, odom, config.scanmatch).poses
+    out, start = [], 0
+    for p, ii in zip(per_pass, idx, strict=True):
+        poses = p.poses.copy()
+        poses[ii] = matched[start: start + ii.shape[0]]
+        start += ii.shape[0]
+        out.append(PassPoses(p.log, p.stamps_ns, poses, p.valid, "scanmatch"))
+    return out
+
+
+def integrate_pass(mapper: GridMapper, rec: Recording, poses: PassPoses, stride: int) -> None:
+    """Add every valid scan of one pass to the mapper (map frame), then close the pass."""
+    scans = rec.scans
+    for i in range(0, len(scans), stride):
+        if not poses.valid[i]:
+            continue
+        pose = poses.poses[i]
+        rot = rotation_matrix(pose[2])
+        affine = scans.laser_to_base[i]
+        origin = rot @ affine[:, 2] + pose[:2]
+        pts, hit = scans.endpoints_base(i)
+        r = scans.ranges[i]
+        with np.errstate(invalid="ignore"):
+            no_return = np.isposinf(r) | (np.isfinite(r) & (r >= scans.range_max[i]))
+        angles = scans.angle_min[i] + scans.angle_increment[i] * np.flatnonzero(no_return)
+        dirs = np.stack([np.cos(angles), np.sin(angles)], axis=1) @ (rot @ affine[:, :2]).T
+        mapper.add_scan(origin, pts[hit] @ rot.T + pose[:2], dirs)
+    mapper.end_pass()
+
+
+def build_map(logs: Sequence[Path], config: DoorbatchConfig | None = None,
+              progress: Callable[[int], object] | None = None) -> DoorMap:
+    """Door-augmented occupancy grid from logs, each one pass (doors stationary within a pass).
+
+    Raises:
+        PipelineError: no usable pose source, or passes in disjoint coordinate frames.
+        InputDataError: a log cannot be read or has no scans.
+    """
+    config = config or DoorbatchConfig()
+    seconds: dict[str, float] = {}
+    t0 = time.perf_counter()
+    recordings = [load_recording(Path(p), config) for p in logs]
+    seconds["read"] = time.perf_counter() - t0
+    source = choose_pose_source(recordings, config.mapping.pose_source)
+    check_common_frame(recordings, source, config)
+    t0 = time.perf_counter()
+    if source == "scanmatch":
+        passes = _chain_scanmatch(recordings, config)
+    else:
+        passes = [pass_poses(rec, source, config) for rec in recordings]
+    seconds["poses"] = time.perf_counter() - t0
+    warnings = [w for rec in recordings for w in rec.warnings]
+    for p in passes:
+        skipped = int((~p.valid).sum())
+        if skipped:
+            warnings.append(f"{p.log}: {skipped} of {p.valid.shape[0]} scans have no {source} pose and are skipped")
+    t0 = time.perf_counter()
+    mapper = GridMapper(config.grid, config.doors)
+    for rec, poses in zip(recordings, passes, strict=True):
+        integrate_pass(mapper, rec, poses, config.mapping.scan_stride)
+        if progress is not None:
+            progress(1)
+    result = mapper.finish()
+    seconds["grid"] = time.perf_counter() - t0
+    for w in warnings:
+        log.warning("%s", w)
+    return DoorMap(result.static_map, result.doors, passes, source, result.n_dynamic_points, warnings, seconds)
+
+
+def preview_doors(doors: Sequence[DetectedDoor]) -> list[PreviewDoor]:
+    """The doors as the map directory writers take them."""
+    return [PreviewDoor(d.hinge_x, d.hinge_y, d.length, d.closed_yaw, d.angle_min, d.angle_max, d.moved)
+            for d in doors]

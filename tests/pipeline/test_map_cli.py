@@ -1,0 +1,73 @@
+"""doorbatch map end to end on the sample's mapping passes, and its clear errors."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from doorbatch.cli import main
+from doorbatch.io import ros_messages as m
+from doorbatch.io.map_server import read_map
+from doorbatch.io.parquet import read_table
+from tests.conftest import REPO, sample_messages
+
+SAMPLE_LOGS = REPO / "datasets" / "sample" / "logs"
+
+
+def test_map_on_the_sample_writes_the_map_directory(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    logs = [str(SAMPLE_LOGS / f"map_pass{k}.mcap") for k in (1, 2, 3)]
+    out = tmp_path / "map"
+    assert main(["map", *logs, "-o", str(out), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["pose_source"] == "reference" and summary["passes"] == 3
+    occ = read_map(out / "map.yaml")
+    assert occ.resolution_m == pytest.approx(0.05)
+    assert (occ.occupancy == 100).sum() > 1000 and (occ.occupancy == 0).sum() > 10000
+    doors = read_table("doors", out / "doors.parquet").to_pydict()
+    assert len(doors["door_id"]) == summary["doors"] >= 1
+    assert set(doors["source"]) == {"grid"}
+    assert all(0.6 <= length <= 1.2 for length in doors["length"])
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["extra"]["pose_source"] == "reference"
+    assert len(manifest["inputs"]) == 3 and manifest["config_hash"]
+    assert (out / "preview.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def _with_reference_frame(frame: str) -> list[tuple[str, str, int, object]]:
+    msgs = []
+    for topic, msgtype, t, msg in sample_messages(8):
+        if topic == "/ground_truth":
+            p = msg.pose.pose.position
+            msg = m.odometry(t, frame, "base_link", p.x, p.y, 0.0)
+        msgs.append((topic, msgtype, t, msg))
+    return msgs
+
+
+def test_passes_with_disjoint_frames_are_an_error(write_log: Callable[..., Path], tmp_path: Path,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    a = write_log("a.mcap", _with_reference_frame("map"))
+    b = write_log("b.mcap", _with_reference_frame("world"))
+    code = main(["map", str(a), str(b), "-o", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert code == 3 and "disjoint coordinate frames" in err
+    assert not (tmp_path / "out" / "map.yaml").exists()
+
+
+def test_a_log_without_any_pose_source_is_an_error(write_log: Callable[..., Path], tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    bare = [x for x in sample_messages(5) if x[0] not in ("/odom", "/ground_truth", "/tf")]
+    code = main(["map", str(write_log("bare.mcap", bare)), "-o", str(tmp_path / "out"), "--pose-source", "reference"])
+    err = capsys.readouterr().err
+    assert code == 3 and "no usable pose source" in err and "bare.mcap" in err
+
+
+def test_odometry_pose_source_uses_odometry(write_log: Callable[..., Path], tmp_path: Path,
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "out"
+    assert main(["map", str(write_log("a.mcap")), "-o", str(out), "--pose-source", "odometry", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["pose_source"] == "odometry"
+    assert np.isfinite(read_map(out / "map.yaml").origin_x_m)
