@@ -353,3 +353,16 @@ def simulate_odometry(truth: PoseSamples, noise: OdometryNoise, rng: np.random.G
         v = np.concatenate([[0.0], np.where(dt > 0, rep.trans / dt, 0.0)])
         w = np.concatenate([[0.0], np.where(dt > 0, (rep.rot1 + rep.rot2) / dt, 0.0)])
     return PoseSamples(truth.t_s, x, y, yaw, v, w)
+
+
+def drift_poses(poses: npt.ArrayLike, noise: OdometryNoise, rng: np.random.Generator) -> FloatArray:
+    """Corrupt a pose sequence (N, 3) into drifting wheel odometry with the simulator's odometry model:
+    the true increments get the α-noise and the systematic bias, and are integrated from the first pose.
+
+    DESIGN.md: the CARMEN logs' own odometry equals their corrected poses, so tests of scan matching and
+    localization on them need odometry made worse this way (with a fixed seed).
+    """
+    p = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    rep = sample_odometry_increments(odometry_increments(p[:, 0], p[:, 1], p[:, 2]), noise, rng)
+    x, y, yaw = integrate_odometry(float(p[0, 0]), float(p[0, 1]), float(p[0, 2]), rep)
+    return np.stack([x, y, yaw], axis=1)

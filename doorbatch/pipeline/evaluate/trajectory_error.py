@@ -1,0 +1,40 @@
+"""Absolute trajectory error of planar trajectories sampled at the same stamps."""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+from doorbatch.geometry.rotations import wrap_angle
+from doorbatch.geometry.se2 import compose, inverse
+
+FloatArray = npt.NDArray[np.float64]
+
+
+def align_first_pose(estimate: npt.ArrayLike, reference: npt.ArrayLike) -> FloatArray:
+    """The estimate moved rigidly so that its first pose equals the reference's (odometry-style evaluation:
+    both start at the same pose)."""
+    est = np.asarray(estimate, dtype=np.float64).reshape(-1, 3)
+    ref = np.asarray(reference, dtype=np.float64).reshape(-1, 3)
+    correction = compose(ref[0], inverse(est[0]))
+    return compose(np.broadcast_to(correction, est.shape), est)
+
+
+def position_errors(estimate: npt.ArrayLike, reference: npt.ArrayLike) -> FloatArray:
+    """|p_est − p_ref| per pose (m)."""
+    est = np.asarray(estimate, dtype=np.float64).reshape(-1, 3)
+    ref = np.asarray(reference, dtype=np.float64).reshape(-1, 3)
+    return np.asarray(np.hypot(est[:, 0] - ref[:, 0], est[:, 1] - ref[:, 1]), dtype=np.float64)
+
+
+def yaw_errors(estimate: npt.ArrayLike, reference: npt.ArrayLike) -> FloatArray:
+    """|wrap(θ_est − θ_ref)| per pose (rad)."""
+    est = np.asarray(estimate, dtype=np.float64).reshape(-1, 3)
+    ref = np.asarray(reference, dtype=np.float64).reshape(-1, 3)
+    return np.abs(wrap_angle(est[:, 2] - ref[:, 2]))
+
+
+def ate_rmse(estimate: npt.ArrayLike, reference: npt.ArrayLike) -> float:
+    """Translational ATE RMSE (m), no alignment: √(mean |p_est − p_ref|²)."""
+    err = position_errors(estimate, reference)
+    return float(np.sqrt(np.mean(err**2))) if err.size else 0.0
