@@ -84,6 +84,6 @@ def interpolate_poses(stamps_ns: npt.ArrayLike, poses: npt.ArrayLike, query_ns: 
     yaw = p[lo, 2] + frac * dyaw
     out[:, 2] = np.arctan2(np.sin(yaw), np.cos(yaw))
     valid = (q >= t[0]) & (q <= t[-1])
-    if max_gap_ns is not None:
-        valid &= (t[hi] - t[lo]) <= max_gap_ns
+    if max_gap_ns is not None:  # a query exactly on a stamp needs no interpolation, whatever the gap
+        valid &= ((t[hi] - t[lo]) <= max_gap_ns) | (q == t[hi]) | (q == t[lo])
     return out, valid

@@ -33,10 +33,23 @@ def _pixel_scale(occ: OccupancyMap, max_side_px: int) -> int:
     return int(max(1, min(4, max_side_px // max(occ.width, occ.height, 1))))
 
 
+def crop_to_known(occ: OccupancyMap, margin_cells: int = 20) -> OccupancyMap:
+    """The map cut to the bounding box of its known cells plus a margin (same world coordinates)."""
+    rows, cols = np.nonzero(occ.occupancy >= 0)
+    if rows.size == 0 or occ.origin_yaw_rad != 0.0:
+        return occ
+    r0, r1 = max(0, rows.min() - margin_cells), min(occ.height, rows.max() + margin_cells + 1)
+    c0, c1 = max(0, cols.min() - margin_cells), min(occ.width, cols.max() + margin_cells + 1)
+    return OccupancyMap(occ.occupancy[r0:r1, c0:c1].copy(), occ.resolution_m,
+                        occ.origin_x_m + c0 * occ.resolution_m, occ.origin_y_m + r0 * occ.resolution_m, 0.0)
+
+
 def render_preview(occ: OccupancyMap, doors: Sequence[PreviewDoor] = (),
                    trajectories: Sequence[npt.NDArray[np.float64]] = (), max_side_px: int = 2000
                    ) -> npt.NDArray[np.uint8]:
-    """BGR image: free white, occupied black, unknown grey; doors red (moved) or orange, trajectories."""
+    """BGR image of the known part of the map: free white, occupied black, unknown grey; doors red (moved)
+    or orange (never seen moving) with their opening arcs; trajectories as coloured lines."""
+    occ = crop_to_known(occ)
     scale = _pixel_scale(occ, max_side_px)
     grid = occ.occupancy
     gray = np.full(grid.shape, 205, dtype=np.uint8)
