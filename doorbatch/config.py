@@ -236,6 +236,65 @@ class MappingConfig(Section):
     scan_stride: int = Field(1, ge=1)
 
 
+class LocalizeConfig(Section):
+    """``doorbatch localize``: MCL with Nav2 AMCL's parameter names, and the RBPF of paper 000 Sec. IV.
+
+    Both methods share every motion and sensor parameter (paper 000 compared them that way).
+    """
+
+    method: Literal["rbpf", "mcl"] = "rbpf"
+    # Odometry motion model (Probabilistic Robotics Table 5.6; Nav2 AMCL alpha1..alpha4). Nav2's default 0.2
+    # is far too pessimistic for ordinary wheel odometry (tracking fails on a 40 m corridor); these suit
+    # odometry drifting ~1-2 % (docs/localization.md says how to calibrate them from a log with a reference).
+    alpha1: float = Field(0.05, ge=0.0)  # rotation noise from rotation
+    alpha2: float = Field(0.05, ge=0.0)  # rotation noise from translation
+    alpha3: float = Field(0.05, ge=0.0)  # translation noise from translation
+    alpha4: float = Field(0.05, ge=0.0)  # translation noise from rotation
+    # Likelihood-field endpoint model (Nav2: laser_model_type likelihood_field).
+    z_hit: float = Field(0.95, ge=0.0, le=1.0)
+    z_rand: float = Field(0.05, ge=0.0, le=1.0)
+    sigma_hit: float = Field(0.1, gt=0.0)  # m
+    laser_likelihood_max_dist: float = Field(2.0, gt=0.0)  # m, distance transform cap
+    max_beams: int = Field(60, ge=2)
+    laser_max_range: float = Field(-1.0)  # m; < 0: use the scan's range_max
+    laser_min_range: float = Field(-1.0)  # m; < 0: use the scan's range_min
+    # Particles: KLD-sampling (Fox 2003) between min and max; bins 0.5 m x 0.5 m x 10 deg.
+    min_particles: int = Field(500, ge=1)
+    max_particles: int = Field(5000, ge=1)
+    pf_err: float = Field(0.01, gt=0.0, lt=1.0)
+    pf_z: float = Field(0.99, gt=0.0, lt=1.0)
+    kld_bin_xy_m: float = Field(0.5, gt=0.0)
+    kld_bin_yaw_deg: float = Field(10.0, gt=0.0)
+    # Resample with low-variance sampling when Neff < resample_neff_ratio * N (1.0: every update).
+    resample_neff_ratio: float = Field(0.5, gt=0.0, le=1.0)
+    # Random-particle recovery (Nav2 recovery_alpha_slow/fast; 0 disables).
+    recovery_alpha_slow: float = Field(0.0, ge=0.0, le=1.0)
+    recovery_alpha_fast: float = Field(0.0, ge=0.0, le=1.0)
+    # Filter update thresholds (Nav2 update_min_d / update_min_a).
+    update_min_d: float = Field(0.1, ge=0.0)  # m
+    update_min_a: float = Field(0.1, ge=0.0)  # rad
+    # Initial pose spread for --init reference / X,Y,YAW (standard deviations).
+    init_sigma_xy_m: float = Field(0.2, gt=0.0)
+    init_sigma_yaw_deg: float = Field(5.0, gt=0.0)
+    # Global localization: particles for --init global, and convergence (weighted position std and yaw std).
+    global_particles: int = Field(20000, ge=1)
+    converged_xy_std_m: float = Field(0.3, gt=0.0)
+    converged_yaw_std_deg: float = Field(10.0, gt=0.0)
+    # RBPF (paper 000 Sec. IV): door angle random walk sigma_d per second, initial door angle std.
+    door_sigma_rad_per_s: float = Field(0.1, ge=0.0)
+    door_init_sigma_deg: float = Field(30.0, gt=0.0)
+    # Door observations: Douglas-Peucker tolerance, and the association gates of Fig. 3.
+    dp_epsilon_m: float = Field(0.05, gt=0.0)
+    door_hinge_gate_m: float = Field(0.2, gt=0.0)  # a segment end this close to the hinge
+    door_length_gate_ratio: float = Field(0.3, gt=0.0)  # |segment length - leaf| / leaf below this
+    door_flush_line_gate_m: float = Field(0.1, gt=0.0)  # longer segment passing this close to the hinge
+    door_angle_sigma_deg: float = Field(3.0, gt=0.0)  # measured leaf angle noise for the Kalman update
+    # Particles drawn into the annotated MCAP per update.
+    annotate_particles: int = Field(200, ge=0)
+    seed: int | None = None  # None: the top-level seed
+    backend: Literal["numpy", "torch"] = "numpy"
+
+
 class DoorbatchConfig(Section):
     """The whole configuration tree."""
 
@@ -248,6 +307,7 @@ class DoorbatchConfig(Section):
     mapping: MappingConfig = MappingConfig()
     grid: GridConfig = GridConfig()
     doors: DoorDetectionConfig = DoorDetectionConfig()
+    localize: LocalizeConfig = LocalizeConfig()
 
     def as_dict(self) -> dict[str, Any]:
         """The resolved tree as plain data (what goes into manifests)."""

@@ -13,6 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from doorbatch.geometry.rotations import wrap_angle
+
 UNKNOWN = -1
 FREE = 0
 OCCUPIED = 100
@@ -105,3 +107,23 @@ class OccupancyMap:
         cells = np.asarray(ij)
         i, j = cells[..., 0], cells[..., 1]
         return np.asarray((i >= 0) & (i < self.height) & (j >= 0) & (j < self.width), dtype=np.bool_)
+
+
+@dataclass(frozen=True)
+class DoorSet:
+    """Doors as arrays (doors.parquet's columns): hinge (D, 2), leaf length (m), closed_yaw (global direction
+    hinge → free end at angle 0), and the opening range [angle_min, angle_max] relative to it (CCW +)."""
+
+    hinge: FloatArray
+    length: FloatArray
+    closed_yaw: FloatArray
+    angle_min: FloatArray
+    angle_max: FloatArray
+
+    def __len__(self) -> int:
+        return int(self.hinge.shape[0])
+
+    @property
+    def range_global(self) -> tuple[FloatArray, FloatArray]:
+        """Leaf directions at the two ends of the opening range, in the map frame."""
+        return wrap_angle(self.closed_yaw + self.angle_min), wrap_angle(self.closed_yaw + self.angle_max)

@@ -16,9 +16,8 @@ import numpy as np
 
 from doorbatch.config import DoorbatchConfig
 from doorbatch.io.map_server import read_map
-from doorbatch.io.parquet import read_table
 from doorbatch.io.sim_truth import read_truth
-from doorbatch.pipeline.evaluate.door_map import DoorSet, score_doors, score_static_occupancy, truth_doors
+from doorbatch.pipeline.evaluate.door_map import score_doors, score_static_occupancy, truth_doors
 
 
 def score(map_dir: Path, truth_path: Path, min_opening_deg: float | None = None) -> dict[str, object]:
@@ -26,9 +25,7 @@ def score(map_dir: Path, truth_path: Path, min_opening_deg: float | None = None)
     truth = read_truth(truth_path)
     opening = min_opening_deg if min_opening_deg is not None else DoorbatchConfig().doors.min_opening_deg
     tset, moved = truth_doors(truth, math.radians(opening))
-    t = read_table("doors", map_dir / "doors.parquet").to_pydict()
-    det = DoorSet(np.array([t["hinge_x"], t["hinge_y"]], dtype=float).T.reshape(-1, 2), np.array(t["length"]),
-                  np.array(t["closed_yaw"]), np.array(t["angle_min"]), np.array(t["angle_max"]))
+    det = read_door_set(map_dir)
     s = score_doors(det, tset, moved)
     static = score_static_occupancy(read_map(map_dir / "map.yaml"),
                                     read_map(truth_path.parent / truth.files["map_static"]))

@@ -11,7 +11,7 @@ from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.io.map_server import write_map
 from doorbatch.io.parquet import read_table, write_table
 from doorbatch.io.preview import PreviewDoor, render_preview, write_preview
-from doorbatch.maps import OccupancyMap
+from doorbatch.maps import DoorSet, OccupancyMap
 
 
 def doors_columns(doors: Sequence[PreviewDoor], n_observations: Sequence[int], source: str,
@@ -42,11 +42,13 @@ def write_map_dir(out: Path, static_map: OccupancyMap, doors: Sequence[PreviewDo
     return [out / "map.yaml", out / "map.pgm", out / "doors.parquet", out / "preview.png"]
 
 
-def read_doors(map_dir: Path) -> list[PreviewDoor]:
-    """The doors of a map directory (grid or em source)."""
-    table = read_table("doors", map_dir / "doors.parquet").to_pydict()
-    return [
-        PreviewDoor(table["hinge_x"][i], table["hinge_y"][i], table["length"][i], table["closed_yaw"][i],
-                    table["angle_min"][i], table["angle_max"][i], table["moved"][i])
-        for i in range(len(table["door_id"]))
-    ]
+def read_door_set(map_dir: Path) -> DoorSet:
+    """doors.parquet of a map directory as arrays (any source: grid or em). A map without the file has
+    no doors (a plain map_server map from another SLAM tool)."""
+    path = map_dir / "doors.parquet"
+    if not path.exists():
+        return DoorSet(np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0))
+    t = read_table("doors", path).to_pydict()
+    return DoorSet(np.array([t["hinge_x"], t["hinge_y"]], dtype=np.float64).T.reshape(-1, 2),
+                   np.asarray(t["length"], dtype=np.float64), np.asarray(t["closed_yaw"], dtype=np.float64),
+                   np.asarray(t["angle_min"], dtype=np.float64), np.asarray(t["angle_max"], dtype=np.float64))

@@ -15,28 +15,9 @@ import numpy.typing as npt
 
 from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.io.sim_truth import SimTruth
-from doorbatch.maps import OccupancyMap
+from doorbatch.maps import DoorSet, OccupancyMap
 
 FloatArray = npt.NDArray[np.float64]
-
-
-@dataclass(frozen=True)
-class DoorSet:
-    """Doors as arrays: hinge (N, 2), leaf length, closed_yaw, and the opening range relative to it."""
-
-    hinge: FloatArray
-    length: FloatArray
-    closed_yaw: FloatArray
-    angle_min: FloatArray
-    angle_max: FloatArray
-
-    def __len__(self) -> int:
-        return int(self.hinge.shape[0])
-
-    @property
-    def range_global(self) -> tuple[FloatArray, FloatArray]:
-        """Leaf directions at the two ends of the opening range, in the map frame."""
-        return wrap_angle(self.closed_yaw + self.angle_min), wrap_angle(self.closed_yaw + self.angle_max)
 
 
 @dataclass(frozen=True)

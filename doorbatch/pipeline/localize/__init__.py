@@ -1,0 +1,1 @@
+"""Localization: MCL (Nav2 AMCL's model) and the RBPF with door states of paper 000, Sec. IV."""
