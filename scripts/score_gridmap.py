@@ -16,6 +16,7 @@ import numpy as np
 
 from doorbatch.config import DoorbatchConfig
 from doorbatch.io.map_server import read_map
+from doorbatch.io.mapdir import read_door_set
 from doorbatch.io.sim_truth import read_truth
 from doorbatch.pipeline.evaluate.door_map import score_doors, score_static_occupancy, truth_doors
 
