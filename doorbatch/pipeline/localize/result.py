@@ -1,0 +1,46 @@
+"""What a localization run produces, per filter update (U updates, D doors)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+FloatArray = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class LocalizationResult:
+    """The estimate after every filter update.
+
+    Attributes:
+        stamps_ns: (U,) scan stamps of the updates.
+        pose: (U, 3) weighted mean pose (map frame); cov: (U, 3, 3) weighted covariance (x, y, yaw).
+        odom: (U, 3) the odometry pose at each update (for the map→odom transform).
+        n_particles: (U,) particles after the update; neff: (U,) effective sample size before resampling.
+        door_mean, door_std: (U, D) per door the weighted angle (rad, relative to closed_yaw) and std;
+        door_observed: (U, D) whether the door was observed in that update's scan (any particle).
+        particles: (U, K, 3) a decimated draw of the particles per update (for the annotated MCAP).
+        converged_ns: first stamp at which the filter counted as converged (None: never; tracking runs
+            start converged); ambiguous: global localization ended with several distinct hypotheses.
+    """
+
+    log: str
+    method: str
+    stamps_ns: npt.NDArray[np.int64]
+    pose: FloatArray
+    cov: FloatArray
+    odom: FloatArray
+    n_particles: npt.NDArray[np.int32]
+    neff: FloatArray
+    door_mean: FloatArray
+    door_std: FloatArray
+    door_observed: npt.NDArray[np.bool_]
+    particles: FloatArray
+    converged_ns: int | None = None
+    ambiguous: bool = False
+    warnings: list[str] = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return int(self.stamps_ns.shape[0])
