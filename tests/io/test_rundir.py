@@ -40,6 +40,7 @@ def test_tables_follow_the_schema_and_hold_the_values(tmp_path: Path) -> None:
     np.testing.assert_allclose(np.reshape(states["angle"], (5, 2)), result.door_mean)
     stamps, x, _, yaw = read_tum(tmp_path / "trajectory.tum")
     np.testing.assert_array_equal(stamps, result.stamps_ns)
+    np.testing.assert_allclose(x, result.pose[:, 0])
     np.testing.assert_allclose(yaw, 3.1)
 
 
