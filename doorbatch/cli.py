@@ -183,6 +183,33 @@ def map_cmd(ctx: Context, logs: tuple[Path, ...], output: Path, pose_source: str
                 f"→ {summary.map_dir}", asdict(summary))
 
 
+@cli.command("localize")
+@click.argument("log_path", metavar="LOG", type=click.Path(path_type=Path))
+@click.option("--map", "map_path", type=click.Path(path_type=Path), required=True,
+              help="Map directory of doorbatch map, or any map_server YAML.")
+@click.option("-o", "--output", type=click.Path(path_type=Path, file_okay=False), required=True,
+              help="Run directory to write.")
+@click.option("--method", type=click.Choice(["rbpf", "mcl"]), default=None, help="Default: localize.method.")
+@click.option("--particles", type=int, default=None, help="Maximum (and global-init) particle count.")
+@click.option("--init", "init", default="reference", show_default=True, help="reference, global or X,Y,YAW.")
+@common_options
+def localize_cmd(ctx: Context, log_path: Path, map_path: Path, output: Path, method: str | None,
+                 particles: int | None, init: str) -> None:
+    """Localize LOG on a map with MCL or the RBPF that estimates every door's angle."""
+    from doorbatch.pipeline.localize.run import run_localize
+    from doorbatch.progress import progress_bar
+
+    lc = ctx.config.localize
+    if particles is not None:
+        lc = lc.model_copy(update={"max_particles": particles, "global_particles": particles,
+                                   "min_particles": min(lc.min_particles, particles)})
+    config = ctx.config.model_copy(update={"localize": lc})
+    with progress_bar(None, "localize", unit="scan") as bar:
+        _, summary = run_localize(log_path, map_path, output, config, method or lc.method, init, bar.update)
+    ctx.summary(f"{summary.method}: {summary.updates} updates, {summary.mean_particles:.0f} particles on average"
+                f"{', ambiguous' if summary.ambiguous else ''} → {summary.run_dir}", asdict(summary))
+
+
 @cli.command("config")
 @click.option("--dump", is_flag=True, help="Print the resolved configuration as YAML.")
 @common_options

@@ -258,11 +258,16 @@ class LocalizeConfig(Section):
     max_beams: int = Field(60, ge=2)
     laser_max_range: float = Field(-1.0)  # m; < 0: use the scan's range_max
     laser_min_range: float = Field(-1.0)  # m; < 0: use the scan's range_min
+    # How beam likelihoods combine into a particle weight: "product" (Π p, paper 000 eq. 5 and the
+    # textbook) or "amcl" (nav2_amcl's 1 + Σ p³). MCL and RBPF always use the same one.
+    beam_combination: Literal["product", "amcl"] = "product"
+    # End points in unknown cells: their real distance to the nearest obstacle (nav2_amcl), or the maximum.
+    unknown_as_max_dist: bool = False
     # Particles: KLD-sampling (Fox 2003) between min and max; bins 0.5 m x 0.5 m x 10 deg.
     min_particles: int = Field(500, ge=1)
     max_particles: int = Field(5000, ge=1)
     pf_err: float = Field(0.01, gt=0.0, lt=1.0)
-    pf_z: float = Field(0.99, gt=0.0, lt=1.0)
+    pf_z: float = Field(0.99, gt=0.0)  # used as the normal quantile itself, as nav2_amcl does (pop_z = pf_z)
     kld_bin_xy_m: float = Field(0.5, gt=0.0)
     kld_bin_yaw_deg: float = Field(10.0, gt=0.0)
     # Resample with low-variance sampling when Neff < resample_neff_ratio * N (1.0: every update).
@@ -280,11 +285,15 @@ class LocalizeConfig(Section):
     global_particles: int = Field(20000, ge=1)
     converged_xy_std_m: float = Field(0.3, gt=0.0)
     converged_yaw_std_deg: float = Field(10.0, gt=0.0)
-    # RBPF (paper 000 Sec. IV): door angle random walk sigma_d per second, initial door angle std.
-    door_sigma_rad_per_s: float = Field(0.1, ge=0.0)
+    # RBPF (paper 000 Sec. IV): door angles follow a random walk, var += sigma_d² · dt (so sigma_d is in
+    # rad/√s); the initial door angle std, which also caps the variance of a door left unobserved.
+    door_sigma_rad_per_sqrt_s: float = Field(0.1, ge=0.0)
     door_init_sigma_deg: float = Field(30.0, gt=0.0)
-    # Door observations: Douglas-Peucker tolerance, and the association gates of Fig. 3.
+    # Door observations: Douglas-Peucker tolerance, polyline break distance and minimal points per segment,
+    # and the association gates of Fig. 3 (orientation within the door's range ± the margin).
     dp_epsilon_m: float = Field(0.05, gt=0.0)
+    dp_max_gap_m: float = Field(0.3, gt=0.0)
+    door_angle_margin_deg: float = Field(10.0, ge=0.0)
     door_hinge_gate_m: float = Field(0.2, gt=0.0)  # a segment end this close to the hinge
     door_length_gate_ratio: float = Field(0.3, gt=0.0)  # |segment length - leaf| / leaf below this
     door_flush_line_gate_m: float = Field(0.1, gt=0.0)  # longer segment passing this close to the hinge

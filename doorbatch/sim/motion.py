@@ -30,6 +30,9 @@ from enum import IntEnum
 import numpy as np
 import numpy.typing as npt
 
+# The increment decomposition is shared with the localizers' motion model (re-exported for the simulator's callers).
+from doorbatch.geometry.odometry import Increments as Increments
+from doorbatch.geometry.odometry import odometry_increments as odometry_increments
 from doorbatch.geometry.rotations import wrap_angle
 
 FloatArray = npt.NDArray[np.float64]
@@ -107,15 +110,6 @@ class OdometryNoise:
     alpha4: float  # m²/rad²   : translation noise from rotation
     scale_error: float = 0.0  # fraction: reported distance = (1 + k)·true distance
     yaw_drift_rad_per_m: float = 0.0  # systematic heading error per metre driven
-
-
-@dataclass(frozen=True)
-class Increments:
-    """Odometry increments (δrot1, δtrans, δrot2) between consecutive poses, each (K−1,)."""
-
-    rot1: FloatArray
-    trans: FloatArray
-    rot2: FloatArray
 
 
 # --------------------------------------------------------------------------------------------- profiles
@@ -296,19 +290,6 @@ def sample_trajectory(traj: Trajectory, t_s: npt.ArrayLike) -> PoseSamples:
 
 
 # --------------------------------------------------------------------------------------------- odometry
-
-
-def odometry_increments(x: FloatArray, y: FloatArray, yaw: FloatArray, min_trans_m: float = 1e-9) -> Increments:
-    """Decompose consecutive poses into (δrot1, δtrans, δrot2) (Probabilistic Robotics, Table 5.6).
-
-    δtrans = |p' − p|, δrot1 = atan2(Δy, Δx) − θ, δrot2 = θ' − θ − δrot1. Below ``min_trans_m`` the motion
-    is a pure rotation: δrot1 = 0, δrot2 = θ' − θ.
-    """
-    dx, dy = np.diff(x), np.diff(y)
-    trans = np.hypot(dx, dy)
-    dyaw = wrap_angle(np.diff(yaw))
-    rot1 = np.where(trans > min_trans_m, wrap_angle(np.arctan2(dy, dx) - yaw[:-1]), 0.0)
-    return Increments(rot1, trans, wrap_angle(dyaw - rot1))
 
 
 def sample_odometry_increments(true: Increments, noise: OdometryNoise, rng: np.random.Generator) -> Increments:

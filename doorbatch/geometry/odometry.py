@@ -1,0 +1,44 @@
+"""Odometry increments (δrot1, δtrans, δrot2): the decomposition of Probabilistic Robotics, Table 5.6.
+
+Shared by the simulator (which corrupts true increments into wheel odometry) and the localizers' motion
+model (which samples particle motion around reported increments). An increment between two poses
+(x, y, θ) → (x', y', θ') of one frame (odom) is
+
+    δtrans = |p' − p|,    δrot1 = atan2(y' − y, x' − x) − θ,    δrot2 = θ' − θ − δrot1,
+
+every angle wrapped to (−π, π]. Below a minimal translation the bearing atan2 is meaningless and the motion
+is taken as a pure rotation: δrot1 = 0, δrot2 = θ' − θ (Nav2 AMCL uses 0.01 m).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from doorbatch.geometry.rotations import wrap_angle
+
+FloatArray = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Increments:
+    """Odometry increments (δrot1, δtrans, δrot2) between consecutive poses, each (K−1,)."""
+
+    rot1: FloatArray
+    trans: FloatArray
+    rot2: FloatArray
+
+
+def odometry_increments(x: FloatArray, y: FloatArray, yaw: FloatArray, min_trans_m: float = 1e-9) -> Increments:
+    """Decompose consecutive poses into (δrot1, δtrans, δrot2) (Probabilistic Robotics, Table 5.6).
+
+    δtrans = |p' − p|, δrot1 = atan2(Δy, Δx) − θ, δrot2 = θ' − θ − δrot1. Below ``min_trans_m`` the motion
+    is a pure rotation: δrot1 = 0, δrot2 = θ' − θ.
+    """
+    dx, dy = np.diff(x), np.diff(y)
+    trans = np.hypot(dx, dy)
+    dyaw = wrap_angle(np.diff(yaw))
+    rot1 = np.where(trans > min_trans_m, wrap_angle(np.arctan2(dy, dx) - yaw[:-1]), 0.0)
+    return Increments(rot1, trans, wrap_angle(dyaw - rot1))

@@ -1,0 +1,57 @@
+"""Calibrate the odometry motion model's α1–α4 from a log with a reference trajectory.
+
+Both trajectories are decomposed into increments (δrot1, δtrans, δrot2) between consecutive samples
+(Probabilistic Robotics Table 5.6). The model says the odometry's increment errors are zero-mean with
+variances σ²_rot = α1·δrot² + α2·δtrans² and σ²_trans = α3·δtrans² + α4·(δrot1² + δrot2²). With the squared
+errors as observations of those variances, the α are a non-negative least-squares fit. Systematic errors
+(a wheel-radius scale, a heading drift) count as noise here, which is what a particle filter needs: its
+spread must cover them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+from scipy.optimize import nnls
+
+from doorbatch.geometry.odometry import odometry_increments
+from doorbatch.geometry.rotations import wrap_angle
+
+
+@dataclass(frozen=True)
+class OdometryAlphas:
+    """Fitted α1..α4 (Nav2 AMCL alpha1..alpha4) and the number of increments used."""
+
+    alpha1: float
+    alpha2: float
+    alpha3: float
+    alpha4: float
+    increments: int
+
+
+def estimate_alphas(odometry: npt.ArrayLike, reference: npt.ArrayLike, min_motion_m: float = 0.02
+                    ) -> OdometryAlphas:
+    """α1..α4 from odometry and reference poses (N, 3) sampled at the same times.
+
+    Increments where the robot moved less than ``min_motion_m`` and turned less than 1° carry no information
+    and are skipped.
+    """
+    odo = np.asarray(odometry, dtype=np.float64).reshape(-1, 3)
+    ref = np.asarray(reference, dtype=np.float64).reshape(-1, 3)
+    io = odometry_increments(odo[:, 0], odo[:, 1], odo[:, 2])
+    ir = odometry_increments(ref[:, 0], ref[:, 1], ref[:, 2])
+    moving = (ir.trans > min_motion_m) | (np.abs(ir.rot1) + np.abs(ir.rot2) > np.radians(1.0))
+    r1, tr, r2 = ir.rot1[moving], ir.trans[moving], ir.rot2[moving]
+    e_r1 = wrap_angle(io.rot1[moving] - r1)
+    e_tr = io.trans[moving] - tr
+    e_r2 = wrap_angle(io.rot2[moving] - r2)
+    # rotation errors: [α1, α2] from both rotations; translation errors: [α3, α4]
+    a_rot = np.concatenate([np.stack([r1**2, tr**2], 1), np.stack([r2**2, tr**2], 1)])
+    b_rot = np.concatenate([e_r1**2, e_r2**2])
+    a_tr = np.stack([tr**2, r1**2 + r2**2], 1)
+    alpha12, _ = nnls(a_rot, b_rot) if b_rot.size else (np.zeros(2), 0.0)
+    alpha34, _ = nnls(a_tr, e_tr**2) if e_tr.size else (np.zeros(2), 0.0)
+    return OdometryAlphas(float(alpha12[0]), float(alpha12[1]), float(alpha34[0]), float(alpha34[1]),
+                          int(moving.sum()))

@@ -1,0 +1,315 @@
+"""The door-aware beam likelihood of the RBPF (paper 000, Sec. IV, eq. (6)).
+
+Each beam end point p (map frame, at the particle's pose) is explained either by the static map or by one
+door leaf. Both are endpoint models of the same quantity, a distance:
+
+* static: d₀ = the likelihood field's distance from p to the nearest occupied cell (capped at
+  ``laser_likelihood_max_dist``), variance σ₀² = σ_hit²;
+* door k: d_k = the distance from p to the leaf at the particle's door mean μ_k (:mod:`door_geometry`). The
+  door angle is uncertain, a_k ~ N(μ_k, P_k), so eq. (6) integrates the endpoint Gaussian over it. With the
+  first-order Taylor expansion d_k(a) ≈ d_k(μ_k) + J_k·(a − μ_k), J_k = ∂d_k/∂a, the integral is again a
+  Gaussian in d_k(μ_k) with the propagated variance σ_k² = σ_hit² + J_k²·P_k.
+
+The per-model density, scaled so that the static one is exactly Nav2's likelihood-field term, is
+
+    g_k = (σ_hit / σ_k) · exp(−d_k² / (2 σ_k²))          (g₀ = exp(−d₀² / (2 σ_hit²)))
+
+(the same constant factor √(2π)·σ_hit times the normalized Gaussian for every model, so comparisons
+between models are comparisons of densities). Maximum-likelihood association picks, per beam, the model
+with the largest g (the static map wins ties); the beam's likelihood is the same mixture as the static
+model, p = z_hit·g + z_rand / range_max, and a particle's log-likelihood is Σ_beams log p (eq. (5); the
+per-beam p are returned too, for Nav2's log(1 + Σ p³) combination). A door whose
+leaf is at least ``laser_likelihood_max_dist`` away from the end point (the static field's cap) is not a
+candidate for that beam.
+
+The hinge is counted once. Mapping keeps the hinge cells occupied in the static grid, and the hinge is
+also an end point of the leaf, so a beam ending at a hinge is close to both models. A product of both
+factors, or a sum over them, would use that beam twice (and reward particles near hinges twice);
+maximum-likelihood association picks exactly one of them per beam. Near the hinge J ≈ 0 (the hinge does not
+move with the angle), so σ_k ≈ σ_hit and the two models tie or nearly so; the choice is then immaterial to
+the weight, and the tie goes to the static map.
+
+Two implementations give the same result: a numba kernel fused over particles × beams × doors (no
+(N, B, D) array; per particle it keeps the doors in reach of its end points, and per (door, beam) it first
+applies a cheap exact bound, see :func:`_score_kernel`), and a NumPy reference in chunks of particles. The
+end points come either as (N, B, 2) map-frame points (:func:`door_log_likelihood`) or as poses and base_link
+points (:func:`door_log_likelihood_at_poses`, which moves them inside the kernel).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Literal, NamedTuple
+
+import numpy as np
+import numpy.typing as npt
+
+from doorbatch.config import LocalizeConfig
+from doorbatch.maps import DoorSet
+from doorbatch.pipeline.localize.door_geometry import (
+    CHUNK_ELEMENTS,
+    doors_in_reach,
+    jit_kernel,
+    point_to_leaf_distance,
+    subset_doors,
+)
+
+FloatArray = npt.NDArray[np.float64]
+Int16Array = npt.NDArray[np.int16]
+Backend = Literal["auto", "numba", "numpy"]
+
+STATIC = -1  # association code of a beam explained by the static map (or skipped)
+
+
+class DoorLikelihood(NamedTuple):
+    """Per-particle log-likelihood Σ_beams log pz (N,) float64, per-beam association (N, B) int16 (−1 static,
+    k ≥ 0 door k), and the per-beam likelihoods pz (N, B) float32 (NaN for skipped beams), for combining the
+    beams another way (e.g. Nav2's log(1 + Σ pz³) with ``likelihood_field.combine_beams``)."""
+
+    log_likelihood: FloatArray
+    association: Int16Array
+    beam_likelihood: npt.NDArray[np.float32]
+
+
+class _Model(NamedTuple):
+    z_hit: float
+    rand_term: float  # z_rand / range_max
+    sigma2: float  # σ_hit²
+    max_dist: float
+
+
+def _model(config: LocalizeConfig, range_max_m: float) -> _Model:
+    if not (math.isfinite(range_max_m) and range_max_m > 0.0):
+        raise ValueError(f"range_max_m must be positive and finite, got {range_max_m}")
+    return _Model(config.z_hit, config.z_rand / range_max_m, config.sigma_hit**2, config.laser_likelihood_max_dist)
+
+
+def door_log_likelihood(static_dist: npt.ArrayLike, points: npt.ArrayLike, doors: DoorSet,
+                        door_mean: npt.ArrayLike, door_var: npt.ArrayLike, config: LocalizeConfig,
+                        range_max_m: float, backend: Backend = "auto") -> DoorLikelihood:
+    """Eq. (6): per-particle log-likelihood of a scan with maximum-likelihood association to map or doors.
+
+    Args:
+        static_dist: (N, B) static likelihood-field distance of each beam end point (m, capped; float32
+            like ``likelihood_field.endpoint_distances``). A NaN here or a non-finite end point skips the beam
+            (no factor, association −1, pz NaN).
+        points: (N, B, 2) beam end points in the map frame at each particle's pose.
+        doors: D doors of the map.
+        door_mean: (N, D) door angle means per particle (rad, relative to closed_yaw, CCW positive).
+        door_var: (N, D) door angle variances (rad²).
+        config: ``z_hit``, ``z_rand``, ``sigma_hit``, ``laser_likelihood_max_dist``.
+        range_max_m: The laser's maximum range (z_rand's uniform density is 1 / range_max).
+        backend: ``numba`` (fused kernel), ``numpy`` (reference), ``auto`` (numba when installed).
+
+    Returns:
+        :class:`DoorLikelihood`: log-likelihood (N,) float64 (the product of the beams, eq. (5)),
+        association (N, B) int16 (−1 static, k door k of ``doors``), per-beam pz (N, B) float32.
+
+    Raises:
+        ValueError: Shapes disagree, more than 32767 doors, range_max_m not positive, or ``numba`` asked
+            for without numba.
+    """
+    dist = np.ascontiguousarray(static_dist, dtype=np.float32)
+    pts = np.ascontiguousarray(points, dtype=np.float64)
+    if pts.shape != (*dist.shape, 2) or dist.ndim != 2:
+        raise ValueError(f"points {pts.shape} must be static_dist's shape {dist.shape} plus (2,)")
+    return _door_log_likelihood(dist, pts, None, None, doors, door_mean, door_var, config, range_max_m, backend)
+
+
+def door_log_likelihood_at_poses(static_dist: npt.ArrayLike, pose: npt.ArrayLike, points_base: npt.ArrayLike,
+                                 doors: DoorSet, door_mean: npt.ArrayLike, door_var: npt.ArrayLike,
+                                 config: LocalizeConfig, range_max_m: float, backend: Backend = "auto"
+                                 ) -> DoorLikelihood:
+    """:func:`door_log_likelihood` with the end points given as poses (N, 3) and base_link points (B, 2).
+
+    The numba kernel moves the points itself, particle by particle, so no (N, B, 2) array is made (saves
+    ~20 MB and ~25 ms at 10,000 particles × 60 beams); the result equals :func:`door_log_likelihood` of
+    ``likelihood_field.endpoint_points(pose, points_base)``.
+
+    Raises:
+        ValueError: As :func:`door_log_likelihood`.
+    """
+    dist = np.ascontiguousarray(static_dist, dtype=np.float32)
+    poses = np.ascontiguousarray(pose, dtype=np.float64).reshape(-1, 3)
+    base = np.ascontiguousarray(points_base, dtype=np.float64).reshape(-1, 2)
+    if dist.shape != (poses.shape[0], base.shape[0]):
+        raise ValueError(f"static_dist {dist.shape} must be (N, B) = ({poses.shape[0]}, {base.shape[0]})")
+    return _door_log_likelihood(dist, None, poses, base, doors, door_mean, door_var, config, range_max_m, backend)
+
+
+def _door_log_likelihood(dist: npt.NDArray[np.float32], pts: FloatArray | None, poses: FloatArray | None,
+                         base: FloatArray | None, doors: DoorSet, door_mean: npt.ArrayLike, door_var: npt.ArrayLike,
+                         config: LocalizeConfig, range_max_m: float, backend: Backend) -> DoorLikelihood:
+    """Checks, then the kernel or the reference, then the beam likelihoods."""
+    model = _model(config, range_max_m)
+    mean = np.ascontiguousarray(door_mean, dtype=np.float64)
+    var = np.ascontiguousarray(door_var, dtype=np.float64)
+    n_doors = len(doors)
+    if n_doors > np.iinfo(np.int16).max:
+        raise ValueError(f"{n_doors} doors do not fit the int16 association")
+    if mean.shape != (dist.shape[0], n_doors) or var.shape != mean.shape:
+        raise ValueError(f"door_mean {mean.shape} and door_var {var.shape} must be (N, D) = "
+                         f"({dist.shape[0]}, {n_doors})")
+    kernel = jit_kernel(_score_kernel) if backend in ("auto", "numba") else None
+    if kernel is None and backend == "numba":
+        raise ValueError("backend 'numba' asked for but numba is not installed (pip install numba)")
+    if kernel is not None:
+        score = np.empty(dist.shape, dtype=np.float32)
+        assoc = np.empty(dist.shape, dtype=np.int16)
+        from_pose = pts is None
+        kernel(dist, np.zeros((0, 0, 2)) if pts is None else pts, np.zeros((0, 3)) if poses is None else poses,
+               np.zeros((0, 2)) if base is None else base, from_pose,
+               np.ascontiguousarray(doors.hinge, dtype=np.float64).reshape(-1, 2),
+               np.ascontiguousarray(doors.length, dtype=np.float64),
+               np.ascontiguousarray(doors.closed_yaw, dtype=np.float64), mean, var, model.sigma2, model.max_dist,
+               score, assoc)
+    else:
+        if pts is None:
+            assert poses is not None and base is not None
+            c, s = np.cos(poses[:, 2, None]), np.sin(poses[:, 2, None])
+            pts = np.stack([poses[:, 0, None] + c * base[:, 0] - s * base[:, 1],
+                            poses[:, 1, None] + s * base[:, 0] + c * base[:, 1]], axis=-1)
+        score, assoc = _numpy_scores(dist, pts, doors, mean, var, model)
+    loglik, pz = _likelihoods(score, model)
+    return DoorLikelihood(loglik, assoc, pz)
+
+
+def _likelihoods(score: npt.NDArray[np.float32], model: _Model) -> tuple[FloatArray, npt.NDArray[np.float32]]:
+    """pz = z_hit·exp(−score/2) + z_rand/range_max per beam, and Σ_beams log pz per particle (NaN: skipped).
+
+    float32 per beam (SIMD exp and log), float64 sums: the error is ~1e-7 relative per beam, far below what
+    the weights resolve.
+    """
+    pz = np.exp(np.float32(-0.5) * score)
+    pz *= np.float32(model.z_hit)
+    pz += np.float32(model.rand_term)
+    log_pz = np.log(pz)
+    log_pz[np.isnan(score)] = 0.0
+    return np.asarray(log_pz.sum(axis=1, dtype=np.float64), dtype=np.float64), pz
+
+
+def _numpy_scores(dist: npt.NDArray[np.float32], pts: FloatArray, doors: DoorSet, mean: FloatArray, var: FloatArray,
+                  model: _Model) -> tuple[npt.NDArray[np.float32], Int16Array]:
+    """NumPy reference: score −2·log(g/z_hit) of the chosen model and the association, per particle chunk."""
+    n, b = dist.shape
+    valid = np.isfinite(dist) & np.isfinite(pts).all(axis=2)
+    score = np.where(valid, dist.astype(np.float64) ** 2 / model.sigma2, np.nan)  # static model
+    assoc = np.full((n, b), STATIC, dtype=np.int16)
+    active = np.flatnonzero(doors_in_reach(doors, pts, model.max_dist)) if len(doors) else np.zeros(0, np.intp)
+    if active.size:
+        sub = subset_doors(doors, active)
+        step = max(1, CHUNK_ELEMENTS // (b * active.size))
+        for lo in range(0, n, step):  # chunks of particles (memory), not a per-particle loop
+            sl = slice(lo, min(n, lo + step))
+            d_k, j_k = point_to_leaf_distance(np.where(valid[sl, :, None], pts[sl], 0.0), sub,
+                                              mean[sl][:, active], dtype=np.float64)
+            sig2 = model.sigma2 + j_k**2 * var[sl][:, None, active]
+            s_k = d_k**2 / sig2 + np.log(sig2 / model.sigma2)
+            s_k = np.where((d_k < model.max_dist) & valid[sl, :, None], s_k, np.inf)
+            best = np.argmin(s_k, axis=2)
+            s_best = np.take_along_axis(s_k, best[:, :, None], axis=2)[:, :, 0]
+            wins = s_best < score[sl]
+            score[sl] = np.where(wins, s_best, score[sl])
+            assoc[sl] = np.where(wins, active[best], STATIC).astype(np.int16)
+    return score.astype(np.float32), assoc
+
+
+def _score_kernel(dist: npt.NDArray[np.float32], pts: FloatArray, poses: FloatArray, base: FloatArray,
+                  from_pose: bool, hinge: FloatArray, length: FloatArray, closed_yaw: FloatArray, mean: FloatArray,
+                  var: FloatArray, sigma2: float, max_dist: float, score: npt.NDArray[np.float32],
+                  assoc: Int16Array) -> None:  # pragma: no cover - compiled by numba
+    """Numba kernel: per particle, its end points (from ``pts``, or ``poses`` ⊕ ``base``), the doors in reach of
+    their bounding box, and per beam the model with the lowest score (static on ties; doors in index order).
+
+    A door cannot win a beam whose end point p has |p − h| ≥ L + d₀·√(1 + L²P/σ_hit²): |J| ≤ L gives
+    d_k ≥ |p − h| − L and σ_k² ≤ σ_hit² + L²P, so d_k²/σ_k² ≥ d₀²/σ_hit². That test runs door by door over all
+    beams in a branch-free loop (vectorizable); only the flagged pairs get the distance, and the logarithm
+    only if d_k²/σ_k² alone does not already lose.
+    """
+    n, b = dist.shape
+    n_doors = length.shape[0]
+    px = np.empty(b)
+    py = np.empty(b)
+    d0 = np.empty(b)
+    best = np.empty(b)
+    best_k = np.empty(b, dtype=np.int16)
+    near = np.empty(b, dtype=np.bool_)
+    max_d2 = max_dist * max_dist
+    for i in range(n):
+        if from_pose:
+            c = math.cos(poses[i, 2])
+            s = math.sin(poses[i, 2])
+            for m in range(b):
+                px[m] = poses[i, 0] + c * base[m, 0] - s * base[m, 1]
+                py[m] = poses[i, 1] + s * base[m, 0] + c * base[m, 1]
+        else:
+            for m in range(b):
+                px[m] = pts[i, m, 0]
+                py[m] = pts[i, m, 1]
+        lo_x = lo_y = math.inf
+        hi_x = hi_y = -math.inf
+        for m in range(b):
+            d0[m] = dist[i, m]
+            best_k[m] = -1
+            if math.isfinite(px[m]) and math.isfinite(py[m]) and math.isfinite(d0[m]):
+                best[m] = d0[m] * d0[m] / sigma2
+                lo_x = min(lo_x, px[m])
+                hi_x = max(hi_x, px[m])
+                lo_y = min(lo_y, py[m])
+                hi_y = max(hi_y, py[m])
+            else:
+                best[m] = math.nan
+                d0[m] = math.nan  # fails every reach test below
+        for k in range(n_doors):
+            hx = hinge[k, 0]
+            hy = hinge[k, 1]
+            ln = length[k]
+            gx = max(lo_x - hx, hx - hi_x, 0.0)
+            gy = max(lo_y - hy, hy - hi_y, 0.0)
+            if gx * gx + gy * gy > (ln + max_dist) ** 2:
+                continue
+            phi = closed_yaw[k] + mean[i, k]
+            ux = math.cos(phi)
+            uy = math.sin(phi)
+            pv = var[i, k]
+            gain = math.sqrt(1.0 + ln * ln * max(pv, 0.0) / sigma2)
+            any_near = False
+            for m in range(b):
+                vx = px[m] - hx
+                vy = py[m] - hy
+                reach = ln + min(d0[m] * gain, max_dist)
+                near[m] = vx * vx + vy * vy < reach * reach
+                any_near |= near[m]
+            if not any_near:
+                continue
+            for m in range(b):
+                if not near[m]:
+                    continue
+                vx = px[m] - hx
+                vy = py[m] - hy
+                t_c = min(max(vx * ux + vy * uy, 0.0), ln)
+                ex = vx - t_c * ux
+                ey = vy - t_c * uy
+                d2 = ex * ex + ey * ey
+                if d2 >= max_d2:
+                    continue
+                jac2 = t_c * t_c  # J² = t_c² s² / d², t_c² on the leaf (d = 0)
+                if d2 > 0.0:
+                    s_k = ux * vy - uy * vx
+                    jac2 = jac2 * s_k * s_k / d2
+                sig2 = sigma2 + jac2 * pv
+                ratio = d2 / sig2
+                if ratio >= best[m]:  # log(σ_k²/σ_hit²) ≥ 0 can only add to it
+                    continue
+                cand = ratio + math.log(sig2 / sigma2)
+                if cand < best[m]:
+                    best[m] = cand
+                    best_k[m] = k
+        for m in range(b):
+            score[i, m] = best[m]
+            assoc[i, m] = best_k[m]
+
+
+def numba_available() -> bool:
+    """Whether the fused numba kernels can be used."""
+    return jit_kernel(_score_kernel) is not None

@@ -1,0 +1,231 @@
+"""Monte Carlo localization with Nav2 AMCL's models and parameters (the baseline of issue #5).
+
+One filter update, as nav2_amcl ``AmclNode::laserReceived`` composes it:
+
+1. ``update_thresholds_met``: the odometry moved more than ``update_min_d`` along x or along y, or turned more
+   than ``update_min_a``, since the last update (AMCL tests |Δx|, |Δy| and |Δθ| separately, in the odom
+   frame). Otherwise nothing happens and the odometry pose of the last update is kept.
+2. ``predict``: the odometry motion model (:mod:`.motion_model`).
+3. ``weigh``: the likelihood-field endpoint model (:mod:`.likelihood_field`) over all particles × beams,
+   combined with the prior weights and normalized in log space; the mean weight feeds the recovery averages.
+4. ``resample_if_needed``: KLD-adaptive low-variance resampling with random-particle injection
+   (:mod:`.resampling`) when Neff < ``resample_neff_ratio``·N (AMCL resamples every ``resample_interval``
+   updates instead; ratio 1.0 resamples on every update), and whenever recovery asks for random particles
+   (else a kidnapped filter whose particles are all equally wrong would never inject any).
+
+The first update after initialization weighs and resamples without motion (AMCL's ``pf_init_``).
+
+Reuse by the RBPF: ``predict`` and ``resample_if_needed`` work on any :class:`ParticleSet` (door arrays are
+carried along: ``predict`` leaves them, resampling copies them with the particles; injected random particles
+copy the door state of the particle drawn in their place, see :class:`~.resampling.KldDraw`). The RBPF's
+importance weight replaces :func:`scan_log_likelihood`: it takes the same static-map distances
+(:func:`~.likelihood_field.endpoint_distances`), the distances to the door leaves, keeps the smaller per
+beam, and feeds them to :func:`~.likelihood_field.endpoint_log_likelihood`; then :func:`apply_log_likelihood`
+normalizes exactly as MCL does.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, replace
+from typing import NamedTuple
+
+import numpy as np
+import numpy.typing as npt
+
+from doorbatch.config import LocalizeConfig
+from doorbatch.geometry.rotations import wrap_angle
+from doorbatch.pipeline.localize.likelihood_field import (
+    CHUNK_PARTICLES,
+    BeamCombination,
+    BeamSet,
+    DistanceField,
+    FreeCells,
+    field_log_likelihood,
+    select_beams,
+)
+from doorbatch.pipeline.localize.motion_model import sample_motion_model_odometry
+from doorbatch.pipeline.localize.particles import ParticleSet
+from doorbatch.pipeline.localize.resampling import RecoveryState, kld_resample
+from doorbatch.records import Scan
+
+FloatArray = npt.NDArray[np.float64]
+
+
+class Weighting(NamedTuple):
+    """Normalized log-weights (N,) (their log-sum-exp is 0) and log w_avg = log Σᵢ wᵢ·pᵢ (recovery's average)."""
+
+    log_weight: FloatArray
+    log_avg_weight: float
+
+
+@dataclass(frozen=True)
+class MclState:
+    """Everything one update needs from the previous one.
+
+    Attributes:
+        particles: the particle set.
+        recovery: AMCL's w_slow / w_fast.
+        odom_at_update: odometry pose (3,) at the last filter update; None before the first.
+    """
+
+    particles: ParticleSet
+    recovery: RecoveryState = dataclasses.field(default_factory=RecoveryState)
+    odom_at_update: FloatArray | None = None
+
+
+@dataclass(frozen=True)
+class StepDiagnostics:
+    """What one :func:`mcl_step` did."""
+
+    updated: bool  # the update thresholds were met (or forced, or first update)
+    resampled: bool
+    neff: float  # effective sample size after weighting, before resampling
+    n_particles: int  # after the step
+    random_fraction: float  # recovery's injection probability at this step
+    n_random: int  # random particles injected
+    log_avg_weight: float  # log w_avg of the weighting (nan without update)
+
+
+def alphas(config: LocalizeConfig) -> tuple[float, float, float, float]:
+    """(alpha1, alpha2, alpha3, alpha4)."""
+    return config.alpha1, config.alpha2, config.alpha3, config.alpha4
+
+
+def update_thresholds_met(odom_prev: npt.ArrayLike, odom_now: npt.ArrayLike, config: LocalizeConfig) -> bool:
+    """AMCL's ``shouldUpdateFilter``: |Δx| > update_min_d or |Δy| > update_min_d or |Δθ| > update_min_a."""
+    a = np.asarray(odom_prev, dtype=np.float64)
+    b = np.asarray(odom_now, dtype=np.float64)
+    dyaw = float(wrap_angle(b[2] - a[2]))
+    return bool(abs(b[0] - a[0]) > config.update_min_d or abs(b[1] - a[1]) > config.update_min_d
+                or abs(dyaw) > config.update_min_a)
+
+
+def predict(particles: ParticleSet, odom_prev: npt.ArrayLike, odom_now: npt.ArrayLike, config: LocalizeConfig,
+            rng: np.random.Generator) -> ParticleSet:
+    """Particles moved by the odometry motion model (weights and door arrays unchanged)."""
+    pose = sample_motion_model_odometry(particles.pose, odom_prev, odom_now, alphas(config), rng)
+    return replace(particles, pose=pose)
+
+
+def beams_from_scan(scan: Scan, laser_to_base: npt.ArrayLike, config: LocalizeConfig) -> BeamSet:
+    """The beams of a scan the endpoint model uses (AMCL's rules: max_beams, laser_min/max_range)."""
+    return select_beams(scan.ranges, scan.angles, scan.range_min, scan.range_max, laser_to_base, config.max_beams,
+                        config.laser_min_range, config.laser_max_range)
+
+
+def scan_log_likelihood(pose: npt.ArrayLike, beams: BeamSet, field: DistanceField, config: LocalizeConfig,
+                        combination: BeamCombination = BeamCombination.AMCL, chunk: int = CHUNK_PARTICLES
+                        ) -> FloatArray:
+    """log p(z | x) (N,) of every particle pose under the likelihood-field endpoint model.
+
+    Every beam end point of every particle is moved at once ((chunk, B) float32 blocks), looked up in the
+    distance field, and combined as AMCL does (or as a product, see :class:`BeamCombination`).
+    """
+    return field_log_likelihood(field, pose, beams.points_base, config.z_hit, config.z_rand, config.sigma_hit,
+                                beams.range_max_m, combination, chunk)
+
+
+def apply_log_likelihood(particles: ParticleSet, log_likelihood: npt.ArrayLike) -> Weighting:
+    """Posterior log-weights log wᵢ + log pᵢ, normalized by log-sum-exp, and log w_avg (for recovery).
+
+    w_avg = Σᵢ wᵢ·pᵢ with the prior weights normalized: the mean likelihood of Probabilistic Robotics Table 8.3
+    ((1/M)·Σ pᵢ right after a resampling). AMCL's ``pf_update_sensor`` divides this once more by the particle
+    count; with KLD changing the count between updates that factor alone moves w_fast away from w_slow, so
+    it is left out (in a steady particle count the ratio w_fast / w_slow is the same).
+    """
+    ll = np.asarray(log_likelihood, dtype=np.float64)
+    with np.errstate(divide="ignore"):
+        log_w = np.log(particles.weight) + ll
+    top = float(np.max(log_w))
+    if not math.isfinite(top):  # every particle impossible: AMCL's "zero total" resets to uniform
+        n = len(particles)
+        return Weighting(np.full(n, -math.log(n)), -math.inf)
+    log_total = top + math.log(float(np.sum(np.exp(log_w - top))))
+    return Weighting(log_w - log_total, log_total)
+
+
+def weigh(particles: ParticleSet, beams: BeamSet, field: DistanceField, config: LocalizeConfig,
+          combination: BeamCombination = BeamCombination.AMCL) -> Weighting:
+    """Weigh the particles with a scan: normalized log-weights and the recovery's mean weight."""
+    return apply_log_likelihood(particles, scan_log_likelihood(particles.pose, beams, field, config, combination))
+
+
+def with_log_weights(particles: ParticleSet, log_weight: npt.ArrayLike) -> ParticleSet:
+    """The particles with weights exp(log_weight), renormalized against rounding."""
+    w = np.exp(np.asarray(log_weight, dtype=np.float64))
+    return replace(particles, weight=w / w.sum())
+
+
+def resample_if_needed(particles: ParticleSet, config: LocalizeConfig, rng: np.random.Generator,
+                       recovery: RecoveryState | None = None, free: FreeCells | None = None
+                       ) -> tuple[ParticleSet, RecoveryState, int]:
+    """KLD-adaptive low-variance resampling when Neff < resample_neff_ratio·N or recovery injects.
+
+    Returns:
+        The particles (the same object when not resampled), the recovery state (reset after an injection,
+        as AMCL), and the number of random particles injected (−1: not resampled).
+    """
+    n = len(particles)
+    recovery = recovery or RecoveryState()
+    fraction = recovery.random_fraction() if free is not None else 0.0
+    if not (config.resample_neff_ratio >= 1.0 or particles.neff() < config.resample_neff_ratio * n
+            or fraction > 0.0):
+        return particles, recovery, -1
+    draw = kld_resample(particles.pose, particles.weight, rng, min_particles=config.min_particles,
+                        max_particles=config.max_particles, pf_err=config.pf_err, pf_z=config.pf_z,
+                        bin_xy_m=config.kld_bin_xy_m, bin_yaw_rad=math.radians(config.kld_bin_yaw_deg),
+                        random_fraction=fraction, free=free)
+    out = particles.take(draw.index)
+    out.pose = draw.pose
+    if fraction > 0.0:
+        recovery = RecoveryState()
+    return out, recovery, int(draw.random.sum())
+
+
+def mcl_step(state: MclState, odom_now: npt.ArrayLike, beams: BeamSet, field: DistanceField,
+             config: LocalizeConfig, rng: np.random.Generator, free: FreeCells | None = None,
+             force: bool = False, combination: BeamCombination = BeamCombination.AMCL
+             ) -> tuple[MclState, StepDiagnostics]:
+    """One AMCL update: thresholds → motion → weight → recovery averages → resample.
+
+    Args:
+        state: the filter state after the previous step.
+        odom_now: (3,) odometry pose at the scan's time.
+        beams: the scan's beams (:func:`beams_from_scan`).
+        field: the map's distance field.
+        config: the ``localize`` section.
+        rng: random generator.
+        free: the map's free cells, for random-particle recovery (None: no injection).
+        force: update even if the thresholds are not met (AMCL's ``request_nomotion_update``).
+        combination: how beams combine (AMCL's 1 + Σ pz³ by default; see :class:`BeamCombination`).
+    """
+    odom = np.asarray(odom_now, dtype=np.float64).reshape(3)
+    particles = state.particles
+    if state.odom_at_update is not None:
+        if not (force or update_thresholds_met(state.odom_at_update, odom, config)):
+            return state, StepDiagnostics(False, False, particles.neff(), len(particles), 0.0, 0, math.nan)
+        particles = predict(particles, state.odom_at_update, odom, config, rng)
+    weighting = weigh(particles, beams, field, config, combination)
+    particles = with_log_weights(particles, weighting.log_weight)
+    recovery = state.recovery.update(weighting.log_avg_weight, config.recovery_alpha_slow,
+                                     config.recovery_alpha_fast)
+    fraction = recovery.random_fraction() if free is not None else 0.0
+    neff = particles.neff()
+    particles, recovery, n_random = resample_if_needed(particles, config, rng, recovery, free)
+    diag = StepDiagnostics(True, n_random >= 0, neff, len(particles), fraction, max(n_random, 0),
+                           weighting.log_avg_weight)
+    return MclState(particles, recovery, odom.copy()), diag
+
+
+def initial_particles(mean: npt.ArrayLike, config: LocalizeConfig, rng: np.random.Generator,
+                      n: int | None = None) -> ParticleSet:
+    """Particles around a known pose (``init_sigma_xy_m``, ``init_sigma_yaw_deg``); max_particles by default."""
+    sigma = (config.init_sigma_xy_m, config.init_sigma_xy_m, math.radians(config.init_sigma_yaw_deg))
+    return ParticleSet.gaussian(mean, sigma, n or config.max_particles, rng)
+
+
+def global_particles(free: FreeCells, n: int, rng: np.random.Generator) -> ParticleSet:
+    """n particles uniform over the map's free space (AMCL's global localization)."""
+    return ParticleSet(free.sample_poses(n, rng), np.full(n, 1.0 / n), np.zeros((n, 0)), np.zeros((n, 0)))

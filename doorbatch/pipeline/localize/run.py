@@ -1,0 +1,279 @@
+"""``doorbatch localize``: MCL or the RBPF over one log, on a map directory (or any map_server map).
+
+The stage in outline::
+
+    recording  = scans, odometry (and a reference) of the log
+    map        = static occupancy map → distance field; doors.parquet → doors (none for a plain map)
+    particles  = initial set: around the reference / a given pose, or uniform over free space (global)
+    for scan:    odometry at the scan → one filter update when the robot moved enough
+    result     = weighted mean and covariance, door angles, particles per update
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+
+from doorbatch.config import DoorbatchConfig, LocalizeConfig
+from doorbatch.errors import PipelineError, UsageError
+from doorbatch.geometry.se2 import interpolate_poses
+from doorbatch.io.map_server import read_map
+from doorbatch.io.mapdir import read_door_set
+from doorbatch.io.recording import Recording, load_recording
+from doorbatch.maps import DoorSet, OccupancyMap
+from doorbatch.pipeline.localize.likelihood_field import (
+    BeamCombination,
+    DistanceField,
+    FreeCells,
+    build_distance_field,
+    free_cells,
+    select_beams,
+)
+from doorbatch.pipeline.localize.mcl import MclState, global_particles, initial_particles, mcl_step
+from doorbatch.pipeline.localize.particles import ParticleSet
+from doorbatch.pipeline.localize.rbpf import rbpf_step
+from doorbatch.pipeline.localize.result import LocalizationResult
+
+log = logging.getLogger(__name__)
+FloatArray = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class LocalizationMap:
+    """What localization needs of a map: the static map, its distance field, free cells, doors."""
+
+    occupancy: OccupancyMap
+    field: DistanceField
+    free: FreeCells
+    doors: DoorSet
+
+
+def load_localization_map(map_path: Path, config: LocalizeConfig) -> LocalizationMap:
+    """A map directory (map.yaml + doors.parquet) or a map_server YAML file from any SLAM tool."""
+    yaml_path = map_path / "map.yaml" if map_path.is_dir() else map_path
+    occ = read_map(yaml_path)
+    doors = read_door_set(yaml_path.parent) if map_path.is_dir() else read_door_set(Path("/nonexistent"))
+    field = build_distance_field(occ, config.laser_likelihood_max_dist, config.unknown_as_max_dist)
+    return LocalizationMap(occ, field, free_cells(occ), doors)
+
+
+def parse_init(text: str) -> str | tuple[float, float, float]:
+    """``reference``, ``global`` or ``X,Y,YAW`` (yaw in radians).
+
+    Raises:
+        UsageError: anything else.
+    """
+    if text in ("reference", "global"):
+        return text
+    parts = text.split(",")
+    try:
+        if len(parts) == 3:
+            x, y, yaw = (float(p) for p in parts)
+            return (x, y, yaw)
+    except ValueError:
+        pass
+    raise UsageError(f"--init {text!r}: expected reference, global or X,Y,YAW")
+
+
+def _laser_to_base_4x4(affine: FloatArray) -> FloatArray:
+    mat = np.eye(4)
+    mat[:2, :2] = affine[:, :2]
+    mat[:2, 3] = affine[:, 2]
+    mat[2, 2] = float(np.sign(np.linalg.det(affine[:, :2]))) or 1.0
+    return mat
+
+
+def _initial_particles(rec: Recording, lmap: LocalizationMap, init: str | tuple[float, float, float],
+                       method: str, config: LocalizeConfig, rng: np.random.Generator) -> ParticleSet:
+    if init == "global":
+        particles = global_particles(lmap.free, config.global_particles, rng)
+    else:
+        if init == "reference":
+            if rec.reference is None:
+                raise PipelineError(f"{rec.path}: --init reference but the log has no reference pose topic")
+            pose, ok = interpolate_poses(rec.reference.stamps_ns, rec.reference.poses, rec.scans.stamps_ns[:1])
+            if not ok[0]:
+                pose = rec.reference.poses[:1]
+            mean = pose[0]
+        else:
+            mean = np.asarray(init, dtype=np.float64)
+        particles = initial_particles(mean, config, rng)
+    n = len(particles)
+    d = len(lmap.doors) if method == "rbpf" else 0
+    mid = (lmap.doors.angle_min + lmap.doors.angle_max) / 2 if d else np.zeros(0)
+    particles.door_mean = np.broadcast_to(mid, (n, d)).copy()
+    particles.door_var = np.full((n, d), math.radians(config.door_init_sigma_deg) ** 2)
+    return particles
+
+
+def _converged(particles: ParticleSet, config: LocalizeConfig) -> bool:
+    _, cov = particles.mean_and_covariance()
+    xy_std = math.sqrt(max(cov[0, 0], cov[1, 1]))
+    return xy_std <= config.converged_xy_std_m and math.sqrt(cov[2, 2]) <= math.radians(config.converged_yaw_std_deg)
+
+
+def ambiguous(particles: ParticleSet, radius_m: float = 1.0, yaw_rad: float = math.pi / 4,
+              min_weight: float = 0.1) -> bool:
+    """Whether at least ``min_weight`` of the weight lies away from the strongest hypothesis (outside
+    ``radius_m`` and ``yaw_rad`` of the heaviest particle's neighbourhood mean), e.g. a symmetric corridor's
+    pose turned by 180°."""
+    w, pose = particles.weight, particles.pose
+    best = pose[int(np.argmax(w))]
+    dyaw = np.abs(np.arctan2(np.sin(pose[:, 2] - best[2]), np.cos(pose[:, 2] - best[2])))
+    near = (np.hypot(pose[:, 0] - best[0], pose[:, 1] - best[1]) <= radius_m) & (dyaw <= yaw_rad)
+    return float(w[~near].sum()) >= min_weight
+
+
+@dataclass
+class _Track:
+    """Per-update estimates, appended during the run."""
+
+    stamps: list[int] = field(default_factory=list)
+    pose: list[FloatArray] = field(default_factory=list)
+    cov: list[FloatArray] = field(default_factory=list)
+    odom: list[FloatArray] = field(default_factory=list)
+    n: list[int] = field(default_factory=list)
+    neff: list[float] = field(default_factory=list)
+    dmean: list[FloatArray] = field(default_factory=list)
+    dstd: list[FloatArray] = field(default_factory=list)
+    observed: list[npt.NDArray[np.bool_]] = field(default_factory=list)
+    particles: list[FloatArray] = field(default_factory=list)
+
+    def add(self, stamp: int, pose: FloatArray, cov: FloatArray, odom: FloatArray, n: int, neff: float,
+            dmean: FloatArray, dstd: FloatArray, observed: npt.NDArray[np.bool_], particles: FloatArray) -> None:
+        self.stamps.append(stamp)
+        self.pose.append(pose)
+        self.cov.append(cov)
+        self.odom.append(odom)
+        self.n.append(n)
+        self.neff.append(neff)
+        self.dmean.append(dmean)
+        self.dstd.append(dstd)
+        self.observed.append(observed)
+        self.particles.append(particles)
+
+    def result(self, log_name: str, method: str, n_doors: int, converged_ns: int | None, is_ambiguous: bool,
+               warnings: list[str]) -> LocalizationResult:
+        u = len(self.stamps)
+        return LocalizationResult(
+            log=log_name, method=method, stamps_ns=np.asarray(self.stamps, dtype=np.int64),
+            pose=np.asarray(self.pose), cov=np.asarray(self.cov), odom=np.asarray(self.odom),
+            n_particles=np.asarray(self.n, dtype=np.int32), neff=np.asarray(self.neff, dtype=np.float64),
+            door_mean=np.asarray(self.dmean).reshape(u, n_doors), door_std=np.asarray(self.dstd).reshape(u, n_doors),
+            door_observed=np.asarray(self.observed, dtype=bool).reshape(u, n_doors),
+            particles=np.asarray(self.particles), converged_ns=converged_ns, ambiguous=is_ambiguous,
+            warnings=warnings)
+
+
+def localize(log_path: Path, lmap: LocalizationMap, config: DoorbatchConfig, method: str = "rbpf",
+             init: str | tuple[float, float, float] = "reference",
+             progress: Callable[[int], object] | None = None) -> LocalizationResult:
+    """Run MCL or the RBPF over a log.
+
+    Raises:
+        PipelineError: the log has no odometry, or --init reference without a reference.
+        UsageError: an unknown method.
+    """
+    if method not in ("mcl", "rbpf"):
+        raise UsageError(f"--method {method!r}: expected rbpf or mcl")
+    lc = config.localize
+    rng = np.random.default_rng(config.seed if lc.seed is None else lc.seed)
+    rec = load_recording(log_path, config)
+    if rec.odometry is None:
+        raise PipelineError(f"{log_path}: no odometry (nav_msgs/Odometry or TF odom→base_link): localization "
+                            "needs it as the motion input")
+    odom, odom_ok = interpolate_poses(rec.odometry.stamps_ns, rec.odometry.poses, rec.scans.stamps_ns,
+                                      int(config.mapping.max_pose_gap_s * 1e9))
+    state = MclState(_initial_particles(rec, lmap, init, method, lc, rng))
+    free = lmap.free if (lc.recovery_alpha_fast > 0.0 or init == "global") else None
+    combination = BeamCombination(lc.beam_combination)
+    track = _Track()
+    converged_ns = None if init == "global" else int(rec.scans.stamps_ns[0])
+    last_s: float | None = None
+    k_draw = max(1, lc.annotate_particles)
+    for i in range(len(rec.scans)):
+        if progress is not None:
+            progress(1)
+        if not odom_ok[i]:
+            continue
+        scan = rec.scans.scan(i)
+        beams = select_beams(scan.ranges, scan.angles, scan.range_min, scan.range_max,
+                             _laser_to_base_4x4(rec.scans.laser_to_base[i]), lc.max_beams, lc.laser_min_range,
+                             lc.laser_max_range)
+        stamp_s = scan.stamp_ns / 1e9
+        first = state.odom_at_update is None
+        if method == "rbpf":
+            pts, hit = rec.scans.endpoints_base(i)
+            state, diag, observed = rbpf_step(state, odom[i], stamp_s, last_s, beams, pts[hit], lmap.field,
+                                              lmap.doors, lc, rng, free, force=first)
+        else:
+            state, diag = mcl_step(state, odom[i], beams, lmap.field, lc, rng, free, force=first,
+                                   combination=combination)
+            observed = np.zeros(0, dtype=bool)
+        if not diag.updated:
+            continue
+        last_s = stamp_s
+        p = state.particles
+        mean, cov = p.mean_and_covariance()
+        dmean, dstd = p.door_estimate()
+        if converged_ns is None and _converged(p, lc):
+            converged_ns = int(scan.stamp_ns)
+        # a fixed-size draw of the (equally weighted after resampling) particles for the annotated MCAP
+        pick = np.linspace(0, len(p) - 1, k_draw).round().astype(np.intp)
+        track.add(scan.stamp_ns, mean, cov, odom[i], len(p), diag.neff, dmean, dstd, observed, p.pose[pick])
+    if not track.stamps:
+        raise PipelineError(f"{log_path}: no scan had an odometry pose; nothing was localized")
+    return track.result(Path(log_path).name, method, state.particles.n_doors, converged_ns,
+                        ambiguous(state.particles), list(rec.warnings))
+
+
+@dataclass(frozen=True)
+class LocalizeRunSummary:
+    """What ``doorbatch localize`` wrote."""
+
+    run_dir: str
+    method: str
+    updates: int
+    mean_particles: float
+    converged: bool
+    converged_after_s: float | None
+    ambiguous: bool
+    files: list[str]
+
+
+def run_localize(log_path: Path, map_path: Path, out: Path, config: DoorbatchConfig, method: str,
+                 init: str, progress: Callable[[int], object] | None = None
+                 ) -> tuple[LocalizationResult, LocalizeRunSummary]:
+    """Localize a log on a map and write the run directory: trajectory.parquet, door_states.parquet,
+    trajectory.tum, annotated.mcap, manifest.json."""
+    from doorbatch.io.annotated_mcap import write_annotated_mcap
+    from doorbatch.io.manifest import Manifest
+    from doorbatch.io.rundir import run_annotations, write_run_tables
+
+    inputs = [log_path, map_path / "map.yaml" if map_path.is_dir() else map_path]
+    if map_path.is_dir() and (map_path / "doors.parquet").exists():
+        inputs.append(map_path / "doors.parquet")
+    manifest = Manifest.start(config.as_dict(), inputs, command="localize", method=method, init=init)
+    lmap = load_localization_map(map_path, config.localize)
+    result = localize(log_path, lmap, config, method, parse_init(init), progress)
+    files = write_run_tables(out, result)
+    write_annotated_mcap(log_path, out / "annotated.mcap",
+                         run_annotations(result, lmap.occupancy, lmap.doors if method == "rbpf" else DoorSet(
+                             np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0)),
+                             config.frames.map, config.frames.odom), config)
+    for w in result.warnings:
+        manifest.warn(w)
+    converged_s = None if result.converged_ns is None else (result.converged_ns - int(result.stamps_ns[0])) / 1e9
+    manifest.extra.update({"converged_after_s": converged_s, "ambiguous": result.ambiguous})
+    manifest.finish()
+    manifest.write(out / "manifest.json")
+    summary = LocalizeRunSummary(str(out), method, len(result), float(result.n_particles.mean()),
+                                 result.converged_ns is not None, converged_s, result.ambiguous,
+                                 [str(f) for f in [*files, out / "annotated.mcap", out / "manifest.json"]])
+    return result, summary

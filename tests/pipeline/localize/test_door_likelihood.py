@@ -1,0 +1,196 @@
+"""Eq. (6) of paper 000: door-aware beam likelihood with maximum-likelihood association (static map or a door)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import numpy.typing as npt
+import pytest
+
+from doorbatch.config import LocalizeConfig
+from doorbatch.maps import DoorSet
+from doorbatch.pipeline.localize.door_likelihood import (
+    door_log_likelihood,
+    door_log_likelihood_at_poses,
+    numba_available,
+)
+
+FloatArray = npt.NDArray[np.float64]
+CONFIG = LocalizeConfig()
+RANGE_MAX = 10.0
+RAND = CONFIG.z_rand / RANGE_MAX
+SIGMA = CONFIG.sigma_hit
+BACKENDS = ["numpy", pytest.param("numba", marks=pytest.mark.skipif(not numba_available(), reason="no numba"))]
+
+# A wall along y = 0 with a doorway x ∈ [0, 0.9]; the door hinges at (0, 0), closed along +x, opens CCW.
+WALLS = np.array([[[-5.0, 0.0], [0.0, 0.0]], [[0.9, 0.0], [5.0, 0.0]]])
+DOOR = DoorSet(hinge=np.array([[0.0, 0.0]]), length=np.array([0.9]), closed_yaw=np.array([0.0]),
+               angle_min=np.array([0.0]), angle_max=np.array([math.pi / 2]))
+
+
+def wall_distance(points: FloatArray) -> FloatArray:
+    """What the static likelihood field holds: distance to the walls (hinge included), capped."""
+    p = points[..., None, :]
+    a, e = WALLS[:, 0], WALLS[:, 1] - WALLS[:, 0]
+    t = np.clip(np.sum((p - a) * e, axis=-1) / np.sum(e * e, axis=-1), 0.0, 1.0)
+    d = np.hypot(*np.moveaxis(p - a - t[..., None] * e, -1, 0)).min(axis=-1)
+    return np.asarray(np.minimum(d, CONFIG.laser_likelihood_max_dist), dtype=np.float64)
+
+
+def static_pz(d: npt.ArrayLike) -> FloatArray:
+    return np.asarray(CONFIG.z_hit * np.exp(-np.square(d) / (2 * SIGMA**2)) + RAND, dtype=np.float64)
+
+
+def door_pz(d: float, jac2: float, var: float) -> float:
+    sig2 = SIGMA**2 + jac2 * var
+    return CONFIG.z_hit * math.sqrt(SIGMA**2 / sig2) * math.exp(-d * d / (2 * sig2)) + RAND
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_leaf_beam_goes_to_the_door_and_prefers_the_right_angle_wall_beam_stays_static(backend: str) -> None:
+    a60 = math.radians(60.0)
+    leaf_hit = 0.5 * np.array([math.cos(a60), math.sin(a60)])
+    beams = np.array([leaf_hit, [-1.0, 0.01], [2.0, -0.02]])
+    pts = np.broadcast_to(beams, (3, 3, 2))
+    mean = np.radians([[60.0], [30.0], [0.0]])  # right angle, wrong angle, closed
+    var = np.full((3, 1), 1e-4)
+    res = door_log_likelihood(wall_distance(pts), pts, DOOR, mean, var, CONFIG, RANGE_MAX, backend=backend)
+    np.testing.assert_array_equal(res.association[:, 1:], -1)  # the wall beams are static for everyone
+    assert res.association[0, 0] == 0 and res.association[1, 0] == 0
+    assert res.log_likelihood[0] > res.log_likelihood[1] + 3.0 > res.log_likelihood[2] + 3.0
+    # The right angle explains the leaf beam perfectly (d = 0, J² = t² on the leaf).
+    assert res.beam_likelihood[0, 0] == pytest.approx(door_pz(0.0, 0.25, 1e-4), rel=1e-6)
+    total = math.log(door_pz(0.0, 0.25, 1e-4)) + np.sum(np.log(static_pz(wall_distance(beams[1:]))))
+    assert res.log_likelihood[0] == pytest.approx(total, rel=1e-6)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_hinge_beam_is_counted_once_by_the_likelier_model(backend: str) -> None:
+    # Exactly at the hinge: static d = 0 and door d = 0 with J = 0 tie; the static map takes it, once.
+    # Just off the hinge along the open leaf: the door is closer than the wall's end and wins, once.
+    near = np.array([0.05, 0.03])
+    pts = np.array([[[0.0, 0.0], near]])
+    mean, var = np.radians([[60.0]]), np.full((1, 1), 1e-4)
+    res = door_log_likelihood(wall_distance(pts), pts, DOOR, mean, var, CONFIG, RANGE_MAX, backend=backend)
+    np.testing.assert_array_equal(res.association, [[-1, 0]])
+    assert res.beam_likelihood[0, 0] == pytest.approx(CONFIG.z_hit + RAND, rel=1e-6)  # not squared, not doubled
+    u = np.array([math.cos(mean[0, 0]), math.sin(mean[0, 0])])
+    t, s = float(near @ u), float(u[0] * near[1] - u[1] * near[0])
+    expected = door_pz(abs(s), t * t, 1e-4)
+    assert expected > static_pz(np.hypot(*near))
+    assert res.beam_likelihood[0, 1] == pytest.approx(expected, rel=1e-6)
+    assert res.log_likelihood[0] == pytest.approx(math.log(CONFIG.z_hit + RAND) + math.log(expected), rel=1e-6)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_marginalized_likelihood_follows_the_propagated_variance(backend: str) -> None:
+    # Leaf at the mean angle 0 along +x; beams 0.5 m from the hinge, on the leaf and 0.3 m off it.
+    # σ² = σ_hit² + t²·var with t = 0.5: on the leaf the likelihood falls with var; 0.3 m off it rises until
+    # σ = 0.3 m (the door may well be where the beam says), then falls.
+    variances = np.linspace(0.0, 1.0, 201)
+    n = variances.size
+    for offset in (0.0, 0.3):
+        pts = np.broadcast_to(np.array([[0.5, offset]]), (n, 1, 2))
+        static = np.full((n, 1), CONFIG.laser_likelihood_max_dist)
+        res = door_log_likelihood(static, pts, DOOR, np.zeros((n, 1)), variances[:, None], CONFIG, RANGE_MAX,
+                                  backend=backend)
+        assert np.all(res.association == 0)
+        expected = np.array([door_pz(offset, 0.25, v) for v in variances])
+        np.testing.assert_allclose(res.beam_likelihood[:, 0], expected, rtol=1e-5)
+        steps = np.diff(res.log_likelihood)
+        if offset == 0.0:
+            assert np.all(steps < 0)
+        else:
+            peak = (offset**2 - SIGMA**2) / 0.25  # σ_hit² + t²·var = offset²
+            assert np.all(steps[variances[1:] < peak - 0.01] > 0)
+            assert np.all(steps[variances[:-1] > peak + 0.01] < 0)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_without_doors_it_is_the_static_endpoint_model(backend: str) -> None:
+    rng = np.random.default_rng(1)
+    dist = rng.uniform(0.0, 2.0, (50, 30)).astype(np.float32)
+    pts = rng.uniform(-3, 3, (50, 30, 2))
+    no_doors = DoorSet(np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0))
+    res = door_log_likelihood(dist, pts, no_doors, np.zeros((50, 0)), np.zeros((50, 0)), CONFIG, RANGE_MAX,
+                              backend=backend)
+    np.testing.assert_allclose(res.log_likelihood, np.log(static_pz(dist.astype(np.float64))).sum(axis=1),
+                               rtol=1e-5)
+    assert np.all(res.association == -1)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_non_finite_beams_are_skipped(backend: str) -> None:
+    rng = np.random.default_rng(2)
+    pts = rng.uniform(-1, 1, (4, 10, 2))
+    dist = wall_distance(pts)
+    mean, var = np.full((4, 1), 0.5), np.full((4, 1), 0.05)
+    full = door_log_likelihood(dist[:, :8], pts[:, :8], DOOR, mean, var, CONFIG, RANGE_MAX, backend=backend)
+    pts[:, 8] = np.nan
+    dist[:, 9] = np.nan
+    res = door_log_likelihood(dist, pts, DOOR, mean, var, CONFIG, RANGE_MAX, backend=backend)
+    np.testing.assert_allclose(res.log_likelihood, full.log_likelihood, rtol=1e-9)
+    assert np.all(res.association[:, 8:] == -1) and np.all(np.isnan(res.beam_likelihood[:, 8:]))
+
+
+def random_case(rng: np.random.Generator, n: int, b: int, d: int
+                ) -> tuple[FloatArray, FloatArray, DoorSet, FloatArray, FloatArray]:
+    """Doors and end points in a 6 m square: many beams near leaves, wide door variances."""
+    doors = DoorSet(hinge=rng.uniform(-3, 3, (d, 2)), length=rng.uniform(0.6, 1.1, d),
+                    closed_yaw=rng.uniform(-math.pi, math.pi, d), angle_min=np.zeros(d), angle_max=np.full(d, 1.6))
+    pts = rng.uniform(-3.5, 3.5, (n, b, 2))
+    static = rng.uniform(0.0, 2.0, (n, b))
+    mean = rng.uniform(-0.2, 1.8, (n, d))
+    var = rng.uniform(0.0, 0.5, (n, d)) ** 2
+    return static, pts, doors, mean, var
+
+
+@pytest.mark.skipif(not numba_available(), reason="no numba")
+def test_numba_kernel_agrees_with_the_numpy_reference() -> None:
+    static, pts, doors, mean, var = random_case(np.random.default_rng(4), 500, 60, 10)
+    pts[0, :5] = np.nan
+    ref = door_log_likelihood(static, pts, doors, mean, var, CONFIG, RANGE_MAX, backend="numpy")
+    fast = door_log_likelihood(static, pts, doors, mean, var, CONFIG, RANGE_MAX, backend="numba")
+    assert np.mean(ref.association >= 0) > 0.3  # the case exercises the doors
+    assert np.mean(fast.association == ref.association) > 0.9999
+    np.testing.assert_allclose(fast.log_likelihood, ref.log_likelihood, rtol=1e-5, atol=1e-4)
+
+
+def test_vectorized_over_particles_matches_a_per_particle_loop() -> None:
+    static, pts, doors, mean, var = random_case(np.random.default_rng(5), 1000, 60, 10)
+    res = door_log_likelihood(static, pts, doors, mean, var, CONFIG, RANGE_MAX)
+    for i in range(1000):
+        one = door_log_likelihood(static[i:i + 1], pts[i:i + 1], doors, mean[i:i + 1], var[i:i + 1], CONFIG,
+                                  RANGE_MAX)
+        np.testing.assert_array_equal(one.association[0], res.association[i])
+        assert one.log_likelihood[0] == res.log_likelihood[i]
+
+
+def test_bad_shapes_and_range_are_errors() -> None:
+    pts = np.zeros((2, 3, 2))
+    with pytest.raises(ValueError, match="points"):
+        door_log_likelihood(np.zeros((2, 4)), pts, DOOR, np.zeros((2, 1)), np.zeros((2, 1)), CONFIG, RANGE_MAX)
+    with pytest.raises(ValueError, match="door_mean"):
+        door_log_likelihood(np.zeros((2, 3)), pts, DOOR, np.zeros((2, 2)), np.zeros((2, 2)), CONFIG, RANGE_MAX)
+    with pytest.raises(ValueError, match="range_max"):
+        door_log_likelihood(np.zeros((2, 3)), pts, DOOR, np.zeros((2, 1)), np.zeros((2, 1)), CONFIG, 0.0)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_at_poses_equals_the_end_point_form(backend: str) -> None:
+    rng = np.random.default_rng(6)
+    static, _, doors, mean, var = random_case(rng, 300, 40, 8)
+    pose = np.column_stack([rng.uniform(-1, 1, (300, 2)), rng.uniform(-math.pi, math.pi, 300)])
+    base = rng.uniform(-3, 3, (40, 2))
+    base[3] = np.nan
+    c, s = np.cos(pose[:, 2, None]), np.sin(pose[:, 2, None])
+    pts = np.stack([pose[:, 0, None] + c * base[:, 0] - s * base[:, 1],
+                    pose[:, 1, None] + s * base[:, 0] + c * base[:, 1]], axis=-1)
+    ref = door_log_likelihood(static, pts, doors, mean, var, CONFIG, RANGE_MAX, backend=backend)
+    res = door_log_likelihood_at_poses(static, pose, base, doors, mean, var, CONFIG, RANGE_MAX, backend=backend)
+    assert np.mean(ref.association >= 0) > 0.2
+    np.testing.assert_array_equal(res.association, ref.association)
+    np.testing.assert_allclose(res.log_likelihood, ref.log_likelihood, rtol=1e-9)
+    with pytest.raises(ValueError, match="static_dist"):
+        door_log_likelihood_at_poses(static[:, :5], pose, base, doors, mean, var, CONFIG, RANGE_MAX)

@@ -1,0 +1,78 @@
+"""doorbatch localize end to end on the sample: outputs, tracking against truth, determinism, errors."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from doorbatch.cli import main
+from doorbatch.config import DoorbatchConfig
+from doorbatch.geometry.se2 import interpolate_poses
+from doorbatch.io.parquet import read_table
+from doorbatch.io.recording import load_recording
+from tests.conftest import REPO
+
+SAMPLE_LOGS = REPO / "datasets" / "sample" / "logs"
+
+
+@pytest.fixture(scope="module")
+def sample_map(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("map") / "map"
+    logs = [str(SAMPLE_LOGS / f"map_pass{k}.mcap") for k in (1, 2, 3)]
+    assert main(["map", *logs, "-o", str(out), "-q"]) == 0
+    return out
+
+
+def _errors(run: Path, log: Path) -> np.ndarray:
+    traj = read_table("trajectory", run / "trajectory.parquet").to_pydict()
+    rec = load_recording(log, DoorbatchConfig())
+    assert rec.reference is not None
+    ref, _ = interpolate_poses(rec.reference.stamps_ns, rec.reference.poses, np.asarray(traj["stamp_ns"]))
+    return np.asarray(np.hypot(np.asarray(traj["x"]) - ref[:, 0], np.asarray(traj["y"]) - ref[:, 1]))
+
+
+@pytest.mark.parametrize("method", ["rbpf", "mcl"])
+def test_localize_tracks_the_open_doors_log(sample_map: Path, tmp_path: Path, method: str,
+                                            capsys: pytest.CaptureFixture[str]) -> None:
+    log = SAMPLE_LOGS / "loc_open.mcap"
+    run = tmp_path / method
+    assert main(["localize", str(log), "--map", str(sample_map), "-o", str(run), "--method", method, "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["method"] == method and summary["updates"] > 100
+    for name in ("trajectory.parquet", "door_states.parquet", "trajectory.tum", "annotated.mcap", "manifest.json"):
+        assert (run / name).exists(), name
+    err = _errors(run, log)
+    assert err.mean() < 0.1, err.mean()
+    states = read_table("door_states", run / "door_states.parquet").to_pydict()
+    n_doors = len(read_table("doors", sample_map / "doors.parquet"))
+    assert len(states["door_id"]) == (summary["updates"] * n_doors if method == "rbpf" else 0)
+
+
+def test_same_seed_same_outputs(sample_map: Path, tmp_path: Path) -> None:
+    log = str(SAMPLE_LOGS / "loc_partial.mcap")
+    for name in ("a", "b"):
+        assert main(["localize", log, "--map", str(sample_map), "-o", str(tmp_path / name), "-q"]) == 0
+    for name in ("trajectory.parquet", "door_states.parquet", "trajectory.tum"):
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes(), name
+
+
+def test_runs_on_a_plain_map_server_map_without_doors(sample_map: Path, tmp_path: Path) -> None:
+    plain = tmp_path / "plain"
+    plain.mkdir()
+    shutil.copy(sample_map / "map.yaml", plain / "map.yaml")
+    shutil.copy(sample_map / "map.pgm", plain / "map.pgm")
+    run = tmp_path / "run"
+    code = main(["localize", str(SAMPLE_LOGS / "loc_closed.mcap"), "--map", str(plain / "map.yaml"), "-o", str(run),
+                 "--method", "mcl", "-q"])
+    assert code == 0
+    assert len(read_table("trajectory", run / "trajectory.parquet")) > 100
+
+
+def test_bad_init_is_a_usage_error(sample_map: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    code = main(["localize", str(SAMPLE_LOGS / "loc_open.mcap"), "--map", str(sample_map), "-o", str(tmp_path / "r"),
+                 "--init", "1,2"])
+    assert code == 2 and "--init" in capsys.readouterr().err

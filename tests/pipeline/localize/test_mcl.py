@@ -1,0 +1,195 @@
+"""MCL (Nav2 AMCL's filter): update thresholds, weighting, resampling decisions, tracking, global localization."""
+
+from __future__ import annotations
+
+import math
+from functools import cache
+
+import numpy as np
+import numpy.typing as npt
+import pytest
+from mcl_sim import LASER_TO_BASE, asymmetric_room, loop_trajectory, room_map, scan_beams, scan_ranges
+
+from doorbatch.config import LocalizeConfig
+from doorbatch.geometry.rotations import wrap_angle
+from doorbatch.pipeline.localize.likelihood_field import (
+    BeamCombination,
+    DistanceField,
+    FreeCells,
+    build_distance_field,
+    free_cells,
+)
+from doorbatch.pipeline.localize.mcl import (
+    MclState,
+    apply_log_likelihood,
+    beams_from_scan,
+    global_particles,
+    initial_particles,
+    mcl_step,
+    resample_if_needed,
+    scan_log_likelihood,
+    update_thresholds_met,
+    weigh,
+)
+from doorbatch.pipeline.localize.particles import ParticleSet
+from doorbatch.records import Scan
+from doorbatch.sim.motion import OdometryNoise, drift_poses
+
+FloatArray = npt.NDArray[np.float64]
+# Drifting wheel odometry: 2 % scale error, 0.6°/m yaw drift, white noise.
+DRIFT = OdometryNoise(0.01, 0.005, 0.01, 0.005, scale_error=0.02, yaw_drift_rad_per_m=0.01)
+
+
+@cache
+def room() -> tuple[DistanceField, FreeCells]:
+    grid = room_map()
+    return build_distance_field(grid, LocalizeConfig().laser_likelihood_max_dist), free_cells(grid)
+
+
+def run(state: MclState, truth: FloatArray, odom: FloatArray, config: LocalizeConfig, rng: np.random.Generator,
+        combination: BeamCombination = BeamCombination.AMCL, free: FreeCells | None = None
+        ) -> tuple[MclState, list[tuple[int, FloatArray, int, int]]]:
+    """Feed scans ray cast from ``truth`` and the ``odom`` poses; (index, mean, particles, injected) per update."""
+    field, _ = room()
+    segments = asymmetric_room()
+    out = []
+    for k in range(truth.shape[0]):
+        beams = scan_beams(segments, truth[k], noise_m=0.01, rng=rng)
+        state, diag = mcl_step(state, odom[k], beams, field, config, rng, free=free, combination=combination)
+        if diag.updated:
+            mean, _ = state.particles.mean_and_covariance()
+            out.append((k, mean, diag.n_particles, diag.n_random))
+    return state, out
+
+
+def test_update_thresholds_are_amcls_per_axis_test() -> None:
+    config = LocalizeConfig(update_min_d=0.1, update_min_a=0.1)
+    assert not update_thresholds_met((0, 0, 0), (0.09, -0.09, 0.09), config)
+    assert update_thresholds_met((0, 0, 0), (0.11, 0.0, 0.0), config)
+    assert update_thresholds_met((0, 0, 0), (0.0, -0.11, 0.0), config)
+    assert update_thresholds_met((0, 0, 0), (0.0, 0.0, -0.11), config)
+    assert not update_thresholds_met((0, 0, 0), (0.08, 0.08, 0.0), config)  # 0.113 m, but < 0.1 on each axis
+    assert not update_thresholds_met((0, 0, 3.1), (0, 0, -3.1), config)  # 0.083 rad across ±π
+
+
+def test_weighting_is_normalized_and_gives_the_mean_likelihood() -> None:
+    field, _ = room()
+    config = LocalizeConfig()
+    rng = np.random.default_rng(11)
+    particles = initial_particles([4.0, 2.0, 0.3], config, rng, n=500)
+    particles.weight = rng.random(500)
+    particles.weight /= particles.weight.sum()
+    beams = scan_beams(asymmetric_room(), np.array([4.0, 2.0, 0.3]))
+    w = weigh(particles, beams, field, config)
+    p = np.exp(scan_log_likelihood(particles.pose, beams, field, config))
+    assert np.all((p >= 1.0) & (p <= 1.0 + len(beams)))  # AMCL: 1 + Σ pz³ with pz ≤ 1
+    posterior = particles.weight * p
+    assert np.allclose(np.exp(w.log_weight), posterior / posterior.sum())
+    assert w.log_avg_weight == pytest.approx(math.log(posterior.sum()))
+    impossible = apply_log_likelihood(particles, np.full(500, -np.inf))  # AMCL's zero total → uniform
+    assert np.allclose(np.exp(impossible.log_weight), 1 / 500)
+
+
+def test_resampling_waits_for_a_low_effective_sample_size() -> None:
+    config = LocalizeConfig(min_particles=100, max_particles=100, resample_neff_ratio=0.5)
+    rng = np.random.default_rng(12)
+    particles = initial_particles([1.0, 1.0, 0.0], config, rng, n=100)
+    same, _, injected = resample_if_needed(particles, config, rng)
+    assert same is particles and injected == -1
+    particles.weight = np.r_[np.full(10, 0.091), np.full(90, 0.0001)]
+    particles.weight /= particles.weight.sum()
+    assert particles.neff() < 50
+    resampled, _, injected = resample_if_needed(particles, config, rng)
+    assert injected == 0 and len(resampled) == 100 and np.allclose(resampled.weight, 0.01)
+    every = LocalizeConfig(min_particles=100, max_particles=100, resample_neff_ratio=1.0)
+    assert resample_if_needed(initial_particles([1, 1, 0], every, rng, n=100), every, rng)[2] == 0
+
+
+def test_no_update_below_the_thresholds() -> None:
+    field, _ = room()
+    config = LocalizeConfig()
+    rng = np.random.default_rng(13)
+    beams = scan_beams(asymmetric_room(), np.array([4.0, 2.0, 0.0]))
+    state, first = mcl_step(MclState(initial_particles([4.0, 2.0, 0.0], config, rng)), (0, 0, 0), beams, field,
+                            config, rng)
+    assert first.updated and state.odom_at_update is not None
+    same, diag = mcl_step(state, (0.05, 0.05, 0.05), beams, field, config, rng)
+    assert not diag.updated and same is state
+    forced, diag = mcl_step(state, (0.05, 0.05, 0.05), beams, field, config, rng, force=True)
+    assert diag.updated and forced.odom_at_update is not None
+    assert np.allclose(forced.odom_at_update, (0.05, 0.05, 0.05))
+
+
+def test_beams_from_a_scan_record_use_the_config() -> None:
+    truth = np.array([4.0, 2.0, 0.0])
+    ranges, angles = scan_ranges(asymmetric_room(), truth)
+    scan = Scan(0, 0, "laser", float(angles[0]), float(angles[1] - angles[0]), 0.05, 12.0, ranges.astype(np.float32))
+    beams = beams_from_scan(scan, LASER_TO_BASE, LocalizeConfig(max_beams=30, laser_max_range=3.0))
+    assert beams.range_max_m == 3.0 and 0 < len(beams) <= 31
+    assert np.all(np.hypot(*(beams.points_base - LASER_TO_BASE[:2, 3]).T) < 3.0)
+
+
+@pytest.mark.parametrize("combination", list(BeamCombination))
+def test_tracking_with_drifting_odometry_stays_within_5_cm(combination: BeamCombination) -> None:
+    truth = loop_trajectory(240)  # 12 m loop, 5 cm per scan
+    rng = np.random.default_rng(14)
+    odom = drift_poses(truth, DRIFT, rng)
+    assert np.hypot(*(odom[-1, :2] - truth[-1, :2])) > 0.2  # the odometry alone drifts away
+    config = LocalizeConfig()
+    _, updates = run(MclState(initial_particles(truth[0], config, rng)), truth, odom, config, rng, combination)
+    assert len(updates) > 90
+    errors = np.array([np.hypot(*(mean[:2] - truth[k, :2])) for k, mean, _, _ in updates])
+    yaw_errors = np.array([abs(float(wrap_angle(mean[2] - truth[k, 2]))) for k, mean, _, _ in updates])
+    assert errors.mean() < 0.05
+    assert errors.max() < 0.15
+    assert yaw_errors.mean() < math.radians(2.0)
+    assert all(config.min_particles <= n <= config.max_particles for _, _, n, _ in updates[1:])
+
+
+def test_global_localization_converges_in_an_asymmetric_room() -> None:
+    _, free = room()
+    truth = loop_trajectory(240)[:120]
+    rng = np.random.default_rng(15)
+    odom = drift_poses(truth, DRIFT, rng)
+    config = LocalizeConfig()
+    state = MclState(global_particles(free, config.global_particles, rng))
+    first, _ = state.particles.mean_and_covariance()
+    assert np.hypot(*(first[:2] - truth[0, :2])) > 0.5  # starts anywhere
+    state, _ = run(state, truth, odom, config, rng)
+    mean, cov = state.particles.mean_and_covariance()
+    assert np.hypot(*(mean[:2] - truth[-1, :2])) < 0.1
+    assert abs(float(wrap_angle(mean[2] - truth[-1, 2]))) < math.radians(3.0)
+    assert math.sqrt(max(cov[0, 0], cov[1, 1])) < config.converged_xy_std_m
+    assert math.degrees(math.sqrt(cov[2, 2])) < config.converged_yaw_std_deg
+
+
+def test_kidnapped_robot_gets_random_particles() -> None:
+    _, free = room()
+    truth = loop_trajectory(240)
+    rng = np.random.default_rng(16)
+    odom = drift_poses(truth, DRIFT, rng)
+    config = LocalizeConfig(recovery_alpha_slow=0.001, recovery_alpha_fast=0.1)
+    state, updates = run(MclState(initial_particles(truth[0], config, rng)), truth[:60], odom[:60], config, rng,
+                         free=free)
+    assert sum(n for _, _, _, n in updates) == 0  # tracking well: w_fast ≈ w_slow, nothing injected
+    wrong = ParticleSet(state.particles.pose + np.array([2.0, 1.5, 1.0]), state.particles.weight,
+                        state.particles.door_mean, state.particles.door_var)
+    state, updates = run(MclState(wrong, state.recovery, state.odom_at_update), truth[60:120], odom[60:120], config,
+                         rng, free=free)
+    # w_fast falls below w_slow within a few updates: random particles come in, and AMCL then resets both
+    # averages (so one injection per drop, not a stream of them)
+    injected = [n for _, _, _, n in updates if n > 0]
+    assert len(injected) >= 1
+    assert state.recovery.random_fraction() < 0.01
+
+
+def test_same_seed_same_result() -> None:
+    truth = loop_trajectory(240)[:40]
+    odom = drift_poses(truth, DRIFT, np.random.default_rng(17))
+    config = LocalizeConfig()
+    results = []
+    for _ in range(2):
+        rng = np.random.default_rng(18)
+        state, _ = run(MclState(initial_particles(truth[0], config, rng)), truth, odom, config, rng)
+        results.append(state.particles.pose)
+    assert np.array_equal(results[0], results[1])
