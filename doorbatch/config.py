@@ -244,15 +244,19 @@ class LocalizeConfig(Section):
 
     method: Literal["rbpf", "mcl"] = "rbpf"
     # Odometry motion model (Probabilistic Robotics Table 5.6; Nav2 AMCL alpha1..alpha4). Nav2's default 0.2
-    # is far too pessimistic for ordinary wheel odometry (tracking fails on a 40 m corridor); these suit
-    # odometry drifting ~1-2 % (docs/localization.md says how to calibrate them from a log with a reference).
-    alpha1: float = Field(0.05, ge=0.0)  # rotation noise from rotation
-    alpha2: float = Field(0.05, ge=0.0)  # rotation noise from translation
-    alpha3: float = Field(0.05, ge=0.0)  # translation noise from translation
-    alpha4: float = Field(0.05, ge=0.0)  # translation noise from rotation
+    # is far too pessimistic for ordinary wheel odometry (tracking fails on a 40 m corridor). These are 2x the
+    # values scripts/calibrate_odometry.py fits on the sample's localization logs (odometry drifting ~1.5 %):
+    # larger ones let the cloud diffuse along a featureless corridor (doors closed) faster than the laser can
+    # hold it (0.05: 0.45-1.1 m mean error with doors closed; docs/results.md "Localization (issue #5)").
+    alpha1: float = Field(0.015, ge=0.0)  # rotation noise from rotation
+    alpha2: float = Field(0.0025, ge=0.0)  # rotation noise from translation
+    alpha3: float = Field(0.015, ge=0.0)  # translation noise from translation
+    alpha4: float = Field(0.0005, ge=0.0)  # translation noise from rotation
     # Likelihood-field endpoint model (Nav2: laser_model_type likelihood_field).
-    z_hit: float = Field(0.95, ge=0.0, le=1.0)
-    z_rand: float = Field(0.05, ge=0.0, le=1.0)
+    # z_rand 0.2 (Nav2 0.05... 0.5): people and doors the map lacks are common; a heavier floor keeps a few
+    # unexplained beams from dominating the product of the beams.
+    z_hit: float = Field(0.8, ge=0.0, le=1.0)
+    z_rand: float = Field(0.2, ge=0.0, le=1.0)
     sigma_hit: float = Field(0.1, gt=0.0)  # m
     laser_likelihood_max_dist: float = Field(2.0, gt=0.0)  # m, distance transform cap
     max_beams: int = Field(60, ge=2)
@@ -261,6 +265,15 @@ class LocalizeConfig(Section):
     # How beam likelihoods combine into a particle weight: "product" (Π p, paper 000 eq. 5 and the
     # textbook) or "amcl" (nav2_amcl's 1 + Σ p³). MCL and RBPF always use the same one.
     beam_combination: Literal["product", "amcl"] = "product"
+    # Beam skipping (Nav2 do_beamskip, beam_skip_distance/threshold/error_threshold): leave out the beams whose
+    # end point is farther than beam_skip_distance from the model (RBPF: static map or the associated door) at
+    # particles holding more than 1 - beam_skip_threshold of the weight, unless more than
+    # beam_skip_error_threshold of the beams would go. Unexplained obstacles (people, doors the map lacks)
+    # otherwise drag the filter along corridors (docs/localization.md).
+    do_beamskip: bool = True
+    beam_skip_distance: float = Field(0.15, gt=0.0)  # m (1.5 sigma_hit; nav2's 0.5 exceeds half a door gap)
+    beam_skip_threshold: float = Field(0.5, ge=0.0, le=1.0)
+    beam_skip_error_threshold: float = Field(0.9, ge=0.0, le=1.0)
     # End points in unknown cells: their real distance to the nearest obstacle (nav2_amcl), or the maximum.
     unknown_as_max_dist: bool = False
     # Particles: KLD-sampling (Fox 2003) between min and max; bins 0.5 m x 0.5 m x 10 deg.

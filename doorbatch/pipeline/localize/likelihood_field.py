@@ -48,6 +48,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy import ndimage
 
+from doorbatch.config import LocalizeConfig
 from doorbatch.maps import OccupancyMap
 
 FloatArray = npt.NDArray[np.float64]
@@ -425,3 +426,73 @@ def select_beams(ranges: npt.ArrayLike, angles: npt.ArrayLike, range_min: float,
     tf = np.asarray(laser_to_base, dtype=np.float64)
     pts = local @ tf[:3, :3].T + tf[:3, 3]
     return BeamSet(pts[:, :2].astype(np.float32), tf[:2, 3].copy(), float(rmax), idx.astype(np.int64))
+
+
+def beam_skip_mask(explained: npt.ArrayLike, weight: npt.ArrayLike, skip_threshold: float,
+                   error_threshold: float) -> npt.NDArray[np.bool_]:
+    """Nav2 AMCL's beam skipping (``do_beamskip``): the beams (B,) to leave out of every particle's weight.
+
+    A beam is skipped when the particles that explain it (``explained`` (N, B): its end point lies within
+    ``beam_skip_distance`` of the model, per particle) carry less than ``skip_threshold`` of the weight
+    (nav2_amcl counts particles; after resampling the two agree). Such a beam hit something the map does
+    not hold at most hypotheses (a person, a closed door whose leaf the static map lacks, a door mapping never
+    saw move): kept, it pulls every particle towards a pose where the end point happens to meet a wall, and
+    in a corridor, which constrains the position along its axis only weakly, a few such beams multiplied in
+    (``product``) outweigh all the others. When the filter disagrees with more than ``error_threshold`` of
+    the beams (it is lost, or the map is wrong everywhere), nothing is skipped, as in nav2_amcl.
+    """
+    ok = np.asarray(explained, dtype=bool)
+    w = np.asarray(weight, dtype=np.float64)
+    if ok.shape[1] == 0:
+        return np.zeros(0, dtype=bool)
+    support = w @ ok / max(float(w.sum()), 1e-300)
+    skip = support < skip_threshold
+    if skip.mean() > error_threshold:
+        return np.zeros_like(skip)
+    return np.asarray(skip, dtype=bool)
+
+
+def cloud_converged(weight: npt.ArrayLike, pose: npt.ArrayLike, config: LocalizeConfig) -> bool:
+    """Weighted position std ≤ ``converged_xy_std_m`` (both axes) and circular yaw std ≤ ``converged_yaw_std_deg``."""
+    w = np.asarray(weight, dtype=np.float64)
+    w = w / w.sum()
+    x = np.asarray(pose, dtype=np.float64).reshape(-1, 3)
+    mean_xy = w @ x[:, :2]
+    var_xy = w @ ((x[:, :2] - mean_xy) ** 2)
+    resultant = abs(complex(float(w @ np.cos(x[:, 2])), float(w @ np.sin(x[:, 2]))))
+    yaw_std = math.sqrt(max(-2.0 * math.log(max(resultant, 1e-300)), 0.0))  # circular std
+    return bool(math.sqrt(float(var_xy.max())) <= config.converged_xy_std_m
+                and yaw_std <= math.radians(config.converged_yaw_std_deg))
+
+
+def skip_unexplained(pz: npt.ArrayLike, weight: npt.ArrayLike, pose: npt.ArrayLike, config: LocalizeConfig,
+                     range_max_m: float, combination: BeamCombination) -> tuple[Float32Array, int]:
+    """Per-beam likelihoods (N, B) with :func:`beam_skip_mask` applied when ``do_beamskip`` is on, and the number
+    of beams skipped. A beam is explained at a particle when its pz is at least that of an end point
+    ``beam_skip_distance`` from the model (for the RBPF: from the model the beam was associated with).
+
+    Only a converged filter skips (weighted position std ≤ ``converged_xy_std_m``, yaw std ≤
+    ``converged_yaw_std_deg``, particles ``pose`` (N, 3)): "most hypotheses cannot explain this beam" means
+    "the map lacks this obstacle" only when the hypotheses are one; during global localization it would
+    leave out exactly the beams that tell the hypotheses apart.
+    """
+    p = np.asarray(pz, dtype=np.float32)
+    if not config.do_beamskip or p.ndim != 2 or p.shape[1] == 0:
+        return p, 0
+    if not cloud_converged(weight, pose, config):
+        return p, 0
+    sig = config.sigma_hit
+    floor = config.z_hit * math.exp(-0.5 * (config.beam_skip_distance / sig) ** 2) + config.z_rand / range_max_m
+    with np.errstate(invalid="ignore"):
+        explained = p >= np.float32(floor)
+    skip = beam_skip_mask(explained, weight, config.beam_skip_threshold, config.beam_skip_error_threshold)
+    return drop_beams(p, skip, combination), int(skip.sum())
+
+
+def drop_beams(pz: npt.ArrayLike, skip: npt.ArrayLike, combination: BeamCombination) -> Float32Array:
+    """``pz`` (N, B) with the skipped beams made neutral for ``combination`` (factor 1 / term 0); NaN too."""
+    p = np.array(pz, dtype=np.float32)
+    neutral = np.float32(1.0 if combination is BeamCombination.PRODUCT else 0.0)
+    p[:, np.asarray(skip, dtype=bool)] = neutral
+    p[np.isnan(p)] = neutral
+    return p

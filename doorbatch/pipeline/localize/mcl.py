@@ -42,8 +42,12 @@ from doorbatch.pipeline.localize.likelihood_field import (
     BeamSet,
     DistanceField,
     FreeCells,
+    beam_likelihood,
+    combine_beams,
+    endpoint_distances,
     field_log_likelihood,
     select_beams,
+    skip_unexplained,
 )
 from doorbatch.pipeline.localize.motion_model import sample_motion_model_odometry
 from doorbatch.pipeline.localize.particles import ParticleSet
@@ -148,8 +152,19 @@ def apply_log_likelihood(particles: ParticleSet, log_likelihood: npt.ArrayLike) 
 
 def weigh(particles: ParticleSet, beams: BeamSet, field: DistanceField, config: LocalizeConfig,
           combination: BeamCombination = BeamCombination.AMCL) -> Weighting:
-    """Weigh the particles with a scan: normalized log-weights and the recovery's mean weight."""
-    return apply_log_likelihood(particles, scan_log_likelihood(particles.pose, beams, field, config, combination))
+    """Weigh the particles with a scan: normalized log-weights and the recovery's mean weight.
+
+    With ``do_beamskip`` the per-beam likelihoods are formed first and the beams most particles cannot explain
+    are left out (:func:`~.likelihood_field.beam_skip_mask`); otherwise the fused chunked path runs.
+    """
+    if config.do_beamskip and len(beams.points_base):
+        dist = endpoint_distances(field, particles.pose, beams.points_base)
+        pz = beam_likelihood(dist, config.z_hit, config.z_rand, config.sigma_hit, beams.range_max_m, out=dist)
+        pz, _ = skip_unexplained(pz, particles.weight, particles.pose, config, beams.range_max_m, combination)
+        ll = combine_beams(pz, combination)
+    else:
+        ll = scan_log_likelihood(particles.pose, beams, field, config, combination)
+    return apply_log_likelihood(particles, ll)
 
 
 def with_log_weights(particles: ParticleSet, log_weight: npt.ArrayLike) -> ParticleSet:

@@ -6,7 +6,9 @@ methods differ only in the map model)::
 
     1. sampling     poses by the odometry motion model; door angles d_k,t = d_k,t−1 + ε, ε ~ N(0, σ_d²·Δt)
     2. importance   per beam, ML association between the static likelihood field and each door leaf at the
-                    particle's door estimate, the door term marginalized to first order (eq. 6)
+                    particle's door estimate, the door term marginalized to first order (eq. 6); once
+                    converged, beams that most of the weight explains by neither are skipped (Nav2's
+                    do_beamskip, likelihood_field.skip_unexplained), as MCL does
     3. door update  one Douglas–Peucker polygon per scan, moved to every particle, associated to doors,
                     Kalman update of the associated doors' angles
     4. resampling   low-variance (KLD-adaptive) when Neff is low
@@ -29,9 +31,10 @@ from doorbatch.pipeline.localize.likelihood_field import (
     BeamSet,
     DistanceField,
     FreeCells,
+    beam_likelihood,
     combine_beams,
     endpoint_distances,
-    endpoint_log_likelihood,
+    skip_unexplained,
 )
 from doorbatch.pipeline.localize.mcl import (
     MclState,
@@ -81,10 +84,12 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
     if n_doors:
         dl = door_log_likelihood_at_poses(static, particles.pose, beams.points_base, doors, particles.door_mean,
                                           particles.door_var, config, beams.range_max_m)
-        loglik = combine_beams(dl.beam_likelihood, BeamCombination(config.beam_combination))
+        pz = dl.beam_likelihood
     else:
-        loglik = endpoint_log_likelihood(static, config.z_hit, config.z_rand, config.sigma_hit, beams.range_max_m,
-                                         BeamCombination(config.beam_combination))
+        pz = beam_likelihood(static, config.z_hit, config.z_rand, config.sigma_hit, beams.range_max_m)
+    combination = BeamCombination(config.beam_combination)
+    pz, _ = skip_unexplained(pz, particles.weight, particles.pose, config, beams.range_max_m, combination)
+    loglik = combine_beams(pz, combination)
     weighting = apply_log_likelihood(particles, loglik)
     particles = with_log_weights(particles, weighting.log_weight)
 
