@@ -134,6 +134,10 @@ class GridConfig(Section):
     # 2 → 5×5, so registration errors up to about two cells (0.1 m) at wall borders never mark wall points
     # dynamic (with 1, pose noise of 2 cm / 0.5° already put false "leaves" along walls in simulation).
     transient_neighborhood_cells: int = Field(2, ge=0, le=5)
+    # A hit beam clears no cell within this distance of the surface it hit (it stops clearing
+    # band / sin(incidence) before its end point): one cell, so that grazing beams do not clear the two
+    # rows of cells a wall on a cell border puts its hits in. 0: clear up to the end point's cell.
+    surface_band_m: float = Field(0.05, ge=0.0)
     # A no-return beam (+inf or ≥ range_max) clears free space up to this distance; 0 disables clearing.
     no_return_clear_m: float = Field(5.0, ge=0.0)
     # Hits farther than this are cut here and only clear free space (no occupied end cell).
@@ -170,9 +174,14 @@ class DoorDetectionConfig(Section):
     min_line_length_m: float = Field(0.4, gt=0.0)
     # A cluster whose eq. (2) lines differ in angle by more than this is a non-line object.
     max_line_angle_deg: float = Field(20.0, gt=0.0, le=90.0)
-    # [λmin, λmax]: line objects of this length are potential door leaves.
+    # [λmin, λmax]: line objects of this length are potential door leaves (set-1 lines, completed along
+    # their line); a set-2 line only needs δ (its cells next to the hinge are still hit by the leaf's state
+    # in the pass it falls), and every door's length, hinge → free end, must lie in [λmin, λmax].
     door_length_min_m: float = Field(0.6, gt=0.0)
     door_length_max_m: float = Field(1.2, gt=0.0)
+    # A cluster of dynamic points is completed along its line by the scan's points in seen-free cells
+    # within this distance of the line (one cell: range noise is ~1 cm, the points are continuous).
+    line_tolerance_m: float = Field(0.05, gt=0.0)
     # Leaf end points closer than this share a hinge.
     hinge_distance_m: float = Field(0.25, gt=0.0)
     # Two leaf angles are distinguishable when they differ by at least this.
@@ -183,18 +192,24 @@ class DoorDetectionConfig(Section):
     # straight line, e.g. two wall pieces end to end); allow_swinging lifts the limit for swinging doors.
     max_rotation_deg: float = Field(180.0, gt=0.0, le=360.0)
     allow_swinging: bool = False
-    # A rigid leaf: the longest observation at each angle is at least this fraction of the longest overall.
+    # A rigid leaf: the median length at each angle (hinge → free end) is at least this fraction of the
+    # longest; the closed angle is left out when two others remain (its free end runs on into the wall).
     min_length_ratio: float = Field(0.7, ge=0.0, le=1.0)
     # Two of the distinguishable angles must come from different passes (doors are stationary within a
-    # pass; set-2 leaves stood there before their pass). Off: the paper's rule alone.
+    # pass; a set-2 leaf stood there in the pass that last hit its cells). Off: the paper's rule alone.
     require_distinct_passes: bool = True
-    # Leaf length: this quantile of the hinge → free end distances (robust to partly occluded views).
+    # Leaf length: this quantile of the hinge → free end distances (robust to partly occluded views), over
+    # the observations away from the closed angle when there are any.
     length_quantile: float = Field(0.9, gt=0.0, le=1.0)
-    # Cap on the points of one cluster (evenly subsampled) so eq. (2)'s all-pairs stays cheap.
-    max_cluster_points: int = Field(200, ge=2)
-    # Extension (the paper's flags cannot see it): a leaf seen at one angle only may have its other
-    # state in cells that were never seen free (a door opened into an unexplored room); search the static
-    # grid for an occupied segment of the same length hinged at the same end point, which must end there.
+    # Cap on the points of one cluster (evenly subsampled, ends kept) so eq. (2)'s all-pairs stays cheap:
+    # 64 points are 2,016 pairs (200 were 19,900, most of a scan's door detection time); a 0.9 m leaf keeps a
+    # point every 1.5 cm, and its straightness test uses pairs longer than δ, which subsampling does not bend.
+    max_cluster_points: int = Field(64, ge=2)
+    # Extension (the paper's flags cannot see it): a leaf state in cells never seen free before or after
+    # (a door opened into an unexplored room, or hidden by the leaf's later state) is static. Search the
+    # static grid at every door's hinge for occupied segments of the leaf's length that end there (further
+    # observed angles; the other state of a leaf seen at one angle only), and for the closed leaf in the
+    # doorway (hit before, not while the leaf stood open). Not hit in a pass where the leaf stood elsewhere.
     static_partner_search: bool = True
     partner_min_fraction: float = Field(0.85, gt=0.0, le=1.0)
     partner_end_clear_m: float = Field(0.2, ge=0.0)

@@ -1,9 +1,12 @@
 """The grid stage over passes: occupancy grid mapping with door detection (paper 000, Sec. III).
 
-Per scan: classify end points against the transient flags (set 1 = dynamic measurements), integrate the
-rest, extract potential door leaves from the scan's dynamic points. Per pass: the seen-occupied cells that
-fell low give set 2, and their leaves. At the end: doors from the persistent leaf set, leaves removed from
-the static grid. Inputs are scans already in the map frame; reading logs is the caller's business.
+Per pass: record what was known before it (:func:`~doorbatch.pipeline.gridmap.dynamic.begin_pass`). Per
+scan: classify end points against the transient flags (set 1 = dynamic measurements), integrate the rest,
+extract potential door leaves from the scan's dynamic points (completed along their lines by the scan's
+points in seen-free cells). At the end of a pass: the seen-occupied cells that fell low give set 2, split
+by the pass that last hit them (when the leaf stood there), and their leaves. At the end: doors from the
+persistent leaf set and the static grid, leaves removed from the static grid. Inputs are scans already in
+the map frame, hit points in beam order; reading logs is the caller's business.
 """
 
 from __future__ import annotations
@@ -19,15 +22,19 @@ from doorbatch.config import DoorDetectionConfig, GridConfig
 from doorbatch.maps import OccupancyMap
 from doorbatch.pipeline.gridmap.doors import (
     SOURCE_FALLEN,
-    SOURCE_TRANSIENT,
     DetectedDoor,
     Leaves,
     extract_leaves,
     group_doors,
     remove_leaves,
+    scan_leaves,
 )
-from doorbatch.pipeline.gridmap.dynamic import classify_endpoints, take_fallen_points, update_transient
-from doorbatch.pipeline.gridmap.occupancy import LogOddsGrid, integrate_scan, new_grid, to_occupancy_map
+from doorbatch.pipeline.gridmap.dynamic import (
+    begin_pass,
+    classify_and_integrate,
+    take_fallen_cells,
+)
+from doorbatch.pipeline.gridmap.occupancy import LogOddsGrid, new_grid, to_occupancy_map
 
 
 class MapScan(NamedTuple):
@@ -45,7 +52,8 @@ class GridMapResult:
     Attributes:
         static_map: The static occupancy map (door leaves removed, hinge cells occupied).
         doors: Detected doors.
-        grid: The final mapping state (log-odds and flags), for inspection.
+        grid: The final mapping state (log-odds and flags), for inspection. The transient flags are those
+            the end points asked for (lazy); ``dynamic.update_transient`` evaluates them everywhere.
         leaves: The persistent set of potential door leaves the doors were extracted from.
         n_dynamic_points: Scan end points classified as dynamic (set 1) and not integrated.
     """
@@ -69,30 +77,45 @@ class GridMapper:
     n_scans: int = 0
     n_dynamic_points: int = 0
     _leaves: list[Leaves] = field(default_factory=list)
+    _pass_begun: bool = False
 
     def add_scan(self, origin: npt.ArrayLike, points: npt.ArrayLike, no_return_dirs: npt.ArrayLike) -> None:
-        """Classify, integrate and mine one scan (map frame) for leaves."""
-        pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        """Classify, integrate and mine one scan (map frame; hit points in beam order) for leaves."""
+        pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
         if self.grid is None:
             self.grid = new_grid(self.grid_config, origin)
-        dynamic = classify_endpoints(self.grid, pts, self.grid_config)
-        self.grid = integrate_scan(self.grid, origin, pts, no_return_dirs, self.grid_config, dynamic)
-        if dynamic.any():
-            self.n_dynamic_points += int(dynamic.sum())
-            leaves = extract_leaves(pts[dynamic], self.door_config, self.n_scans, self.pass_index, SOURCE_TRANSIENT)
-            if len(leaves):
-                self._leaves.append(leaves)
+        if not self._pass_begun:
+            begin_pass(self.grid, self.grid_config)
+            self._pass_begun = True
+        self.grid, cls = classify_and_integrate(self.grid, origin, pts, no_return_dirs, self.grid_config,
+                                                self.door_config.door_length_max_m)
+        if cls.n_dynamic:
+            self.n_dynamic_points += cls.n_dynamic
+            # A leaf needs two points a leaf's length apart, or points that may complete a line.
+            if cls.n_dynamic >= 2 and (cls.n_support or cls.dynamic_span_m >= self.door_config.door_length_min_m):
+                support = pts[cls.support & ~cls.dynamic] if cls.n_support else None
+                leaves = scan_leaves(pts[cls.dynamic], support, self.door_config, self.n_scans,
+                                     len(self.grid.pass_starts) - 1)
+                if len(leaves):
+                    self._leaves.append(leaves)
         self.n_scans += 1
 
     def end_pass(self) -> None:
         """Set 2 of the pass (seen-occupied cells that fell low) and its leaves; starts the next pass."""
-        if self.grid is not None:
-            fallen = take_fallen_points(self.grid, self.grid_config, self.pass_start_scan)
-            leaves = extract_leaves(fallen, self.door_config, self.pass_index, self.pass_index, SOURCE_FALLEN)
-            if len(leaves):
-                self._leaves.append(leaves)
+        if self.grid is not None and self._pass_begun:
+            cells = take_fallen_cells(self.grid, self.grid_config, self.pass_start_scan)
+            means = self.grid.cell_means(cells)
+            # Eq. (1) per pass that last hit the cells: each such pass held one state of a door, and states
+            # of one door that fall in the same pass share the hinge (one cluster, no line) otherwise.
+            stood = self.grid.pass_of_scan(self.grid.last_hit_scan.reshape(-1)[cells])
+            for q in np.unique(stood):
+                leaves = extract_leaves(means[stood == q], self.door_config, len(self.grid.pass_starts) - 1, int(q),
+                                        SOURCE_FALLEN)
+                if len(leaves):
+                    self._leaves.append(leaves)
         self.pass_index += 1
         self.pass_start_scan = self.grid.scan_count if self.grid is not None else 0
+        self._pass_begun = False
 
     def finish(self) -> GridMapResult:
         """Doors from the persistent leaf set; the static map without their leaves."""
@@ -100,7 +123,6 @@ class GridMapper:
         leaves = Leaves.concat(self._leaves)
         doors = group_doors(leaves, self.door_config, grid)
         remove_leaves(grid, doors, self.door_config, self.grid_config)
-        update_transient(grid, self.grid_config)
         return GridMapResult(to_occupancy_map(grid), doors, grid, leaves, self.n_dynamic_points)
 
 

@@ -1,16 +1,24 @@
 """Door detection from dynamic points (paper 000, Sec. III): clusters, lines, door leaves, hinged doors.
 
 1. Clusters by proximity, eq. (1): C_i = {p | ∃ q ∈ C_i : ‖p − q‖ < ε} (single linkage: the connected
-   components of the ε-graph, :func:`cluster_points`).
+   components of the ε-graph, :func:`cluster_points`). A cluster of a scan's dynamic points is completed
+   along its line by the scan's points in cells once seen free (:func:`complete_line`): the transient
+   neighbourhood rule makes a leaf's points next to any static structure (its hinge, its door stop, its
+   other states near the hinge) static, so the dynamic part alone is shorter than the leaf.
 2. Lines of minimal length, eq. (2): L_i = {(p, q) ∈ C_i × C_i | ‖p − q‖ > δ}. A cluster whose lines
    disagree in angle by more than ``max_line_angle_deg`` is a non-line object; otherwise its line object is
    the mean line segment (mean direction of L_i, through the cluster centroid) with the length of the
-   longest pair in L_i (:func:`fit_leaf`). Lines with length in [λmin, λmax] are potential door leaves.
-3. Doors: leaves with close end points (a common hinge) seen at two or more distinguishable angles, and
-   rotating no more than 180° unless ``allow_swinging`` (:func:`group_doors`).
+   longest pair in L_i (:func:`fit_leaf`). Lines with length in [λmin, λmax] are potential door leaves
+   (set-2 lines: longer than δ; the door's length from its hinge is gated instead).
+3. Doors: leaves with close end points (a common hinge, where their lines cross) seen at two or more
+   distinguishable angles in different passes, rotating no more than 180° unless ``allow_swinging``
+   (:func:`group_doors`). Extension: the observed angles the dynamic points cannot see — a leaf state in
+   cells never seen free before or after is integrated as static — come from the static grid
+   (:func:`_static_states`, :func:`_static_partner`, :func:`_closed_state`), each checked against the
+   passes: a line hit while the leaf stood at another angle is something else.
 
-A door is its hinge, leaf length, reference (closed) direction and observed opening range
-(:class:`DetectedDoor`), and :func:`remove_leaves` takes the leaf out of the static grid.
+A door is its hinge, leaf length, reference (closed) direction from the wall behind the hinge, and
+observed opening range (:class:`DetectedDoor`); :func:`remove_leaves` takes the leaf out of the static grid.
 """
 
 from __future__ import annotations
@@ -28,6 +36,14 @@ from scipy.spatial import cKDTree
 from doorbatch.config import DoorDetectionConfig, GridConfig
 from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.pipeline.gridmap.dynamic import seen_free_grid
+from doorbatch.pipeline.gridmap.kernels import (
+    band_line_kernel,
+    cluster_kernel,
+    complete_kernel,
+    fit_leaf_kernel,
+    ray_fraction_kernel,
+    scan_leaves_kernel,
+)
 from doorbatch.pipeline.gridmap.occupancy import LogOddsGrid
 
 FloatArray = npt.NDArray[np.float64]
@@ -35,9 +51,9 @@ IntArray = npt.NDArray[np.int64]
 BoolArray = npt.NDArray[np.bool_]
 
 SOURCE_TRANSIENT = 1  # set 1: scan end points in transient cells (one time instance per scan)
-SOURCE_FALLEN = 2  # set 2: means of seen-occupied cells that fell low (one time instance per pass)
+SOURCE_FALLEN = 2  # set 2: means of seen-occupied cells that fell low (one instance per pass and hit pass)
 SOURCE_STATIC = 3  # static partner found in the grid for a leaf seen at one angle only (extension)
-DENSE_CLUSTER_MAX = 96  # clustering switches from a dense reachability matrix to a k-d tree above this
+DENSE_CLUSTER_MAX = 512  # clustering switches from all pairs (compiled) to a k-d tree above this
 
 
 @dataclass(frozen=True, slots=True)
@@ -46,8 +62,9 @@ class Leaves:
 
     Attributes:
         p0, p1: (N, 2) segment end points (order carries no meaning).
-        instance: (N,) time instance (scan number for set 1, pass number for set 2).
-        pass_index: (N,) pass the observation comes from.
+        instance: (N,) time instance (scan number for set 1, the pass it fell in for set 2).
+        pass_index: (N,) pass in which the leaf stood there: the scan's pass for set 1; for set 2 the pass
+            that last hit its cells (doors are stationary within a pass).
         source: (N,) SOURCE_TRANSIENT, SOURCE_FALLEN or SOURCE_STATIC.
     """
 
@@ -98,26 +115,19 @@ class DetectedDoor:
 
 
 def cluster_points(points: npt.ArrayLike, eps: float) -> IntArray:
-    """Eq. (1): labels 0 … C − 1 of the single-linkage clusters (pairs closer than ε are linked).
+    """Eq. (1): labels 0 … C − 1 of the single-linkage clusters (pairs closer than ε are linked), numbered
+    in the order of each cluster's first point.
 
-    Up to ``DENSE_CLUSTER_MAX`` points (a scan's dynamic points), the ε-adjacency matrix is closed under
-    reachability by repeated squaring; beyond, a k-d tree's ε-pairs feed a connected-components search.
+    Up to ``DENSE_CLUSTER_MAX`` points (a scan's dynamic points), a compiled union–find over all pairs
+    (:func:`doorbatch.pipeline.gridmap.kernels.cluster_kernel`); beyond, a k-d tree's ε-pairs feed a
+    connected-components search.
     """
-    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
     n = pts.shape[0]
     if n <= 1:
         return np.zeros(n, dtype=np.int64)
     if n <= DENSE_CLUSTER_MAX:
-        dx = pts[:, 0, None] - pts[None, :, 0]
-        dy = pts[:, 1, None] - pts[None, :, 1]
-        reach = (dx * dx + dy * dy < eps * eps).astype(np.float32)
-        for _ in range(max(1, math.ceil(math.log2(n))) + 1):
-            nxt = ((reach @ reach) > 0).astype(np.float32)
-            if np.array_equal(nxt, reach):
-                break
-            reach = nxt
-        first = np.argmax(reach > 0, axis=1)  # smallest index in each point's cluster
-        return np.asarray(np.unique(first, return_inverse=True)[1], dtype=np.int64)
+        return np.asarray(cluster_kernel(pts, eps), dtype=np.int64)
     pairs = cKDTree(pts).query_pairs(eps * (1.0 - 1e-12), output_type="ndarray")
     graph = coo_matrix((np.ones(pairs.shape[0]), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
     _, labels = connected_components(graph, directed=False)
@@ -140,7 +150,19 @@ def fit_leaf(points: npt.ArrayLike, config: DoorDetectionConfig) -> FloatArray |
     Undirected line angles θ are compared as 2θ on the circle: the largest angle between two lines is half
     the span of the 2θ. The mean line has the circular mean direction of the 2θ and passes through the
     cluster centroid; its segment is centred on the projection of the longest pair, with that pair's length.
+    At most ``max_cluster_points`` points, evenly subsampled, enter the all-pairs evaluation (compiled,
+    :func:`doorbatch.pipeline.gridmap.kernels.fit_leaf_kernel`; :func:`fit_leaf_numpy` is its reference).
     """
+    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
+    if pts.shape[0] > config.max_cluster_points:
+        pts = pts[np.linspace(0, pts.shape[0] - 1, config.max_cluster_points).astype(np.int64)]
+    out = np.empty((2, 2))
+    ok = fit_leaf_kernel(pts, config.min_line_length_m, math.radians(config.max_line_angle_deg), out)
+    return out if ok else None
+
+
+def fit_leaf_numpy(points: npt.ArrayLike, config: DoorDetectionConfig) -> FloatArray | None:
+    """:func:`fit_leaf` in NumPy alone (the reference of the compiled kernel)."""
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
     if pts.shape[0] > config.max_cluster_points:
         pts = pts[np.linspace(0, pts.shape[0] - 1, config.max_cluster_points).astype(np.int64)]
@@ -164,25 +186,89 @@ def fit_leaf(points: npt.ArrayLike, config: DoorDetectionConfig) -> FloatArray |
     return np.stack([mid - half * u, mid + half * u])
 
 
+def complete_line(cluster: FloatArray, support: FloatArray, config: DoorDetectionConfig) -> FloatArray:
+    """The cluster grown along its own line by eq. (1) linkage over ``support`` points.
+
+    The line is the cluster's principal axis; support points within ``line_tolerance_m`` of it join when
+    they continue the cluster along the line with gaps below ε (``cluster_distance_m``), up to λmax beyond
+    it. Returns the cluster's points followed by the support points that joined. Compiled
+    (:func:`doorbatch.pipeline.gridmap.kernels.complete_kernel`); :func:`complete_line_numpy` is its
+    reference.
+    """
+    if support.shape[0] == 0 or cluster.shape[0] < 2:
+        return cluster
+    join = np.empty(support.shape[0], dtype=bool)
+    n = complete_kernel(np.ascontiguousarray(cluster, dtype=np.float64),
+                        np.ascontiguousarray(support, dtype=np.float64), config.line_tolerance_m,
+                        config.cluster_distance_m, config.door_length_max_m, join)
+    return np.concatenate([cluster, support[join]]) if n else cluster
+
+
+def complete_line_numpy(cluster: FloatArray, support: FloatArray, config: DoorDetectionConfig) -> FloatArray:
+    """:func:`complete_line` in NumPy alone (the reference of the compiled kernel)."""
+    if support.shape[0] == 0 or cluster.shape[0] < 2:
+        return cluster
+    centre = cluster.mean(axis=0)
+    e = cluster - centre
+    theta = 0.5 * math.atan2(2.0 * float(e[:, 0] @ e[:, 1]), float(e[:, 0] @ e[:, 0]) - float(e[:, 1] @ e[:, 1]))
+    u = np.array([math.cos(theta), math.sin(theta)])  # principal axis
+    v = np.array([-u[1], u[0]])
+    t_own = e @ u
+    lo, hi = float(t_own.min()), float(t_own.max())
+    rel = support - centre
+    t = rel @ u
+    near = (np.abs(rel @ v) <= config.line_tolerance_m) & (t >= lo - config.door_length_max_m) & (
+        t <= hi + config.door_length_max_m) & ((t < lo) | (t > hi))
+    if not near.any():
+        return cluster
+    cand = np.flatnonzero(near)
+    keep = np.zeros(cand.size, dtype=bool)
+    for side, edge in ((t[cand] < lo, lo), (t[cand] > hi, hi)):
+        idx = np.flatnonzero(side)
+        if idx.size == 0:
+            continue
+        dist = np.abs(t[cand[idx]] - edge)
+        order = np.argsort(dist)
+        steps = np.diff(np.concatenate([[0.0], dist[order]]))
+        run = int(np.argmax(steps >= config.cluster_distance_m)) if (steps >= config.cluster_distance_m).any() \
+            else order.size
+        keep[idx[order[:run]]] = True
+    return np.concatenate([cluster, support[cand[keep]]])
+
+
 def extract_leaves(points: npt.ArrayLike, config: DoorDetectionConfig, instance: int = 0,
-                   pass_index: int = 0, source: int = SOURCE_TRANSIENT) -> Leaves:
+                   pass_index: int = 0, source: int = SOURCE_TRANSIENT,
+                   support: npt.ArrayLike | None = None) -> Leaves:
     """Potential door leaves among the dynamic points of one time instance: eq. (1) clusters, eq. (2) line
-    objects, and the length gate [λmin, λmax]."""
+    objects, and the length gate [λmin, λmax].
+
+    ``support``: other points of the same scan that may complete a cluster along its line
+    (:func:`complete_line`). The transient neighbourhood rule turns the points of a leaf within r cells of
+    static structure into static ones — at the hinge always, at the door stop for a closed leaf, and
+    along any other state of the leaf near the hinge (0.2 m / sin α of a leaf at α from it) — so the
+    dynamic part alone is short of the leaf, often short of λmin. The caller passes the points in cells
+    that were seen free and held no structure known before the pass: the rest of the leaf, not a wall.
+    """
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    extra = np.zeros((0, 2)) if support is None else np.asarray(support, dtype=np.float64).reshape(-1, 2)
     if pts.shape[0] < 2:
         return Leaves()
+    # Set 2 loses the cells near the hinge that the leaf's state in this pass still hits (two states
+    # overlap there over ~2 cells / sin Δ), so a fallen line may be shorter than its leaf: it only needs
+    # to be a line (longer than δ); the door's length is checked from its hinge (group_doors).
+    shortest = config.min_line_length_m if source == SOURCE_FALLEN else config.door_length_min_m
     span = pts.max(axis=0) - pts.min(axis=0)
-    if float(span @ span) < config.door_length_min_m**2:  # no pair is as long as a leaf: no leaf here
+    if extra.shape[0] == 0 and float(span @ span) < shortest**2:  # no pair long enough
         return Leaves()
     labels = cluster_points(pts, config.cluster_distance_m)
     counts = np.bincount(labels)
     segs = []
     for label in np.flatnonzero(counts >= 2):
-        seg = fit_leaf(pts[labels == label], config)
+        seg = fit_leaf(complete_line(pts[labels == label], extra, config), config)
         if seg is None:
             continue
         length = float(np.hypot(*(seg[1] - seg[0])))
-        if config.door_length_min_m <= length <= config.door_length_max_m:
+        if shortest <= length <= config.door_length_max_m:
             segs.append(seg)
     if not segs:
         return Leaves()
@@ -190,6 +276,25 @@ def extract_leaves(points: npt.ArrayLike, config: DoorDetectionConfig, instance:
     n = arr.shape[0]
     return Leaves(arr[:, 0].copy(), arr[:, 1].copy(), np.full(n, instance, np.int64),
                   np.full(n, pass_index, np.int64), np.full(n, source, np.int64))
+
+
+def scan_leaves(points: npt.ArrayLike, support: npt.ArrayLike | None, config: DoorDetectionConfig, instance: int,
+                pass_index: int) -> Leaves:
+    """:func:`extract_leaves` of one scan's dynamic points (set 1) in one compiled call
+    (:func:`doorbatch.pipeline.gridmap.kernels.scan_leaves_kernel`): the per-scan path of the mapper."""
+    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
+    extra = np.zeros((0, 2)) if support is None else np.ascontiguousarray(support, dtype=np.float64).reshape(-1, 2)
+    if pts.shape[0] < 2:
+        return Leaves()
+    segs = np.empty((pts.shape[0], 2, 2))
+    count = scan_leaves_kernel(pts, extra, config.cluster_distance_m, config.line_tolerance_m,
+                               config.min_line_length_m, math.radians(config.max_line_angle_deg),
+                               config.door_length_min_m, config.door_length_max_m, config.max_cluster_points, segs)
+    if count == 0:
+        return Leaves()
+    arr = segs[:count]
+    return Leaves(arr[:, 0].copy(), arr[:, 1].copy(), np.full(count, instance, np.int64),
+                  np.full(count, pass_index, np.int64), np.full(count, SOURCE_TRANSIENT, np.int64))
 
 
 # ------------------------------------------------------------------------------------------ doors
@@ -212,10 +317,9 @@ class _Hinged:
 
 
 def _when(leaves: Leaves) -> FloatArray:
-    """When each leaf stood where it was seen: set 1 during its pass p; set 2 (cells that fell low in pass
-    p) before p, written p − ½; a static partner at an unknown time (NaN)."""
+    """The pass in which each leaf stood where it was seen (``pass_index``); a static partner at an unknown
+    time (NaN)."""
     t = leaves.pass_index.astype(np.float64)
-    t = np.where(leaves.source == SOURCE_FALLEN, t - 0.5, t)
     return np.asarray(np.where(leaves.source == SOURCE_STATIC, np.nan, t), dtype=np.float64)
 
 
@@ -280,11 +384,15 @@ def _range_about(yaws: FloatArray) -> tuple[float, float]:
 def intersect_lines(points: FloatArray, yaws: FloatArray) -> FloatArray | None:
     """Least-squares intersection h of lines (point p_m, direction θ_m): min Σ (n_m · (h − p_m))², with
     n_m ⊥ direction; None when the lines are (nearly) parallel."""
-    n = np.stack([-np.sin(yaws), np.cos(yaws)], axis=1)
-    a = n.T @ n
-    if np.linalg.cond(a) > 1e6:
+    nx, ny = -np.sin(yaws), np.cos(yaws)
+    axx, axy, ayy = float(nx @ nx), float(nx @ ny), float(ny @ ny)  # A = Σ n nᵀ (2 × 2, symmetric)
+    mid, rad = (axx + ayy) / 2, math.hypot((axx - ayy) / 2, axy)
+    if mid - rad <= (mid + rad) * 1e-6:  # condition number λmax / λmin > 1e6
         return None
-    return np.asarray(np.linalg.solve(a, n.T @ np.einsum("ij,ij->i", n, points)), dtype=np.float64)
+    c = nx * points[:, 0] + ny * points[:, 1]
+    bx, by = float(nx @ c), float(ny @ c)
+    det = axx * ayy - axy * axy
+    return np.array([(ayy * bx - axy * by) / det, (axx * by - axy * bx) / det])
 
 
 def group_doors(leaves: Leaves, config: DoorDetectionConfig, grid: LogOddsGrid | None = None
@@ -292,14 +400,17 @@ def group_doors(leaves: Leaves, config: DoorDetectionConfig, grid: LogOddsGrid |
     """Paper 000, Sec. III: doors are leaves with a common hinge seen at ≥ 2 distinguishable angles.
 
     For each group of leaves whose end points are within ``hinge_distance_m``: the leaf directions are
-    grouped into observed angles (:func:`angle_modes`); the group is a door when two observed angles differ
+    grouped into observed angles (:func:`angle_modes`); the hinge is where their lines cross (a group
+    formed around the free ends of a small rotation is dropped, :func:`_hinge_estimate`). With a grid
+    (``static_partner_search``), a group with one observed angle gets its other angle from the static grid
+    (:func:`_lone_partner`), the closed direction comes from the wall behind the hinge
+    (:func:`closed_direction`), and further observed angles come from the static grid
+    (:func:`_static_states`, :func:`_closed_state`). The group is a door when two observed angles differ
     by ≥ ``min_opening_deg``, all lie within :func:`_max_span` of each other (office doors rotate at most
-    180°; ``allow_swinging`` lifts this), the leaf keeps its length (``min_length_ratio``), and two of
-    the angles were seen at different times (``require_distinct_passes``). With a grid, a group with one
-    observed angle may get its
-    other angle from the static grid (``static_partner_search``), and the closed direction comes from the
-    wall behind the hinge (:func:`closed_direction`). Each leaf serves one door; groups with more
-    observations are taken first.
+    180°; ``allow_swinging`` lifts this), the leaf keeps its length (``min_length_ratio``) and is a leaf's
+    length [λmin, λmax] from the hinge, and two of the angles were seen in different passes
+    (``require_distinct_passes``). Each leaf serves one door; groups with more observations are taken
+    first.
     """
     if len(leaves) == 0:
         return []
@@ -318,42 +429,242 @@ def group_doors(leaves: Leaves, config: DoorDetectionConfig, grid: LogOddsGrid |
     return doors
 
 
+@dataclass
+class _Observed:
+    """A door's observations while it is being built: per observation the hinge-side end, the free end,
+    the direction, the pass it stood there (NaN: unknown) and its observed-angle label; and the angles."""
+
+    near: FloatArray
+    far: FloatArray
+    yaw: FloatArray
+    when: FloatArray
+    labels: IntArray
+    modes: FloatArray
+
+    def add(self, near: FloatArray, far: FloatArray, when: float) -> None:
+        """One more observed angle, seen once (a state found in the static grid)."""
+        self.near = np.vstack([self.near, near[None]])
+        self.far = np.vstack([self.far, far[None]])
+        self.yaw = np.append(self.yaw, math.atan2(far[1] - near[1], far[0] - near[0]))
+        self.when = np.append(self.when, when)
+        self.labels = np.append(self.labels, self.modes.size)
+        self.modes = np.append(self.modes, self.yaw[-1])
+
+    def passes(self) -> set[int]:
+        """The passes in which the leaf was seen at one of its angles."""
+        return {int(t) for t in self.when if not math.isnan(t)}
+
+
 def _door_from_group(g: _Hinged, gap: float, config: DoorDetectionConfig, grid: LogOddsGrid | None,
                      occupied: BoolArray | None) -> DetectedDoor | None:
     labels = angle_modes(g.yaw, gap)
-    modes = _mode_yaws(g.yaw, labels)
-    near, far, yaw, when = g.near, g.far, g.yaw, g.when
-    if modes.size == 1 and grid is not None and occupied is not None and config.static_partner_search:
-        partner = _static_partner(grid, occupied, g, float(modes[0]), config)
-        if partner is None:
+    obs = _Observed(g.near, g.far, g.yaw, g.when, labels, _mode_yaws(g.yaw, labels))
+    use_grid = grid is not None and occupied is not None and config.static_partner_search
+    if obs.modes.size == 1:
+        if not use_grid or grid is None or occupied is None:
             return None
-        near = np.vstack([near, partner[0][None]])
-        far = np.vstack([far, partner[1][None]])
-        yaw = np.append(yaw, math.atan2(*(partner[1] - partner[0])[::-1]))
-        when = np.append(when, np.nan)
-        labels = np.append(labels, 1)
-        modes = np.append(modes, yaw[-1])
-    if modes.size < 2:
+        if not _lone_partner(grid, occupied, g, obs, config):
+            return None
+    hinge = _hinge_estimate(obs.near, obs.far, obs.labels, obs.modes, config)
+    if hinge is None:
         return None
-    start, span = _range_about(modes)
+    closed = _range_about(obs.modes)[0]
+    if use_grid and grid is not None and occupied is not None:
+        closed = closed_direction(grid, occupied, hinge, obs.modes, config)
+    dist = np.hypot(obs.far[:, 0] - hinge[0], obs.far[:, 1] - hinge[1])
+    if not _rigid(dist, obs, closed, config):
+        return None
+    if use_grid and grid is not None and occupied is not None:
+        length = _leaf_length(dist, obs.yaw, closed, config)
+        for end, when in _static_states(grid, occupied, hinge, obs.modes, closed, length, obs.passes(), config):
+            obs.add(hinge, end, when)
+        if np.min(np.abs(wrap_angle(obs.modes - closed))) > gap:
+            state = _closed_state(grid, hinge, closed, length, obs.passes(), config)
+            if state is not None:
+                obs.add(hinge, *state)
+    start, span = _range_about(obs.modes)
     if not math.radians(config.min_opening_deg) <= span <= _max_span(config):
         return None
-    if config.require_distinct_passes and not _moved_between_passes(modes, labels, when, config):
+    if config.require_distinct_passes and not _moved_between_passes(obs.modes, obs.labels, obs.when, config):
         return None
-    hinge = _hinge_estimate(near, far, labels, modes, config)
-    dist = np.hypot(far[:, 0] - hinge[0], far[:, 1] - hinge[1])
-    per_mode = np.zeros(modes.size)
-    np.maximum.at(per_mode, labels, dist)
-    if per_mode.min() < config.min_length_ratio * per_mode.max():  # a rigid leaf keeps its length
+    dist = np.hypot(obs.far[:, 0] - hinge[0], obs.far[:, 1] - hinge[1])
+    length = _leaf_length(dist, obs.yaw, closed, config)
+    if not config.door_length_min_m <= length <= config.door_length_max_m:  # [λmin, λmax], from the hinge
         return None
-    length = float(np.quantile(dist, config.length_quantile))
-    closed = start if grid is None or occupied is None else closed_direction(grid, occupied, hinge, modes, config)
     # Positions along the observed arc (CCW from its start), shifted to the closed direction; not wrapped,
-    # so a swinging door's range may exceed 180°.
-    rel = float(wrap_angle(start - closed)) + np.mod(modes - start, 2 * np.pi)
+    # so a swinging door's range may exceed 180°. (The ε keeps the start itself at 0, not at 2π.)
+    rel = float(wrap_angle(start - closed)) + np.mod(obs.modes - start + 1e-9, 2 * np.pi) - 1e-9
     return DetectedDoor(float(hinge[0]), float(hinge[1]), length, float(wrap_angle(closed)),
-                        float(rel.min()), float(rel.max()), int(yaw.size), True,
-                        tuple(float(v) for v in wrap_angle(modes)))
+                        float(rel.min()), float(rel.max()), int(obs.yaw.size), True,
+                        tuple(float(v) for v in wrap_angle(obs.modes)))
+
+
+def _leaf_length(dist: FloatArray, yaw: FloatArray, closed: float, config: DoorDetectionConfig) -> float:
+    """The ``length_quantile`` of the hinge → free end distances. A closed leaf is collinear with its wall,
+    so its free end cannot be told from the wall beyond the door stop (wall cells beside a doorway may
+    even hold dynamic points); the length comes from the observations that stand away from the closed
+    direction, where the free end stands free (all, if there are none)."""
+    away = np.abs(wrap_angle(yaw - closed)) >= math.radians(config.min_opening_deg)
+    return float(np.quantile(dist[away] if away.any() else dist, config.length_quantile))
+
+
+def _rigid(dist: FloatArray, obs: _Observed, closed: float, config: DoorDetectionConfig) -> bool:
+    """A rigid leaf keeps its length: the median hinge → free end distance of each observed angle is at
+    least ``min_length_ratio`` of the longest. Angles within ``min_opening_deg`` of the closed direction
+    are left out when others remain (a closed leaf's free end runs on into the wall beyond the door stop)."""
+    away = np.abs(wrap_angle(obs.modes - closed)) >= math.radians(config.min_opening_deg)
+    keep = np.flatnonzero(away) if away.sum() >= 2 else np.arange(obs.modes.size)
+    med = np.array([np.median(dist[obs.labels == k]) for k in keep])
+    return bool(med.min() >= config.min_length_ratio * med.max())
+
+
+def _lone_partner(grid: LogOddsGrid, occupied: BoolArray, g: _Hinged, obs: _Observed,
+                  config: DoorDetectionConfig) -> bool:
+    """Extension for leaves seen at one angle only: their other state from the static grid, as a leaf-shaped
+    occupied segment hinged at their common end (:func:`_static_partner`), or else as the closed leaf
+    (:func:`_closed_state`, along the wall behind the hinge). Adds it to ``obs``; whether one was found."""
+    partner = _static_partner(grid, occupied, g, float(obs.modes[0]), obs.passes(), config)
+    if partner is not None:
+        obs.add(*partner)
+        return True
+    hinge = g.near.mean(axis=0)
+    closed, wall_point = _wall_behind(grid, occupied, hinge, obs.modes, config)
+    if wall_point is None:
+        return False
+    # The hinge is where the leaf's line meets the wall's (the leaf's near end may be cut short).
+    crossing = intersect_lines(np.stack([((g.near + g.far) / 2).mean(axis=0), wall_point]),
+                               np.array([float(obs.modes[0]), closed]))
+    if crossing is not None and np.hypot(*(crossing - hinge)) <= config.hinge_distance_m:
+        hinge = crossing
+    length = float(np.quantile(np.hypot(*(g.far - g.near).T), config.length_quantile))
+    state = _closed_state(grid, hinge, closed, length, obs.passes(), config)
+    if state is None:
+        return False
+    obs.add(hinge, *state)
+    return True
+
+
+def _closed_state(grid: LogOddsGrid, hinge: FloatArray, closed: float, length: float, seen_in: set[int],
+                  config: DoorDetectionConfig) -> tuple[FloatArray, float] | None:
+    """Extension: the closed leaf as an observed angle when its cells never fell (the leaf that opened hid
+    them). A closed leaf is flush with its wall, so it cannot be told from the wall by shape; it is told
+    by time: along the closed direction over [L/3, L − 2 cells] (off the hinge and the door stop), at
+    least ``partner_min_fraction`` of the samples (every half cell) have a cell within one cell that was
+    hit, and none of those cells was last hit in a pass in which the leaf stood at another angle (a wall
+    is hit in every pass that sees it; the doorway is empty, or hidden, while the leaf stands open).
+    Returns (free end, the last pass the closed leaf was hit), or None."""
+    res = grid.resolution_m
+    s = np.arange(length / 3, length - 2 * res + 1e-9, res / 2)
+    if s.size == 0:
+        return None
+    u = np.array([math.cos(closed), math.sin(closed)])
+    centre = np.floor(grid.world_to_cell_float(hinge + s[:, None] * u)).astype(np.int64)
+    h, w = grid.shape
+    di, dj = np.meshgrid(np.arange(-1, 2), np.arange(-1, 2), indexing="ij")
+    rows = np.clip(centre[:, 1, None] + di.reshape(1, -1), 0, h - 1)
+    cols = np.clip(centre[:, 0, None] + dj.reshape(1, -1), 0, w - 1)
+    hit = grid.hits[rows, cols] > 0
+    if hit.any(axis=1).mean() < config.partner_min_fraction:
+        return None
+    passes = grid.pass_of_scan(grid.last_hit_scan[rows, cols][hit])
+    if seen_in & set(passes.tolist()):
+        return None
+    return hinge + length * u, float(passes.max())
+
+
+def _static_states(grid: LogOddsGrid, occupied: BoolArray, hinge: FloatArray, modes: FloatArray, closed: float,
+                   length: float, seen_in: set[int], config: DoorDetectionConfig) -> list[tuple[FloatArray, float]]:
+    """Extension: further observed angles of a door as leaf-shaped occupied segments in the static grid.
+
+    A leaf seen in cells that were never seen free before, and never seen free afterwards (the leaf's
+    later states hide them: a leaf opened 100° into a room, then 50°, leaves the 100° cells behind the
+    50° leaf), is integrated as static and never joins either set of dynamic points; it is still an
+    observed angle of the door, and a part of the opening range. Directions φ at 1° steps on the side of
+    the closed direction where the observed angles lie (a door opens to one side), within the rotation
+    limit (:func:`_max_span`, which also keeps off the wall behind the hinge) and farther than
+    ``angle_cluster_gap_deg`` from the observed angles score the fraction of occupied cells (grown by a
+    cell) along [2 cells, L − 1 cell]. Each run of directions scoring ≥ ``partner_min_fraction`` gives one
+    candidate, its best φ, checked by :func:`_leaf_end` (a line along φ that ends) and :func:`_stood_when`
+    (not hit while the leaf stood at another angle), and kept if the arc of all angles stays within the
+    limit. Returns the free end of each angle found, with the last pass its cells were hit.
+    """
+    res = grid.resolution_m
+    gap = math.radians(config.angle_cluster_gap_deg)
+    start, span = _range_about(modes)
+    rel = wrap_angle(modes - closed)
+    limit = _max_span(config)
+    steps = np.radians(np.arange(0.0, math.degrees(limit) + 1e-9, 1.0))
+    if np.all(np.abs(rel) <= gap):  # seen closed only: either side
+        yaws = closed + np.concatenate([-steps[::-1], steps[1:]])
+    elif np.all(rel >= -gap):  # opens counter-clockwise
+        yaws = closed + steps
+    elif np.all(rel <= gap):  # clockwise
+        yaws = closed - steps[::-1]
+    else:  # observed on both sides of the closed direction (a swinging door): around the observed arc
+        room = limit - span
+        yaws = start - room + np.radians(np.arange(0.0, math.degrees(span + 2 * room) + 1e-9, 1.0))
+    free_of_modes = np.min(np.abs(wrap_angle(yaws[:, None] - modes[None, :])), axis=1) > gap
+    frac = _ray_fraction(grid, occupied, hinge, yaws, 2 * res, length - res)
+    ok = (frac >= config.partner_min_fraction) & free_of_modes
+    found: list[tuple[FloatArray, float]] = []
+    lo, hi = _unwrapped_arc(start, span, yaws)  # the arc held so far, on the yaws' axis
+    runs = np.split(np.arange(yaws.size), np.flatnonzero(np.diff(ok.astype(np.int8)) != 0) + 1)
+    for run in sorted((r for r in runs if ok[r[0]]), key=lambda r: -float(frac[r].max())):
+        tries, extent = _run_directions(run, frac, float(yaws[run[0]]), float(yaws[1] - yaws[0]), gap)
+        end = None
+        for phi in tries:
+            end = _leaf_end(grid, occupied, hinge, phi, length, config, extent)
+            if end is not None:
+                break
+        if end is None or np.hypot(*(end - hinge)) < config.min_length_ratio * length:
+            continue
+        phi = float(yaws[run[0]]) + float(wrap_angle(math.atan2(end[1] - hinge[1], end[0] - hinge[0]) - yaws[run[0]]))
+        if max(hi, phi) - min(lo, phi) > _max_span(config):
+            continue
+        when = _stood_when(grid, hinge, end, seen_in)
+        if when is None:
+            continue
+        lo, hi = min(lo, phi), max(hi, phi)
+        found.append((end, when))
+    return found
+
+
+def _stood_when(grid: LogOddsGrid, hinge: FloatArray, end: FloatArray, seen_in: set[int]) -> float | None:
+    """The last pass in which the cells of a static leaf state were hit (those beyond a third of its length:
+    near the hinge all states share cells), or None if that is a pass in which the leaf stood at another
+    angle (doors are stationary within a pass: a line hit then is something else)."""
+    t = np.linspace(1 / 3, 1.0, 12)
+    cells = grid.flat_index(hinge + t[:, None] * (end - hinge))
+    last = grid.last_hit_scan.reshape(-1)[cells]
+    last = last[last >= 0]
+    if last.size == 0:
+        return None
+    passes = grid.pass_of_scan(last)
+    if seen_in & set(passes.tolist()):
+        return None
+    return float(np.bincount(passes - passes.min()).argmax() + passes.min())
+
+
+def _run_directions(run: IntArray, score: FloatArray, first: float, step: float, spacing: float
+                    ) -> tuple[list[float], tuple[float, float]]:
+    """A run of consecutive directions (``first``: the direction of its first index, ``step`` apart, in
+    run order, which may wrap around the circle): directions to try, from the middle of its best-scoring
+    ones outwards every ``spacing`` (a run may hold two states of a leaf a few degrees apart), and its
+    extent, unwrapped."""
+    best = np.flatnonzero(score[run] >= score[run].max() - 1e-9)
+    middle = first + step * float(best[best.size // 2])
+    lo, hi = first, first + step * (run.size - 1)
+    k = np.arange(1, int((hi - lo) / max(spacing, 1e-9)) + 2)
+    around = np.stack([middle - k * spacing, middle + k * spacing], axis=1).reshape(-1)
+    return [middle, *(float(a) for a in around if lo <= a <= hi)], (lo, hi)
+
+
+def _unwrapped_arc(start: float, span: float, axis: FloatArray) -> tuple[float, float]:
+    """The arc [start, start + span] shifted by a multiple of 2π to overlap ``axis`` (monotone angles)."""
+    mid = start + span / 2
+    centre = float(axis[axis.size // 2]) if axis.size else mid
+    shift = 2 * math.pi * round((centre - mid) / (2 * math.pi))
+    return start + shift, start + span + shift
 
 
 def _moved_between_passes(modes: FloatArray, labels: IntArray, when: FloatArray,
@@ -381,16 +692,20 @@ def _max_span(config: DoorDetectionConfig) -> float:
 
 
 def _hinge_estimate(near: FloatArray, far: FloatArray, labels: IntArray, modes: FloatArray,
-                    config: DoorDetectionConfig) -> FloatArray:
+                    config: DoorDetectionConfig) -> FloatArray | None:
     """The hinge: least-squares intersection of the mean lines of the observed angles (the end points
     near the hinge are cut short by the transient neighbourhood rule, the lines are not); the mean of
-    the near end points if that intersection is farther than ``hinge_distance_m`` from it."""
+    the near end points if that intersection is farther than ``hinge_distance_m`` from it. None when the
+    lines cross at the other ends: for a small rotation the free ends lie within ``hinge_distance_m``
+    too (2 L sin(Δ/2): 0.24 m for 0.9 m and 15°), and a leaf turns about its hinge, not its free end."""
     k = modes.size
     mids = (near + far) / 2
     sums = np.stack([np.bincount(labels, mids[:, c], minlength=k) for c in (0, 1)], axis=1).astype(np.float64)
     centre = sums / np.bincount(labels, minlength=k).astype(np.float64)[:, None]
     fallback = near.mean(axis=0)
     h = intersect_lines(centre, modes)
+    if h is not None and np.hypot(*(h - far.mean(axis=0))) < np.hypot(*(h - fallback)):
+        return None
     if h is None or np.hypot(*(h - fallback)) > config.hinge_distance_m:
         return np.asarray(fallback, dtype=np.float64)
     return h
@@ -399,40 +714,42 @@ def _hinge_estimate(near: FloatArray, far: FloatArray, labels: IntArray, modes: 
 # ------------------------------------------------------------------------------------------ grid probes
 
 
+def _logit(p: float) -> float:
+    return math.log(p / (1.0 - p))
+
+
 def _occupied_dilated(grid: LogOddsGrid, config: DoorDetectionConfig) -> BoolArray:
     """Occupied cells (p > p_occupied) grown by one cell, so probes tolerate a cell of misregistration."""
-    occ = grid.log_odds > np.float32(math.log(config.p_occupied / (1 - config.p_occupied)))
-    return np.asarray(ndimage.binary_dilation(occ, structure=np.ones((3, 3), bool)), dtype=np.bool_)
+    occ = (grid.log_odds > np.float32(_logit(config.p_occupied))).view(np.uint8)
+    return np.asarray(ndimage.maximum_filter(occ, size=3, mode="constant", cval=0).view(bool), dtype=np.bool_)
 
 
 def _ray_fraction(grid: LogOddsGrid, mask: BoolArray, start: FloatArray, yaws: FloatArray,
                   s0: float, s1: float) -> FloatArray:
     """Fraction of samples (every half cell) at distances [s0, s1] along each direction from ``start``
-    that fall into True cells of ``mask`` (outside the grid counts as False)."""
+    that fall into True cells of ``mask`` (outside the grid counts as False); compiled
+    (:func:`doorbatch.pipeline.gridmap.kernels.ray_fraction_kernel`)."""
     s = np.arange(s0, s1 + 1e-9, grid.resolution_m / 2)
-    if s.size == 0:
-        return np.zeros(yaws.size)
-    xy = start + s[None, :, None] * np.stack([np.cos(yaws), np.sin(yaws)], axis=-1)[:, None, :]
-    c = np.floor(grid.world_to_cell_float(xy)).astype(np.int64)
-    h, w = grid.shape
-    inside = (c[..., 0] >= 0) & (c[..., 0] < w) & (c[..., 1] >= 0) & (c[..., 1] < h)
-    hit = np.zeros(inside.shape, dtype=bool)
-    hit[inside] = mask[c[..., 1][inside], c[..., 0][inside]]
-    return np.asarray(hit.mean(axis=1), dtype=np.float64)
+    out = np.zeros(np.shape(yaws)[0])
+    if s.size:
+        ray_fraction_kernel(mask, grid.origin_x_m, grid.origin_y_m, 1.0 / grid.resolution_m, float(start[0]),
+                            float(start[1]), np.ascontiguousarray(yaws, dtype=np.float64), s, out)
+    return out
 
 
-def _static_partner(grid: LogOddsGrid, occupied: BoolArray, g: _Hinged, mode_yaw: float,
-                   config: DoorDetectionConfig) -> tuple[FloatArray, FloatArray] | None:
+def _static_partner(grid: LogOddsGrid, occupied: BoolArray, g: _Hinged, mode_yaw: float, seen_in: set[int],
+                    config: DoorDetectionConfig) -> tuple[FloatArray, FloatArray, float] | None:
     """Extension: the leaf's other observed angle as an occupied segment in the static grid.
 
     For leaves seen at one angle only, with their shared end as the hinge: directions φ at 1° steps,
     between ``min_opening_deg`` and min(180°, ``max_rotation_deg``) − ``min_opening_deg`` from the leaf
     (nearly opposite is the wall going on behind the hinge), score the fraction of occupied cells (grown
     by a cell) along [2 cells, L − 1 cell] (L: the leaf's length); beyond L + 3 cells,
-    ``partner_end_clear_m`` must hold no occupied cell (a wall would go on). The best φ scoring
-    ≥ ``partner_min_fraction`` is refined by :func:`_refine_partner`, and the search repeats from the
-    refined hinge until it moves less than a cell (at most three rounds). Returns (hinge, free end), or
-    None.
+    ``partner_end_clear_m`` must hold no occupied cell (a wall would go on). Runs of directions scoring
+    ≥ ``partner_min_fraction``, best first, are refined by :func:`_refine_partner` (refitted from the
+    refined hinge until it moves less than a cell, at most twice). A partner whose cells were hit in
+    a pass in which the leaf stood at its one angle is something else (:func:`_stood_when`). Returns
+    (hinge, free end, the last pass the partner's cells were hit), or None.
     """
     length = float(np.quantile(np.hypot(*(g.far - g.near).T), config.length_quantile))
     res = grid.resolution_m
@@ -441,90 +758,168 @@ def _static_partner(grid: LogOddsGrid, occupied: BoolArray, g: _Hinged, mode_yaw
     offsets = np.radians(np.arange(-180.0, 180.0, 1.0))
     yaws = mode_yaw + offsets[(np.abs(offsets) >= lo) & (np.abs(offsets) <= hi)]
     hinge = g.near.mean(axis=0)
-    found = None
-    for _ in range(3):  # the refined hinge moves back along the leaf: search again from there
-        frac = _ray_fraction(grid, occupied, hinge, yaws, 2 * res, length - res)
-        clear = (length + 3 * res, length + 3 * res + config.partner_end_clear_m)
-        beyond = _ray_fraction(grid, occupied, hinge, yaws, *clear)
-        ok = (frac >= config.partner_min_fraction) & (beyond == 0.0)
-        if not ok.any():
-            return found
-        phi = float(yaws[int(np.argmax(np.where(ok, frac, -1.0)))])
-        refined = _refine_partner(grid, g, mode_yaw, hinge, phi, length, config)
-        if refined is None:
-            return found
-        moved = float(np.hypot(*(refined[0] - hinge)))
-        found, hinge = refined, refined[0]
-        if moved < res:
-            break
-    return found
+    frac = _ray_fraction(grid, occupied, hinge, yaws, 2 * res, length - res)
+    clear = (length + 3 * res, length + 3 * res + config.partner_end_clear_m)
+    ok = frac >= config.partner_min_fraction
+    ok[ok] = _ray_fraction(grid, occupied, hinge, yaws[ok], *clear) == 0.0
+    breaks = (np.diff(ok.astype(np.int8)) != 0) | (np.diff(yaws) > math.radians(1.5))  # the gap about the leaf
+    runs = np.split(np.arange(yaws.size), np.flatnonzero(breaks) + 1)
+    gap = math.radians(config.angle_cluster_gap_deg)
+    for run in sorted((r for r in runs if ok[r[0]]), key=lambda r: -float(frac[r].max())):
+        tries, extent = _run_directions(run, frac, float(yaws[run[0]]), math.radians(1.0), gap)
+        for phi in tries:
+            found = _refine_partner(grid, occupied, g, mode_yaw, hinge, phi, length, config, extent)
+            # The refined hinge moves back along the leaf (its near end is cut short): refit from there,
+            # along the direction found, until it moves less than a cell.
+            for _ in range(2):
+                if found is None or np.hypot(*(found[0] - hinge)) < res:
+                    break
+                d = found[1] - found[0]
+                again = _refine_partner(grid, occupied, g, mode_yaw, found[0], math.atan2(d[1], d[0]), length,
+                                        config)
+                hinge, found = found[0], again if again is not None else found
+            if found is not None:
+                when = _stood_when(grid, *found, seen_in)
+                if when is not None:
+                    return found[0], found[1], when
+                break  # a line that was hit while the leaf stood at its one angle: not this run
+    return None
 
 
-def _refine_partner(grid: LogOddsGrid, g: _Hinged, mode_yaw: float, hinge: FloatArray, phi: float,
-                    length: float, config: DoorDetectionConfig) -> tuple[FloatArray, FloatArray] | None:
-    """Fit a line to the occupied cells within two cells of the ray hinge + s·(cos φ, sin φ); the hinge is
-    its intersection with the leaf's line (the leaf's near end may be cut short), the free end the last
-    occupied cell along it before a gap longer than ``partner_gap_m``."""
-    res = grid.resolution_m
-    occ = grid.log_odds > np.float32(math.log(config.p_occupied / (1 - config.p_occupied)))
-    reach = length + config.partner_end_clear_m
-    box0 = np.floor(grid.world_to_cell_float(hinge - reach)).astype(np.int64)
-    box1 = np.floor(grid.world_to_cell_float(hinge + reach)).astype(np.int64)
-    h, w = grid.shape
-    j0, i0 = np.maximum(box0, 0)
-    j1, i1 = np.minimum(box1, [w - 1, h - 1])
-    ii, jj = np.nonzero(occ[i0:i1 + 1, j0:j1 + 1])
-    centres = grid.cell_centers((ii + i0) * w + (jj + j0))
-    u = np.array([math.cos(phi), math.sin(phi)])
-    rel = centres - hinge
-    s = rel @ u
-    lateral = np.abs(rel @ np.array([-u[1], u[0]]))
-    band = (lateral <= 2 * res) & (s >= 2 * res) & (s <= reach)
-    if band.sum() < 3:
+def _refine_partner(grid: LogOddsGrid, occupied: BoolArray, g: _Hinged, mode_yaw: float, hinge: FloatArray,
+                    phi: float, length: float, config: DoorDetectionConfig,
+                    within: tuple[float, float] | None = None) -> tuple[FloatArray, FloatArray] | None:
+    """The occupied line along φ (:func:`_band_line`); the hinge is its intersection with the leaf's line
+    (the leaf's near end may be cut short), the free end as :func:`_free_end`; None unless it is clear
+    beyond the leaf (:func:`_clear_beyond`)."""
+    fit = _band_line(grid, hinge, phi, length + config.partner_end_clear_m, config, within)
+    if fit is None:
         return None
-    pts = centres[band]
-    mean = pts.mean(axis=0)
-    _, vecs = np.linalg.eigh(np.cov((pts - mean).T))
-    d = vecs[:, 1] * (1.0 if float(vecs[:, 1] @ u) >= 0 else -1.0)
-    yaw_p = math.atan2(d[1], d[0])
+    pts, mean, d = fit
     lone_mid = ((g.near + g.far) / 2).mean(axis=0)
-    refined = intersect_lines(np.stack([lone_mid, mean]), np.array([mode_yaw, yaw_p]))
+    refined = intersect_lines(np.stack([lone_mid, mean]), np.array([mode_yaw, math.atan2(d[1], d[0])]))
     if refined is not None and np.hypot(*(refined - hinge)) <= config.hinge_distance_m:
         hinge = refined
+    end = _free_end(grid, pts, hinge, d, config)
+    if not _clear_beyond(grid, occupied, hinge, end, config):
+        return None
+    return hinge, end
+
+
+def _leaf_end(grid: LogOddsGrid, occupied: BoolArray, hinge: FloatArray, phi: float, length: float,
+              config: DoorDetectionConfig, within: tuple[float, float] | None = None) -> FloatArray | None:
+    """The free end of the occupied leaf along hinge + s·(cos φ, sin φ) (:func:`_band_line`,
+    :func:`_free_end`), or None unless it is clear beyond the leaf (:func:`_clear_beyond`)."""
+    fit = _band_line(grid, hinge, phi, length + config.partner_end_clear_m, config, within)
+    if fit is None:
+        return None
+    end = _free_end(grid, fit[0], hinge, fit[2], config)
+    return end if _clear_beyond(grid, occupied, hinge, end, config) else None
+
+
+def _band_line(grid: LogOddsGrid, hinge: FloatArray, phi: float, reach: float, config: DoorDetectionConfig,
+               within: tuple[float, float] | None = None) -> tuple[FloatArray, FloatArray, FloatArray] | None:
+    """The occupied cells (p > ``p_occupied``) within two cells of the ray hinge + s·(cos φ, sin φ),
+    s ∈ [2 cells, reach], as their mean end points; their mean and principal direction (pointing along φ).
+
+    None with fewer than three cells, or when the direction differs from φ by more than
+    ``angle_cluster_gap_deg``: a ray at a shallow angle to a wall runs inside the wall's grown cells for a
+    leaf's length, but the cells it crossed line up with the wall, not with the ray. With ``within`` (the
+    directions (lo, hi) of the run of directions φ came from), a fit that points elsewhere inside the run
+    moves the band there (at most twice): probed from a point off the object's line (a hinge guess from a
+    leaf cut short), a run is lopsided and its middle is off the object's direction. Compiled
+    (:func:`doorbatch.pipeline.gridmap.kernels.band_line_kernel`).
+    """
+    res = grid.resolution_m
+    side = 2 * math.ceil(reach / res) + 2
+    out = np.empty((side * side, 2))
+    lo, hi = within if within is not None else (0.0, 0.0)
+    n, mx, my, dx, dy = band_line_kernel(grid.log_odds, grid.hits, grid.hit_sum, _logit(config.p_occupied),
+                                         float(hinge[0]), float(hinge[1]), grid.origin_x_m, grid.origin_y_m, res,
+                                         phi, reach, math.radians(config.angle_cluster_gap_deg), within is not None,
+                                         lo, hi, out)
+    if n == 0:
+        return None
+    return out[:n] + hinge, np.array([mx, my]) + hinge, np.array([dx, dy])
+
+
+def _clear_beyond(grid: LogOddsGrid, occupied: BoolArray, hinge: FloatArray, end: FloatArray,
+                  config: DoorDetectionConfig) -> bool:
+    """No occupied cell (grown by a cell) along hinge → end over ``partner_end_clear_m`` from three cells
+    past the end (one for the growth, one for where in its last cell the leaf ends, one spare): a leaf
+    ends there, a wall would go on (the line fit reaches no farther than L + ``partner_end_clear_m``, so
+    a wall's "end" is followed by more wall)."""
+    d = end - hinge
+    s0 = float(np.hypot(*d)) + 3 * grid.resolution_m
+    yaw = np.array([math.atan2(d[1], d[0])])
+    return bool(_ray_fraction(grid, occupied, hinge, yaw, s0, s0 + config.partner_end_clear_m)[0] == 0.0)
+
+
+def _free_end(grid: LogOddsGrid, pts: FloatArray, hinge: FloatArray, d: FloatArray,
+              config: DoorDetectionConfig) -> FloatArray:
+    """The last of the cells along d before a gap longer than ``partner_gap_m`` (a slanted leaf's cells are
+    hit from grazing angles and some stay below p_occupied), plus half a cell."""
+    res = grid.resolution_m
     along = np.sort((pts - hinge) @ d)
     gaps = np.flatnonzero(np.diff(along) > max(config.partner_gap_m, 2 * res))
-    far = float(along[gaps[0]] if gaps.size else along[-1]) + res / 2
-    return hinge, hinge + far * d
+    return np.asarray(hinge + (float(along[gaps[0]] if gaps.size else along[-1]) + res / 2) * d, dtype=np.float64)
 
 
 def closed_direction(grid: LogOddsGrid, occupied: BoolArray, hinge: FloatArray, modes: FloatArray,
                      config: DoorDetectionConfig) -> float:
+    """The reference (closed) direction of a door (:func:`_wall_behind`)."""
+    return _wall_behind(grid, occupied, hinge, modes, config)[0]
+
+
+def _wall_behind(grid: LogOddsGrid, occupied: BoolArray, hinge: FloatArray, modes: FloatArray,
+                 config: DoorDetectionConfig) -> tuple[float, FloatArray | None]:
     """The reference (closed) direction of a door: a closed leaf is flush with its wall, so the wall
     continues behind the hinge, opposite to the closed leaf.
 
-    Candidates φ at 1° steps outside the observed range (or at its ends) score the fraction of occupied
-    cells along hinge − s·(cos φ, sin φ), s ∈ [2 cells, ``wall_probe_m``]; among those scoring
-    ≥ ``wall_min_fraction``, the one nearest to an end of the observed range wins (a perpendicular wall at
-    the hinge scores too, but lies far from the range). Without such a wall, the end of the observed range
-    with the better score is used (paper 000 only asks for "a reference opening angle in global
-    coordinates").
+    Directions φ at 1° steps score the fraction of occupied cells (grown by a cell) along
+    hinge − s·(cos φ, sin φ), s ∈ [2 cells, ``wall_probe_m``]; each run of directions scoring
+    ≥ ``wall_min_fraction`` is one wall, its direction a line fit to its cells (the grown cells score
+    fully over a spread of directions). Among the walls whose closed direction lies outside the observed
+    range (or within ``angle_cluster_gap_deg`` of its ends) and within the rotation limit of it, the one
+    nearest to an end of the range wins (a perpendicular wall at the hinge scores too, but lies far from
+    the range). Without such a wall, the end of the observed range with the better score is used (paper
+    000 only asks for "a reference opening angle in global coordinates"). Returns the closed direction
+    and a point on the wall's fitted line (None without a wall).
     """
     start, span = _range_about(modes)
     res = grid.resolution_m
+    gap = math.radians(config.angle_cluster_gap_deg)
     ends = np.array([start, start + span])
     end_score = _ray_fraction(grid, occupied, hinge, ends + math.pi, 2 * res, config.wall_probe_m)
     limit = math.radians(min(config.max_rotation_deg, 360.0)) - span
-    cand = start + span + np.radians(np.arange(0.0, 360.0, 1.0))
-    rel = np.mod(cand - (start + span), 2 * np.pi)  # CCW beyond the range end …
-    back = 2 * np.pi - span - rel  # … and CW before its start
-    outside = (back >= -1e-9) & ((rel <= limit + 1e-9) | (back <= limit + 1e-9))
-    cand, rel, back = cand[outside], rel[outside], back[outside]
+    cand = start + span + np.radians(np.arange(0.0, 360.0, 1.0))  # CCW from the range end, once around
     score = _ray_fraction(grid, occupied, hinge, cand + math.pi, 2 * res, config.wall_probe_m)
     good = score >= config.wall_min_fraction
-    if good.any():
-        dist = np.minimum(rel, back)[good]
-        return float(wrap_angle(cand[good][int(np.argmin(dist))]))
-    return float(wrap_angle(ends[int(np.argmax(end_score))]))
+    if good.all() or not good.any():
+        return float(wrap_angle(ends[int(np.argmax(end_score))])), None
+    shift = int(np.argmin(good))  # start the runs at a direction that is not a wall: none wraps around
+    order = np.roll(np.arange(cand.size), -shift)
+    best: tuple[float, float, FloatArray | None] | None = None  # (distance to the range, direction, wall point)
+    for run in np.split(order, np.flatnonzero(np.diff(good[order].astype(np.int8)) != 0) + 1):
+        if not good[run[0]]:
+            continue
+        tries, (lo, hi) = _run_directions(run, score, float(cand[run[0]]), math.radians(1.0), gap)
+        phi = tries[0]
+        fit = _band_line(grid, hinge, phi + math.pi, config.wall_probe_m, config, (lo + math.pi, hi + math.pi))
+        point = None
+        if fit is not None:
+            phi = math.atan2(-fit[2][1], -fit[2][0])
+            point = fit[1]
+        beyond_end = float(np.mod(phi - (start + span) + gap, 2 * np.pi)) - gap  # CCW past the range end
+        before_start = 2 * np.pi - span - beyond_end  # CW before its start
+        if before_start < -gap or min(beyond_end, before_start) > limit:
+            continue  # inside the observed range, or farther from it than a door turns
+        dist = max(0.0, min(beyond_end, before_start))
+        if best is None or dist < best[0]:
+            best = (dist, phi, point)
+    if best is not None:
+        return float(wrap_angle(best[1])), best[2]
+    return float(wrap_angle(ends[int(np.argmax(end_score))])), None
 
 
 # ------------------------------------------------------------------------------------------ static map
@@ -569,7 +964,7 @@ def remove_leaves(grid: LogOddsGrid, doors: list[DetectedDoor], config: DoorDete
     if not doors:
         return grid
     swept = np.zeros(grid.shape, dtype=bool)
-    occupied = grid.log_odds > np.float32(math.log(config.p_occupied / (1 - config.p_occupied)))
+    occupied = grid.log_odds > np.float32(_logit(config.p_occupied))
     for door in doors:
         swept |= swept_cells(grid, door, config.sweep_margin_m) & ~(
             occupied & _near(grid, door.hinge_x, door.hinge_y, config.hinge_keep_m))

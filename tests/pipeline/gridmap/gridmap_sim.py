@@ -103,3 +103,48 @@ def scan_pass(world: Corridor, alpha_a: float, alpha_b: float, *, reverse: bool,
         hit = r < max_range
         scans.append(MapScan(origin, origin + r[hit, None] * dirs[hit], dirs[~hit]))
     return scans
+
+
+@dataclass(frozen=True)
+class World:
+    """Static segments and hinged doors; ``scan_world`` scans it with the doors at given angles."""
+
+    static: FloatArray
+    doors: tuple[Door, ...]
+
+
+def two_sided_corridor(south_length: float = 0.9) -> World:
+    """Corridor y ∈ [0, 3], x ∈ [0, 14], walls on cell borders (as in the simulator's worlds), a room on
+    each side: door N hinged at the west end of its doorway in the top wall, opening into the north room
+    (counter-clockwise from 0°); door S hinged at the east end of its doorway in the bottom wall, opening
+    into the south room (counter-clockwise from 180°, the mirror image of N)."""
+    n = Door((5.0, 3.0), 0.9, 0.0, +1)
+    s = Door((10.0, 0.0), south_length, math.pi, +1)
+    s_free = 10.0 - south_length
+    segs = [
+        [(0, 3), (5.0, 3)], [(5.9, 3), (14, 3)], [(0, 0), (s_free, 0)], [(10.0, 0), (14, 0)],
+        [(0, 0), (0, 3)], [(14, 0), (14, 3)],
+        [(3.5, 3), (3.5, 6)], [(7.5, 3), (7.5, 6)], [(3.5, 6), (7.5, 6)],
+        [(8.0, 0), (8.0, -3)], [(12.0, 0), (12.0, -3)], [(8.0, -3), (12.0, -3)],
+    ]
+    return World(np.asarray(segs, dtype=np.float64), (n, s))
+
+
+def scan_world(world: World, angles: tuple[float, ...], *, reverse: bool, seed: int, n_scans: int = 240,
+               beams: int = 360, max_range: float = 10.0, sigma: float = 0.01, y: float = 1.5) -> list[MapScan]:
+    """One pass along y (left → right, or back) with door k held at ``angles[k]`` (rad)."""
+    rng = np.random.default_rng(seed)
+    xs = np.linspace(0.8, 13.2, n_scans)
+    if reverse:
+        xs = xs[::-1]
+    segs = np.concatenate([world.static, *(d.leaf(a) for d, a in zip(world.doors, angles, strict=True))])
+    angles_b = np.linspace(-math.pi, math.pi, beams, endpoint=False)
+    scans = []
+    for k, x in enumerate(xs):
+        origin = np.array([x, y])
+        yaw = 0.02 * math.sin(k / 7.0)
+        dirs = np.stack([np.cos(angles_b + yaw), np.sin(angles_b + yaw)], axis=1)
+        r = cast(origin, dirs, segs) + rng.normal(0.0, sigma, beams)
+        hit = r < max_range
+        scans.append(MapScan(origin, origin + r[hit, None] * dirs[hit], dirs[~hit]))
+    return scans

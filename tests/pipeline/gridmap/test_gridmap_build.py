@@ -7,10 +7,10 @@ from functools import cache
 
 import numpy as np
 import pytest
-from gridmap_sim import Corridor, Door, scan_pass
+from gridmap_sim import Corridor, Door, World, scan_pass, scan_world, two_sided_corridor
 
 from doorbatch.pipeline.gridmap.build import GridMapResult, build_grid_map
-from doorbatch.pipeline.gridmap.doors import DetectedDoor
+from doorbatch.pipeline.gridmap.doors import SOURCE_FALLEN, DetectedDoor
 
 OPEN = math.radians(60.0)
 B_OPEN = math.radians(45.0)  # door B stands open in every pass: it never moves
@@ -94,3 +94,74 @@ def test_a_walking_person_leaves_no_occupied_cells_and_no_door() -> None:
     cells = m.world_to_cell(pts)
     assert np.all(m.occupancy[cells[:, 0], cells[:, 1]] < 65)
     assert result.n_dynamic_points > 0
+
+
+# ------------------------------------------------------------------ doors on both sides, three passes
+
+DEG = math.pi / 180.0
+# Per pass, the angles of door N (opens into the north room) and door S (the mirror image, south side).
+# N: 100° into the room, closed, then 50°: the 100° leaf lies behind the 50° one and is never seen free
+# again. S: 50° into the room (never seen free before: static), closed (set 1, cut short at both ends by
+# the transient neighbourhood rule), then 64° (hides the closed leaf; the 50° leaf and the closed leaf's
+# hinge end fall in the same pass).
+PLAN = ((100.0, 50.0), (0.0, 0.0), (50.0, 64.0))
+
+
+@cache
+def _two_sided(south_length: float) -> tuple[World, GridMapResult]:
+    world = two_sided_corridor(south_length)
+    passes = [scan_world(world, (a * DEG, b * DEG), reverse=k % 2 == 1, seed=10 + k) for k, (a, b) in enumerate(PLAN)]
+    return world, build_grid_map(passes)
+
+
+def _nearest(doors: list[DetectedDoor], truth: Door) -> DetectedDoor:
+    return min(doors, key=lambda d: math.hypot(d.hinge_x - truth.hinge[0], d.hinge_y - truth.hinge[1]))
+
+
+@pytest.mark.parametrize("south_length", [0.9, 0.7])
+def test_doors_on_both_sides_of_the_corridor_are_found_with_their_whole_range(south_length: float) -> None:
+    """The south door's closed leaf is seen only as set-1 points cut short by the neighbourhood rule (a
+    0.7 m leaf loses more than λmin allows); completed along its line, it is found."""
+    world, result = _two_sided(south_length)
+    assert len(result.doors) == 2
+    north, south = world.doors
+    _check_door(_nearest(result.doors, north), north, 0.0, 100.0 * DEG)
+    _check_door(_nearest(result.doors, south), south, 0.0, 64.0 * DEG)
+
+
+def test_a_leaf_hidden_behind_its_later_state_is_part_of_the_opening_range() -> None:
+    """Door N stood at 100° in the first pass, in cells never seen free before or after (the 50° leaf of
+    the last pass hides them): neither set of dynamic points holds it, the static grid does."""
+    world, result = _two_sided(0.9)
+    door = _nearest(result.doors, world.doors[0])
+    assert math.degrees(door.angle_max) == pytest.approx(100.0, abs=5.0)
+    assert any(abs(math.remainder(y - 100.0 * DEG, 2 * math.pi)) < 5 * DEG for y in door.observed_yaws)
+    m = result.static_map  # and it is taken out of the static map
+    hinge = np.asarray(world.doors[0].hinge)
+    pts = hinge + np.linspace(0.2, 0.8, 7)[:, None] * [math.cos(100 * DEG), math.sin(100 * DEG)]
+    cells = m.world_to_cell(pts)
+    assert np.all(m.occupancy[cells[:, 0], cells[:, 1]] < 65)
+
+
+def test_leaf_states_that_fall_in_one_pass_are_told_apart_by_when_they_were_hit() -> None:
+    """In the last pass the S door's 50° leaf (hit in pass 0) and its closed leaf's hinge end (hit in pass
+    1) both fall; split by the pass that last hit them, the 50° leaf is a line (set 2) of pass 0."""
+    world, result = _two_sided(0.9)
+    south = world.doors[1]
+    leaves = result.leaves
+    near = np.minimum(np.hypot(*(leaves.p0 - south.hinge).T), np.hypot(*(leaves.p1 - south.hinge).T)) < 0.3
+    fallen = near & (leaves.source == SOURCE_FALLEN)
+    yaw = np.arctan2(*(leaves.p1 - leaves.p0)[:, ::-1].T)
+    at_50 = np.abs(np.remainder(yaw - (math.pi + 50 * DEG) + math.pi / 2, math.pi) - math.pi / 2) < 5 * DEG
+    assert np.any(fallen & at_50 & (leaves.pass_index == 0))
+
+
+def test_a_door_opened_from_closed_is_found_when_its_closed_cells_never_fall() -> None:
+    """Closed in two passes, then opened 22° into the corridor: the leaf hides most of its closed cells, so
+    the closed state is neither set 1 nor set 2. The doorway's cells, hit before and not while the leaf
+    stood open, are the closed state."""
+    world = Corridor(door_a=Door((5.0, 3.0), 0.9, 0.0, -1))
+    passes = [scan_pass(world, a * DEG, B_OPEN, reverse=k % 2 == 1, seed=20 + k) for k, a in enumerate((0, 0, 22))]
+    result = build_grid_map(passes)
+    assert len(result.doors) == 1
+    _check_door(result.doors[0], world.door_a, -22.0 * DEG, 0.0)

@@ -9,6 +9,8 @@ import pytest
 
 from doorbatch.config import DoorDetectionConfig, GridConfig
 from doorbatch.pipeline.gridmap.doors import (
+    SOURCE_FALLEN,
+    SOURCE_TRANSIENT,
     DetectedDoor,
     Leaves,
     angle_modes,
@@ -106,8 +108,9 @@ def test_a_leaf_that_turns_within_one_pass_is_no_door() -> None:
     segs = [_leaf(hinge, 0.9, 0.0), _leaf(hinge, 0.9, math.radians(60))]
     assert group_doors(_leaves(segs, [1, 1]), CFG) == []
     assert len(group_doors(_leaves(segs, [1, 1]), CFG.model_copy(update={"require_distinct_passes": False}))) == 1
-    fallen = Leaves(np.array([s[0] for s in segs]), np.array([s[1] for s in segs]), np.arange(2),
-                    np.array([1, 1]), np.array([2, 1]))  # set 2 of pass 1: the leaf stood there before
+    # Set 2 found in pass 1, of cells last hit in pass 0: the leaf stood there in pass 0.
+    fallen = Leaves(np.array([s[0] for s in segs]), np.array([s[1] for s in segs]), np.array([1, 7]),
+                    np.array([0, 1]), np.array([2, 1]))
     assert len(group_doors(fallen, CFG)) == 1
 
 
@@ -142,3 +145,43 @@ def test_removing_a_leaf_clears_the_swept_cells_and_keeps_the_hinge_occupied() -
     assert flat[hinge] == pytest.approx(gcfg.l_max)
     assert np.all(grid.log_odds[swept] <= gcfg.l_max) and np.sum(grid.log_odds[swept] > 0) == 1
     assert np.all(flat[outside] == np.float32(gcfg.l_max))
+
+
+def test_a_small_rotation_is_hinged_at_the_hinge_not_at_the_free_end() -> None:
+    """Turned by 16°, a 0.9 m leaf's free ends are 0.25 m apart: they form a group of close end points too.
+    The lines cross at the hinge, so that group makes no door and the hinge group does."""
+    hinge = (2.0, 3.0)
+    segs = [_leaf(hinge, 0.9, 0.0)] * 3 + [_leaf(hinge, 0.9, math.radians(16.0))] * 3
+    (door,) = group_doors(_leaves(segs), CFG)
+    assert math.hypot(door.hinge_x - 2.0, door.hinge_y - 3.0) < 0.02
+    assert math.degrees(door.angle_max - door.angle_min) == pytest.approx(16.0, abs=0.5)
+
+
+def test_a_door_shorter_than_a_leaf_from_its_hinge_is_no_door() -> None:
+    """Set-2 lines may be shorter than λmin (cut at the hinge); the door's length, from its hinge, is gated."""
+    hinge = (2.0, 3.0)
+    segs = [_leaf(hinge, 0.5, 0.0)] * 2 + [_leaf(hinge, 0.5, math.radians(60.0))] * 2
+    assert group_doors(_leaves(segs), CFG) == []
+    segs = [_leaf(hinge, 0.75, 0.0, cut=0.2)] * 2 + [_leaf(hinge, 0.75, math.radians(60.0))] * 2  # 0.55 m line
+    (door,) = group_doors(_leaves(segs), CFG)
+    assert door.length == pytest.approx(0.75, abs=0.02)
+
+
+def test_a_fallen_line_shorter_than_a_leaf_is_kept_a_dynamic_one_is_not() -> None:
+    pts = _line((0, 0), (0.5, 0), 12)
+    assert len(extract_leaves(pts, CFG, source=SOURCE_FALLEN)) == 1
+    assert len(extract_leaves(pts, CFG, source=SOURCE_TRANSIENT)) == 0
+
+
+def test_a_cluster_cut_short_is_completed_along_its_line_by_support_points() -> None:
+    """The transient neighbourhood rule leaves only the middle of a leaf dynamic; the rest of the leaf's
+    points of the same scan (in seen-free cells) complete the line — across gaps shorter than ε only."""
+    dynamic = _line((0.3, 0), (0.6, 0), 8)
+    support = np.vstack([_line((0.0, 0.01), (0.27, 0.01), 7), _line((0.63, 0), (0.9, 0), 7),
+                         _line((1.2, 0), (1.5, 0), 7),  # beyond a 0.3 m gap: another object
+                         _line((0.1, 0.3), (0.4, 0.3), 7)])  # off the line
+    assert len(extract_leaves(dynamic, CFG)) == 0
+    (seg,) = np.stack([*extract_leaves(dynamic, CFG, support=support).p0[:1],
+                       *extract_leaves(dynamic, CFG, support=support).p1[:1]])[None]
+    xs = sorted(seg[:, 0].tolist())
+    assert xs[0] == pytest.approx(0.0, abs=0.02) and xs[1] == pytest.approx(0.9, abs=0.02)

@@ -6,6 +6,7 @@ import numpy as np
 
 from doorbatch.config import GridConfig
 from doorbatch.pipeline.gridmap.dynamic import (
+    begin_pass,
     classify_endpoints,
     seen_free_grid,
     take_fallen_cells,
@@ -89,10 +90,12 @@ def test_update_transient_matches_the_lazy_flag() -> None:
 def test_a_seen_occupied_cell_that_falls_low_gives_its_cell_mean_once() -> None:
     grid = new_grid(CFG, (1.0, 1.0))
     origin, target = [0.25, 0.25], [1.23, 0.27]
+    begin_pass(grid, CFG)
     for _ in range(5):
         grid = integrate_scan(grid, origin, [target], NO_DIRS, CFG)
     assert grid.seen_occupied[2, 12]
     start = grid.scan_count
+    begin_pass(grid, CFG)
     for _ in range(20):  # the object left: beams now pass through the cell
         grid = integrate_scan(grid, origin, [[1.85, 0.25]], NO_DIRS, CFG)
     points = take_fallen_points(grid, CFG, since_scan=start)
@@ -101,10 +104,42 @@ def test_a_seen_occupied_cell_that_falls_low_gives_its_cell_mean_once() -> None:
     assert take_fallen_cells(grid, CFG, since_scan=start).size == 0
 
 
-def test_a_cell_still_hit_during_the_pass_is_consumed_but_not_returned() -> None:
+def test_a_cell_falls_by_the_evidence_of_its_pass_alone() -> None:
+    """A saturated cell seen free a few times in a pass (a leaf seen obliquely through a doorway) is not
+    below p_transient_below overall, but the pass's own evidence is: it falls."""
     grid = new_grid(CFG, (1.0, 1.0))
-    grid.log_odds[2, 12] = CFG.l_low - 1.0
+    begin_pass(grid, CFG)
+    grid.log_odds[2, 12] = CFG.l_max
     grid.seen_occupied[2, 12] = True
+    grid.last_hit_scan[2, 12] = 0
+    grid.scan_count = 10
+    begin_pass(grid, CFG)
+    n_free = int(np.ceil(-CFG.l_low / -CFG.l_free))  # free updates that bring an unknown cell below the level
+    grid.log_odds[2, 12] = CFG.l_max + (n_free - 1) * CFG.l_free
+    assert take_fallen_cells(grid, CFG, since_scan=10).size == 0  # one update short
+    grid.log_odds[2, 12] = CFG.l_max + n_free * CFG.l_free
+    assert grid.log_odds[2, 12] > CFG.l_low  # still not low overall …
+    assert take_fallen_cells(grid, CFG, since_scan=10).tolist() == [2 * 20 + 12]  # … but gone in this pass
+
+
+def test_a_cell_still_hit_during_the_pass_is_not_returned_and_stays_seen_occupied() -> None:
+    """A wall on a cell border flickers between hit and free within a pass: it is a surface present in
+    the pass, not an object that left, and its flag keeps it out of the next pass's dynamic points."""
+    grid = new_grid(CFG, (1.0, 1.0))
+    grid.seen_occupied[2, 12] = True
+    begin_pass(grid, CFG)
+    grid.log_odds[2, 12] = CFG.l_low - 1.0
     grid.last_hit_scan[2, 12] = 7
     assert take_fallen_cells(grid, CFG, since_scan=5).size == 0
-    assert not grid.seen_occupied[2, 12]
+    assert grid.seen_occupied[2, 12]
+
+
+def test_points_near_structure_known_before_the_pass_are_static() -> None:
+    """Transient cells next to a cell seen occupied before the pass (a wall that grazing beams cleared)
+    hold no dynamic measurements; farther than the neighbourhood they do."""
+    grid = new_grid(CFG, (1.0, 1.0))
+    grid.log_odds[1:-1, 1:-1] = CFG.l_min
+    grid.seen_occupied[5, 10] = True  # e.g. a wall cell that was hit, then cleared by grazing beams
+    begin_pass(grid, CFG)
+    pts = [_centre(grid, 5, j) for j in (9, 11, 12)]
+    assert classify_endpoints(grid, pts, CFG).tolist() == [False, False, True]

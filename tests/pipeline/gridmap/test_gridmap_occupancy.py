@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from gridmap_sim import cast
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -13,12 +14,14 @@ from doorbatch.config import GridConfig
 from doorbatch.maps import UNKNOWN
 from doorbatch.pipeline.gridmap.occupancy import (
     LogOddsGrid,
+    free_fraction,
     integrate_scan,
     new_grid,
     to_occupancy_map,
 )
 
-CFG = GridConfig(resolution_m=0.1, initial_size_m=2.0, growth_margin_m=0.5)
+# surface_band_m = 0: these tests check the DDA's exact cells; the band has its own tests below.
+CFG = GridConfig(resolution_m=0.1, initial_size_m=2.0, growth_margin_m=0.5, surface_band_m=0.0)
 NO_DIRS = np.zeros((0, 2))
 FREE, OCC = float(np.float32(CFG.l_free)), float(np.float32(CFG.l_occ))
 
@@ -146,3 +149,38 @@ def test_one_scan_changes_each_cell_by_at_most_one_update(ox: float, oy: float, 
     assert np.allclose(grid.log_odds.reshape(-1)[grid.flat_index(points)], CFG.l_occ)
     (origin_cell,) = grid.flat_index([[ox, oy]])
     assert grid.log_odds.reshape(-1)[origin_cell] != 0.0
+
+
+def test_a_beam_stops_clearing_one_band_before_the_surface_it_hit() -> None:
+    """free_fraction: 1 − band / (r sin θ), θ from the nearer neighbouring end point."""
+    wall = np.stack([np.linspace(0.5, 1.5, 11), np.full(11, 1.0)], axis=1)  # a wall y = 1, seen from (1, 0)
+    frac = free_fraction(wall, 1.0, 0.0, 0.05)
+    r = np.hypot(wall[:, 0] - 1.0, 1.0)
+    sin = 1.0 / r  # the beam's angle to the wall: sin θ = distance to the wall / range
+    np.testing.assert_allclose(frac, 1.0 - 0.05 / (r * sin), atol=1e-12)
+    grazing = np.stack([np.linspace(5.0, 6.0, 11), np.full(11, 1.0)], axis=1)  # seen from (0, 0.9): 1°
+    assert np.all(free_fraction(grazing, 0.0, 0.9, 0.05) < 0.5)
+
+
+def test_grazing_beams_do_not_clear_a_wall_on_a_cell_border() -> None:
+    """A wall on a cell border (y = 1 m) puts its hits into two rows of cells. Seen from 6–12 m away at
+    2–5°, a cell of it is rarely a beam's end point, but beams that end farther along the wall pass
+    through its near-side row for metres: without the surface band that row goes below
+    p_transient_below (and its wall points would turn dynamic); with it, it is never cleared."""
+    wall = np.array([[[0.0, 1.0], [30.0, 1.0]]])
+    angles = np.linspace(-math.pi, math.pi, 360, endpoint=False)
+    dirs = np.stack([np.cos(angles), np.sin(angles)], axis=1)
+    near_row = [[x, 0.975] for x in np.arange(6.0, 12.0, 0.05)]
+    lowest = {}
+    for band in (0.05, 0.0):
+        cfg = GridConfig(surface_band_m=band)
+        rng = np.random.default_rng(4)
+        grid = new_grid(cfg, (10.0, 1.0))
+        for x0 in np.linspace(0.5, 2.5, 20):
+            origin = np.array([x0, 0.5])
+            r = cast(origin, dirs, wall) + rng.normal(0.0, 0.01, angles.size)
+            hit = r < 20.0
+            grid = integrate_scan(grid, origin, origin + r[hit, None] * dirs[hit], dirs[~hit], cfg)
+        lowest[band] = float(grid.log_odds.reshape(-1)[grid.flat_index(near_row)].min())
+    assert lowest[0.05] >= 0.0
+    assert lowest[0.0] < GridConfig().l_low
