@@ -35,7 +35,7 @@ from scipy.spatial import cKDTree
 
 from doorbatch.config import DoorDetectionConfig, GridConfig
 from doorbatch.geometry.rotations import wrap_angle
-from doorbatch.pipeline.gridmap.dynamic import seen_free_grid
+from doorbatch.pipeline.gridmap.dynamic import seen_free
 from doorbatch.pipeline.gridmap.kernels import (
     band_line_kernel,
     cluster_kernel,
@@ -414,7 +414,7 @@ def group_doors(leaves: Leaves, config: DoorDetectionConfig, grid: LogOddsGrid |
     """
     if len(leaves) == 0:
         return []
-    occupied = None if grid is None else _occupied_dilated(grid, config)
+    occupied = None if grid is None else _occupied_dilated(grid, config, leaves)
     gap = math.radians(config.angle_cluster_gap_deg)
     used = np.zeros(len(leaves), dtype=bool)
     doors: list[DetectedDoor] = []
@@ -718,10 +718,22 @@ def _logit(p: float) -> float:
     return math.log(p / (1.0 - p))
 
 
-def _occupied_dilated(grid: LogOddsGrid, config: DoorDetectionConfig) -> BoolArray:
-    """Occupied cells (p > p_occupied) grown by one cell, so probes tolerate a cell of misregistration."""
-    occ = (grid.log_odds > np.float32(_logit(config.p_occupied))).view(np.uint8)
-    return np.asarray(ndimage.maximum_filter(occ, size=3, mode="constant", cval=0).view(bool), dtype=np.bool_)
+def _occupied_dilated(grid: LogOddsGrid, config: DoorDetectionConfig, leaves: Leaves | None = None) -> BoolArray:
+    """Occupied cells (p > p_occupied) grown by one cell, so probes tolerate a cell of misregistration.
+    With ``leaves``, only within 2 λmax of them (where the probes from their hinges reach; zeros beyond)."""
+    h, w = grid.shape
+    i0, i1, j0, j1 = 0, h, 0, w
+    if leaves is not None and len(leaves):
+        ends = np.concatenate([leaves.p0, leaves.p1])
+        lo = np.floor(grid.world_to_cell_float(ends.min(axis=0) - 2 * config.door_length_max_m)).astype(np.int64)
+        hi = np.floor(grid.world_to_cell_float(ends.max(axis=0) + 2 * config.door_length_max_m)).astype(np.int64)
+        j0, i0 = (int(v) for v in np.maximum(lo, 0))
+        j1, i1 = (int(v) for v in np.minimum(hi + 1, [w, h]))
+    out = np.zeros((h, w), dtype=bool)
+    if i1 > i0 and j1 > j0:
+        occ = (grid.log_odds[i0:i1, j0:j1] > np.float32(_logit(config.p_occupied))).view(np.uint8)
+        out[i0:i1, j0:j1] = ndimage.maximum_filter(occ, size=3, mode="constant", cval=0).view(bool)
+    return out
 
 
 def _ray_fraction(grid: LogOddsGrid, mask: BoolArray, start: FloatArray, yaws: FloatArray,
@@ -929,6 +941,13 @@ def swept_cells(grid: LogOddsGrid, door: DetectedDoor, margin_m: float) -> BoolA
     """(H, W) mask of the cells whose centres lie in the sector the leaf swept over its observed range
     (radius = leaf length, angles [angle_min, angle_max] about closed_yaw), or within ``margin_m`` of
     the leaf at either end of the range."""
+    mask = np.zeros(grid.shape, dtype=bool)
+    mask.reshape(-1)[_swept_flat(grid, door, margin_m)] = True
+    return mask
+
+
+def _swept_flat(grid: LogOddsGrid, door: DetectedDoor, margin_m: float) -> IntArray:
+    """Flat indices of :func:`swept_cells` (computed in the door's box only)."""
     h, w = grid.shape
     res = grid.resolution_m
     reach = door.length + margin_m + res
@@ -936,9 +955,8 @@ def swept_cells(grid: LogOddsGrid, door: DetectedDoor, margin_m: float) -> BoolA
     c1 = np.floor(grid.world_to_cell_float([door.hinge_x + reach, door.hinge_y + reach])).astype(np.int64)
     j0, i0 = np.maximum(c0, 0)
     j1, i1 = np.minimum(c1, [w - 1, h - 1])
-    mask = np.zeros((h, w), dtype=bool)
     if j1 < j0 or i1 < i0:
-        return mask
+        return np.zeros(0, dtype=np.int64)
     jj, ii = np.meshgrid(np.arange(j0, j1 + 1), np.arange(i0, i1 + 1))
     px = grid.origin_x_m + (jj + 0.5) * res - door.hinge_x
     py = grid.origin_y_m + (ii + 0.5) * res - door.hinge_y
@@ -949,8 +967,7 @@ def swept_cells(grid: LogOddsGrid, door: DetectedDoor, margin_m: float) -> BoolA
         u = (math.cos(door.closed_yaw + ang), math.sin(door.closed_yaw + ang))
         t = np.clip(px * u[0] + py * u[1], 0.0, door.length)
         inside |= np.hypot(px - t * u[0], py - t * u[1]) <= margin_m
-    mask[i0:i1 + 1, j0:j1 + 1] = inside
-    return mask
+    return np.asarray((ii * w + jj)[inside], dtype=np.int64)
 
 
 def remove_leaves(grid: LogOddsGrid, doors: list[DetectedDoor], config: DoorDetectionConfig,
@@ -963,38 +980,23 @@ def remove_leaves(grid: LogOddsGrid, doors: list[DetectedDoor], config: DoorDete
     """
     if not doors:
         return grid
-    swept = np.zeros(grid.shape, dtype=bool)
-    occupied = grid.log_odds > np.float32(_logit(config.p_occupied))
+    threshold = np.float32(_logit(config.p_occupied))
+    parts = []
     for door in doors:
-        swept |= swept_cells(grid, door, config.sweep_margin_m) & ~(
-            occupied & _near(grid, door.hinge_x, door.hinge_y, config.hinge_keep_m))
-    free = seen_free_grid(grid, grid_config)
-    grid.log_odds[swept & free] = np.float32(grid_config.l_min)
-    unknown = swept & ~free
-    grid.log_odds[unknown] = 0.0
-    grid.hits[unknown] = 0
-    grid.hit_sum[unknown] = 0
-    grid.seen_occupied[swept] = False
+        flat = _swept_flat(grid, door, config.sweep_margin_m)
+        near_hinge = np.hypot(*(grid.cell_centers(flat) - (door.hinge_x, door.hinge_y)).T) <= config.hinge_keep_m
+        parts.append(flat[~(near_hinge & (grid.log_odds.reshape(-1)[flat] > threshold))])
+    swept = np.unique(np.concatenate(parts))
+    free = seen_free(grid, swept, grid_config)
+    grid.log_odds.reshape(-1)[swept[free]] = np.float32(grid_config.l_min)
+    unknown = swept[~free]
+    grid.log_odds.reshape(-1)[unknown] = 0.0
+    grid.hits.reshape(-1)[unknown] = 0
+    grid.hit_sum.reshape(-1)[unknown] = 0
+    grid.seen_occupied.reshape(-1)[swept] = False
     for door in doors:
         if grid.contains([door.hinge_x, door.hinge_y]):
             k = int(grid.flat_index([door.hinge_x, door.hinge_y]))
             grid.log_odds.reshape(-1)[k] = np.float32(grid_config.l_max)
             grid.hits.reshape(-1)[k] = max(1, int(grid.hits.reshape(-1)[k]))
     return grid
-
-
-def _near(grid: LogOddsGrid, x: float, y: float, radius: float) -> BoolArray:
-    """(H, W) mask of the cells whose centres lie within ``radius`` of (x, y)."""
-    h, w = grid.shape
-    res = grid.resolution_m
-    mask = np.zeros((h, w), dtype=bool)
-    j0 = max(0, math.floor((x - radius - grid.origin_x_m) / res))
-    i0 = max(0, math.floor((y - radius - grid.origin_y_m) / res))
-    j1 = min(w, math.ceil((x + radius - grid.origin_x_m) / res) + 1)
-    i1 = min(h, math.ceil((y + radius - grid.origin_y_m) / res) + 1)
-    if j1 <= j0 or i1 <= i0:
-        return mask
-    cx = grid.origin_x_m + (np.arange(j0, j1) + 0.5) * res - x
-    cy = grid.origin_y_m + (np.arange(i0, i1) + 0.5) * res - y
-    mask[i0:i1, j0:j1] = cy[:, None] ** 2 + cx[None, :] ** 2 <= radius**2
-    return mask

@@ -441,6 +441,13 @@ def scan_leaves_kernel(dyn: FloatArray, support: FloatArray, eps: float, tol: fl
                     grown[total, 0] = support[i, 0]
                     grown[total, 1] = support[i, 1]
                     total += 1
+        lox = hix = grown[0, 0]
+        loy = hiy = grown[0, 1]
+        for q in range(1, total):
+            lox, hix = min(lox, grown[q, 0]), max(hix, grown[q, 0])
+            loy, hiy = min(loy, grown[q, 1]), max(hiy, grown[q, 1])
+        if (hix - lox) ** 2 + (hiy - loy) ** 2 < shortest * shortest:
+            continue  # no pair as long as a leaf (a person, a chair): its line would be too short anyway
         pts = grown[:total]
         if total > max_points:  # evenly subsampled as np.linspace(0, n - 1, max_points).astype(int) does
             step = (total - 1) / (max_points - 1)
