@@ -13,7 +13,7 @@ An experiment file (``configs/experiments/*.yaml``; relative paths are relative 
     init: reference            # reference | global | X,Y,YAW
     set: ["localize.z_rand=0.2"]   # config overrides for every run
 
-Output: ``DIR/map/`` (when built), ``DIR/runs/<log stem>/<method>_n<N>_s<seed>/`` (trajectory.parquet,
+Output: ``DIR/map/`` (when built), ``DIR/runs/<log stem>/<method>[_n<N>]_s<seed>/`` (trajectory.parquet,
 door_states.parquet, trajectory.tum, manifest.json with the sweep point in ``extra.params``; no annotated
 MCAP, which the metrics do not need), and the report (metrics.parquet with ``params`` = the sweep point,
 report.md, report.html, plots). Each run is deterministic given its seed, so the workers' order does not
@@ -75,9 +75,9 @@ class SweepPoint(BaseModel):
 
     @property
     def run_name(self) -> str:
-        """``<method>_n<particles>_s<seed>`` (``n-`` for the config's particle count)."""
-        n = "-" if self.particles is None else str(self.particles)
-        return f"{self.method}_n{n}_s{self.seed}"
+        """``<method>_n<particles>_s<seed>`` (``<method>_s<seed>`` with the config's particle count)."""
+        n = "" if self.particles is None else f"_n{self.particles}"
+        return f"{self.method}{n}_s{self.seed}"
 
     def params(self) -> dict[str, Any]:
         """The params column of metrics.parquet."""
