@@ -2,6 +2,9 @@
 
 Public API (the ``run`` stage and notebooks call these; :mod:`doorbatch.io.report_writer` writes the result)::
 
+    run_tables_from_result(result: LocalizationResult, *, name=None, init="reference", map_doors=None,
+                           reference=None, truth=None, params=None) -> RunTables   # a run in memory
+
     evaluate_runs(runs: Sequence[RunTables], config: DoorbatchConfig, *,
                   reference: ReferenceTrajectory | None = None, truth: SimTruth | None = None,
                   maps: Sequence[MapTables] = ()) -> Evaluation
@@ -46,6 +49,7 @@ from doorbatch.pipeline.evaluate.trajectory_metrics import (
     statistics,
     trajectory_errors,
 )
+from doorbatch.pipeline.localize.result import LocalizationResult
 
 FloatArray = npt.NDArray[np.float64]
 Int64Array = npt.NDArray[np.int64]
@@ -95,6 +99,19 @@ class RunTables:
     reference: ReferenceTrajectory | None = None
     truth: SimTruth | None = None
     params: dict[str, Any] = field(default_factory=dict)
+
+
+def run_tables_from_result(result: LocalizationResult, *, name: str | None = None, init: str = "reference",
+                           map_doors: DoorSet | None = None, reference: ReferenceTrajectory | None = None,
+                           truth: SimTruth | None = None, params: dict[str, Any] | None = None) -> RunTables:
+    """A run in memory (``localize``'s result) as :class:`RunTables`, without writing a run directory."""
+    u, d = result.door_mean.shape
+    states = None if d == 0 else DoorStateTable(
+        np.repeat(result.stamps_ns, d), np.tile(np.arange(d, dtype=np.int32), u), result.door_mean.ravel(),
+        result.door_observed.ravel())
+    return RunTables(name or f"{result.log}/{result.method}", result.log, result.method, result.stamps_ns,
+                     result.pose, init, result.converged_ns, result.ambiguous, states, map_doors, reference, truth,
+                     dict(params or {}))
 
 
 @dataclass(frozen=True)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import base64
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +25,7 @@ from doorbatch.pipeline.evaluate.report import (
     ReferenceTrajectory,
     RunTables,
     evaluate_runs,
+    run_tables_from_result,
     summary_table,
 )
 from doorbatch.pipeline.localize.result import LocalizationResult
@@ -115,15 +117,18 @@ def test_error_along_the_corridor_averages_runs_per_bin() -> None:
     assert row[1][table.value_columns.index("ape_trans_rmse")] == pytest.approx(0.15)
 
 
-def _write_run(folder: Path, log: Path, stamps: np.ndarray, pose: np.ndarray, method: str,
-               door_angle: float) -> None:
+def _result(log: Path, stamps: np.ndarray, pose: np.ndarray, method: str, door_angle: float) -> LocalizationResult:
     u = len(stamps)
-    result = LocalizationResult(
+    return LocalizationResult(
         log=log.name, method=method, stamps_ns=stamps, pose=pose, cov=np.tile(np.eye(3) * 1e-3, (u, 1, 1)),
         odom=pose.copy(), n_particles=np.full(u, 500, np.int32), neff=np.full(u, 400.0),
         door_mean=np.full((u, 1), door_angle), door_std=np.full((u, 1), 0.05), door_observed=np.ones((u, 1), bool),
-        particles=np.zeros((u, 1, 3)))
-    write_run_tables(folder, result)
+        particles=np.zeros((u, 1, 3)), converged_ns=int(stamps[0]))
+
+
+def _write_run(folder: Path, log: Path, stamps: np.ndarray, pose: np.ndarray, method: str,
+               door_angle: float) -> None:
+    write_run_tables(folder, _result(log, stamps, pose, method, door_angle))
     manifest = Manifest.start(DoorbatchConfig().as_dict(), [log], command="localize", method=method,
                               init="reference")
     manifest.extra.update({"converged_after_s": 0.0, "ambiguous": False})
@@ -161,3 +166,24 @@ def test_evaluate_cli_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str])
     (tmp_path / "empty").mkdir()
     assert main(["evaluate", str(tmp_path / "empty"), "-o", str(tmp_path / "r")]) == 3
     assert "neither a run directory" in capsys.readouterr().err
+
+
+def test_a_run_in_memory_scores_as_its_run_directory(tmp_path: Path) -> None:
+    stamps, ref = _straight()
+    log = tmp_path / "loc.mcap"
+    log.write_bytes(b"")
+    truth = _truth(0.5)
+    map_doors = DoorSet(np.array([[5.0, 1.1]]), np.array([0.9]), np.zeros(1), np.zeros(1), np.ones(1))
+    result = _result(log, stamps, ref + np.array([0.02, -0.03, 0.01]), "rbpf", 0.45)
+    reference = ReferenceTrajectory(stamps, ref)
+    _write_run(tmp_path / "run", log, stamps, result.pose, "rbpf", 0.45)
+    from doorbatch.io.run_reader import read_run_dir
+
+    on_disk = replace(read_run_dir(tmp_path / "run", DoorbatchConfig(), "r"), map_doors=map_doors)
+    in_memory = run_tables_from_result(result, name="r", map_doors=map_doors)
+    a = evaluate_runs([on_disk], DoorbatchConfig(), reference=reference, truth=truth)
+    b = evaluate_runs([in_memory], DoorbatchConfig(), reference=reference, truth=truth)
+    assert [r.metric for r in a.metrics] == [r.metric for r in b.metrics]
+    np.testing.assert_allclose([r.value for r in a.metrics], [r.value for r in b.metrics], atol=1e-12)
+    truth_angle = np.minimum(0.5, 0.005 * np.arange(200))  # the truth ramps 0 → 0.5 rad over 10 s, then stays
+    assert a.value("r", "door_state_error_mean") == pytest.approx(np.mean(np.abs(0.45 - truth_angle)))
