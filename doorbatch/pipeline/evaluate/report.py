@@ -371,7 +371,7 @@ class SummaryTable:
 
 
 def _label(params: dict[str, Any]) -> str:
-    return ", ".join(f"{k}={v}" for k, v in sorted(params.items()) if k != "seed")
+    return ", ".join(f"{k}={v}" for k, v in sorted(params.items()) if k != "seed" and v is not None)
 
 
 def summary_table(evaluation: Evaluation, metrics: Sequence[str] = SUMMARY_METRICS, method_map: bool = False

@@ -29,8 +29,10 @@ from doorbatch.pipeline.evaluate.report import (
     summary_table,
 )
 from doorbatch.pipeline.localize.result import LocalizationResult
+from tests.conftest import REPO
 
 T0 = 1_700_000_000_000_000_000
+SAMPLE_LOGS = REPO / "datasets" / "sample" / "logs"
 DT = 100_000_000
 
 
@@ -187,3 +189,50 @@ def test_a_run_in_memory_scores_as_its_run_directory(tmp_path: Path) -> None:
     np.testing.assert_allclose([r.value for r in a.metrics], [r.value for r in b.metrics], atol=1e-12)
     truth_angle = np.minimum(0.5, 0.005 * np.arange(200))  # the truth ramps 0 → 0.5 rad over 10 s, then stays
     assert a.value("r", "door_state_error_mean") == pytest.approx(np.mean(np.abs(0.45 - truth_angle)))
+
+
+def _map_dir(folder: Path, doors: DoorSet) -> Path:
+    import shutil
+
+    from doorbatch.io.parquet import write_table
+
+    folder.mkdir(parents=True)
+    for suffix in ("yaml", "pgm"):
+        shutil.copy(SAMPLE_LOGS / f"map.map_static.{suffix}", folder / f"map.{suffix}")
+    (folder / "map.yaml").write_text((folder / "map.yaml").read_text().replace("map.map_static.pgm", "map.pgm"))
+    n = len(doors)
+    write_table("doors", {"door_id": np.arange(n, dtype=np.int32), "hinge_x": doors.hinge[:, 0],
+                          "hinge_y": doors.hinge[:, 1], "length": doors.length, "closed_yaw": doors.closed_yaw,
+                          "angle_min": doors.angle_min, "angle_max": doors.angle_max,
+                          "n_observations": np.full(n, 5, np.int32), "source": ["grid"] * n, "moved": [True] * n},
+                folder / "doors.parquet")
+    manifest = Manifest.start(DoorbatchConfig().as_dict(), [SAMPLE_LOGS / "map_pass1.mcap"], command="map")
+    manifest.write(folder / "manifest.json")
+    return folder
+
+
+def test_door_maps_are_scored_against_the_mapping_truth(tmp_path: Path) -> None:
+    from doorbatch.io.sim_truth import read_truth
+    from doorbatch.pipeline.evaluate.door_map import truth_doors
+
+    truth = read_truth(SAMPLE_LOGS / "map.truth.yaml")
+    doors, moved = truth_doors(truth, math.radians(DoorbatchConfig().doors.min_opening_deg))
+    keep = np.flatnonzero(moved)
+    exact = DoorSet(doors.hinge[keep], doors.length[keep], doors.closed_yaw[keep], doors.angle_min[keep],
+                    doors.angle_max[keep])
+    shifted_hinge = exact.hinge.copy()
+    shifted_hinge[0] += [0.5, 0.0]  # beyond the 0.3 m match radius: a false positive and a missed door
+    shifted = DoorSet(shifted_hinge, exact.length + 0.05, exact.closed_yaw, exact.angle_min, exact.angle_max)
+    out = tmp_path / "report"
+    args = ["evaluate", str(_map_dir(tmp_path / "exact", exact)), str(_map_dir(tmp_path / "shifted", shifted)),
+            "-o", str(out), "-q"]
+    assert main(args) == 0  # the truth is found next to the map's logs (map.truth.yaml of the sample)
+    table = read_table("metrics", out / "metrics.parquet").to_pydict()
+    got = {(r, m): v for r, m, v in zip(table["run"], table["metric"], table["value"], strict=True)}
+    n = len(keep)
+    assert got[("exact", "door_precision")] == 1.0 and got[("exact", "door_recall")] == 1.0
+    assert got[("exact", "door_hinge_error_mean")] == pytest.approx(0.0, abs=1e-12)
+    assert got[("shifted", "door_precision")] == pytest.approx((n - 1) / n)
+    assert got[("shifted", "door_recall")] == pytest.approx((n - 1) / n)
+    assert got[("shifted", "door_length_error_mean")] == pytest.approx(0.05)
+    assert main([*args[:-1], "--world", str(SAMPLE_LOGS / "map.truth.yaml")]) == 0  # the same truth, given
