@@ -161,6 +161,11 @@ def test_evaluate_cli_writes_the_report_directory(tmp_path: Path, capsys: pytest
     assert png.startswith(b"\x89PNG") and "src=\"error_along_x.png\"" not in page  # embedded, not linked
     assert (out / "error_along_x.png").read_bytes()[:4] == b"\x89PNG"
     assert "| loc.mcap | rbpf |" in (out / "report.md").read_text()
+    again = tmp_path / "again"  # deterministic: the same inputs give the same bytes (reruns of doorbatch run)
+    assert main(["evaluate", str(tmp_path / "runs" / "mcl"), str(tmp_path / "runs" / "rbpf"), "-o", str(again),
+                 "-q"]) == 0
+    for name in ("metrics.parquet", "report.md", "report.html", "error_along_x.png"):
+        assert (again / name).read_bytes() == (out / name).read_bytes(), name
 
 
 def test_evaluate_cli_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
