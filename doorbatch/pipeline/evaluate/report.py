@@ -374,6 +374,12 @@ def _label(params: dict[str, Any]) -> str:
     return ", ".join(f"{k}={v}" for k, v in sorted(params.items()) if k != "seed" and v is not None)
 
 
+def _sort_key(params: dict[str, Any]) -> tuple[tuple[str, int, float, str], ...]:
+    """Sweep points in numeric order (1,000 before 5,000 before 10,000), seeds left out."""
+    return tuple((k, 0, float(v), "") if isinstance(v, int | float) else (k, 1, 0.0, str(v))
+                 for k, v in sorted(params.items()) if k != "seed")
+
+
 def summary_table(evaluation: Evaluation, metrics: Sequence[str] = SUMMARY_METRICS, method_map: bool = False
                   ) -> SummaryTable:
     """Mean of each metric per (log, method, sweep point without the seed), over the runs (seeds) there."""
@@ -381,14 +387,16 @@ def summary_table(evaluation: Evaluation, metrics: Sequence[str] = SUMMARY_METRI
     groups: dict[tuple[str, str, str], dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
     runs: dict[tuple[str, str, str], set[str]] = defaultdict(set)
     units: dict[str, str] = {}
+    order: dict[tuple[str, str, str], tuple[Any, ...]] = {}
     for r in keep:
         key = (r.log if not method_map else r.run, r.method, _label(r.params))
+        order.setdefault(key, (key[0], key[1], *_sort_key(r.params)))
         groups[key][r.metric].append(r.value)
         runs[key].add(r.run)
         units[r.metric] = r.unit
     present = tuple(m for m in metrics if m in units)
     rows: list[tuple[tuple[str, ...], tuple[float, ...]]] = []
-    for key in sorted(groups):
+    for key in sorted(groups, key=order.__getitem__):
         values = tuple(float(np.nanmean(groups[key][m])) if groups[key].get(m) and np.isfinite(groups[key][m]).any()
                        else math.nan for m in present)
         rows.append(((*key, str(len(runs[key]))), values))

@@ -241,3 +241,11 @@ def test_door_maps_are_scored_against_the_mapping_truth(tmp_path: Path) -> None:
     assert got[("shifted", "door_recall")] == pytest.approx((n - 1) / n)
     assert got[("shifted", "door_length_error_mean")] == pytest.approx(0.05)
     assert main([*args[:-1], "--world", str(SAMPLE_LOGS / "map.truth.yaml")]) == 0  # the same truth, given
+
+
+def test_summary_rows_follow_the_particle_count_numerically() -> None:
+    stamps, ref = _straight(50)
+    runs = [RunTables(f"r{n}", "l", "mcl", stamps, ref, reference=ReferenceTrajectory(stamps, ref),
+                      params={"particles": n, "seed": 0}) for n in (10000, 5000, 1000, 20000)]
+    table = summary_table(evaluate_runs(runs, DoorbatchConfig()))
+    assert [labels[2] for labels, _ in table.rows] == [f"particles={n}" for n in (1000, 5000, 10000, 20000)]
