@@ -58,8 +58,11 @@ def read_reference(path: Path, config: DoorbatchConfig) -> ReferenceTrajectory:
     return ReferenceTrajectory(rec.reference.stamps_ns, rec.reference.poses)
 
 
-def _sibling(log_path: Path, suffix: str) -> Path:
-    return log_path.with_name(log_path.name.split(".")[0] + suffix)
+def _sibling(log_path: Path, kind: str) -> Path:
+    """The simulator's ``truth`` (YAML) or ``trajectory`` (TUM) file of a log, named as the simulator does."""
+    from doorbatch.sim.simulate import output_paths
+
+    return output_paths(log_path)[kind]
 
 
 def _input_paths(manifest: Manifest) -> list[Path]:
@@ -93,11 +96,11 @@ def read_run_dir(run_dir: Path, config: DoorbatchConfig, name: str | None = None
     maps = [p.parent for p in inputs[1:] if p.name == "map.yaml"]
     converged_after = extra.get("converged_after_s")
     reference = truth = None
-    if log_path is not None and _sibling(log_path, ".truth.tum").is_file():
-        tum = read_tum(_sibling(log_path, ".truth.tum"))
+    if log_path is not None and _sibling(log_path, "trajectory").is_file():
+        tum = read_tum(_sibling(log_path, "trajectory"))
         reference = ReferenceTrajectory(tum.stamp_ns, np.stack([tum.x, tum.y, tum.yaw], axis=1))
-    if log_path is not None and _sibling(log_path, ".truth.yaml").is_file():
-        truth = read_truth(_sibling(log_path, ".truth.yaml"))
+    if log_path is not None and _sibling(log_path, "truth").is_file():
+        truth = read_truth(_sibling(log_path, "truth"))
     params = extra.get("params")
     return RunTables(
         name=name or run_dir.name, log=str(table["log"][0]), method=str(table["method"][0]), stamps_ns=stamps,
@@ -115,7 +118,7 @@ def read_map_dir(map_dir: Path, name: str | None = None) -> MapTables:
     manifest_path = map_dir / "manifest.json"
     if manifest_path.is_file():
         logs = _input_paths(Manifest.read(manifest_path))
-        candidates = [_sibling(p, ".truth.yaml") for p in logs] + [p.parent / "map.truth.yaml" for p in logs[:1]]
+        candidates = [_sibling(p, "truth") for p in logs] + [p.parent / "map.truth.yaml" for p in logs[:1]]
         found = next((c for c in candidates if c.is_file()), None)
         truth = read_truth(found) if found is not None else None
     return MapTables(name or map_dir.name, read_door_set(map_dir), truth)
