@@ -249,3 +249,19 @@ def test_summary_rows_follow_the_particle_count_numerically() -> None:
                       params={"particles": n, "seed": 0}) for n in (10000, 5000, 1000, 20000)]
     table = summary_table(evaluate_runs(runs, DoorbatchConfig()))
     assert [labels[2] for labels, _ in table.rows] == [f"particles={n}" for n in (1000, 5000, 10000, 20000)]
+
+
+def test_a_log_without_truth_files_gives_its_reference_topic(tmp_path: Path) -> None:
+    from doorbatch.io.run_reader import read_run_dir
+    from tests.conftest import sample_messages, write_messages
+
+    log = write_messages(tmp_path / "real.mcap", sample_messages(n_scans=20))  # /ground_truth: (0.1 i + 1, ...)
+    i = np.arange(20)
+    stamps = T0 + 100_000_000 * (i + 1)
+    truth = np.stack([0.1 * i + 1, 0.02 * i, 0.01 * i], axis=1)
+    _write_run(tmp_path / "run", log, stamps, truth + np.array([0.0, 0.25, 0.0]), "mcl", 0.0)
+    run = read_run_dir(tmp_path / "run", DoorbatchConfig())
+    assert run.reference is not None and len(run.reference.stamps_ns) == 20
+    ev = evaluate_runs([run], DoorbatchConfig())
+    assert ev.value("run", "ape_trans_rmse") == pytest.approx(0.25, abs=1e-6)
+    assert read_run_dir(tmp_path / "run", DoorbatchConfig(), find_reference=False).reference is None
