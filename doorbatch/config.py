@@ -348,14 +348,19 @@ class DoorPoseConfig(Section):
     nms_iou_threshold: float = Field(0.45, ge=0.0, le=1.0)
     # TorchScript device: "cpu" or "cuda".
     torch_device: str = "cpu"
-    # Sec. III-B: a door box within this many pixels of the left or right image border is not fully seen.
-    border_margin_px: float = Field(1.0, ge=0.0)
+    # Sec. III-B: a door box within this many pixels of the left or right image border is not fully seen
+    # (about 3σ of a detector's box-edge noise, so that a box cut by the border and then jittered is caught).
+    border_margin_px: float = Field(8.0, ge=0.0)
     # Line fit and the paper's RANSAC parameters (Sec. IV-B: max trials 1000, residual threshold 0.01 m).
     fit: Literal["naive", "lsq", "ransac"] = "ransac"
     ransac_max_trials: int = Field(1000, ge=1)
     ransac_residual_m: float = Field(0.01, gt=0.0)
     # Fewer door points than this: no estimate (two define a line; three let RANSAC reject one).
     min_door_points: int = Field(3, ge=2)
+    # Sec. III-B "evaluate if a valid door was detected": an estimate narrower or wider than a door (standard
+    # leaves are 0.6-1.25 m) is not one (a false box, or a line fitted to an obstacle); 0 and inf disable it.
+    door_width_min_m: float = Field(0.5, ge=0.0)
+    door_width_max_m: float = Field(1.4, gt=0.0)
     # Goal pose: this far from the door centre along its normal, facing the door (Sec. IV-C: 0.5 m).
     goal_offset_m: float = Field(0.5, gt=0.0)
     # Association with --map: the nearest mapped doorway (closed-leaf midpoint) within this distance.

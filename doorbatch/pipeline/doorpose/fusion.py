@@ -8,8 +8,8 @@ In the camera's horizontal plane (optical x right, z forward; the paper's 2D ass
 3. door points: laser hits, moved into the camera frame by TF, with β_l ≤ atan2(x, z) ≤ β_r and z > 0;
 4. a line z = a + b·x through them (``naive``, ``lsq`` or ``ransac``, see :mod:`.line_fit`);
 5. door edges where the rays meet the line: t = a / (cos β − b·sin β), e = t·(sin β, cos β);
-6. centre c = (e_l + e_r)/2, width |e_r − e_l|, normal n ⊥ (e_r − e_l) pointing to the camera, and the goal
-   g = c + offset·n facing the door (heading −n);
+6. centre c = (e_l + e_r)/2, width |e_r − e_l| (outside [door_width_min_m, door_width_max_m]: not a door),
+   normal n ⊥ (e_r − e_l) pointing to the camera, and the goal g = c + offset·n facing the door (heading −n);
 7. handle side: the best handle box whose centre lies in the door box, left or right of the box centre.
 """
 
@@ -105,7 +105,8 @@ def ray_line_intersection(bearing: float, line: DepthLine) -> FloatArray | None:
 def estimate_door(camera: PinholeCamera, detections: Sequence[Detection], points_cam: FloatArray,
                   config: DoorPoseConfig, rng: np.random.Generator, fit: LineFit | None = None) -> CameraDoor | None:
     """One door estimate from one image's boxes and one scan's points in the camera frame (module docstring);
-    None when no door box is usable, too few points fall between the rays, or the rays miss the line."""
+    None when no door box is usable, too few points fall between the rays, the rays miss the line, or the
+    width is not a door's."""
     box = select_door_box(detections, camera.width, config.door_class, config.border_margin_px)
     if box is None:
         return None
@@ -123,7 +124,7 @@ def estimate_door(camera: PinholeCamera, detections: Sequence[Detection], points
     center = (left + right) / 2
     along = right - left
     width = float(np.hypot(*along))
-    if width <= 0.0:
+    if not config.door_width_min_m <= width <= config.door_width_max_m or width <= 0.0:
         return None
     normal = np.array([-along[1], along[0]]) / width
     if normal @ center > 0.0:  # point from the door toward the camera at the origin
