@@ -27,7 +27,7 @@ from scipy import stats
 
 from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import PipelineError
-from doorbatch.pipeline.doorpose.approach import simulate_approach, summed_pose_error
+from doorbatch.pipeline.doorpose.approach import GoalUpdating, simulate_approach, summed_pose_error
 from doorbatch.pipeline.doorpose.fusion import estimate_door, select_door_box, to_planar
 from doorbatch.pipeline.doorpose.line_fit import LineFit
 from doorbatch.sim.door_scene import CAMERA_FRAME, DoorSceneSpec, make_door_scene, observe
@@ -134,7 +134,7 @@ def compare_goal_updating(exp: DoorPoseExperiment, config: DoorbatchConfig) -> G
     rng = np.random.default_rng(exp.seed)
     spec = DoorSceneSpec(obstacles_per_scene=exp.obstacles_per_scene)
     noise = odometry_noise()
-    modes = ("initial", "continuous")
+    modes: tuple[GoalUpdating, ...] = ("initial", "continuous")
     errors: dict[str, list[float]] = {m: [] for m in modes}
     reached: dict[str, list[bool]] = {m: [] for m in modes}
     durations: dict[str, list[float]] = {m: [] for m in modes}
