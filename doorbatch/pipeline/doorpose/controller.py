@@ -8,7 +8,8 @@ heading θ:
     v = k_ρ·ρ,  ω = k_α·α + k_β·β
 
 locally exponentially stable for k_ρ > 0, k_β < 0, k_α − k_ρ > 0. When the goal lies behind the robot
-(α ∉ (−π/2, π/2]) the robot backs up: the same law with the heading turned by π and v = −k_ρ·ρ. The command
+(|α| > π/2) the robot backs up: the same law for the robot and the goal both turned by π (so Δx, Δy
+change sign and θ does not), with v = −k_ρ·ρ. The command
 is scaled down (v and ω together, so the path's curvature is kept) to the speed limits.
 """
 
@@ -47,9 +48,8 @@ def polar_error(pose: FloatArray, goal: FloatArray) -> tuple[float, float, float
     rho = math.hypot(ex, ey)
     alpha = float(wrap_angle(-theta + math.atan2(ey, ex)))
     backward = abs(alpha) > math.pi / 2
-    if backward:
-        theta = float(wrap_angle(theta + math.pi))
-        alpha = float(wrap_angle(-theta + math.atan2(ey, ex)))
+    if backward:  # a robot turned by π driving forward to the goal turned by π: (Δx, Δy) → (−Δx, −Δy)
+        alpha = float(wrap_angle(-theta + math.atan2(-ey, -ex)))
     return rho, alpha, float(wrap_angle(-theta - alpha)), backward
 
 
