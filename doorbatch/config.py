@@ -346,6 +346,8 @@ class DoorPoseConfig(Section):
     input_size_px: int = Field(640, ge=32)
     confidence_threshold: float = Field(0.25, ge=0.0, le=1.0)
     nms_iou_threshold: float = Field(0.45, ge=0.0, le=1.0)
+    # Output layout: v5 [1, N, 5+C] with objectness, v8 [1, 4+C, N]; auto: the larger dimension is N.
+    yolo_layout: Literal["auto", "v5", "v8"] = "auto"
     # TorchScript device: "cpu" or "cuda".
     torch_device: str = "cpu"
     # Sec. III-B: a door box within this many pixels of the left or right image border is not fully seen
