@@ -18,21 +18,23 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Literal
 
 import numpy as np
 import numpy.typing as npt
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from scipy import stats
 
-from doorbatch.config import DoorbatchConfig
-from doorbatch.errors import PipelineError
+from doorbatch.config import DoorbatchConfig, deep_merge, read_yaml_mapping
+from doorbatch.errors import ConfigError, PipelineError
 from doorbatch.pipeline.doorpose.approach import GoalUpdating, simulate_approach, summed_pose_error
 from doorbatch.pipeline.doorpose.fusion import estimate_door, select_door_box, to_planar
 from doorbatch.pipeline.doorpose.line_fit import LineFit
 from doorbatch.sim.door_scene import CAMERA_FRAME, DoorSceneSpec, make_door_scene, observe
 from doorbatch.sim.motion import OdometryNoise
 from doorbatch.sim.scenario import OdometrySpec
+from doorbatch.sim.world import explain_validation
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -217,3 +219,29 @@ def goal_updating_metrics(result: GoalUpdatingComparison, run: str, params: dict
     p = z_test_greater(result.errors["continuous"], result.errors["initial"])[1]
     rows.append(_rows(run, "simulated", "initial", "z_test_p_vs_continuous", p, "1", params))
     return _columns(rows)
+
+
+def load_experiment(path: Path, base: DoorbatchConfig) -> tuple[DoorPoseExperiment, DoorbatchConfig]:
+    """An experiment file and the config it runs with: its ``config:`` block merged over ``base``.
+
+    Raises:
+        ConfigError: unreadable, bad YAML, unknown key or wrong value (in the file or its config block).
+    """
+    data = read_yaml_mapping(path)
+    try:
+        exp = DoorPoseExperiment.model_validate(data)
+        config = DoorbatchConfig.model_validate(deep_merge(base.as_dict(), exp.config))
+    except ValidationError as err:
+        raise ConfigError(f"{path}: {explain_validation(err)}") from err
+    return exp, config
+
+
+def experiment_metrics(exp: DoorPoseExperiment, config: DoorbatchConfig, run: str
+                       ) -> tuple[dict[str, list[object]], FitComparison | GoalUpdatingComparison]:
+    """Run an experiment (Table I or II) and its metrics.parquet columns."""
+    params: dict[str, object] = {"experiment": exp.experiment, "samples": exp.samples, "seed": exp.seed}
+    if exp.experiment == "doorpose_fit_comparison":
+        fits = compare_fits(exp, config)
+        return fit_comparison_metrics(fits, run, params), fits
+    upd = compare_goal_updating(exp, config)
+    return goal_updating_metrics(upd, run, params), upd
