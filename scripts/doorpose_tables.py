@@ -40,7 +40,7 @@ def _table(errors: dict[str, np.ndarray], paper: dict[str, tuple[float, float]])
     lines = ["| method | n | mean | std | paper mean | paper std |", "| --- | --- | --- | --- | --- | --- |"]
     for name, err in errors.items():
         ok = err[np.isfinite(err)]
-        fails = f" ({err.size - ok.size} no line)" if ok.size < err.size else ""
+        fails = f" ({err.size - ok.size} no estimate)" if ok.size < err.size else ""
         lines.append(f"| {LABEL[name]} | {ok.size}{fails} | {ok.mean():.4f} | {ok.std(ddof=1):.4f} | "
                      f"{paper[name][0]:.4f} | {paper[name][1]:.4f} |")
     return lines

@@ -31,7 +31,7 @@ from doorbatch.errors import ConfigError, PipelineError
 from doorbatch.pipeline.doorpose.approach import GoalUpdating, simulate_approach, summed_pose_error
 from doorbatch.pipeline.doorpose.fusion import estimate_door, select_door_box, to_planar
 from doorbatch.pipeline.doorpose.line_fit import LineFit
-from doorbatch.sim.door_scene import CAMERA_FRAME, DoorSceneSpec, make_door_scene, observe
+from doorbatch.sim.door_scene import CAMERA_FRAME, PAPER_DETECTIONS, DoorSceneSpec, make_door_scene, observe
 from doorbatch.sim.motion import OdometryNoise
 from doorbatch.sim.scenario import OdometrySpec
 from doorbatch.sim.world import explain_validation
@@ -53,6 +53,8 @@ class DoorPoseExperiment(BaseModel):
     lateral_m: tuple[float, float] = (-0.6, 0.6)
     heading_deg: tuple[float, float] = (-15.0, 15.0)  # relative to facing the door
     obstacles_per_scene: tuple[int, int] = (1, 2)
+    # Expected false door boxes per image (0: the paper's setting, see doorbatch.sim.door_scene).
+    false_positive_rate: float = Field(0.0, ge=0.0)
     max_attempts_factor: int = Field(5, ge=1)  # draws per wanted sample before giving up
     config: dict[str, object] = {}
 
@@ -78,6 +80,11 @@ class GoalUpdatingComparison:
     durations_s: dict[str, FloatArray] = field(default_factory=dict)
 
 
+def _scene_spec(exp: DoorPoseExperiment) -> DoorSceneSpec:
+    detections = PAPER_DETECTIONS.model_copy(update={"false_positive_rate": exp.false_positive_rate})
+    return DoorSceneSpec(obstacles_per_scene=exp.obstacles_per_scene, detections=detections)
+
+
 def _start_pose(rng: np.random.Generator, exp: DoorPoseExperiment) -> FloatArray:
     return np.array([rng.uniform(*exp.lateral_m), -rng.uniform(*exp.distance_m),
                      math.pi / 2 + math.radians(rng.uniform(*exp.heading_deg))])
@@ -91,7 +98,7 @@ def compare_fits(exp: DoorPoseExperiment, config: DoorbatchConfig) -> FitCompari
         PipelineError: fewer than ``samples`` usable scenes in ``samples · max_attempts_factor`` draws.
     """
     rng = np.random.default_rng(exp.seed)
-    spec = DoorSceneSpec(obstacles_per_scene=exp.obstacles_per_scene)
+    spec = _scene_spec(exp)
     cfg = config.doorpose
     errors: dict[str, list[float]] = {f.value: [] for f in LineFit}
     checked = correct = draws = 0
@@ -134,7 +141,7 @@ def compare_goal_updating(exp: DoorPoseExperiment, config: DoorbatchConfig) -> G
         PipelineError: fewer than ``samples`` usable start poses in ``samples · max_attempts_factor`` draws.
     """
     rng = np.random.default_rng(exp.seed)
-    spec = DoorSceneSpec(obstacles_per_scene=exp.obstacles_per_scene)
+    spec = _scene_spec(exp)
     noise = odometry_noise()
     modes: tuple[GoalUpdating, ...] = ("initial", "continuous")
     errors: dict[str, list[float]] = {m: [] for m in modes}
