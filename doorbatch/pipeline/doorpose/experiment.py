@@ -10,7 +10,8 @@
   (Montgomery & Runger): z = (x̄_b − x̄_a)/√(σ_a²/n_a + σ_b²/n_b), p = 1 − Φ(z), H1: μ_b > μ_a.
 
 Results turn into rows of DESIGN's metrics.parquet with :func:`fit_comparison_metrics` and
-:func:`goal_updating_metrics` (pure: ``doorbatch evaluate`` writes them).
+:func:`goal_updating_metrics`; door poses of a run against their truth with :func:`door_pose_metrics` (pure:
+``doorbatch evaluate`` writes them).
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ from scipy import stats
 
 from doorbatch.config import DoorbatchConfig, deep_merge, read_yaml_mapping
 from doorbatch.errors import ConfigError, PipelineError
+from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.pipeline.doorpose.approach import GoalUpdating, simulate_approach, summed_pose_error
 from doorbatch.pipeline.doorpose.fusion import estimate_door, select_door_box, to_planar
 from doorbatch.pipeline.doorpose.line_fit import LineFit
@@ -252,3 +254,31 @@ def experiment_metrics(exp: DoorPoseExperiment, config: DoorbatchConfig, run: st
         return fit_comparison_metrics(fits, run, params), fits
     upd = compare_goal_updating(exp, config)
     return goal_updating_metrics(upd, run, params), upd
+
+
+def door_pose_metrics(estimated: npt.ArrayLike, truth: npt.ArrayLike, handle_sides: list[str],
+                      true_handle_sides: list[str], run: str, log: str, method: str,
+                      params: dict[str, object] | None = None) -> dict[str, list[object]]:
+    """metrics.parquet columns of door poses against their truth, row by row (the caller matches them):
+    ``estimated`` and ``truth`` are (N, 4) centre x, y, normal yaw, width. Metrics: the mean summed error
+    |Δx| + |Δy| + |Δθ| (Table I's), mean centre distance, mean |Δyaw|, mean |Δwidth|, the handle-side
+    accuracy over rows whose true side is not ``none``, and the count."""
+    est = np.asarray(estimated, dtype=np.float64).reshape(-1, 4)
+    tru = np.asarray(truth, dtype=np.float64).reshape(-1, 4)
+    p = params or {}
+    dyaw = np.abs(wrap_angle(est[:, 2] - tru[:, 2]))
+    summed = np.abs(est[:, 0] - tru[:, 0]) + np.abs(est[:, 1] - tru[:, 1]) + dyaw
+    visible = [i for i, s in enumerate(true_handle_sides) if s != "none"]
+    accuracy = (sum(handle_sides[i] == true_handle_sides[i] for i in visible) / len(visible)) if visible else math.nan
+    n = est.shape[0]
+    rows = [
+        _rows(run, log, method, "door_pose_error_mean", summed.mean() if n else math.nan, "1", p),
+        _rows(run, log, method, "door_center_error_mean", np.hypot(*(est[:, :2] - tru[:, :2]).T).mean()
+              if n else math.nan, "m", p),
+        _rows(run, log, method, "door_yaw_error_mean", dyaw.mean() if n else math.nan, "rad", p),
+        _rows(run, log, method, "door_width_error_mean", np.abs(est[:, 3] - tru[:, 3]).mean() if n else math.nan,
+              "m", p),
+        _rows(run, log, method, "handle_side_accuracy", accuracy, "1", p),
+        _rows(run, log, method, "door_poses", n, "count", p),
+    ]
+    return _columns(rows)

@@ -15,6 +15,7 @@ from doorbatch.pipeline.doorpose.approach import simulate_approach
 from doorbatch.pipeline.doorpose.experiment import (
     DoorPoseExperiment,
     compare_fits,
+    door_pose_metrics,
     fit_comparison_metrics,
     odometry_noise,
     z_test_greater,
@@ -70,3 +71,16 @@ def test_odometry_drift_moves_the_initial_only_run_off_the_goal() -> None:
     cont = simulate_approach(scene, start, cfg, drifting, np.random.default_rng(2), "continuous")
     assert cont.error < init.error
     assert odometry_noise().alpha1 > 0.0
+
+
+def test_door_pose_metrics_against_truth() -> None:
+    truth = np.array([[0.0, 0.0, -math.pi / 2, 0.9], [1.0, 2.0, math.pi, 0.8]])
+    est = truth + np.array([[0.03, -0.04, 0.02, 0.01], [0.0, 0.0, -0.1, -0.02]])
+    cols = door_pose_metrics(est, truth, ["left", "right"], ["left", "left"], "r", "log", "ransac")
+    rows = dict(zip(cols["metric"], cols["value"], strict=True))
+    assert rows["door_pose_error_mean"] == pytest.approx((0.03 + 0.04 + 0.02 + 0.1) / 2)
+    assert rows["door_center_error_mean"] == pytest.approx(0.05 / 2)
+    assert rows["door_yaw_error_mean"] == pytest.approx(0.06)
+    assert rows["door_width_error_mean"] == pytest.approx(0.015)
+    assert rows["handle_side_accuracy"] == pytest.approx(0.5)
+    assert build_table("metrics", cols).num_rows == 6
