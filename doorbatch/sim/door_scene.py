@@ -22,6 +22,7 @@ from doorbatch.records import CameraInfo, Detection, Scan, Transform
 from doorbatch.sim.raycast import RayBuffers
 from doorbatch.sim.scenario import CameraSpec, ColorsSpec, DetectionsSpec, LaserSpec, MountSpec
 from doorbatch.sim.sensors import (
+    Box,
     CameraModel,
     LaserModel,
     Scene,
@@ -159,11 +160,15 @@ def make_door_scene(rng: np.random.Generator, spec: DoorSceneSpec | None = None)
 
 @dataclass(frozen=True)
 class Observation:
-    """What the robot senses at one pose: detector boxes, laser hits in the camera frame, true boxes."""
+    """What the robot senses at one pose: detector boxes, laser hits in the camera frame, true boxes, and
+    the raw image and ranges (for writing logs)."""
 
     detections: tuple[Detection, ...]
     points_cam: FloatArray  # (N, 3) optical frame
     handle_visible: bool  # the true boxes include the door's handle
+    true_boxes: tuple[Box, ...]
+    image: npt.NDArray[np.uint8]  # (H, W, 3) RGB
+    ranges: npt.NDArray[np.float32]  # (B,) the scan
 
 
 def observe(door_scene: DoorScene, pose: FloatArray, rng: np.random.Generator,
@@ -179,4 +184,5 @@ def observe(door_scene: DoorScene, pose: FloatArray, rng: np.random.Generator,
     scan = Scan(0, 0, LASER_FRAME, ds.laser.angle_min_rad, ds.laser.angle_increment_rad, ds.laser.range_min_m,
                 ds.laser.range_max_m, sample.ranges.astype(np.float32))
     points, _ = scan_in_camera(scan, ds.tf, CAMERA_FRAME)
-    return Observation(dets, points, any(b.class_id == "handle" for b in boxes))
+    return Observation(dets, points, any(b.class_id == "handle" for b in boxes), tuple(boxes), frame.image,
+                       scan.ranges)

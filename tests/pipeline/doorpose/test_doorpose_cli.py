@@ -10,11 +10,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from door_logs import door_log
 from mcap.reader import make_reader
 
 from doorbatch.cli import main
 from doorbatch.config import DoorbatchConfig
-from doorbatch.io import ros_messages as m
 from doorbatch.io.doorpose_inputs import read_doorpose_inputs
 from doorbatch.io.log_writer import LogFormat, LogWriter
 from doorbatch.io.parquet import read_table, write_table
@@ -22,39 +22,7 @@ from doorbatch.io.reader import open_log
 from doorbatch.maps import DoorSet
 from doorbatch.pipeline.doorpose.association import associate
 from doorbatch.records import Detection, Image
-from doorbatch.sim.door_scene import CAMERA_FRAME, LASER_FRAME, DoorScene, DoorSceneSpec, make_door_scene, observe
-from doorbatch.sim.sensors import camera_rotation_xyzw, simulate_scan
-from tests.conftest import T0, write_messages
-
-STEP_NS = 200_000_000
-
-
-def _door_log(path: Path, scene: DoorScene, poses: np.ndarray, rng: np.random.Generator) -> Path:
-    cam = scene.camera_model
-    lm = scene.laser
-    msgs: list[tuple[str, str, int, object]] = [
-        ("/tf_static", "tf2_msgs/msg/TFMessage", T0, m.tf_message([
-            m.planar_transform(T0, "base_link", LASER_FRAME, lm.mount_xy_m[0], lm.mount_xy_m[1], 0.0, z=lm.mount_z_m),
-            m.transform_stamped(T0, "base_link", CAMERA_FRAME, (*cam.mount_xy_m, cam.mount_z_m),
-                                tuple(camera_rotation_xyzw(cam.mount_yaw_rad)))])),
-        ("/camera/camera_info", "sensor_msgs/msg/CameraInfo", T0,
-         m.camera_info(T0, CAMERA_FRAME, cam.width, cam.height, cam.k)),
-    ]
-    for i, pose in enumerate(poses):
-        t = T0 + STEP_NS * (i + 1)
-        x, y, yaw = (float(v) for v in pose)
-        obs = observe(scene, pose, rng)
-        ranges = simulate_scan(pose, scene.scene, lm, rng).ranges.astype(np.float32)
-        boxes = [(d.class_id, d.score, d.center_x, d.center_y, d.size_x, d.size_y) for d in obs.detections]
-        msgs += [
-            ("/ground_truth", "nav_msgs/msg/Odometry", t, m.odometry(t, "map", "base_link", x, y, yaw)),
-            ("/scan", "sensor_msgs/msg/LaserScan", t,
-             m.laser_scan(t, LASER_FRAME, lm.angle_min_rad, lm.angle_increment_rad, lm.range_min_m, lm.range_max_m,
-                          ranges)),
-            ("/detections", "vision_msgs/msg/Detection2DArray", t + 5_000_000,
-             m.detection_array(t + 5_000_000, CAMERA_FRAME, boxes)),
-        ]
-    return write_messages(path, sorted(msgs, key=lambda msg: msg[2]))
+from doorbatch.sim.door_scene import DoorScene, DoorSceneSpec, make_door_scene
 
 
 def _map_dir(path: Path, scene: DoorScene) -> Path:
@@ -74,7 +42,7 @@ def test_doorpose_writes_door_poses_matched_to_the_map(tmp_path: Path, capsys: p
     rng = np.random.default_rng(11)
     scene = make_door_scene(rng, DoorSceneSpec(obstacles_per_scene=(1, 1)))
     poses = np.array([[0.1 * k - 0.3, -2.6 + 0.15 * k, math.pi / 2 + 0.03 * k] for k in range(8)])
-    log = _door_log(tmp_path / "door.mcap", scene, poses, rng)
+    log = door_log(tmp_path / "door.mcap", scene, poses, rng)
     out = tmp_path / "run"
     assert main(["doorpose", str(log), "-o", str(out), "--map", str(_map_dir(tmp_path / "map", scene)),
                  "--json"]) == 0
@@ -104,7 +72,7 @@ def test_doorpose_writes_door_poses_matched_to_the_map(tmp_path: Path, capsys: p
 def test_doorpose_without_camera_info_is_bad_input(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     rng = np.random.default_rng(2)
     scene = make_door_scene(rng)
-    log = _door_log(tmp_path / "door.mcap", scene, np.array([[0.0, -2.0, math.pi / 2]]), rng)
+    log = door_log(tmp_path / "door.mcap", scene, np.array([[0.0, -2.0, math.pi / 2]]), rng)
     with open_log(log) as reader, LogWriter(tmp_path / "nocam2.mcap", LogFormat.MCAP) as writer:
         for raw in reader.raw_messages():
             if raw.topic != "/camera/camera_info":
