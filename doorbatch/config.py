@@ -332,6 +332,23 @@ class LocalizeConfig(Section):
     backend: Literal["numpy", "torch"] = "numpy"
 
 
+class RunConfig(Section):
+    """``doorbatch run``: what the batch does per site, and how it spreads the work."""
+
+    # Localization methods run on every localization log (each gets OUT/<site>/runs/<log>/<method>/).
+    methods: list[Literal["mcl", "rbpf"]] = Field(default_factory=lambda: ["mcl", "rbpf"],  # type: ignore[arg-type]
+                                                  min_length=1)
+    # Initial pose for localization: reference (the log's reference pose topic), global, or X,Y,YAW.
+    init: str = "reference"
+    # Map stages (doorbatch map --stages).
+    map_stages: list[str] = Field(default_factory=lambda: ["grid"], min_length=1)
+    # Parallel steps with the local executor; 0: one per CPU.
+    workers: int = Field(0, ge=0)
+    executor: Literal["local", "dask"] = "local"
+    # Dask scheduler address (tcp://host:8786); None: an in-process LocalCluster of `workers` workers.
+    dask_scheduler: str | None = None
+
+
 class DoorbatchConfig(Section):
     """The whole configuration tree."""
 
@@ -345,6 +362,7 @@ class DoorbatchConfig(Section):
     grid: GridConfig = GridConfig()
     doors: DoorDetectionConfig = DoorDetectionConfig()
     localize: LocalizeConfig = LocalizeConfig()
+    run: RunConfig = RunConfig()
 
     def as_dict(self) -> dict[str, Any]:
         """The resolved tree as plain data (what goes into manifests)."""
