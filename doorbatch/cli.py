@@ -213,6 +213,39 @@ def localize_cmd(ctx: Context, log_path: Path, map_path: Path, output: Path, met
                 f"{', ambiguous' if summary.ambiguous else ''} → {summary.run_dir}", asdict(summary))
 
 
+@cli.command("evaluate")
+@click.argument("run_dirs", metavar="RUNDIR...", nargs=-1, type=click.Path(path_type=Path, file_okay=False))
+@click.option("-o", "--output", type=click.Path(path_type=Path, file_okay=False), required=True,
+              help="Report directory to write.")
+@click.option("--reference", type=click.Path(path_type=Path), default=None,
+              help="Reference trajectory: a TUM file or a log with a reference pose topic.")
+@click.option("--world", "truth", type=click.Path(path_type=Path, dir_okay=False), default=None,
+              help="Simulator truth YAML (door map and door-state scoring).")
+@click.option("--align", type=click.Choice(["none", "se2"]), default=None, help="Default: evaluate.align.")
+@common_options
+def evaluate_cmd(ctx: Context, run_dirs: tuple[Path, ...], output: Path, reference: Path | None,
+                 truth: Path | None, align: str | None) -> None:
+    """Metrics (APE/RPE as evo, convergence, door maps, door states) and a report of RUNDIRs."""
+    from doorbatch.errors import UsageError
+    from doorbatch.io.report_writer import stdout_table
+
+    config = ctx.config
+    if align is not None:
+        config = config.model_copy(update={"evaluate": config.evaluate.model_copy(update={"align": align})})
+    if not run_dirs:
+        raise UsageError("evaluate: give RUNDIR...")
+    else:
+        from doorbatch.pipeline.evaluate.stage import evaluate_run_dirs
+
+        evaluation = evaluate_run_dirs(list(run_dirs), output, config, reference=reference, truth=truth)
+    data = {"report_dir": str(output), "runs": len({r.run for r in evaluation.metrics}),
+            "metrics": [{"run": r.run, "log": r.log, "method": r.method, "metric": r.metric, "value": r.value,
+                         "unit": r.unit, "params": r.params} for r in evaluation.metrics]}
+    if not ctx.as_json and not ctx.quiet:
+        click.echo(stdout_table(evaluation))
+    ctx.summary(f"{len(evaluation.metrics)} metrics of {data['runs']} runs → {output}/report.html", data)
+
+
 @cli.command("run")
 @click.argument("dataset", type=click.Path(path_type=Path, file_okay=False))
 @click.option("-o", "--output", type=click.Path(path_type=Path, file_okay=False), required=True,

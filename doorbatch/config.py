@@ -332,6 +332,32 @@ class LocalizeConfig(Section):
     backend: Literal["numpy", "torch"] = "numpy"
 
 
+class EvaluateConfig(Section):
+    """``doorbatch evaluate``: trajectory metrics as evo computes them, localization and door scoring."""
+
+    # evo --t_max_diff: reference and estimate poses further apart in time are not associated.
+    max_time_diff_s: float = Field(0.01, gt=0.0)
+    # evo --align: none (the map frame is shared) or se2 (Umeyama without scale on the planar positions).
+    align: Literal["none", "se2"] = "none"
+    # evo --delta D --delta_unit m; --all_pairs; rel_delta_tol (all-pairs mode only).
+    rpe_delta_m: float = Field(1.0, gt=0.0)
+    rpe_all_pairs: bool = False
+    rpe_rel_delta_tol: float = Field(0.1, gt=0.0)
+    # Unit of the rotation metrics in metrics.parquet (evo --pose_relation angle_rad / angle_deg).
+    angle_unit: Literal["rad", "deg"] = "rad"
+    # Doors match truth doors whose hinge lies this close (issue #6).
+    door_match_max_hinge_m: float = Field(0.3, gt=0.0)
+    # A door's estimated angle is scored while it was observed within this window (s) before the update.
+    door_state_window_s: float = Field(2.0, ge=0.0)
+    # Global localization succeeds when it converges within window_s of the first scan and the estimate is
+    # within xy_m and yaw_deg of the reference at convergence and at the end (paper 000 Sec. V-B).
+    global_success_window_s: float = Field(30.0, gt=0.0)
+    global_success_xy_m: float = Field(0.3, gt=0.0)
+    global_success_yaw_deg: float = Field(10.0, gt=0.0)
+    # Bin width of the error-along-the-corridor curves (paper 000 Figs. 5-7).
+    along_x_bin_m: float = Field(0.5, gt=0.0)
+
+
 class RunConfig(Section):
     """``doorbatch run``: what the batch does per site, and how it spreads the work."""
 
@@ -362,6 +388,7 @@ class DoorbatchConfig(Section):
     grid: GridConfig = GridConfig()
     doors: DoorDetectionConfig = DoorDetectionConfig()
     localize: LocalizeConfig = LocalizeConfig()
+    evaluate: EvaluateConfig = EvaluateConfig()
     run: RunConfig = RunConfig()
 
     def as_dict(self) -> dict[str, Any]:

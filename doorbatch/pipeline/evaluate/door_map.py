@@ -43,22 +43,31 @@ def _range_error(det: DoorSet, i: int, truth: DoorSet, j: int) -> float:
     return min(same, swapped)
 
 
-def score_doors(detected: DoorSet, truth: DoorSet, moved: npt.ArrayLike,
-                max_hinge_distance_m: float = 0.3) -> DoorScore:
-    """Precision over all detections, recall over the truth doors that moved, and errors of the matches."""
-    moved_mask = np.asarray(moved, dtype=bool)
-    dist = np.linalg.norm(detected.hinge[:, None, :] - truth.hinge[None, :, :], axis=2) if len(detected) and len(
-        truth) else np.zeros((len(detected), len(truth)))
-    pairs = sorted((float(dist[i, j]), i, j) for i in range(len(detected)) for j in range(len(truth))
-                    if dist[i, j] <= max_hinge_distance_m)
+def match_by_hinge(detected_hinge: npt.ArrayLike, truth_hinge: npt.ArrayLike, max_hinge_distance_m: float
+                   ) -> tuple[list[tuple[int, int]], FloatArray]:
+    """Greedy one-to-one matching by hinge distance: pairs (detected, truth) in increasing distance, each
+    within ``max_hinge_distance_m``; also the (D, T) distance matrix."""
+    det = np.asarray(detected_hinge, dtype=np.float64).reshape(-1, 2)
+    tru = np.asarray(truth_hinge, dtype=np.float64).reshape(-1, 2)
+    dist = np.linalg.norm(det[:, None, :] - tru[None, :, :], axis=2)
+    close = np.argwhere(dist <= max_hinge_distance_m)
+    order = np.lexsort((close[:, 1], close[:, 0], dist[close[:, 0], close[:, 1]]))
     used_d: set[int] = set()
     used_t: set[int] = set()
     matched: list[tuple[int, int]] = []
-    for _, i, j in pairs:
+    for i, j in close[order].tolist():
         if i not in used_d and j not in used_t:
             used_d.add(i)
             used_t.add(j)
             matched.append((i, j))
+    return matched, dist
+
+
+def score_doors(detected: DoorSet, truth: DoorSet, moved: npt.ArrayLike,
+                max_hinge_distance_m: float = 0.3) -> DoorScore:
+    """Precision over all detections, recall over the truth doors that moved, and errors of the matches."""
+    moved_mask = np.asarray(moved, dtype=bool)
+    matched, dist = match_by_hinge(detected.hinge, truth.hinge, max_hinge_distance_m)
     true_pos = [(i, j) for i, j in matched if moved_mask[j]]
     false_pos = sorted(set(range(len(detected))) - {i for i, _ in true_pos})
     missed = [j for j in np.flatnonzero(moved_mask) if j not in {t for _, t in true_pos}]

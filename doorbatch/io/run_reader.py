@@ -1,0 +1,126 @@
+"""Read what ``doorbatch evaluate`` takes: localization run directories, map directories, references.
+
+A run directory (``doorbatch localize``) holds trajectory.parquet, door_states.parquet and manifest.json; the
+manifest names the log (first input) and the map (``map.yaml``, ``doors.parquet``) and records ``init``,
+``converged_after_s`` and ``ambiguous``. Next to a simulated log lie ``<stem>.truth.tum`` (reference) and
+``<stem>.truth.yaml`` (truth): they are the run's own reference and truth when present. A map directory
+(``doorbatch map``) holds doors.parquet; its manifest names its logs, whose folder may hold the mapping
+truth ``<stem>.truth.yaml`` of the sample layout (``map.truth.yaml`` for ``map_pass*.mcap``).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from doorbatch.config import DoorbatchConfig
+from doorbatch.errors import InputDataError
+from doorbatch.io.manifest import Manifest
+from doorbatch.io.mapdir import read_door_set
+from doorbatch.io.parquet import read_table
+from doorbatch.io.sim_truth import SimTruth, read_truth
+from doorbatch.io.tum import read_tum
+from doorbatch.pipeline.evaluate.report import DoorStateTable, MapTables, ReferenceTrajectory, RunTables
+
+log = logging.getLogger(__name__)
+
+
+def is_run_dir(path: Path) -> bool:
+    """Whether ``path`` is a localization run directory (has trajectory.parquet)."""
+    return (Path(path) / "trajectory.parquet").is_file()
+
+
+def is_map_dir(path: Path) -> bool:
+    """Whether ``path`` is a map directory (doors.parquet and map.yaml, no trajectory)."""
+    p = Path(path)
+    return (p / "doors.parquet").is_file() and (p / "map.yaml").is_file() and not is_run_dir(p)
+
+
+def read_reference(path: Path, config: DoorbatchConfig) -> ReferenceTrajectory:
+    """A reference trajectory from a TUM file (``.tum``/``.txt``) or from a log's reference pose topic.
+
+    Raises:
+        InputDataError: unreadable, or a log without a reference pose topic.
+    """
+    path = Path(path)
+    if path.suffix in (".tum", ".txt"):
+        tum = read_tum(path)
+        return ReferenceTrajectory(tum.stamp_ns, np.stack([tum.x, tum.y, tum.yaw], axis=1))
+    from doorbatch.io.recording import load_recording
+
+    rec = load_recording(path, config)
+    if rec.reference is None:
+        raise InputDataError("--reference: the log has no reference pose topic", path=path)
+    return ReferenceTrajectory(rec.reference.stamps_ns, rec.reference.poses)
+
+
+def _sibling(log_path: Path, suffix: str) -> Path:
+    return log_path.with_name(log_path.name.split(".")[0] + suffix)
+
+
+def _input_paths(manifest: Manifest) -> list[Path]:
+    return [Path(str(i.get("path", ""))) for i in manifest.inputs]
+
+
+def _read_door_states(path: Path) -> DoorStateTable | None:
+    if not path.is_file():
+        return None
+    t = read_table("door_states", path).to_pydict()
+    return DoorStateTable(np.asarray(t["stamp_ns"], dtype=np.int64), np.asarray(t["door_id"], dtype=np.int32),
+                          np.asarray(t["angle"], dtype=np.float64), np.asarray(t["observed"], dtype=bool))
+
+
+def read_run_dir(run_dir: Path, config: DoorbatchConfig, name: str | None = None) -> RunTables:
+    """A run directory as :class:`RunTables`, with the reference and truth found next to its log.
+
+    Raises:
+        InputDataError: a missing or malformed table or manifest (names the file).
+    """
+    run_dir = Path(run_dir)
+    table = read_table("trajectory", run_dir / "trajectory.parquet").to_pydict()
+    if not table["stamp_ns"]:
+        raise InputDataError("trajectory table is empty", path=run_dir / "trajectory.parquet")
+    stamps = np.asarray(table["stamp_ns"], dtype=np.int64)
+    pose = np.stack([np.asarray(table[k], dtype=np.float64) for k in ("x", "y", "yaw")], axis=1)
+    manifest = Manifest.read(run_dir / "manifest.json") if (run_dir / "manifest.json").is_file() else None
+    extra: dict[str, Any] = dict(manifest.extra) if manifest else {}
+    inputs = _input_paths(manifest) if manifest else []
+    log_path = inputs[0] if inputs else None
+    maps = [p.parent for p in inputs[1:] if p.name == "map.yaml"]
+    converged_after = extra.get("converged_after_s")
+    reference = truth = None
+    if log_path is not None and _sibling(log_path, ".truth.tum").is_file():
+        tum = read_tum(_sibling(log_path, ".truth.tum"))
+        reference = ReferenceTrajectory(tum.stamp_ns, np.stack([tum.x, tum.y, tum.yaw], axis=1))
+    if log_path is not None and _sibling(log_path, ".truth.yaml").is_file():
+        truth = read_truth(_sibling(log_path, ".truth.yaml"))
+    params = extra.get("params")
+    return RunTables(
+        name=name or run_dir.name, log=str(table["log"][0]), method=str(table["method"][0]), stamps_ns=stamps,
+        pose=pose, init=str(extra.get("init", "reference")),
+        converged_ns=None if converged_after is None else int(stamps[0]) + round(float(converged_after) * 1e9),
+        ambiguous=bool(extra.get("ambiguous", False)), door_states=_read_door_states(run_dir / "door_states.parquet"),
+        map_doors=read_door_set(maps[0]) if maps and maps[0].is_dir() else None, reference=reference, truth=truth,
+        params=dict(params) if isinstance(params, dict) else {})
+
+
+def read_map_dir(map_dir: Path, name: str | None = None) -> MapTables:
+    """A map directory's doors, with the mapping truth next to its first log when present."""
+    map_dir = Path(map_dir)
+    truth: SimTruth | None = None
+    manifest_path = map_dir / "manifest.json"
+    if manifest_path.is_file():
+        logs = _input_paths(Manifest.read(manifest_path))
+        candidates = [_sibling(p, ".truth.yaml") for p in logs] + [p.parent / "map.truth.yaml" for p in logs[:1]]
+        found = next((c for c in candidates if c.is_file()), None)
+        truth = read_truth(found) if found is not None else None
+    return MapTables(name or map_dir.name, read_door_set(map_dir), truth)
+
+
+def params_json(params: dict[str, Any]) -> str:
+    """The params column's JSON (sorted keys, compact)."""
+    return json.dumps(params, sort_keys=True, separators=(",", ":"), default=str)

@@ -1,0 +1,379 @@
+"""``doorbatch evaluate``'s numerics: localization runs and door maps → metric rows and plot data. Pure.
+
+Public API (the ``run`` stage and notebooks call these; :mod:`doorbatch.io.report_writer` writes the result)::
+
+    evaluate_runs(runs: Sequence[RunTables], config: DoorbatchConfig, *,
+                  reference: ReferenceTrajectory | None = None, truth: SimTruth | None = None,
+                  maps: Sequence[MapTables] = ()) -> Evaluation
+    evaluate_run_dirs(run_dirs: Sequence[Path], out_dir: Path, config: DoorbatchConfig, *,
+                      reference: Path | None = None, truth: Path | None = None) -> Evaluation
+        (in :mod:`doorbatch.pipeline.evaluate.stage`: reads the run and map directories, evaluates, writes
+        metrics.parquet, report.md, report.html and the PNG plots into ``out_dir``)
+
+``reference`` and ``truth`` given here override each run's own (``RunTables.reference``/``.truth``, which the
+reader finds next to the run's log: ``<log stem>.truth.tum`` and ``<log stem>.truth.yaml``).
+
+Per localization run (metric names; rotations in ``evaluate.angle_unit``):
+``ape_trans_<stat>`` and ``ape_rot_<stat>``, ``rpe_trans_<stat>`` and ``rpe_rot_<stat>`` (stat: rmse, mean,
+median, std, min, max, as evo, see :mod:`trajectory_metrics`), ``associated_poses``, ``rpe_pairs``;
+``converged`` (0/1), ``time_to_converge_s``, ``ambiguous`` (0/1) and, for global initialization,
+``global_success`` (0/1); with a truth and a door map, ``door_state_error_mean`` / ``_max`` (rad).
+Per door map with a truth: ``door_precision``, ``door_recall``, ``door_hinge_error_mean`` (m),
+``door_length_error_mean`` (m, absolute), ``door_range_error_mean`` (rad), ``doors_detected``, ``doors_truth``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import defaultdict
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from doorbatch.config import DoorbatchConfig, EvaluateConfig
+from doorbatch.errors import PipelineError
+from doorbatch.io.sim_truth import SimTruth
+from doorbatch.maps import DoorSet
+from doorbatch.pipeline.evaluate.door_map import score_doors, truth_doors
+from doorbatch.pipeline.evaluate.door_state_error import door_state_errors
+from doorbatch.pipeline.evaluate.localization_success import ConvergenceCheck, global_success
+from doorbatch.pipeline.evaluate.trajectory_metrics import (
+    Alignment,
+    TrajectoryErrors,
+    statistics,
+    trajectory_errors,
+)
+
+FloatArray = npt.NDArray[np.float64]
+Int64Array = npt.NDArray[np.int64]
+
+
+@dataclass(frozen=True)
+class ReferenceTrajectory:
+    """Reference poses (ground truth or SLAM): (N,) stamps in ns, (N, 3) x, y, yaw in the map frame."""
+
+    stamps_ns: Int64Array
+    pose: FloatArray
+
+
+@dataclass(frozen=True)
+class DoorStateTable:
+    """door_states.parquet of one run as arrays (one row per update and door)."""
+
+    stamps_ns: Int64Array
+    door_id: npt.NDArray[np.int32]
+    angle: FloatArray
+    observed: npt.NDArray[np.bool_]
+
+
+@dataclass(frozen=True)
+class RunTables:
+    """One localization run (a ``doorbatch localize`` run directory, or a result in memory).
+
+    Attributes:
+        name: the run's label in the report (e.g. ``loc_closed/rbpf``); log, method: as in trajectory.parquet.
+        stamps_ns, pose: the estimated trajectory; init: ``reference``, ``global`` or ``X,Y,YAW``.
+        converged_ns: first stamp counted as converged (None: never); ambiguous: as the run reported.
+        door_states: the RBPF's door angles (None for MCL); map_doors: the map's doors they refer to.
+        reference, truth: the run's own reference trajectory and simulator truth, when known.
+        params: the sweep point of an experiment (goes into metrics.parquet's params column).
+    """
+
+    name: str
+    log: str
+    method: str
+    stamps_ns: Int64Array
+    pose: FloatArray
+    init: str = "reference"
+    converged_ns: int | None = None
+    ambiguous: bool = False
+    door_states: DoorStateTable | None = None
+    map_doors: DoorSet | None = None
+    reference: ReferenceTrajectory | None = None
+    truth: SimTruth | None = None
+    params: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class MapTables:
+    """A door map to score: its doors and the simulator truth of its mapping passes."""
+
+    name: str
+    doors: DoorSet
+    truth: SimTruth | None = None
+    params: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class MetricRow:
+    """One row of metrics.parquet (DESIGN schema); ``params`` is written as JSON."""
+
+    run: str
+    log: str
+    method: str
+    metric: str
+    value: float
+    unit: str
+    params: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class ErrorSeries:
+    """A run's localization error over time and along the corridor (paper 000 Figs. 5–7)."""
+
+    run: str
+    log: str
+    method: str
+    params: dict[str, Any]
+    t_s: FloatArray  # since the run's first update
+    x_ref_m: FloatArray  # reference x (the corridor direction)
+    position_error_m: FloatArray
+    yaw_error_rad: FloatArray
+
+
+@dataclass(frozen=True)
+class DoorStateSeries:
+    """A run's mean absolute door-angle error over the recently observed doors, per update."""
+
+    run: str
+    log: str
+    method: str
+    t_s: FloatArray
+    error_rad: FloatArray
+
+
+@dataclass(frozen=True)
+class AlongCorridor:
+    """Position error binned along x and averaged over the runs of one (log, method): mean and std."""
+
+    log: str
+    method: str
+    x_m: FloatArray
+    mean_error_m: FloatArray
+    std_error_m: FloatArray
+    runs: int
+
+
+@dataclass(frozen=True)
+class SuccessCurve:
+    """Global localization success rate against the particle count, for one (log, method)."""
+
+    log: str
+    method: str
+    particles: FloatArray
+    success_rate: FloatArray
+    runs: npt.NDArray[np.int64]
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """Everything a report shows: the metric rows and the data of each plot."""
+
+    metrics: list[MetricRow]
+    errors: list[ErrorSeries]
+    door_states: list[DoorStateSeries]
+    along_corridor: list[AlongCorridor]
+    success: list[SuccessCurve]
+    title: str = "doorbatch evaluation"
+
+    def value(self, run: str, metric: str) -> float:
+        """The value of one metric of one run (NaN when absent)."""
+        return next((r.value for r in self.metrics if r.run == run and r.metric == metric), math.nan)
+
+    def with_title(self, title: str) -> Evaluation:
+        """The same evaluation under another title."""
+        return replace(self, title=title)
+
+
+def _stat_rows(run: RunTables, prefix: str, errors: FloatArray, unit: str, scale: float) -> list[MetricRow]:
+    return [MetricRow(run.name, run.log, run.method, f"{prefix}_{k}", v * scale, unit, run.params)
+            for k, v in statistics(errors).items()]
+
+
+def _trajectory_rows(run: RunTables, errs: TrajectoryErrors, cfg: EvaluateConfig) -> list[MetricRow]:
+    scale = math.degrees(1.0) if cfg.angle_unit == "deg" else 1.0
+    rows = [*_stat_rows(run, "ape_trans", errs.ape_m, "m", 1.0),
+            *_stat_rows(run, "ape_rot", errs.ape_rad, cfg.angle_unit, scale),
+            *_stat_rows(run, "rpe_trans", errs.rpe_m, "m", 1.0),
+            *_stat_rows(run, "rpe_rot", errs.rpe_rad, cfg.angle_unit, scale)]
+    rows.append(MetricRow(run.name, run.log, run.method, "associated_poses", float(len(errs.ape_m)), "count",
+                          run.params))
+    rows.append(MetricRow(run.name, run.log, run.method, "rpe_pairs", float(len(errs.rpe_m)), "count", run.params))
+    return rows
+
+
+def _convergence_rows(run: RunTables, reference: ReferenceTrajectory | None,
+                      cfg: EvaluateConfig) -> list[MetricRow]:
+    t0 = int(run.stamps_ns[0])
+    after = math.nan if run.converged_ns is None else (run.converged_ns - t0) / 1e9
+    rows = [MetricRow(run.name, run.log, run.method, "converged", float(run.converged_ns is not None), "bool",
+                      run.params),
+            MetricRow(run.name, run.log, run.method, "time_to_converge_s", after, "s", run.params),
+            MetricRow(run.name, run.log, run.method, "ambiguous", float(run.ambiguous), "bool", run.params)]
+    if run.init == "global" and reference is not None:
+        check = ConvergenceCheck(cfg.global_success_window_s, cfg.global_success_xy_m,
+                                 math.radians(cfg.global_success_yaw_deg), cfg.max_time_diff_s)
+        ok = global_success(run.stamps_ns, run.pose, run.converged_ns, reference.stamps_ns, reference.pose, check)
+        rows.append(MetricRow(run.name, run.log, run.method, "global_success", float(ok), "bool", run.params))
+    return rows
+
+
+def _door_state_part(run: RunTables, truth: SimTruth | None, cfg: EvaluateConfig
+                     ) -> tuple[list[MetricRow], list[DoorStateSeries]]:
+    if truth is None or run.door_states is None or run.map_doors is None or not len(run.map_doors):
+        return [], []
+    series = door_state_errors(run.door_states.stamps_ns, run.door_states.door_id, run.door_states.angle,
+                               run.door_states.observed, run.map_doors, truth, cfg.door_match_max_hinge_m,
+                               int(cfg.door_state_window_s * 1e9))
+    if series.stamps_ns.size == 0:
+        return [], []
+    t0 = int(run.stamps_ns[0])
+    rows = [MetricRow(run.name, run.log, run.method, "door_state_error_mean", float(np.mean(series.error_rad)),
+                      "rad", run.params),
+            MetricRow(run.name, run.log, run.method, "door_state_error_max", float(np.max(series.error_rad)),
+                      "rad", run.params)]
+    return rows, [DoorStateSeries(run.name, run.log, run.method, (series.stamps_ns - t0) / 1e9, series.error_rad)]
+
+
+def _map_rows(door_map: MapTables, truth: SimTruth | None, cfg: DoorbatchConfig) -> list[MetricRow]:
+    if truth is None:
+        return []
+    truth_set, moved = truth_doors(truth, math.radians(cfg.doors.min_opening_deg))
+    score = score_doors(door_map.doors, truth_set, moved, cfg.evaluate.door_match_max_hinge_m)
+
+    def mean(a: FloatArray) -> float:
+        return float(np.mean(np.abs(a))) if a.size else math.nan
+
+    values = [("door_precision", score.precision, "ratio"), ("door_recall", score.recall, "ratio"),
+              ("door_hinge_error_mean", mean(score.hinge_error_m), "m"),
+              ("door_length_error_mean", mean(score.length_error_m), "m"),
+              ("door_range_error_mean", mean(score.range_error_rad), "rad"),
+              ("doors_detected", float(len(door_map.doors)), "count"), ("doors_truth", float(moved.sum()), "count")]
+    return [MetricRow(door_map.name, "", "map", k, float(v), u, door_map.params) for k, v, u in values]
+
+
+def along_corridor(series: Sequence[ErrorSeries], bin_m: float) -> list[AlongCorridor]:
+    """Per (log, method): position error binned by reference x (width ``bin_m``), mean and std over the
+    runs' per-bin means (paper 000 Figs. 5–7 average 10 runs)."""
+    groups: dict[tuple[str, str], list[ErrorSeries]] = defaultdict(list)
+    for s in series:
+        groups[(s.log, s.method)].append(s)
+    curves = []
+    for (log_name, method), members in groups.items():
+        x_all = np.concatenate([m.x_ref_m for m in members])
+        if x_all.size == 0:
+            continue
+        lo = math.floor(float(x_all.min()) / bin_m)
+        n_bins = math.floor(float(x_all.max()) / bin_m) - lo + 1
+        per_run = np.full((len(members), n_bins), np.nan)
+        for r, m in enumerate(members):
+            idx = np.floor(m.x_ref_m / bin_m).astype(np.int64) - lo
+            sums = np.bincount(idx, m.position_error_m, n_bins)
+            counts = np.bincount(idx, minlength=n_bins)
+            per_run[r, counts > 0] = sums[counts > 0] / counts[counts > 0]
+        seen = np.isfinite(per_run).any(axis=0)
+        x = (np.arange(n_bins) + lo + 0.5) * bin_m
+        with np.errstate(invalid="ignore"):
+            curves.append(AlongCorridor(log_name, method, x[seen], np.nanmean(per_run[:, seen], axis=0),
+                                        np.nanstd(per_run[:, seen], axis=0), len(members)))
+    return curves
+
+
+def success_curves(rows: Sequence[MetricRow]) -> list[SuccessCurve]:
+    """Per (log, method): the fraction of ``global_success`` runs at each ``params["particles"]``."""
+    groups: dict[tuple[str, str], dict[float, list[float]]] = defaultdict(lambda: defaultdict(list))
+    for r in rows:
+        if r.metric == "global_success" and "particles" in r.params:
+            groups[(r.log, r.method)][float(r.params["particles"])].append(r.value)
+    curves = []
+    for (log_name, method), by_n in groups.items():
+        ns = sorted(by_n)
+        curves.append(SuccessCurve(log_name, method, np.array(ns), np.array([np.mean(by_n[n]) for n in ns]),
+                                   np.array([len(by_n[n]) for n in ns], dtype=np.int64)))
+    return curves
+
+
+def evaluate_runs(runs: Sequence[RunTables], config: DoorbatchConfig, *,
+                  reference: ReferenceTrajectory | None = None, truth: SimTruth | None = None,
+                  maps: Sequence[MapTables] = ()) -> Evaluation:
+    """Metrics and plot data of localization runs and door maps (see the module docstring).
+
+    A run with no reference gets only its convergence metrics; a run whose stamps match no reference pose
+    within ``evaluate.max_time_diff_s`` raises.
+
+    Raises:
+        PipelineError: a run and its reference have no pose within the time tolerance.
+    """
+    cfg = config.evaluate
+    rows: list[MetricRow] = []
+    series: list[ErrorSeries] = []
+    door_series: list[DoorStateSeries] = []
+    for run in runs:
+        if len(run.stamps_ns) == 0:
+            raise PipelineError(f"run {run.name}: empty trajectory")
+        ref = reference if reference is not None else run.reference
+        if ref is not None:
+            try:
+                errs = trajectory_errors(run.stamps_ns, run.pose, ref.stamps_ns, ref.pose,
+                                         max_diff_s=cfg.max_time_diff_s, align=Alignment(cfg.align),
+                                         rpe_delta_m=cfg.rpe_delta_m, rpe_all_pairs=cfg.rpe_all_pairs,
+                                         rpe_rel_delta_tol=cfg.rpe_rel_delta_tol)
+            except PipelineError as err:
+                raise PipelineError(f"run {run.name}: {err}") from err
+            rows += _trajectory_rows(run, errs, cfg)
+            series.append(ErrorSeries(run.name, run.log, run.method, run.params,
+                                      (errs.stamps_ns - int(run.stamps_ns[0])) / 1e9, errs.reference[:, 0],
+                                      errs.ape_m, errs.ape_rad))
+        rows += _convergence_rows(run, ref, cfg)
+        state_rows, state_series = _door_state_part(run, truth if truth is not None else run.truth, cfg)
+        rows += state_rows
+        door_series += state_series
+    for door_map in maps:
+        rows += _map_rows(door_map, truth if truth is not None else door_map.truth, config)
+    return Evaluation(rows, series, door_series, along_corridor(series, cfg.along_x_bin_m), success_curves(rows))
+
+
+
+SUMMARY_METRICS = ("ape_trans_rmse", "ape_trans_max", "ape_rot_rmse", "rpe_trans_rmse", "rpe_rot_rmse",
+                   "time_to_converge_s", "global_success", "door_state_error_mean")
+MAP_METRICS = ("door_precision", "door_recall", "door_hinge_error_mean", "door_length_error_mean",
+               "door_range_error_mean")
+
+
+@dataclass(frozen=True)
+class SummaryTable:
+    """A table of the report: column names, units, and rows of (labels..., values...)."""
+
+    label_columns: tuple[str, ...]
+    value_columns: tuple[str, ...]
+    units: tuple[str, ...]
+    rows: list[tuple[tuple[str, ...], tuple[float, ...]]]
+
+
+def _label(params: dict[str, Any]) -> str:
+    return ", ".join(f"{k}={v}" for k, v in sorted(params.items()) if k != "seed")
+
+
+def summary_table(evaluation: Evaluation, metrics: Sequence[str] = SUMMARY_METRICS, method_map: bool = False
+                  ) -> SummaryTable:
+    """Mean of each metric per (log, method, sweep point without the seed), over the runs (seeds) there."""
+    keep = [r for r in evaluation.metrics if r.metric in metrics and ((r.method == "map") == method_map)]
+    groups: dict[tuple[str, str, str], dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
+    runs: dict[tuple[str, str, str], set[str]] = defaultdict(set)
+    units: dict[str, str] = {}
+    for r in keep:
+        key = (r.log if not method_map else r.run, r.method, _label(r.params))
+        groups[key][r.metric].append(r.value)
+        runs[key].add(r.run)
+        units[r.metric] = r.unit
+    present = tuple(m for m in metrics if m in units)
+    rows: list[tuple[tuple[str, ...], tuple[float, ...]]] = []
+    for key in sorted(groups):
+        values = tuple(float(np.nanmean(groups[key][m])) if groups[key].get(m) and np.isfinite(groups[key][m]).any()
+                       else math.nan for m in present)
+        rows.append(((*key, str(len(runs[key]))), values))
+    first = "map" if method_map else "log"
+    return SummaryTable((first, "method", "params", "runs"), present, tuple(units[m] for m in present), rows)

@@ -1,0 +1,63 @@
+"""``doorbatch evaluate`` end to end: read run and map directories, evaluate, write the report directory.
+
+    evaluate_run_dirs(run_dirs: Sequence[Path], out_dir: Path, config: DoorbatchConfig, *,
+                      reference: Path | None = None, truth: Path | None = None) -> Evaluation
+
+``run_dirs`` may mix localization run directories (trajectory.parquet) and map directories (doors.parquet);
+``reference`` is a TUM file or a log with a reference pose topic, ``truth`` a simulator truth YAML; both
+override what each run finds next to its log. Writes metrics.parquet, report.md, report.html, the plots and
+manifest.json into ``out_dir``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+from doorbatch.config import DoorbatchConfig
+from doorbatch.errors import InputDataError
+from doorbatch.io.manifest import Manifest
+from doorbatch.io.report_writer import write_report
+from doorbatch.io.run_reader import is_map_dir, is_run_dir, read_map_dir, read_reference, read_run_dir
+from doorbatch.io.sim_truth import read_truth
+from doorbatch.pipeline.evaluate.report import Evaluation, MapTables, RunTables, evaluate_runs
+
+
+def _names(dirs: Sequence[Path]) -> list[str]:
+    """Unique labels: the folder name, or parent/name where names repeat (runs/<log>/<method>)."""
+    names = [d.name for d in dirs]
+    return [f"{d.parent.name}/{d.name}" if names.count(d.name) > 1 else d.name for d in dirs]
+
+
+def evaluate_run_dirs(run_dirs: Sequence[Path], out_dir: Path, config: DoorbatchConfig, *,
+                      reference: Path | None = None, truth: Path | None = None,
+                      title: str = "doorbatch evaluation") -> Evaluation:
+    """Evaluate run and map directories and write the report directory (see the module docstring).
+
+    Raises:
+        InputDataError: a directory that is neither a run nor a map directory, or unreadable inputs.
+        PipelineError: a run whose stamps match none of its reference's.
+    """
+    dirs = [Path(d) for d in run_dirs]
+    inputs = [d / "trajectory.parquet" if is_run_dir(d) else d / "doors.parquet" for d in dirs if
+              is_run_dir(d) or is_map_dir(d)]
+    manifest = Manifest.start(config.as_dict(), [*inputs, *(p for p in (reference, truth) if p is not None)],
+                              command="evaluate")
+    runs: list[RunTables] = []
+    maps: list[MapTables] = []
+    for d, name in zip(dirs, _names(dirs), strict=True):
+        if is_run_dir(d):
+            runs.append(read_run_dir(d, config, name))
+        elif is_map_dir(d):
+            maps.append(read_map_dir(d, name))
+        else:
+            raise InputDataError("neither a run directory (trajectory.parquet) nor a map directory "
+                                 "(map.yaml, doors.parquet)", path=d)
+    ref = read_reference(reference, config) if reference is not None else None
+    world = read_truth(truth) if truth is not None else None
+    evaluation = evaluate_runs(runs, config, reference=ref, truth=world, maps=maps).with_title(title)
+    write_report(evaluation, out_dir)
+    manifest.extra.update({"runs": len(runs), "maps": len(maps)})
+    manifest.finish()
+    manifest.write(out_dir / "manifest.json")
+    return evaluation

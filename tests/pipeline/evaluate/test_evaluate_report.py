@@ -1,0 +1,163 @@
+"""evaluate_runs and doorbatch evaluate: known answers on synthetic runs, the report directory's contents."""
+
+from __future__ import annotations
+
+import base64
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from doorbatch.cli import main
+from doorbatch.config import DoorbatchConfig, load_config
+from doorbatch.io.manifest import Manifest
+from doorbatch.io.parquet import read_table
+from doorbatch.io.rundir import write_run_tables
+from doorbatch.io.sim_truth import SimTruth, TruthDoor
+from doorbatch.io.tum import write_tum
+from doorbatch.maps import DoorSet
+from doorbatch.pipeline.evaluate.door_state_error import door_state_errors
+from doorbatch.pipeline.evaluate.report import (
+    ReferenceTrajectory,
+    RunTables,
+    evaluate_runs,
+    summary_table,
+)
+from doorbatch.pipeline.localize.result import LocalizationResult
+
+T0 = 1_700_000_000_000_000_000
+DT = 100_000_000
+
+
+def _straight(n: int = 200) -> tuple[np.ndarray, np.ndarray]:
+    """A robot driving along x at 0.5 m/s, 10 Hz."""
+    stamps = T0 + DT * np.arange(n, dtype=np.int64)
+    pose = np.stack([0.05 * np.arange(n), np.zeros(n), np.zeros(n)], axis=1)
+    return stamps, pose
+
+
+def _truth(angle_rad: float) -> SimTruth:
+    door = TruthDoor(0, "d0", 5.0, 1.0, 0.9, 0.0, 1, 1.5, 2.0, (0.5, 0.5, 0.5), (0.1, 0.1, 0.1))
+    return SimTruth(generator={}, start_ns=T0, end_ns=T0 + 100 * DT, files={}, world_name="w", wall_height_m=2.0,
+                    segments=np.zeros((0, 2, 2)), segment_kinds=(), doors=(door,), passes=(),
+                    angle_stamp_ns=np.array([T0, T0 + 100 * DT]), angle_door_id=np.array([0, 0]),
+                    angle_rad=np.array([0.0, angle_rad]))
+
+
+def test_known_offset_gives_known_ape_and_zero_rpe() -> None:
+    stamps, ref = _straight()
+    est = ref + np.array([0.0, 0.1, 0.02])
+    run = RunTables("r", "log.mcap", "mcl", stamps, est, reference=ReferenceTrajectory(stamps, ref))
+    ev = evaluate_runs([run], DoorbatchConfig())
+    for stat in ("rmse", "mean", "median", "min", "max"):
+        assert ev.value("r", f"ape_trans_{stat}") == pytest.approx(0.1, abs=1e-12)
+        assert ev.value("r", f"ape_rot_{stat}") == pytest.approx(0.02, abs=1e-12)
+    assert ev.value("r", "ape_trans_std") == pytest.approx(0.0, abs=1e-12)
+    # a constant heading offset turns every relative motion d by 0.02 rad: ‖E‖ = 2 sin(0.01) d, d ≈ 1 m
+    assert ev.value("r", "rpe_trans_max") == pytest.approx(2 * math.sin(0.01) * 1.0, rel=0.06)
+    assert ev.value("r", "rpe_rot_max") == pytest.approx(0.0, abs=1e-12)
+    assert ev.value("r", "rpe_pairs") == 9  # 9.95 m of path in 1 m steps
+    shifted = RunTables("s", "log.mcap", "mcl", stamps, ref + np.array([0.3, -0.1, 0.0]),
+                        reference=ReferenceTrajectory(stamps, ref))
+    assert evaluate_runs([shifted], DoorbatchConfig()).value("s", "rpe_trans_max") == pytest.approx(0.0, abs=1e-12)
+    aligned = evaluate_runs([run], load_config(overrides=["evaluate.align=se2", "evaluate.angle_unit=deg"]))
+    assert aligned.value("r", "ape_trans_max") < 1e-9  # SE(2) alignment removes the offset
+    assert next(r.unit for r in aligned.metrics if r.metric == "ape_rot_rmse") == "deg"
+
+
+def test_global_success_needs_convergence_at_the_right_pose() -> None:
+    stamps, ref = _straight()
+    reference = ReferenceTrajectory(stamps, ref)
+    turned = ref.copy()
+    turned[:, 2] = np.pi  # converged on the pose turned by 180° (the symmetric corridor's trap)
+    near = ref + np.array([0.05, 0, 0])
+    runs = [RunTables("ok", "l", "rbpf", stamps, near, init="global", converged_ns=int(stamps[20])),
+            RunTables("turned", "l", "rbpf", stamps, turned, init="global", converged_ns=int(stamps[20])),
+            RunTables("late", "l", "rbpf", stamps, ref, init="global", converged_ns=None),
+            RunTables("tracking", "l", "rbpf", stamps, ref, init="reference", converged_ns=int(stamps[0]))]
+    ev = evaluate_runs(runs, DoorbatchConfig(), reference=reference)
+    assert [ev.value(n, "global_success") for n in ("ok", "turned", "late")] == [1.0, 0.0, 0.0]
+    assert math.isnan(ev.value("tracking", "global_success"))
+    assert ev.value("ok", "time_to_converge_s") == pytest.approx(2.0)
+    assert math.isnan(ev.value("late", "time_to_converge_s")) and ev.value("late", "converged") == 0.0
+
+
+def test_door_state_error_counts_recently_observed_doors_only() -> None:
+    truth = _truth(math.radians(40))
+    stamps = T0 + DT * np.arange(100, dtype=np.int64)
+    true_angle = truth.door_angles_at(stamps)[:, 0]
+    map_doors = DoorSet(np.array([[5.05, 1.0]]), np.array([0.9]), np.array([0.1]), np.zeros(1), np.ones(1))
+    est = true_angle - 0.1 + math.radians(5)  # map closed_yaw is 0.1 rad off: global direction 5° off
+    observed = np.arange(100) < 50  # observed for 5 s, then unseen
+    errs = door_state_errors(stamps, np.zeros(100, np.int32), est, observed, map_doors, truth, 0.3, 2 * 10**9)
+    assert errs.stamps_ns[0] == stamps[0] and errs.stamps_ns[-1] == stamps[69]  # 2 s after the last observation
+    np.testing.assert_allclose(errs.error_rad, math.radians(5), atol=1e-12)
+    far = DoorSet(np.array([[6.0, 1.0]]), np.array([0.9]), np.zeros(1), np.zeros(1), np.ones(1))
+    assert door_state_errors(stamps, np.zeros(100, np.int32), est, observed, far, truth, 0.3, 0).error_rad.size == 0
+
+
+def test_error_along_the_corridor_averages_runs_per_bin() -> None:
+    stamps, ref = _straight(101)  # x from 0 to 5 m
+    runs = [RunTables(f"s{k}", "l", "mcl", stamps, ref + np.array([0, 0.1 * (k + 1), 0]), reference=ReferenceTrajectory(
+        stamps, ref), params={"seed": k}) for k in range(2)]
+    ev = evaluate_runs(runs, load_config(overrides=["evaluate.along_x_bin_m=1.0"]))
+    (curve,) = ev.along_corridor
+    assert curve.runs == 2
+    np.testing.assert_allclose(curve.x_m, [0.5, 1.5, 2.5, 3.5, 4.5, 5.5])
+    np.testing.assert_allclose(curve.mean_error_m, 0.15)
+    np.testing.assert_allclose(curve.std_error_m, 0.05)
+    table = summary_table(ev)
+    (row,) = table.rows  # seeds are averaged into one row
+    assert row[0][3] == "2"
+    assert row[1][table.value_columns.index("ape_trans_rmse")] == pytest.approx(0.15)
+
+
+def _write_run(folder: Path, log: Path, stamps: np.ndarray, pose: np.ndarray, method: str,
+               door_angle: float) -> None:
+    u = len(stamps)
+    result = LocalizationResult(
+        log=log.name, method=method, stamps_ns=stamps, pose=pose, cov=np.tile(np.eye(3) * 1e-3, (u, 1, 1)),
+        odom=pose.copy(), n_particles=np.full(u, 500, np.int32), neff=np.full(u, 400.0),
+        door_mean=np.full((u, 1), door_angle), door_std=np.full((u, 1), 0.05), door_observed=np.ones((u, 1), bool),
+        particles=np.zeros((u, 1, 3)))
+    write_run_tables(folder, result)
+    manifest = Manifest.start(DoorbatchConfig().as_dict(), [log], command="localize", method=method,
+                              init="reference")
+    manifest.extra.update({"converged_after_s": 0.0, "ambiguous": False})
+    manifest.write(folder / "manifest.json")
+
+
+def test_evaluate_cli_writes_the_report_directory(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    stamps, ref = _straight()
+    log = tmp_path / "loc.mcap"
+    log.write_bytes(b"not read")  # only its name and the reference beside it are used
+    write_tum(tmp_path / "loc.truth.tum", stamps, *ref.T)
+    _write_run(tmp_path / "runs" / "mcl", log, stamps, ref + np.array([0.0, 0.2, 0.0]), "mcl", 0.0)
+    _write_run(tmp_path / "runs" / "rbpf", log, stamps, ref + np.array([0.0, 0.05, 0.0]), "rbpf", 0.3)
+    out = tmp_path / "report"
+    code = main(["evaluate", str(tmp_path / "runs" / "mcl"), str(tmp_path / "runs" / "rbpf"), "-o", str(out),
+                 "--json"])
+    assert code == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["runs"] == 2
+    table = read_table("metrics", out / "metrics.parquet").to_pydict()
+    rmse = {r: v for r, m, v in zip(table["run"], table["metric"], table["value"], strict=True)
+            if m == "ape_trans_rmse"}
+    assert rmse == pytest.approx({"mcl": 0.2, "rbpf": 0.05})
+    assert pq.read_schema(out / "metrics.parquet").names == ["run", "log", "method", "metric", "value", "unit",
+                                                              "params"]
+    page = (out / "report.html").read_text()
+    png = base64.b64decode(page.split("data:image/png;base64,")[1].split('"')[0])
+    assert png.startswith(b"\x89PNG") and "src=\"error_along_x.png\"" not in page  # embedded, not linked
+    assert (out / "error_along_x.png").read_bytes()[:4] == b"\x89PNG"
+    assert "| loc.mcap | rbpf |" in (out / "report.md").read_text()
+
+
+def test_evaluate_cli_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["evaluate", "-o", str(tmp_path / "r")]) == 2
+    (tmp_path / "empty").mkdir()
+    assert main(["evaluate", str(tmp_path / "empty"), "-o", str(tmp_path / "r")]) == 3
+    assert "neither a run directory" in capsys.readouterr().err
