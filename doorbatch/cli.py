@@ -250,20 +250,22 @@ def evaluate_cmd(ctx: Context, run_dirs: tuple[Path, ...], output: Path, referen
 @click.argument("dataset", type=click.Path(path_type=Path, file_okay=False))
 @click.option("-o", "--output", type=click.Path(path_type=Path, file_okay=False), required=True,
               help="Output folder (maps, runs, reports, dataset tables, run.log).")
-@click.option("--workers", type=click.IntRange(min=0), default=None, help="Parallel steps (0: one per CPU).")
-@click.option("--executor", type=click.Choice(["local", "dask"]), default=None, help="Default: run.executor.")
+@click.option("--workers", type=click.IntRange(min=0), default=0, show_default=True,
+              help="Parallel steps (0: one per CPU).")
+@click.option("--executor", type=click.Choice(["local", "dask"]), default=None,
+              help="local process pool (default), or a Dask cluster.")
 @click.option("--scheduler", default=None, metavar="ADDRESS", help="Dask scheduler address (implies dask).")
 @click.option("--force", is_flag=True, help="Redo every step, even those up to date.")
 @common_options
-def run_cmd(ctx: Context, dataset: Path, output: Path, workers: int | None, executor: str | None,
+def run_cmd(ctx: Context, dataset: Path, output: Path, workers: int, executor: str | None,
             scheduler: str | None, force: bool) -> None:
     """Map, localize and evaluate every site of DATASET (its dataset.yaml); incremental and cron-safe."""
     from doorbatch.errors import BatchPartialError
-    from doorbatch.pipeline.batch.run import prepare_run, run_dataset
+    from doorbatch.pipeline.batch.run import Execution, prepare_run, run_dataset
 
-    ds, config = prepare_run(dataset, ctx.config_file, ctx.overrides, workers=workers, executor=executor,
-                             scheduler=scheduler)
-    summary = run_dataset(ds, output, config, force=force)
+    execution = Execution("dask" if scheduler and executor is None else executor or "local", workers, scheduler)
+    ds, config = prepare_run(dataset, ctx.config_file, ctx.overrides)
+    summary = run_dataset(ds, output, config, execution, force=force)
     ctx.summary(summary.line(), asdict(summary))
     if not summary.complete:
         first = summary.failures[0]

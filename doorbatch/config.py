@@ -368,11 +368,8 @@ class RunConfig(Section):
     init: str = "reference"
     # Map stages (doorbatch map --stages).
     map_stages: list[str] = Field(default_factory=lambda: ["grid"], min_length=1)
-    # Parallel steps with the local executor; 0: one per CPU.
-    workers: int = Field(0, ge=0)
-    executor: Literal["local", "dask"] = "local"
-    # Dask scheduler address (tcp://host:8786); None: an in-process LocalCluster of `workers` workers.
-    dask_scheduler: str | None = None
+    # How the work is spread (--workers, --executor, --scheduler) is no config: it must not change outputs
+    # or the config hash in their manifests.
 
 
 class DoorbatchConfig(Section):

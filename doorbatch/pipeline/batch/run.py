@@ -24,6 +24,7 @@ from types import FrameType
 from typing import Any
 
 from doorbatch.config import DoorbatchConfig
+from doorbatch.errors import UsageError
 from doorbatch.io.atomic import atomic_write_text
 from doorbatch.io.dataset import Dataset
 from doorbatch.io.run_lock import run_lock
@@ -37,6 +38,24 @@ from doorbatch.progress import Progress, progress_bar
 
 log = logging.getLogger(__name__)
 SUMMARY_FILE = "summary.json"
+
+
+@dataclass(frozen=True)
+class Execution:
+    """Where the steps run (``--executor``, ``--workers``, ``--scheduler``): never part of the config, so
+    that it changes no output."""
+
+    executor: str = "local"  # local or dask
+    workers: int = 0  # 0: one per CPU
+    scheduler: str | None = None  # Dask scheduler address; None: an in-process LocalCluster
+
+    def __post_init__(self) -> None:
+        if self.executor not in ("local", "dask"):
+            raise UsageError(f"--executor {self.executor!r}: expected local or dask")
+        if self.scheduler is not None and self.executor != "dask":
+            raise UsageError("--scheduler needs --executor dask")
+        if self.workers < 0:
+            raise UsageError(f"--workers {self.workers}: expected 0 (one per CPU) or more")
 
 
 @dataclass(frozen=True)
@@ -124,15 +143,16 @@ def _summary(dataset: Dataset, out: Path, steps: list[Step], outcomes: dict[str,
         str(dataset.root), str(out), len(steps), counts[StepStatus.DONE], counts[StepStatus.UP_TO_DATE],
         counts[StepStatus.FAILED], counts[StepStatus.BLOCKED], seconds,
         str(report) if outcomes["report"].ok and report.exists() else None, stale,
-        [{"step": o.step_id, "status": str(o.status), "error": o.error or ""} for o in outcomes.values() if not o.ok],
+        [{"step": s.id, "status": str(outcomes[s.id].status), "error": outcomes[s.id].error or ""}
+         for s in steps if not outcomes[s.id].ok],
         [{"step": s.id, "status": str(outcomes[s.id].status), "seconds": round(outcomes[s.id].seconds, 3)}
          for s in steps])
 
 
-def _run_locked(dataset: Dataset, out: Path, config: DoorbatchConfig, force: bool, stale: str | None) -> RunSummary:
+def _run_locked(dataset: Dataset, out: Path, config: DoorbatchConfig, execution: Execution, force: bool,
+                stale: str | None) -> RunSummary:
     start = time.perf_counter()
-    rc = config.run
-    steps = plan_steps(dataset, list(rc.methods))
+    steps = plan_steps(dataset, list(config.run.methods))
     job = BatchJob(dataset, out, config, force)
     with ExitStack() as stack:
         bars: dict[StepKind, Progress] = {
@@ -143,7 +163,7 @@ def _run_locked(dataset: Dataset, out: Path, config: DoorbatchConfig, force: boo
             bars[step.kind].update(1)
             _log_outcome(step, outcome)
 
-        executor = stack.enter_context(open_executor(rc.executor, rc.workers, rc.dask_scheduler))
+        executor = stack.enter_context(open_executor(execution.executor, execution.workers, execution.scheduler))
         outcomes = run_steps(steps, job, executor, on_outcome,
                              lambda s: log.debug("%s: started", s.id, extra={"event": "step_started", "step": s.id}))
     summary = _summary(dataset, out, steps, outcomes, time.perf_counter() - start, stale)
@@ -157,7 +177,8 @@ def _json(data: dict[str, Any]) -> str:
     return json.dumps(data, indent=2) + "\n"
 
 
-def run_dataset(dataset: Dataset, out: Path, config: DoorbatchConfig, *, force: bool = False) -> RunSummary:
+def run_dataset(dataset: Dataset, out: Path, config: DoorbatchConfig, execution: Execution | None = None, *,
+                force: bool = False) -> RunSummary:
     """Run every step of ``dataset`` into ``out`` (see the module docstring); returns the summary, which
     lists failed steps (the caller turns them into exit code 4).
 
@@ -167,11 +188,12 @@ def run_dataset(dataset: Dataset, out: Path, config: DoorbatchConfig, *, force: 
         KeyboardInterrupt: Ctrl-C or SIGTERM; staged folders are removed and completed steps stay.
     """
     out = Path(out).resolve()
+    execution = execution or Execution()
     with run_lock(out) as (mine, stale), run_log_handler(out), sigterm_as_interrupt():
         log.info("run of %s started", dataset.root, extra={
             "event": "run_started", "dataset": str(dataset.root), "pid": mine.pid, "host": mine.host,
-            "config_hash": config.hash(), "force": force, "executor": config.run.executor,
-            "workers": resolve_workers(config.run.workers)})
+            "config_hash": config.hash(), "force": force, "executor": execution.executor,
+            "workers": resolve_workers(execution.workers), "scheduler": execution.scheduler})
         stale_text = None if stale is None else stale.describe()
         if stale is not None:
             log.warning("took over the stale lock of %s", stale_text,
@@ -180,7 +202,7 @@ def run_dataset(dataset: Dataset, out: Path, config: DoorbatchConfig, *, force: 
             log.warning("removed %s left by an interrupted run", path, extra={"event": "leftover_removed",
                                                                             "path": str(path)})
         try:
-            summary = _run_locked(dataset, out, config, force, stale_text)
+            summary = _run_locked(dataset, out, config, execution, force, stale_text)
         except KeyboardInterrupt:
             removed = remove_leftovers(out)
             log.error("run interrupted; removed %d staged folder(s)", len(removed), extra={"event": "run_interrupted"})
@@ -189,23 +211,16 @@ def run_dataset(dataset: Dataset, out: Path, config: DoorbatchConfig, *, force: 
     return summary
 
 
-def prepare_run(dataset_path: Path, config_file: Path | None, overrides: tuple[str, ...] = (), *,
-                workers: int | None = None, executor: str | None = None,
-                scheduler: str | None = None) -> tuple[Dataset, DoorbatchConfig]:
+def prepare_run(dataset_path: Path, config_file: Path | None, overrides: tuple[str, ...] = ()
+                ) -> tuple[Dataset, DoorbatchConfig]:
     """Read the dataset and resolve the config: defaults < ``config_file`` < the dataset's ``config:`` <
-    ``overrides`` < the command-line options (``--scheduler`` implies the Dask executor).
+    ``overrides``.
 
     Raises:
-        InputDataError: a bad dataset.yaml. ConfigError: a bad config. UsageError: ``--scheduler`` with
-            ``--executor local``.
+        InputDataError: a bad dataset.yaml. ConfigError: a bad config.
     """
     from doorbatch.config import load_config
-    from doorbatch.errors import UsageError
     from doorbatch.io.dataset import read_dataset
 
-    if scheduler is not None and executor == "local":
-        raise UsageError("--scheduler needs --executor dask")
     dataset = read_dataset(Path(dataset_path).resolve())  # manifests name absolute inputs: any worker finds them
-    options = {"workers": workers, "executor": "dask" if scheduler else executor, "dask_scheduler": scheduler}
-    cli_options = tuple(f"run.{k}={v}" for k, v in options.items() if v is not None)
-    return dataset, load_config(config_file, (*overrides, *cli_options), extra=dataset.config)
+    return dataset, load_config(config_file, overrides, extra=dataset.config)
