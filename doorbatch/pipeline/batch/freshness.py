@@ -10,7 +10,7 @@ of the next by content, so a rerun of mapping that yields the same map leaves lo
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -61,15 +61,17 @@ class StepKey:
 
 
 def step_key(kind: StepKind, config: Mapping[str, Any], inputs: Sequence[Path],
-             params: Mapping[str, Any] | None = None) -> StepKey:
-    """Fingerprint a step's inputs and config sections.
+             params: Mapping[str, Any] | None = None,
+             fingerprint: Callable[[Path], dict[str, Any]] = file_fingerprint) -> StepKey:
+    """Fingerprint a step's inputs (with ``fingerprint``: a cache's, or hashing every byte) and config
+    sections.
 
     Raises:
         InputDataError: an input is missing or unreadable (names it).
     """
     sections = STEP_SECTIONS[kind]
     return StepKey(kind, json.loads(json.dumps(dict(params or {}), default=str)), sections,
-                   sections_hash(config, sections), [file_fingerprint(p) for p in inputs])
+                   sections_hash(config, sections), [fingerprint(p) for p in inputs])
 
 
 def recorded_step(out_dir: Path) -> dict[str, Any] | None:

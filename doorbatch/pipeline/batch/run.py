@@ -27,6 +27,7 @@ from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import UsageError
 from doorbatch.io.atomic import atomic_write_text
 from doorbatch.io.dataset import Dataset
+from doorbatch.io.fingerprint_cache import read_fingerprint_cache, write_fingerprint_cache
 from doorbatch.io.run_lock import run_lock
 from doorbatch.io.run_log import RUN_LOG, JsonLinesHandler
 from doorbatch.io.staged_dir import remove_leftovers
@@ -153,19 +154,22 @@ def _run_locked(dataset: Dataset, out: Path, config: DoorbatchConfig, execution:
                 stale: str | None) -> RunSummary:
     start = time.perf_counter()
     steps = plan_steps(dataset, list(config.run.methods))
-    job = BatchJob(dataset, out, config, force)
+    fingerprints = read_fingerprint_cache(out)
+    job = BatchJob(dataset, out, config, force, fingerprints)
     with ExitStack() as stack:
         bars: dict[StepKind, Progress] = {
             kind: stack.enter_context(progress_bar(sum(s.kind is kind for s in steps), str(kind), unit="step"))
             for kind in StepKind}
 
         def on_outcome(step: Step, outcome: StepOutcome) -> None:
+            fingerprints.update(outcome.fingerprints)
             bars[step.kind].update(1)
             _log_outcome(step, outcome)
 
         executor = stack.enter_context(open_executor(execution.executor, execution.workers, execution.scheduler))
         outcomes = run_steps(steps, job, executor, on_outcome,
                              lambda s: log.debug("%s: started", s.id, extra={"event": "step_started", "step": s.id}))
+    write_fingerprint_cache(out, fingerprints)
     summary = _summary(dataset, out, steps, outcomes, time.perf_counter() - start, stale)
     atomic_write_text(out / SUMMARY_FILE, _json(asdict(summary)))
     return summary

@@ -7,6 +7,7 @@ localize`` themselves (:func:`~doorbatch.pipeline.map_run.run_map`,
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -21,7 +22,18 @@ from doorbatch.pipeline.batch.freshness import recorded_step
 from doorbatch.pipeline.batch.plan import METRICS_DIR, TRAJECTORIES_DIR, Step, map_dir
 
 if TYPE_CHECKING:
-    from doorbatch.pipeline.evaluate.report import MapTables, RunTables
+    from doorbatch.pipeline.evaluate.report import Evaluation, MapTables, RunTables
+
+# The report's plots go through matplotlib.pyplot, whose figure registry is global: steps running as threads
+# (the Dask LocalCluster) write their reports one at a time.
+_PYPLOT_LOCK = threading.Lock()
+
+
+def _write_report(evaluation: Evaluation, dest: Path) -> None:
+    from doorbatch.io.report_writer import write_report
+
+    with _PYPLOT_LOCK:
+        write_report(evaluation, dest)
 
 
 def build_site_map(site: Site, dest: Path, config: DoorbatchConfig) -> list[str]:
@@ -61,12 +73,11 @@ def _site_tables(site: Site, out: Path, run_dirs: Sequence[str], config: Doorbat
 
 def evaluate_site(site: Site, out: Path, run_dirs: Sequence[str], dest: Path, config: DoorbatchConfig) -> list[str]:
     """Metrics, plots and report of the site's map and of each run that succeeded, into ``dest``."""
-    from doorbatch.io.report_writer import write_report
     from doorbatch.pipeline.evaluate.report import evaluate_runs
 
     tables, maps = _site_tables(site, out, run_dirs, config)
     evaluation = evaluate_runs(tables, config, maps=maps).with_title(f"doorbatch run: site {site.name}")
-    write_report(evaluation, dest)
+    _write_report(evaluation, dest)
     return []
 
 
@@ -74,7 +85,6 @@ def dataset_report(dataset: Dataset, out: Path, evaluations: Sequence[Step], des
                    config: DoorbatchConfig) -> list[str]:
     """The dataset report over every site that was evaluated, into ``dest`` (OUT/report), and the site
     partitions of the dataset-level tables OUT/metrics/site=<site>/ and OUT/trajectories/site=<site>/."""
-    from doorbatch.io.report_writer import write_report
     from doorbatch.pipeline.evaluate.report import evaluate_runs
 
     by_name = {s.name: s for s in dataset.sites}
@@ -93,5 +103,5 @@ def dataset_report(dataset: Dataset, out: Path, evaluations: Sequence[Step], des
             tables += site_runs
             maps += site_maps
         evaluation = evaluate_runs(tables, config, maps=maps).with_title(f"doorbatch run: {dataset.root.name}")
-        write_report(evaluation, dest)
+        _write_report(evaluation, dest)
     return []

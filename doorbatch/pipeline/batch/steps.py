@@ -14,10 +14,12 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
 from pathlib import Path
+from typing import Any
 
 from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import DoorbatchError
 from doorbatch.io.dataset import Dataset, Site
+from doorbatch.io.fingerprint_cache import FingerprintCache
 from doorbatch.io.manifest import utc_now_iso
 from doorbatch.io.staged_dir import staged_dir
 from doorbatch.pipeline.batch.freshness import StepKey, recorded_key, stamp_manifest, step_key
@@ -46,6 +48,7 @@ class StepOutcome:
     error: str | None = None
     warnings: list[str] = field(default_factory=list)
     traceback: str | None = None  # of an internal error, for run.log
+    fingerprints: dict[str, dict[str, Any]] = field(default_factory=dict)  # new cache entries
 
     @property
     def ok(self) -> bool:
@@ -61,6 +64,7 @@ class BatchJob:
     out: Path
     config: DoorbatchConfig
     force: bool = False
+    fingerprints: dict[str, dict[str, Any]] = field(default_factory=dict)  # the cache when the run started
 
     def site(self, name: str | None) -> Site:
         """The dataset's site of this name."""
@@ -125,14 +129,18 @@ def execute_step(step: Step, job: BatchJob, usable: Sequence[Step] = ()) -> Step
         usable: The steps of ``step.uses`` that succeeded (their outputs are read).
     """
     start = time.perf_counter()
+    cache = FingerprintCache(job.fingerprints)
     try:
-        key = step_key(step.kind, job.config.as_dict(), *_inputs(step, job, usable))
+        key = step_key(step.kind, job.config.as_dict(), *_inputs(step, job, usable), fingerprint=cache.fingerprint)
         if not job.force and recorded_key(job.out / step.out_dir) == key.digest:
-            return StepOutcome(step.id, StepStatus.UP_TO_DATE, time.perf_counter() - start)
+            return StepOutcome(step.id, StepStatus.UP_TO_DATE, time.perf_counter() - start, fingerprints=cache.new)
         warnings = _execute(step, job, usable, key)
     except DoorbatchError as err:
-        return StepOutcome(step.id, StepStatus.FAILED, time.perf_counter() - start, str(err))
+        return StepOutcome(step.id, StepStatus.FAILED, time.perf_counter() - start, str(err),
+                           fingerprints=cache.new)
     except Exception as err:  # a bug or an unforeseen data problem: this step fails, the batch goes on
         return StepOutcome(step.id, StepStatus.FAILED, time.perf_counter() - start,
-                           f"internal error ({type(err).__name__}: {err})", traceback=traceback.format_exc())
-    return StepOutcome(step.id, StepStatus.DONE, time.perf_counter() - start, warnings=warnings)
+                           f"internal error ({type(err).__name__}: {err})", traceback=traceback.format_exc(),
+                           fingerprints=cache.new)
+    return StepOutcome(step.id, StepStatus.DONE, time.perf_counter() - start, warnings=warnings,
+                       fingerprints=cache.new)

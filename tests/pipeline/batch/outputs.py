@@ -8,7 +8,7 @@ from pathlib import Path
 
 # Fields that differ between two identical runs: wall times, and the absolute paths of inputs and outputs.
 TIMING_FIELDS = ("started_at", "finished_at", "stage_seconds")
-RUN_RECORDS = ("run.log", "summary.json")  # the history of runs, not outputs
+RUN_RECORDS = ("run.log", "summary.json", ".doorbatch-fingerprints.json")  # run records and caches, not outputs
 
 
 def _manifest_digest(path: Path, roots: dict[str, str]) -> str:
