@@ -3,8 +3,10 @@
 ``OUT/.doorbatch.lock`` is JSON ``{"pid", "host", "started_at"}``. It is created with its content in one
 step (written to a temporary file, then hard-linked to the lock name, which fails if the lock exists), so
 a reader never sees an empty lock. A lock whose PID is dead on this host is stale (a killed run): it is
-reported and taken over. A lock held by a live process, or by another host (whose PIDs cannot be
-checked), is an :class:`~doorbatch.errors.OutputLockedError` (exit 2: the output is in use, retry later).
+reported and taken over, and so is one whose PID now belongs to a process started after the lock was
+taken (PIDs are reused after a reboot; Linux tells start times). A lock held by a live process, or by
+another host (whose PIDs cannot be checked), is an :class:`~doorbatch.errors.OutputLockedError` (exit 2:
+the output is in use, retry later).
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import socket
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass
+from datetime import datetime
 from pathlib import Path
 
 from doorbatch.errors import OutputLockedError
@@ -50,6 +53,30 @@ def pid_alive(pid: int) -> bool:
     except PermissionError:  # exists, owned by someone else
         return True
     return True
+
+
+def process_start_epoch_s(pid: int) -> float | None:
+    """When process ``pid`` started (Unix time), from Linux's /proc; ``None`` where that is unavailable."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        boot_s = next(float(line.split()[1]) for line in Path("/proc/stat").read_text().splitlines()
+                      if line.startswith("btime "))
+        return boot_s + int(fields[19]) / os.sysconf("SC_CLK_TCK")  # field 22 of stat(5): start time in ticks
+    except (OSError, ValueError, IndexError, StopIteration):
+        return None
+
+
+def holder_running(info: LockInfo) -> bool:
+    """Whether the lock's holder still runs: its PID is alive and, where the start time of processes is
+    known, that process started before the lock did (after a reboot, PIDs are reused)."""
+    if not pid_alive(info.pid):
+        return False
+    started = process_start_epoch_s(info.pid)
+    try:
+        locked = datetime.fromisoformat(info.started_at.replace("Z", "+00:00")).timestamp()
+    except ValueError:
+        return True
+    return started is None or started <= locked + 2.0  # /proc's start time has clock-tick resolution
 
 
 def read_lock(path: Path) -> LockInfo | None:
@@ -90,7 +117,7 @@ def acquire_lock(folder: Path) -> tuple[LockInfo, LockInfo | None]:
         if _try_create(path, mine):
             return mine, stale
         held = read_lock(path)
-        if held is not None and (held.host != mine.host or pid_alive(held.pid)):
+        if held is not None and (held.host != mine.host or holder_running(held)):
             raise OutputLockedError(f"{folder} is in use by another doorbatch run ({held.describe()}); "
                                     f"if that run is gone, remove {path}")
         stale = held or LockInfo(-1, "?", "?")

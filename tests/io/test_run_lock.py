@@ -12,7 +12,16 @@ from pathlib import Path
 import pytest
 
 from doorbatch.errors import ExitCode, OutputLockedError
-from doorbatch.io.run_lock import LOCK_NAME, LockInfo, acquire_lock, pid_alive, read_lock, run_lock
+from doorbatch.io.manifest import utc_now_iso
+from doorbatch.io.run_lock import (
+    LOCK_NAME,
+    LockInfo,
+    acquire_lock,
+    pid_alive,
+    process_start_epoch_s,
+    read_lock,
+    run_lock,
+)
 
 
 def dead_pid() -> int:
@@ -22,10 +31,10 @@ def dead_pid() -> int:
     return int(done.stdout)
 
 
-def write_lock(folder: Path, pid: int, host: str | None = None) -> None:
+def write_lock(folder: Path, pid: int, host: str | None = None, started_at: str | None = None) -> None:
     folder.mkdir(parents=True, exist_ok=True)
     (folder / LOCK_NAME).write_text(json.dumps({"pid": pid, "host": host or socket.gethostname(),
-                                                "started_at": "2026-11-23T01:00:00.000Z"}))
+                                                "started_at": started_at or utc_now_iso()}))
 
 
 def test_lock_holds_pid_host_and_time_and_is_removed_after(tmp_path: Path) -> None:
@@ -48,6 +57,17 @@ def test_a_dead_pid_lock_is_reported_and_taken_over(tmp_path: Path) -> None:
     mine, stale = acquire_lock(tmp_path)
     assert stale is not None and stale.pid == pid and mine.pid == os.getpid()
     assert read_lock(tmp_path / LOCK_NAME) == mine
+
+
+def test_a_live_pid_that_started_after_the_lock_is_a_reused_pid(tmp_path: Path) -> None:
+    if process_start_epoch_s(os.getpid()) is None:
+        pytest.skip("process start times are not available here")
+    write_lock(tmp_path, os.getpid(), started_at="2000-01-01T00:00:00.000Z")  # e.g. a lock from before a reboot
+    _, stale = acquire_lock(tmp_path)
+    assert stale is not None and stale.pid == os.getpid()
+    write_lock(tmp_path, os.getpid())  # the same live process, lock taken now: it holds it
+    with pytest.raises(OutputLockedError):
+        acquire_lock(tmp_path)
 
 
 def test_an_unreadable_lock_is_stale(tmp_path: Path) -> None:

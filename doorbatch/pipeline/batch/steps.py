@@ -75,6 +75,12 @@ def _existing(paths: Sequence[Path]) -> list[Path]:
     return [p for p in paths if p.exists()]
 
 
+def truth_beside(log: Path, suffix: str) -> Path:
+    """``<name up to its first dot><suffix>`` beside a log: where the simulator writes its truth
+    (``loc.truth.tum``), and where the evaluation's run reader looks for it (the same rule)."""
+    return log.with_name(log.name.split(".")[0] + suffix)
+
+
 def _inputs(step: Step, job: BatchJob, usable: Sequence[Step]) -> tuple[list[Path], dict[str, object]]:
     """The files a step reads (in a fixed order) and its parameters."""
     out, run = job.out, job.config.run
@@ -87,11 +93,13 @@ def _inputs(step: Step, job: BatchJob, usable: Sequence[Step]) -> tuple[list[Pat
     if step.kind is StepKind.EVALUATE:
         site = job.site(step.site)
         files = _existing([out / f"{site.name}/map" / f for f in MAP_FILES])
+        # the truth each reader finds: the site's, else beside the mapping logs; beside each localization log
+        files += [site.truth] if site.truth is not None else _existing(
+            [*(truth_beside(p, ".truth.yaml") for p in site.mapping), site.mapping[0].parent / "map.truth.yaml"])
         for u in usable:
             assert u.log is not None
-            files += [u.log, *_existing([out / u.out_dir / f for f in RUN_FILES])]
-        if site.truth is not None:
-            files.append(site.truth)
+            files += _existing([out / u.out_dir / f for f in RUN_FILES])
+            files += _existing([truth_beside(u.log, ".truth.tum"), truth_beside(u.log, ".truth.yaml")])
         return files, {"runs": [u.out_dir for u in usable]}
     # the dataset report re-reads what each site evaluation read: their step keys stand for those inputs
     return [out / u.out_dir / "metrics.parquet" for u in usable], {

@@ -16,6 +16,7 @@ import pyarrow.dataset as pads
 import pytest
 
 from doorbatch.cli import main
+from doorbatch.io.manifest import utc_now_iso
 from doorbatch.io.run_lock import LOCK_NAME
 from doorbatch.io.run_log import read_run_log
 from tests.conftest import REPO
@@ -117,7 +118,7 @@ def test_a_live_lock_is_exit_2_and_a_stale_one_is_taken_over(
         tiny: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "out"
     out.mkdir()
-    holder = {"pid": os.getpid(), "host": socket.gethostname(), "started_at": "2026-11-23T00:00:00.000Z"}
+    holder = {"pid": os.getpid(), "host": socket.gethostname(), "started_at": utc_now_iso()}
     (out / LOCK_NAME).write_text(json.dumps(holder))
     assert main(["run", str(tiny), "-o", str(out), "-q"]) == 2
     assert f"pid {os.getpid()}" in capsys.readouterr().err
