@@ -23,7 +23,7 @@ from doorbatch.io.fingerprint_cache import FingerprintCache
 from doorbatch.io.manifest import utc_now_iso
 from doorbatch.io.staged_dir import staged_dir
 from doorbatch.pipeline.batch.freshness import StepKey, recorded_key, stamp_manifest, step_key
-from doorbatch.pipeline.batch.plan import Step, StepKind
+from doorbatch.pipeline.batch.plan import Step, StepKind, map_dir
 
 MAP_FILES = ("map.yaml", "map.pgm", "doors.parquet")
 RUN_FILES = ("trajectory.parquet", "door_states.parquet", "trajectory.tum")
@@ -88,11 +88,11 @@ def _inputs(step: Step, job: BatchJob, usable: Sequence[Step]) -> tuple[list[Pat
         return list(job.site(step.site).mapping), {"stages": run.map_stages}
     if step.kind is StepKind.LOCALIZE:
         assert step.log is not None
-        map_dir = out / f"{step.site}/map"
-        return [step.log, *_existing([map_dir / f for f in MAP_FILES])], {"method": step.method, "init": run.init}
+        site_map = out / map_dir(str(step.site))
+        return [step.log, *_existing([site_map / f for f in MAP_FILES])], {"method": step.method, "init": run.init}
     if step.kind is StepKind.EVALUATE:
         site = job.site(step.site)
-        files = _existing([out / f"{site.name}/map" / f for f in MAP_FILES])
+        files = _existing([out / map_dir(site.name) / f for f in MAP_FILES])
         # the truth each reader finds: the site's, else beside the mapping logs; beside each localization log
         files += [site.truth] if site.truth is not None else _existing(
             [*(truth_beside(p, ".truth.yaml") for p in site.mapping), site.mapping[0].parent / "map.truth.yaml"])
@@ -114,7 +114,7 @@ def _run_stage(step: Step, job: BatchJob, usable: Sequence[Step], dest: Path) ->
         return stages.build_site_map(job.site(step.site), dest, job.config)
     if step.kind is StepKind.LOCALIZE:
         assert step.log is not None and step.method is not None
-        return stages.localize_log(step.log, job.out / f"{step.site}/map", dest, job.config, step.method)
+        return stages.localize_log(step.log, job.out / map_dir(str(step.site)), dest, job.config, step.method)
     if step.kind is StepKind.EVALUATE:
         return stages.evaluate_site(job.site(step.site), job.out, [u.out_dir for u in usable], dest, job.config)
     return stages.dataset_report(job.dataset, job.out, usable, dest, job.config)
