@@ -222,18 +222,26 @@ def localize_cmd(ctx: Context, log_path: Path, map_path: Path, output: Path, met
 @click.option("--world", "truth", type=click.Path(path_type=Path, dir_okay=False), default=None,
               help="Simulator truth YAML (door map and door-state scoring).")
 @click.option("--align", type=click.Choice(["none", "se2"]), default=None, help="Default: evaluate.align.")
+@click.option("--experiment", type=click.Path(path_type=Path, dir_okay=False), default=None,
+              help="Run an experiment sweep (configs/experiments/*.yaml) instead of evaluating RUNDIRs.")
+@click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Parallel processes for --experiment.")
 @common_options
 def evaluate_cmd(ctx: Context, run_dirs: tuple[Path, ...], output: Path, reference: Path | None,
-                 truth: Path | None, align: str | None) -> None:
-    """Metrics (APE/RPE as evo, convergence, door maps, door states) and a report of RUNDIRs."""
+                 truth: Path | None, align: str | None, experiment: Path | None, workers: int) -> None:
+    """Metrics (APE/RPE as evo, convergence, door maps, door states) and a report of RUNDIRs, or an experiment."""
     from doorbatch.errors import UsageError
     from doorbatch.io.report_writer import stdout_table
 
     config = ctx.config
     if align is not None:
         config = config.model_copy(update={"evaluate": config.evaluate.model_copy(update={"align": align})})
-    if not run_dirs:
-        raise UsageError("evaluate: give RUNDIR...")
+    if experiment is not None:
+        from doorbatch.pipeline.evaluate.experiment import run_experiment_file
+
+        evaluation = run_experiment_file(experiment, output, config, workers=workers)
+    elif not run_dirs:
+        raise UsageError("evaluate: give RUNDIR... or --experiment FILE")
     else:
         from doorbatch.pipeline.evaluate.stage import evaluate_run_dirs
 

@@ -134,8 +134,9 @@ def _success_plot(evaluation: Evaluation) -> Plot | None:
 
     def draw(axes: Any) -> None:
         ax = axes[0]
+        markers = {name: "osD^v<>"[k % 7] for k, name in enumerate(sorted({c.log for c in curves}))}
         for c in curves:
-            ax.semilogx(c.particles, 100 * c.success_rate, marker="o", color=_COLORS.get(c.method),
+            ax.semilogx(c.particles, 100 * c.success_rate, marker=markers[c.log], color=_COLORS.get(c.method),
                         linestyle="-" if c.method == "rbpf" else "--", label=f"{c.method}, {c.log}")
         ax.set_xlabel("particles")
         ax.set_ylabel("success rate (%)")

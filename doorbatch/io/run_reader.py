@@ -3,7 +3,8 @@
 A run directory (``doorbatch localize``) holds trajectory.parquet, door_states.parquet and manifest.json; the
 manifest names the log (first input) and the map (``map.yaml``, ``doors.parquet``) and records ``init``,
 ``converged_after_s`` and ``ambiguous``. Next to a simulated log lie ``<stem>.truth.tum`` (reference) and
-``<stem>.truth.yaml`` (truth): they are the run's own reference and truth when present. A map directory
+``<stem>.truth.yaml`` (truth): they are the run's own reference and truth when present; a log without the
+TUM file gives its reference pose topic (e.g. a CARMEN log's corrected poses), if it has one. A map directory
 (``doorbatch map``) holds doors.parquet; its manifest names its logs, whose folder may hold the mapping
 truth ``<stem>.truth.yaml`` of the sample layout (``map.truth.yaml`` for ``map_pass*.mcap``).
 """
@@ -58,8 +59,11 @@ def read_reference(path: Path, config: DoorbatchConfig) -> ReferenceTrajectory:
     return ReferenceTrajectory(rec.reference.stamps_ns, rec.reference.poses)
 
 
-def _sibling(log_path: Path, suffix: str) -> Path:
-    return log_path.with_name(log_path.name.split(".")[0] + suffix)
+def _sibling(log_path: Path, kind: str) -> Path:
+    """The simulator's ``truth`` (YAML) or ``trajectory`` (TUM) file of a log, named as the simulator does."""
+    from doorbatch.sim.simulate import output_paths
+
+    return output_paths(log_path)[kind]
 
 
 def _input_paths(manifest: Manifest) -> list[Path]:
@@ -74,8 +78,26 @@ def _read_door_states(path: Path) -> DoorStateTable | None:
                           np.asarray(t["angle"], dtype=np.float64), np.asarray(t["observed"], dtype=bool))
 
 
-def read_run_dir(run_dir: Path, config: DoorbatchConfig, name: str | None = None) -> RunTables:
-    """A run directory as :class:`RunTables`, with the reference and truth found next to its log.
+def _own_reference(log_path: Path | None, config: DoorbatchConfig) -> ReferenceTrajectory | None:
+    """The simulator's ``<stem>.truth.tum`` next to the log, else the log's reference pose topic, else None."""
+    if log_path is None:
+        return None
+    if _sibling(log_path, "trajectory").is_file():
+        tum = read_tum(_sibling(log_path, "trajectory"))
+        return ReferenceTrajectory(tum.stamp_ns, np.stack([tum.x, tum.y, tum.yaw], axis=1))
+    if not log_path.exists():
+        return None
+    try:
+        return read_reference(log_path, config)
+    except InputDataError as err:  # no reference topic (or unreadable now): no trajectory metrics
+        log.info("%s: no reference trajectory (%s)", log_path, err)
+        return None
+
+
+def read_run_dir(run_dir: Path, config: DoorbatchConfig, name: str | None = None,
+                 find_reference: bool = True) -> RunTables:
+    """A run directory as :class:`RunTables`, with the reference and truth found next to its log (with
+    ``find_reference``: ``<stem>.truth.tum``, else the log's reference pose topic).
 
     Raises:
         InputDataError: a missing or malformed table or manifest (names the file).
@@ -92,12 +114,10 @@ def read_run_dir(run_dir: Path, config: DoorbatchConfig, name: str | None = None
     log_path = inputs[0] if inputs else None
     maps = [p.parent for p in inputs[1:] if p.name == "map.yaml"]
     converged_after = extra.get("converged_after_s")
-    reference = truth = None
-    if log_path is not None and _sibling(log_path, ".truth.tum").is_file():
-        tum = read_tum(_sibling(log_path, ".truth.tum"))
-        reference = ReferenceTrajectory(tum.stamp_ns, np.stack([tum.x, tum.y, tum.yaw], axis=1))
-    if log_path is not None and _sibling(log_path, ".truth.yaml").is_file():
-        truth = read_truth(_sibling(log_path, ".truth.yaml"))
+    reference = _own_reference(log_path, config) if find_reference else None
+    truth = None
+    if log_path is not None and _sibling(log_path, "truth").is_file():
+        truth = read_truth(_sibling(log_path, "truth"))
     params = extra.get("params")
     return RunTables(
         name=name or run_dir.name, log=str(table["log"][0]), method=str(table["method"][0]), stamps_ns=stamps,
@@ -115,7 +135,7 @@ def read_map_dir(map_dir: Path, name: str | None = None) -> MapTables:
     manifest_path = map_dir / "manifest.json"
     if manifest_path.is_file():
         logs = _input_paths(Manifest.read(manifest_path))
-        candidates = [_sibling(p, ".truth.yaml") for p in logs] + [p.parent / "map.truth.yaml" for p in logs[:1]]
+        candidates = [_sibling(p, "truth") for p in logs] + [p.parent / "map.truth.yaml" for p in logs[:1]]
         found = next((c for c in candidates if c.is_file()), None)
         truth = read_truth(found) if found is not None else None
     return MapTables(name or map_dir.name, read_door_set(map_dir), truth)

@@ -75,10 +75,12 @@ def _existing(paths: Sequence[Path]) -> list[Path]:
     return [p for p in paths if p.exists()]
 
 
-def truth_beside(log: Path, suffix: str) -> Path:
-    """``<name up to its first dot><suffix>`` beside a log: where the simulator writes its truth
-    (``loc.truth.tum``), and where the evaluation's run reader looks for it (the same rule)."""
-    return log.with_name(log.name.split(".")[0] + suffix)
+def truth_beside(log: Path, kind: str) -> Path:
+    """The simulator's ``truth`` (YAML) or ``trajectory`` (TUM) file beside a log: where the evaluation's
+    run reader looks for them."""
+    from doorbatch.sim.simulate import output_paths
+
+    return output_paths(log)[kind]
 
 
 def _inputs(step: Step, job: BatchJob, usable: Sequence[Step]) -> tuple[list[Path], dict[str, object]]:
@@ -95,11 +97,11 @@ def _inputs(step: Step, job: BatchJob, usable: Sequence[Step]) -> tuple[list[Pat
         files = _existing([out / map_dir(site.name) / f for f in MAP_FILES])
         # the truth each reader finds: the site's, else beside the mapping logs; beside each localization log
         files += [site.truth] if site.truth is not None else _existing(
-            [*(truth_beside(p, ".truth.yaml") for p in site.mapping), site.mapping[0].parent / "map.truth.yaml"])
-        for u in usable:
+            [*(truth_beside(p, "truth") for p in site.mapping), site.mapping[0].parent / "map.truth.yaml"])
+        for u in usable:  # each run's reference: the truth TUM beside its log, else the log's reference topic
             assert u.log is not None
             files += _existing([out / u.out_dir / f for f in RUN_FILES])
-            files += _existing([truth_beside(u.log, ".truth.tum"), truth_beside(u.log, ".truth.yaml")])
+            files += _existing([truth_beside(u.log, "trajectory"), truth_beside(u.log, "truth"), u.log])
         return files, {"runs": [u.out_dir for u in usable]}
     # the dataset report re-reads what each site evaluation read: their step keys stand for those inputs
     return [out / u.out_dir / "metrics.parquet" for u in usable], {

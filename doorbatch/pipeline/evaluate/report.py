@@ -2,6 +2,9 @@
 
 Public API (the ``run`` stage and notebooks call these; :mod:`doorbatch.io.report_writer` writes the result)::
 
+    run_tables_from_result(result: LocalizationResult, *, name=None, init="reference", map_doors=None,
+                           reference=None, truth=None, params=None) -> RunTables   # a run in memory
+
     evaluate_runs(runs: Sequence[RunTables], config: DoorbatchConfig, *,
                   reference: ReferenceTrajectory | None = None, truth: SimTruth | None = None,
                   maps: Sequence[MapTables] = ()) -> Evaluation
@@ -46,6 +49,7 @@ from doorbatch.pipeline.evaluate.trajectory_metrics import (
     statistics,
     trajectory_errors,
 )
+from doorbatch.pipeline.localize.result import LocalizationResult
 
 FloatArray = npt.NDArray[np.float64]
 Int64Array = npt.NDArray[np.int64]
@@ -95,6 +99,19 @@ class RunTables:
     reference: ReferenceTrajectory | None = None
     truth: SimTruth | None = None
     params: dict[str, Any] = field(default_factory=dict)
+
+
+def run_tables_from_result(result: LocalizationResult, *, name: str | None = None, init: str = "reference",
+                           map_doors: DoorSet | None = None, reference: ReferenceTrajectory | None = None,
+                           truth: SimTruth | None = None, params: dict[str, Any] | None = None) -> RunTables:
+    """A run in memory (``localize``'s result) as :class:`RunTables`, without writing a run directory."""
+    u, d = result.door_mean.shape
+    states = None if d == 0 else DoorStateTable(
+        np.repeat(result.stamps_ns, d), np.tile(np.arange(d, dtype=np.int32), u), result.door_mean.ravel(),
+        result.door_observed.ravel())
+    return RunTables(name or f"{result.log}/{result.method}", result.log, result.method, result.stamps_ns,
+                     result.pose, init, result.converged_ns, result.ambiguous, states, map_doors, reference, truth,
+                     dict(params or {}))
 
 
 @dataclass(frozen=True)
@@ -354,7 +371,13 @@ class SummaryTable:
 
 
 def _label(params: dict[str, Any]) -> str:
-    return ", ".join(f"{k}={v}" for k, v in sorted(params.items()) if k != "seed")
+    return ", ".join(f"{k}={v}" for k, v in sorted(params.items()) if k != "seed" and v is not None)
+
+
+def _sort_key(params: dict[str, Any]) -> tuple[tuple[str, int, float, str], ...]:
+    """Sweep points in numeric order (1,000 before 5,000 before 10,000), seeds left out."""
+    return tuple((k, 0, float(v), "") if isinstance(v, int | float) else (k, 1, 0.0, str(v))
+                 for k, v in sorted(params.items()) if k != "seed")
 
 
 def summary_table(evaluation: Evaluation, metrics: Sequence[str] = SUMMARY_METRICS, method_map: bool = False
@@ -364,14 +387,16 @@ def summary_table(evaluation: Evaluation, metrics: Sequence[str] = SUMMARY_METRI
     groups: dict[tuple[str, str, str], dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
     runs: dict[tuple[str, str, str], set[str]] = defaultdict(set)
     units: dict[str, str] = {}
+    order: dict[tuple[str, str, str], tuple[Any, ...]] = {}
     for r in keep:
         key = (r.log if not method_map else r.run, r.method, _label(r.params))
+        order.setdefault(key, (key[0], key[1], *_sort_key(r.params)))
         groups[key][r.metric].append(r.value)
         runs[key].add(r.run)
         units[r.metric] = r.unit
     present = tuple(m for m in metrics if m in units)
     rows: list[tuple[tuple[str, ...], tuple[float, ...]]] = []
-    for key in sorted(groups):
+    for key in sorted(groups, key=order.__getitem__):
         values = tuple(float(np.nanmean(groups[key][m])) if groups[key].get(m) and np.isfinite(groups[key][m]).any()
                        else math.nan for m in present)
         rows.append(((*key, str(len(runs[key]))), values))

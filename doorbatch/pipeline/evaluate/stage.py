@@ -47,7 +47,7 @@ def evaluate_run_dirs(run_dirs: Sequence[Path], out_dir: Path, config: Doorbatch
     maps: list[MapTables] = []
     for d, name in zip(dirs, _names(dirs), strict=True):
         if is_run_dir(d):
-            runs.append(read_run_dir(d, config, name))
+            runs.append(read_run_dir(d, config, name, find_reference=reference is None))
         elif is_map_dir(d):
             maps.append(read_map_dir(d, name))
         else:

@@ -165,12 +165,19 @@ def rpe_pairs(poses: npt.ArrayLike, delta_m: float, all_pairs: bool = False,
         keep = np.abs(path[best] - path[i] - delta_m) <= delta_m * rel_delta_tol
         first, second = i[keep], best[keep]
     else:
+        path = np.concatenate([[0.0], np.cumsum(steps)])
         ids = [0]
-        while True:  # one pass per pair: evo sums the steps since the last id, in order (cumsum does too)
-            reached = np.flatnonzero(np.cumsum(steps[ids[-1]:]) >= delta_m)
+        while True:  # one step per pair: evo sums the steps since the last id in order (cumsum does too),
+            start = ids[-1]  # over a window that the global path says reaches delta, doubled until it does
+            width = int(np.searchsorted(path, path[start] + delta_m)) - start + 2
+            while True:
+                reached = np.flatnonzero(np.cumsum(steps[start:start + width]) >= delta_m)
+                if reached.size or start + width >= steps.size:
+                    break
+                width *= 2
             if reached.size == 0:
                 break
-            ids.append(ids[-1] + int(reached[0]) + 1)
+            ids.append(start + int(reached[0]) + 1)
         first, second = np.asarray(ids[:-1], dtype=np.intp), np.asarray(ids[1:], dtype=np.intp)
     if first.size == 0:
         raise PipelineError(f"RPE: no pose pair {delta_m} m apart along the path")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import base64
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -24,11 +25,14 @@ from doorbatch.pipeline.evaluate.report import (
     ReferenceTrajectory,
     RunTables,
     evaluate_runs,
+    run_tables_from_result,
     summary_table,
 )
 from doorbatch.pipeline.localize.result import LocalizationResult
+from tests.conftest import REPO
 
 T0 = 1_700_000_000_000_000_000
+SAMPLE_LOGS = REPO / "datasets" / "sample" / "logs"
 DT = 100_000_000
 
 
@@ -115,15 +119,18 @@ def test_error_along_the_corridor_averages_runs_per_bin() -> None:
     assert row[1][table.value_columns.index("ape_trans_rmse")] == pytest.approx(0.15)
 
 
-def _write_run(folder: Path, log: Path, stamps: np.ndarray, pose: np.ndarray, method: str,
-               door_angle: float) -> None:
+def _result(log: Path, stamps: np.ndarray, pose: np.ndarray, method: str, door_angle: float) -> LocalizationResult:
     u = len(stamps)
-    result = LocalizationResult(
+    return LocalizationResult(
         log=log.name, method=method, stamps_ns=stamps, pose=pose, cov=np.tile(np.eye(3) * 1e-3, (u, 1, 1)),
         odom=pose.copy(), n_particles=np.full(u, 500, np.int32), neff=np.full(u, 400.0),
         door_mean=np.full((u, 1), door_angle), door_std=np.full((u, 1), 0.05), door_observed=np.ones((u, 1), bool),
-        particles=np.zeros((u, 1, 3)))
-    write_run_tables(folder, result)
+        particles=np.zeros((u, 1, 3)), converged_ns=int(stamps[0]))
+
+
+def _write_run(folder: Path, log: Path, stamps: np.ndarray, pose: np.ndarray, method: str,
+               door_angle: float) -> None:
+    write_run_tables(folder, _result(log, stamps, pose, method, door_angle))
     manifest = Manifest.start(DoorbatchConfig().as_dict(), [log], command="localize", method=method,
                               init="reference")
     manifest.extra.update({"converged_after_s": 0.0, "ambiguous": False})
@@ -154,6 +161,11 @@ def test_evaluate_cli_writes_the_report_directory(tmp_path: Path, capsys: pytest
     assert png.startswith(b"\x89PNG") and "src=\"error_along_x.png\"" not in page  # embedded, not linked
     assert (out / "error_along_x.png").read_bytes()[:4] == b"\x89PNG"
     assert "| loc.mcap | rbpf |" in (out / "report.md").read_text()
+    again = tmp_path / "again"  # deterministic: the same inputs give the same bytes (reruns of doorbatch run)
+    assert main(["evaluate", str(tmp_path / "runs" / "mcl"), str(tmp_path / "runs" / "rbpf"), "-o", str(again),
+                 "-q"]) == 0
+    for name in ("metrics.parquet", "report.md", "report.html", "error_along_x.png"):
+        assert (again / name).read_bytes() == (out / name).read_bytes(), name
 
 
 def test_evaluate_cli_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -161,3 +173,95 @@ def test_evaluate_cli_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str])
     (tmp_path / "empty").mkdir()
     assert main(["evaluate", str(tmp_path / "empty"), "-o", str(tmp_path / "r")]) == 3
     assert "neither a run directory" in capsys.readouterr().err
+
+
+def test_a_run_in_memory_scores_as_its_run_directory(tmp_path: Path) -> None:
+    stamps, ref = _straight()
+    log = tmp_path / "loc.mcap"
+    log.write_bytes(b"")
+    truth = _truth(0.5)
+    map_doors = DoorSet(np.array([[5.0, 1.1]]), np.array([0.9]), np.zeros(1), np.zeros(1), np.ones(1))
+    result = _result(log, stamps, ref + np.array([0.02, -0.03, 0.01]), "rbpf", 0.45)
+    reference = ReferenceTrajectory(stamps, ref)
+    _write_run(tmp_path / "run", log, stamps, result.pose, "rbpf", 0.45)
+    from doorbatch.io.run_reader import read_run_dir
+
+    on_disk = replace(read_run_dir(tmp_path / "run", DoorbatchConfig(), "r"), map_doors=map_doors)
+    in_memory = run_tables_from_result(result, name="r", map_doors=map_doors)
+    a = evaluate_runs([on_disk], DoorbatchConfig(), reference=reference, truth=truth)
+    b = evaluate_runs([in_memory], DoorbatchConfig(), reference=reference, truth=truth)
+    assert [r.metric for r in a.metrics] == [r.metric for r in b.metrics]
+    np.testing.assert_allclose([r.value for r in a.metrics], [r.value for r in b.metrics], atol=1e-12)
+    truth_angle = np.minimum(0.5, 0.005 * np.arange(200))  # the truth ramps 0 → 0.5 rad over 10 s, then stays
+    assert a.value("r", "door_state_error_mean") == pytest.approx(np.mean(np.abs(0.45 - truth_angle)))
+
+
+def _map_dir(folder: Path, doors: DoorSet) -> Path:
+    import shutil
+
+    from doorbatch.io.parquet import write_table
+
+    folder.mkdir(parents=True)
+    for suffix in ("yaml", "pgm"):
+        shutil.copy(SAMPLE_LOGS / f"map.map_static.{suffix}", folder / f"map.{suffix}")
+    (folder / "map.yaml").write_text((folder / "map.yaml").read_text().replace("map.map_static.pgm", "map.pgm"))
+    n = len(doors)
+    write_table("doors", {"door_id": np.arange(n, dtype=np.int32), "hinge_x": doors.hinge[:, 0],
+                          "hinge_y": doors.hinge[:, 1], "length": doors.length, "closed_yaw": doors.closed_yaw,
+                          "angle_min": doors.angle_min, "angle_max": doors.angle_max,
+                          "n_observations": np.full(n, 5, np.int32), "source": ["grid"] * n, "moved": [True] * n},
+                folder / "doors.parquet")
+    manifest = Manifest.start(DoorbatchConfig().as_dict(), [SAMPLE_LOGS / "map_pass1.mcap"], command="map")
+    manifest.write(folder / "manifest.json")
+    return folder
+
+
+def test_door_maps_are_scored_against_the_mapping_truth(tmp_path: Path) -> None:
+    from doorbatch.io.sim_truth import read_truth
+    from doorbatch.pipeline.evaluate.door_map import truth_doors
+
+    truth = read_truth(SAMPLE_LOGS / "map.truth.yaml")
+    doors, moved = truth_doors(truth, math.radians(DoorbatchConfig().doors.min_opening_deg))
+    keep = np.flatnonzero(moved)
+    exact = DoorSet(doors.hinge[keep], doors.length[keep], doors.closed_yaw[keep], doors.angle_min[keep],
+                    doors.angle_max[keep])
+    shifted_hinge = exact.hinge.copy()
+    shifted_hinge[0] += [0.5, 0.0]  # beyond the 0.3 m match radius: a false positive and a missed door
+    shifted = DoorSet(shifted_hinge, exact.length + 0.05, exact.closed_yaw, exact.angle_min, exact.angle_max)
+    out = tmp_path / "report"
+    args = ["evaluate", str(_map_dir(tmp_path / "exact", exact)), str(_map_dir(tmp_path / "shifted", shifted)),
+            "-o", str(out), "-q"]
+    assert main(args) == 0  # the truth is found next to the map's logs (map.truth.yaml of the sample)
+    table = read_table("metrics", out / "metrics.parquet").to_pydict()
+    got = {(r, m): v for r, m, v in zip(table["run"], table["metric"], table["value"], strict=True)}
+    n = len(keep)
+    assert got[("exact", "door_precision")] == 1.0 and got[("exact", "door_recall")] == 1.0
+    assert got[("exact", "door_hinge_error_mean")] == pytest.approx(0.0, abs=1e-12)
+    assert got[("shifted", "door_precision")] == pytest.approx((n - 1) / n)
+    assert got[("shifted", "door_recall")] == pytest.approx((n - 1) / n)
+    assert got[("shifted", "door_length_error_mean")] == pytest.approx(0.05)
+    assert main([*args[:-1], "--world", str(SAMPLE_LOGS / "map.truth.yaml")]) == 0  # the same truth, given
+
+
+def test_summary_rows_follow_the_particle_count_numerically() -> None:
+    stamps, ref = _straight(50)
+    runs = [RunTables(f"r{n}", "l", "mcl", stamps, ref, reference=ReferenceTrajectory(stamps, ref),
+                      params={"particles": n, "seed": 0}) for n in (10000, 5000, 1000, 20000)]
+    table = summary_table(evaluate_runs(runs, DoorbatchConfig()))
+    assert [labels[2] for labels, _ in table.rows] == [f"particles={n}" for n in (1000, 5000, 10000, 20000)]
+
+
+def test_a_log_without_truth_files_gives_its_reference_topic(tmp_path: Path) -> None:
+    from doorbatch.io.run_reader import read_run_dir
+    from tests.conftest import sample_messages, write_messages
+
+    log = write_messages(tmp_path / "real.mcap", sample_messages(n_scans=20))  # /ground_truth: (0.1 i + 1, ...)
+    i = np.arange(20)
+    stamps = T0 + 100_000_000 * (i + 1)
+    truth = np.stack([0.1 * i + 1, 0.02 * i, 0.01 * i], axis=1)
+    _write_run(tmp_path / "run", log, stamps, truth + np.array([0.0, 0.25, 0.0]), "mcl", 0.0)
+    run = read_run_dir(tmp_path / "run", DoorbatchConfig())
+    assert run.reference is not None and len(run.reference.stamps_ns) == 20
+    ev = evaluate_runs([run], DoorbatchConfig())
+    assert ev.value("run", "ape_trans_rmse") == pytest.approx(0.25, abs=1e-6)
+    assert read_run_dir(tmp_path / "run", DoorbatchConfig(), find_reference=False).reference is None

@@ -1,0 +1,81 @@
+"""Experiments end to end at reduced size: sweep points, parallel runs, metrics with params, the report."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+import yaml
+
+from doorbatch.cli import main
+from doorbatch.config import DoorbatchConfig
+from doorbatch.io.experiment_file import read_experiment
+from doorbatch.io.parquet import read_table
+from doorbatch.pipeline.evaluate.experiment import ExperimentSpec, point_config, sweep_points
+from tests.conftest import REPO
+
+LOGS = REPO / "datasets" / "sample" / "logs"
+PLAIN_MAP = LOGS / "loc_closed.map_static.yaml"  # the simulator's door-less static map: no map to build
+
+
+def _write(path: Path, doc: dict[str, object]) -> Path:
+    path.write_text(yaml.safe_dump(doc))
+    return path
+
+
+def _rows(report: Path) -> list[dict[str, object]]:
+    t = read_table("metrics", report / "metrics.parquet").to_pylist()
+    return [{**r, "params": json.loads(str(r["params"]))} for r in t]
+
+
+def test_sweep_points_and_their_configs() -> None:
+    spec = ExperimentSpec(name="x", map=Path("m"), logs=(Path("a.mcap"), Path("b.mcap")), methods=("mcl", "rbpf"),
+                          particles=(100, 1000), seeds=(0, 1, 2))
+    points = sweep_points(spec)
+    assert len(points) == 2 * 2 * 2 * 3 and len({(p.log, p.run_name) for p in points}) == len(points)
+    cfg = point_config(DoorbatchConfig(), points[-1])
+    assert (cfg.seed, cfg.localize.max_particles, cfg.localize.global_particles) == (2, 1000, 1000)
+    assert cfg.localize.min_particles == 500
+    assert point_config(DoorbatchConfig(), points[0]).localize.min_particles == 100
+
+
+def test_experiment_file_paths_are_relative_to_the_file(tmp_path: Path) -> None:
+    path = _write(tmp_path / "e.yaml", {"name": "e", "map": "maps/m.yaml", "logs": ["l.mcap"]})
+    spec = read_experiment(path)
+    assert spec.map == tmp_path / "maps" / "m.yaml" and spec.logs == (tmp_path / "l.mcap",)
+    _write(path, {"name": "e", "map": "m", "logs": ["l.mcap"], "metods": ["mcl"]})
+    assert main(["evaluate", "--experiment", str(path), "-o", str(tmp_path / "o")]) == 2
+
+
+def test_tracking_experiment_runs_in_parallel_and_reports(tmp_path: Path) -> None:
+    spec = _write(tmp_path / "tracking.yaml", {
+        "name": "tracking", "map": str(PLAIN_MAP), "logs": [str(LOGS / "loc_partial.mcap")],
+        "methods": ["mcl", "rbpf"], "particles": [200], "seeds": [0, 1], "init": "reference"})
+    out = tmp_path / "out"
+    assert main(["evaluate", "--experiment", str(spec), "-o", str(out), "--workers", "2", "-q"]) == 0
+    rows = _rows(out)
+    rmse = {(r["method"], r["params"]["seed"]): r["value"] for r in rows if r["metric"] == "ape_trans_rmse"}
+    assert set(rmse) == {("mcl", 0), ("mcl", 1), ("rbpf", 0), ("rbpf", 1)}
+    assert all(0.0 < v < 0.5 for v in rmse.values())  # tracking holds on the truth map
+    assert all(r["params"]["particles"] == 200 and r["params"]["init"] == "reference" for r in rows)
+    assert (out / "runs" / "loc_partial" / "rbpf_n200_s1" / "trajectory.parquet").exists()
+    assert (out / "error_along_x.png").exists() and "data:image/png;base64," in (out / "report.html").read_text()
+
+
+def test_global_experiment_reports_success_against_particles(tmp_path: Path) -> None:
+    spec = _write(tmp_path / "global.yaml", {
+        "name": "global", "map": str(PLAIN_MAP), "logs": [str(LOGS / "loc_closed.mcap")], "methods": ["mcl"],
+        "particles": [100, 400], "seeds": [0], "init": "global"})
+    out = tmp_path / "out"
+    assert main(["evaluate", "--experiment", str(spec), "-o", str(out), "-q"]) == 0
+    success = {r["params"]["particles"]: r["value"] for r in _rows(out) if r["metric"] == "global_success"}
+    assert set(success) == {100, 400} and set(success.values()) <= {0.0, 1.0}
+    assert (out / "global_success.png").exists()
+    assert "global_success" in (out / "report.md").read_text()
+
+
+@pytest.mark.parametrize("name", ["tracking.yaml", "global.yaml", "global_reduced.yaml"])
+def test_shipped_experiment_files_are_valid(name: str) -> None:
+    spec = read_experiment(REPO / "configs" / "experiments" / name)
+    assert all(p.exists() for p in spec.logs) and len(sweep_points(spec)) >= 60
