@@ -131,6 +131,8 @@ def _log_outcome(step: Step, outcome: StepOutcome) -> None:
              "seconds": round(outcome.seconds, 3), "error": outcome.error, "warnings": outcome.warnings}
     if outcome.ok:
         log.info("%s: %s", step.id, outcome.status, extra=extra)
+    elif outcome.status is StepStatus.BLOCKED:  # the failure that blocked it is the error
+        log.warning("%s: %s", step.id, outcome.error, extra=extra)
     else:
         log.error("%s: %s: %s", step.id, outcome.status, outcome.error,
                   extra={**extra, "traceback": outcome.traceback})
