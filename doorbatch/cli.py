@@ -33,10 +33,13 @@ CRASH_LOG = Path(tempfile.gettempdir()) / "doorbatch-crash.log"
 class Context:
     """What every command gets from the common options."""
 
-    def __init__(self, config: DoorbatchConfig, as_json: bool, quiet: bool) -> None:
+    def __init__(self, config: DoorbatchConfig, as_json: bool, quiet: bool, config_file: Path | None = None,
+                 overrides: tuple[str, ...] = ()) -> None:
         self.config = config
         self.as_json = as_json
         self.quiet = quiet
+        self.config_file = config_file  # kept for commands that merge more config in (run: the dataset's)
+        self.overrides = overrides
 
     def summary(self, line: str, data: dict[str, Any]) -> None:
         """The one-line summary at the end of a command, or the JSON summary with ``--json``."""
@@ -70,7 +73,7 @@ def common_options(func: F) -> F:
         _setup_logging(verbose - quiet)
         set_progress_enabled(not quiet and not as_json)
         config = load_config(config_file, overrides)
-        return func(Context(config, as_json, quiet > 0), **kwargs)
+        return func(Context(config, as_json, quiet > 0, config_file, overrides), **kwargs)
 
     return wrapper  # type: ignore[return-value]
 
@@ -281,6 +284,33 @@ def doorpose_cmd(ctx: Context, log_path: Path | None, output: Path, map_path: Pa
     ctx.summary(f"{summary.door_poses} door pose(s) from {summary.paired} image(s) paired with scans "
                 f"({summary.fit}, frame {summary.frame}), {summary.matched} matched → {summary.run_dir}",
                 asdict(summary))
+
+
+@cli.command("run")
+@click.argument("dataset", type=click.Path(path_type=Path, file_okay=False))
+@click.option("-o", "--output", type=click.Path(path_type=Path, file_okay=False), required=True,
+              help="Output folder (maps, runs, reports, dataset tables, run.log).")
+@click.option("--workers", type=click.IntRange(min=0), default=0, show_default=True,
+              help="Parallel steps (0: one per CPU).")
+@click.option("--executor", type=click.Choice(["local", "dask"]), default=None,
+              help="local process pool (default), or a Dask cluster.")
+@click.option("--scheduler", default=None, metavar="ADDRESS", help="Dask scheduler address (implies dask).")
+@click.option("--force", is_flag=True, help="Redo every step, even those up to date.")
+@common_options
+def run_cmd(ctx: Context, dataset: Path, output: Path, workers: int, executor: str | None,
+            scheduler: str | None, force: bool) -> None:
+    """Map, localize and evaluate every site of DATASET (its dataset.yaml); incremental and cron-safe."""
+    from doorbatch.errors import BatchPartialError
+    from doorbatch.pipeline.batch.run import Execution, prepare_run, run_dataset
+
+    execution = Execution("dask" if scheduler and executor is None else executor or "local", workers, scheduler)
+    ds, config = prepare_run(dataset, ctx.config_file, ctx.overrides)
+    summary = run_dataset(ds, output, config, execution, force=force)
+    ctx.summary(summary.line(), asdict(summary))
+    if not summary.complete:
+        first = summary.failures[0]
+        raise BatchPartialError(f"{summary.failed + summary.blocked} of {summary.steps} steps did not complete "
+                                f"(first: {first['step']}: {first['error']}); see {output / 'summary.json'}")
 
 
 @cli.command("config")

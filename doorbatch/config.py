@@ -419,6 +419,20 @@ class DoorPoseConfig(Section):
         return self
 
 
+class RunConfig(Section):
+    """``doorbatch run``: what the batch does per site, and how it spreads the work."""
+
+    # Localization methods run on every localization log (each gets OUT/<site>/runs/<log>/<method>/).
+    methods: list[Literal["mcl", "rbpf"]] = Field(default_factory=lambda: ["mcl", "rbpf"],  # type: ignore[arg-type]
+                                                  min_length=1)
+    # Initial pose for localization: reference (the log's reference pose topic), global, or X,Y,YAW.
+    init: str = "reference"
+    # Map stages (doorbatch map --stages).
+    map_stages: list[str] = Field(default_factory=lambda: ["grid"], min_length=1)
+    # How the work is spread (--workers, --executor, --scheduler) is no config: it must not change outputs
+    # or the config hash in their manifests.
+
+
 class DoorbatchConfig(Section):
     """The whole configuration tree."""
 
@@ -434,6 +448,7 @@ class DoorbatchConfig(Section):
     localize: LocalizeConfig = LocalizeConfig()
     evaluate: EvaluateConfig = EvaluateConfig()
     doorpose: DoorPoseConfig = DoorPoseConfig()
+    run: RunConfig = RunConfig()
 
     def as_dict(self) -> dict[str, Any]:
         """The resolved tree as plain data (what goes into manifests)."""

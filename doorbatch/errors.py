@@ -75,6 +75,12 @@ class BatchPartialError(DoorbatchError):
     exit_code = ExitCode.PARTIAL
 
 
+class OutputLockedError(DoorbatchError):
+    """Another live run holds the output folder's lock: a usage error (exit 2), not bad data; retry later."""
+
+    exit_code = ExitCode.USAGE
+
+
 class OptionalDependencyError(DoorbatchError):
     """An optional extra (torch, dask, ...) is needed but not installed."""
 

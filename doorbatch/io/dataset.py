@@ -1,0 +1,115 @@
+"""``DATASET/dataset.yaml``: the sites of a dataset, their mapping and localization logs, optional truth.
+
+Layout (DESIGN.md, Command line), paths relative to the dataset folder::
+
+    sites:
+      office_corridor:
+        mapping: [logs/map_pass1.mcap, logs/map_pass2.mcap]       # one pass per log, at least one
+        localization: [logs/loc_closed.mcap]                      # may be empty
+        truth: truth/office_corridor.yaml                         # optional
+    config: {}                                                    # optional overrides for this dataset
+
+Only the layout is checked here; whether each log reads is the pipeline's business (a missing or corrupt
+log fails its own steps, not the whole dataset).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from doorbatch.config import read_yaml_mapping
+from doorbatch.errors import ConfigError, InputDataError
+
+DATASET_FILE = "dataset.yaml"
+_SITE_NAME = re.compile(r"^[A-Za-z0-9_.-]+$")  # a folder name and a hive partition value without escaping
+_LOG_SUFFIXES = (".gz", ".mcap", ".bag", ".db3", ".log", ".clf")
+
+
+@dataclass(frozen=True)
+class Site:
+    """One site: the logs its map is built from, the logs localized on that map, and its truth file."""
+
+    name: str
+    mapping: tuple[Path, ...]
+    localization: tuple[Path, ...]
+    truth: Path | None = None
+
+
+@dataclass(frozen=True)
+class Dataset:
+    """A dataset folder: its sites (in file order) and its ``config:`` overrides."""
+
+    root: Path
+    sites: tuple[Site, ...]
+    config: dict[str, Any]
+
+
+def log_name(path: Path) -> str:
+    """The name a log's outputs go under: its file name less log suffixes (``loc.log.gz`` → ``loc``)."""
+    name = Path(path).name
+    while True:
+        stem, dot, suffix = name.rpartition(".")
+        if not dot or not stem or f".{suffix}" not in _LOG_SUFFIXES:
+            return name
+        name = stem
+
+
+def _paths(root: Path, site: str, key: str, value: Any, where: Path) -> tuple[Path, ...]:
+    if value is None:
+        return ()
+    if isinstance(value, str):
+        value = [value]
+    if not isinstance(value, list) or not all(isinstance(v, str) and v for v in value):
+        raise InputDataError(f"sites.{site}.{key} must be a list of paths relative to the dataset", path=where)
+    return tuple(root / v for v in value)
+
+
+def _site(root: Path, name: Any, entry: Any, where: Path) -> Site:
+    if not isinstance(name, str) or not _SITE_NAME.match(name):
+        raise InputDataError(f"site name {name!r}: use letters, digits, '_', '-', '.'", path=where)
+    if not isinstance(entry, dict):
+        raise InputDataError(f"sites.{name} must be a mapping with mapping/localization/truth", path=where)
+    unknown = sorted(set(entry) - {"mapping", "localization", "truth"})
+    if unknown:
+        raise InputDataError(f"sites.{name}: unknown key(s) {unknown} (mapping, localization, truth)", path=where)
+    mapping = _paths(root, name, "mapping", entry.get("mapping"), where)
+    if not mapping:
+        raise InputDataError(f"sites.{name}.mapping: at least one mapping log is needed", path=where)
+    localization = _paths(root, name, "localization", entry.get("localization"), where)
+    names = [log_name(p) for p in localization]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise InputDataError(f"sites.{name}.localization: two logs share the output name(s) {twice}", path=where)
+    truth = entry.get("truth")
+    if truth is not None and not (isinstance(truth, str) and truth):
+        raise InputDataError(f"sites.{name}.truth must be a path relative to the dataset", path=where)
+    return Site(name, mapping, localization, root / truth if truth else None)
+
+
+def read_dataset(root: Path) -> Dataset:
+    """Read ``root/dataset.yaml``.
+
+    Raises:
+        InputDataError: no dataset.yaml, bad YAML, or a layout that does not fit (names the key).
+    """
+    root = Path(root)
+    where = root / DATASET_FILE
+    if not where.is_file():
+        raise InputDataError(f"no {DATASET_FILE} in the dataset folder", path=root)
+    try:
+        data = read_yaml_mapping(where)
+    except ConfigError as err:
+        raise InputDataError(str(err)) from err
+    unknown = sorted(set(data) - {"sites", "config"})
+    if unknown:
+        raise InputDataError(f"unknown top-level key(s) {unknown} (sites, config)", path=where)
+    sites = data.get("sites")
+    if not isinstance(sites, dict) or not sites:
+        raise InputDataError("'sites' must map at least one site name to its logs", path=where)
+    config = data.get("config") or {}
+    if not isinstance(config, dict):
+        raise InputDataError("'config' must be a mapping of config sections", path=where)
+    return Dataset(root, tuple(_site(root, k, v, where) for k, v in sites.items()), config)

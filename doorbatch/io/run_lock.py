@@ -1,0 +1,144 @@
+"""The lock file that keeps two ``doorbatch run`` off one output folder (cron-safe).
+
+``OUT/.doorbatch.lock`` is JSON ``{"pid", "host", "started_at"}``. It is created with its content in one
+step (written to a temporary file, then hard-linked to the lock name, which fails if the lock exists), so
+a reader never sees an empty lock. A lock whose PID is dead on this host is stale (a killed run): it is
+reported and taken over, and so is one whose PID now belongs to a process started after the lock was
+taken (PIDs are reused after a reboot; Linux tells start times). A lock held by a live process, or by
+another host (whose PIDs cannot be checked), is an :class:`~doorbatch.errors.OutputLockedError` (exit 2:
+the output is in use, retry later).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import socket
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import asdict, dataclass
+from datetime import datetime
+from pathlib import Path
+
+from doorbatch.errors import OutputLockedError
+from doorbatch.io.atomic import temp_path_for
+from doorbatch.io.manifest import utc_now_iso
+
+log = logging.getLogger(__name__)
+LOCK_NAME = ".doorbatch.lock"
+
+
+@dataclass(frozen=True)
+class LockInfo:
+    """Who holds a lock."""
+
+    pid: int
+    host: str
+    started_at: str
+
+    def describe(self) -> str:
+        """``pid 123 on host since 2026-...Z``."""
+        return f"pid {self.pid} on {self.host} since {self.started_at}"
+
+
+def pid_alive(pid: int) -> bool:
+    """Whether a process with this PID exists on this host (signal 0 probes without sending)."""
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # exists, owned by someone else
+        return True
+    return True
+
+
+def process_start_epoch_s(pid: int) -> float | None:
+    """When process ``pid`` started (Unix time), from Linux's /proc; ``None`` where that is unavailable."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        boot_s = next(float(line.split()[1]) for line in Path("/proc/stat").read_text().splitlines()
+                      if line.startswith("btime "))
+        return boot_s + int(fields[19]) / os.sysconf("SC_CLK_TCK")  # field 22 of stat(5): start time in ticks
+    except (OSError, ValueError, IndexError, StopIteration):
+        return None
+
+
+def holder_running(info: LockInfo) -> bool:
+    """Whether the lock's holder still runs: its PID is alive and, where the start time of processes is
+    known, that process started before the lock did (after a reboot, PIDs are reused)."""
+    if not pid_alive(info.pid):
+        return False
+    started = process_start_epoch_s(info.pid)
+    try:
+        locked = datetime.fromisoformat(info.started_at.replace("Z", "+00:00")).timestamp()
+    except ValueError:
+        return True
+    return started is None or started <= locked + 2.0  # /proc's start time has clock-tick resolution
+
+
+def read_lock(path: Path) -> LockInfo | None:
+    """The lock's holder, or ``None`` when the file is unreadable or not a lock (treated as stale)."""
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+        return LockInfo(int(data["pid"]), str(data["host"]), str(data["started_at"]))
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def _try_create(path: Path, info: LockInfo) -> bool:
+    tmp = temp_path_for(path)
+    tmp.write_text(json.dumps(asdict(info)) + "\n", encoding="utf-8")
+    try:
+        os.link(tmp, path)  # atomic, fails when the lock exists
+        return True
+    except FileExistsError:
+        return False
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def acquire_lock(folder: Path) -> tuple[LockInfo, LockInfo | None]:
+    """Take ``folder``/.doorbatch.lock for this process.
+
+    Returns:
+        This process's lock, and the stale lock that was taken over (``None`` if there was none).
+
+    Raises:
+        OutputLockedError: a live process on this host, or any process on another host, holds it.
+    """
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / LOCK_NAME
+    mine = LockInfo(os.getpid(), socket.gethostname(), utc_now_iso())
+    stale: LockInfo | None = None
+    for _ in range(3):  # a race with another run taking over the same stale lock: try again
+        if _try_create(path, mine):
+            return mine, stale
+        held = read_lock(path)
+        if held is not None and (held.host != mine.host or holder_running(held)):
+            raise OutputLockedError(f"{folder} is in use by another doorbatch run ({held.describe()}); "
+                                    f"if that run is gone, remove {path}")
+        stale = held or LockInfo(-1, "?", "?")
+        log.warning("taking over the stale lock %s (%s: not running)", path,
+                    stale.describe() if held else "unreadable lock file")
+        path.unlink(missing_ok=True)
+    raise OutputLockedError(f"{folder}: could not take the lock {path} (another run keeps taking it)")
+
+
+def release_lock(folder: Path, mine: LockInfo) -> None:
+    """Remove the lock if it is still ours."""
+    path = folder / LOCK_NAME
+    if read_lock(path) == mine:
+        path.unlink(missing_ok=True)
+
+
+@contextmanager
+def run_lock(folder: Path) -> Iterator[tuple[LockInfo, LockInfo | None]]:
+    """Hold the lock of ``folder`` for the ``with`` body (see :func:`acquire_lock`)."""
+    mine, stale = acquire_lock(folder)
+    try:
+        yield mine, stale
+    finally:
+        release_lock(folder, mine)

@@ -1,0 +1,56 @@
+"""``OUT/run.log``: one JSON object per line for every event of a ``doorbatch run`` (cron-friendly).
+
+Each line has ``time`` (ISO 8601 UTC), ``level``, ``logger``, ``message``, and the fields a caller passes in
+``extra={"event": ..., ...}`` (``event``, ``step``, ``status``, ``seconds``, ``error``...). The file is
+appended to, so it keeps the history of every run into the same output folder; each run starts with a
+``run_started`` event. Lines are written whole and flushed one by one.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+from typing import Any, TextIO
+
+from doorbatch.io.manifest import utc_now_iso
+
+RUN_LOG = "run.log"
+_STANDARD = set(vars(logging.LogRecord("", 0, "", 0, "", None, None))) | {"message", "asctime"}
+
+
+def record_fields(record: logging.LogRecord) -> dict[str, Any]:
+    """The JSON object of one log record: the standard fields and every ``extra`` field."""
+    fields: dict[str, Any] = {"time": utc_now_iso(), "level": record.levelname, "logger": record.name,
+                              "message": record.getMessage()}
+    fields.update({k: v for k, v in vars(record).items() if k not in _STANDARD})
+    if record.exc_info:
+        fields["traceback"] = logging.Formatter().formatException(record.exc_info)
+    return fields
+
+
+class JsonLinesHandler(logging.Handler):
+    """A logging handler appending one JSON line per record to a file."""
+
+    def __init__(self, path: Path, level: int = logging.INFO) -> None:
+        super().__init__(level)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        self._file: TextIO = path.open("a", encoding="utf-8")
+
+    def emit(self, record: logging.LogRecord) -> None:
+        """Append the record as one line and flush it."""
+        try:
+            self._file.write(json.dumps(record_fields(record), default=str) + "\n")
+            self._file.flush()
+        except Exception:
+            self.handleError(record)
+
+    def close(self) -> None:
+        """Close the file."""
+        self._file.close()
+        super().close()
+
+
+def read_run_log(path: Path) -> list[dict[str, Any]]:
+    """Every event of a run.log, in order."""
+    return [json.loads(line) for line in path.read_text(encoding="utf-8").splitlines() if line.strip()]

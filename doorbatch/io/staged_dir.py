@@ -1,0 +1,78 @@
+"""Output folders that appear complete or not at all: a step writes into a hidden temporary folder beside
+the destination, which is renamed into place when the step succeeds.
+
+Temporary folders are ``.<name>.<16 hex>.tmp`` (a replaced old folder briefly ``.<name>.<16 hex>.old``);
+:func:`remove_leftovers` deletes what a killed run left. Replacing an existing folder takes two renames
+(old away, new in); a kill between them leaves the destination missing, never partial, and the next run
+redoes that step.
+"""
+
+from __future__ import annotations
+
+import secrets
+import shutil
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+from doorbatch.io.atomic import TEMP_MARKER
+
+_OLD_MARKER = ".old"
+
+
+def _sibling(dest: Path, marker: str) -> Path:
+    return dest.with_name(f".{dest.name}.{secrets.token_hex(8)}{marker}")
+
+
+@contextmanager
+def staged_dir(dest: Path) -> Iterator[Path]:
+    """Yield an empty temporary folder; when the ``with`` body returns it replaces ``dest``.
+
+    When the body raises (or is interrupted), the temporary folder is removed and ``dest`` is untouched.
+
+    Raises:
+        OSError: the folder cannot be created or renamed.
+    """
+    dest = Path(dest)
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    tmp = _sibling(dest, TEMP_MARKER)
+    tmp.mkdir()
+    try:
+        yield tmp
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    old = _sibling(dest, _OLD_MARKER)
+    if dest.exists():
+        dest.rename(old)
+    tmp.rename(dest)
+    shutil.rmtree(old, ignore_errors=True)
+
+
+def is_leftover(path: Path) -> bool:
+    """Whether ``path`` is a temporary file or folder of :func:`staged_dir` or :mod:`doorbatch.io.atomic`."""
+    name = path.name
+    return name.startswith(".") and (TEMP_MARKER in name or name.endswith(_OLD_MARKER))
+
+
+def remove_leftovers(root: Path) -> list[Path]:
+    """Delete every temporary file and folder under ``root`` that an interrupted run left; return them.
+
+    Call it only while holding the output's lock (a running step's temporary folder looks the same).
+    """
+    removed: list[Path] = []
+    if not root.is_dir():
+        return removed
+    stack = [root]
+    while stack:
+        folder = stack.pop()
+        for path in sorted(folder.iterdir()):
+            if is_leftover(path):
+                if path.is_dir():
+                    shutil.rmtree(path, ignore_errors=True)
+                else:
+                    path.unlink(missing_ok=True)
+                removed.append(path)
+            elif path.is_dir() and not path.is_symlink():
+                stack.append(path)
+    return removed

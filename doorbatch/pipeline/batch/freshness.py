@@ -1,0 +1,109 @@
+"""Incremental runs: a step is up to date when its folder's manifest records the same step key.
+
+The key is the SHA-256 of the step's identity (kind and parameters such as the method), the content hash
+of every input file (:func:`~doorbatch.io.manifest.file_fingerprint`, by name and SHA-256: moving the
+dataset does not invalidate it), and the hash of the resolved config sections the step depends on (a
+change to ``localize.sigma_hit`` redoes localization, not mapping). Outputs of an upstream step are inputs
+of the next by content, so a rerun of mapping that yields the same map leaves localization skipped.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from doorbatch.config import tree_hash
+from doorbatch.errors import InputDataError
+from doorbatch.io.manifest import Manifest, file_fingerprint
+from doorbatch.pipeline.batch.plan import StepKind
+
+MANIFEST = "manifest.json"
+STEP_RECORD = "step"  # the key of the step record in manifest.extra
+
+# Config sections each kind of step reads (absent ones are left out: evaluation's section lands separately).
+_READING = ("seed", "topics", "frames", "io", "laser")
+STEP_SECTIONS: dict[StepKind, tuple[str, ...]] = {
+    StepKind.MAP: (*_READING, "scanmatch", "mapping", "grid", "doors"),
+    StepKind.LOCALIZE: (*_READING, "mapping", "localize"),  # mapping.max_pose_gap_s bounds odometry gaps
+    StepKind.EVALUATE: (*_READING, "doors", "evaluate"),
+    StepKind.REPORT: ("evaluate",),
+}
+
+
+def sections_hash(config: Mapping[str, Any], sections: Sequence[str]) -> str:
+    """SHA-256 of the named sections of a resolved config tree (canonical JSON)."""
+    return tree_hash({name: config[name] for name in sections if name in config})
+
+
+@dataclass(frozen=True)
+class StepKey:
+    """What a step's output depends on; :attr:`digest` is the key compared between runs."""
+
+    kind: StepKind
+    params: dict[str, Any]
+    sections: tuple[str, ...]
+    sections_hash: str
+    inputs: list[dict[str, Any]] = field(default_factory=list)
+
+    @property
+    def digest(self) -> str:
+        """SHA-256 over kind, params, the sections' hash and each input's name and content hash."""
+        return tree_hash({"kind": str(self.kind), "params": self.params, "sections_hash": self.sections_hash,
+                          "inputs": [[Path(i["path"]).name, i["sha256"]] for i in self.inputs]})
+
+    def record(self) -> dict[str, Any]:
+        """The step record stored in the manifest."""
+        return {"kind": str(self.kind), "key": self.digest, "params": self.params, "sections": list(self.sections),
+                "sections_hash": self.sections_hash, "inputs": self.inputs}
+
+
+def step_key(kind: StepKind, config: Mapping[str, Any], inputs: Sequence[Path],
+             params: Mapping[str, Any] | None = None,
+             fingerprint: Callable[[Path], dict[str, Any]] = file_fingerprint) -> StepKey:
+    """Fingerprint a step's inputs (with ``fingerprint``: a cache's, or hashing every byte) and config
+    sections.
+
+    Raises:
+        InputDataError: an input is missing or unreadable (names it).
+    """
+    sections = STEP_SECTIONS[kind]
+    return StepKey(kind, json.loads(json.dumps(dict(params or {}), default=str)), sections,
+                   sections_hash(config, sections), [fingerprint(p) for p in inputs])
+
+
+def recorded_step(out_dir: Path) -> dict[str, Any] | None:
+    """The step record in ``out_dir``/manifest.json, or ``None`` (no folder, no manifest, not a step's)."""
+    path = out_dir / MANIFEST
+    if not path.is_file():
+        return None
+    try:
+        record = Manifest.read(path).extra.get(STEP_RECORD)
+    except InputDataError:
+        return None
+    return record if isinstance(record, dict) and isinstance(record.get("key"), str) else None
+
+
+def recorded_key(out_dir: Path) -> str | None:
+    """The step key in ``out_dir``/manifest.json, or ``None``."""
+    record = recorded_step(out_dir)
+    return None if record is None else str(record["key"])
+
+
+def stamp_manifest(out_dir: Path, key: StepKey, config: Mapping[str, Any], started_at: str,
+                   warnings: Sequence[str] = ()) -> None:
+    """Add the step record to the manifest a stage wrote in ``out_dir``, or write one if it wrote none."""
+    path = out_dir / MANIFEST
+    if path.is_file():
+        manifest = Manifest.read(path)
+    else:
+        manifest = Manifest.start(config)
+        manifest.started_at = started_at
+        manifest.inputs = list(key.inputs)
+        for w in warnings:
+            manifest.warn(w)
+        manifest.finish()
+    manifest.extra[STEP_RECORD] = key.record()
+    manifest.write(path)

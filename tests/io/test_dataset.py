@@ -1,0 +1,54 @@
+"""dataset.yaml: the sample's, and clear errors for layouts that do not fit."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from doorbatch.errors import ExitCode, InputDataError
+from doorbatch.io.dataset import log_name, read_dataset
+from tests.conftest import REPO
+
+
+def test_the_sample_dataset_reads_with_paths_under_its_folder() -> None:
+    root = REPO / "datasets" / "sample"
+    dataset = read_dataset(root)
+    (site,) = dataset.sites
+    assert site.name == "office_corridor"
+    assert [p.name for p in site.mapping] == ["map_pass1.mcap", "map_pass2.mcap", "map_pass3.mcap"]
+    assert [log_name(p) for p in site.localization] == ["loc_closed", "loc_open", "loc_partial"]
+    assert all(p.is_file() for p in (*site.mapping, *site.localization))
+    assert site.truth == root / "logs" / "map.truth.yaml"
+    assert isinstance(dataset.config, dict)
+
+
+@pytest.mark.parametrize(("name", "expected"), [
+    ("a.mcap", "a"), ("intel.log.gz", "intel"), ("x.clf", "x"), ("run.bag", "run"), ("bag_folder", "bag_folder"),
+    ("v1.2.mcap", "v1.2"),
+])
+def test_log_name_drops_log_suffixes_only(name: str, expected: str) -> None:
+    assert log_name(Path("/d") / name) == expected
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ("sites: {}\n", "at least one site"),
+    ("sites: {s: {mapping: []}}\n", "at least one mapping log"),
+    ("sites: {s: {mapping: [a.mcap], localisation: [b.mcap]}}\n", "localisation"),
+    ("sites: {'a/b': {mapping: [a.mcap]}}\n", "site name"),
+    ("sites: {s: {mapping: [a.mcap], localization: [x/l.mcap, y/l.mcap]}}\n", "share the output name"),
+    ("sites: {s: {mapping: [a.mcap]}}\nconfig: [1]\n", "'config' must be a mapping"),
+    ("sites: {s: {mapping: [a.mcap]}}\nextra: 1\n", "unknown top-level"),
+    ("sites: [\n", "not valid YAML"),
+])
+def test_bad_layouts_are_bad_input_naming_the_problem(tmp_path: Path, text: str, message: str) -> None:
+    (tmp_path / "dataset.yaml").write_text(text)
+    with pytest.raises(InputDataError, match=message) as err:
+        read_dataset(tmp_path)
+    assert err.value.exit_code == ExitCode.BAD_INPUT
+
+
+def test_a_folder_without_dataset_yaml_is_named(tmp_path: Path) -> None:
+    with pytest.raises(InputDataError, match=r"no dataset\.yaml") as err:
+        read_dataset(tmp_path)
+    assert str(tmp_path) in str(err.value)

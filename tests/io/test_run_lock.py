@@ -1,0 +1,88 @@
+"""The output lock: one holder at a time, stale locks taken over, live ones refused (exit 2)."""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from doorbatch.errors import ExitCode, OutputLockedError
+from doorbatch.io.manifest import utc_now_iso
+from doorbatch.io.run_lock import (
+    LOCK_NAME,
+    LockInfo,
+    acquire_lock,
+    pid_alive,
+    process_start_epoch_s,
+    read_lock,
+    run_lock,
+)
+
+
+def dead_pid() -> int:
+    """The PID of a process that has exited."""
+    done = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True,
+                          check=True)
+    return int(done.stdout)
+
+
+def write_lock(folder: Path, pid: int, host: str | None = None, started_at: str | None = None) -> None:
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / LOCK_NAME).write_text(json.dumps({"pid": pid, "host": host or socket.gethostname(),
+                                                "started_at": started_at or utc_now_iso()}))
+
+
+def test_lock_holds_pid_host_and_time_and_is_removed_after(tmp_path: Path) -> None:
+    with run_lock(tmp_path / "out") as (mine, stale):
+        assert stale is None
+        held = read_lock(tmp_path / "out" / LOCK_NAME)
+        assert held == mine and held.pid == os.getpid() and held.host == socket.gethostname()
+        assert held.started_at.endswith("Z")
+        with pytest.raises(OutputLockedError, match=f"pid {os.getpid()}") as err:
+            acquire_lock(tmp_path / "out")
+        assert err.value.exit_code == ExitCode.USAGE
+    assert not (tmp_path / "out" / LOCK_NAME).exists()
+    assert [p.name for p in (tmp_path / "out").iterdir()] == []  # no temporary file left either
+
+
+def test_a_dead_pid_lock_is_reported_and_taken_over(tmp_path: Path) -> None:
+    pid = dead_pid()
+    assert not pid_alive(pid)
+    write_lock(tmp_path, pid)
+    mine, stale = acquire_lock(tmp_path)
+    assert stale is not None and stale.pid == pid and mine.pid == os.getpid()
+    assert read_lock(tmp_path / LOCK_NAME) == mine
+
+
+def test_a_live_pid_that_started_after_the_lock_is_a_reused_pid(tmp_path: Path) -> None:
+    if process_start_epoch_s(os.getpid()) is None:
+        pytest.skip("process start times are not available here")
+    write_lock(tmp_path, os.getpid(), started_at="2000-01-01T00:00:00.000Z")  # e.g. a lock from before a reboot
+    _, stale = acquire_lock(tmp_path)
+    assert stale is not None and stale.pid == os.getpid()
+    write_lock(tmp_path, os.getpid())  # the same live process, lock taken now: it holds it
+    with pytest.raises(OutputLockedError):
+        acquire_lock(tmp_path)
+
+
+def test_an_unreadable_lock_is_stale(tmp_path: Path) -> None:
+    (tmp_path / LOCK_NAME).write_text("{not json")
+    mine, stale = acquire_lock(tmp_path)
+    assert stale == LockInfo(-1, "?", "?") and read_lock(tmp_path / LOCK_NAME) == mine
+
+
+def test_a_lock_from_another_host_is_never_taken(tmp_path: Path) -> None:
+    write_lock(tmp_path, dead_pid(), host="some-other-host")
+    with pytest.raises(OutputLockedError, match="some-other-host"):
+        acquire_lock(tmp_path)
+
+
+def test_release_leaves_a_lock_that_is_not_ours(tmp_path: Path) -> None:
+    with run_lock(tmp_path):
+        write_lock(tmp_path, os.getppid())  # someone replaced it meanwhile
+    assert read_lock(tmp_path / LOCK_NAME) is not None

@@ -1,0 +1,166 @@
+"""doorbatch run end to end on a tiny dataset: outputs, dataset tables, incremental reruns, a corrupt log,
+the lock, SIGTERM mid-way, and the Dask executor."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pyarrow.dataset as pads
+import pytest
+
+from doorbatch.cli import main
+from doorbatch.io.manifest import utc_now_iso
+from doorbatch.io.run_lock import LOCK_NAME
+from doorbatch.io.run_log import read_run_log
+from tests.conftest import REPO
+from tests.pipeline.batch.outputs import output_digests
+from tests.pipeline.batch.tiny_dataset import LOCALIZATION, cut_log
+
+SITE = "corridor"
+METHODS = ("mcl", "rbpf")
+ALL_STEPS = {f"map:{SITE}", f"evaluate:{SITE}", "report",
+             *(f"localize:{SITE}/{log}/{m}" for log in LOCALIZATION for m in METHODS)}
+
+
+def run_json(dataset: Path, out: Path, capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, dict]:
+    code = main(["run", str(dataset), "-o", str(out), "--workers", "1", "--json", *args])
+    return code, json.loads(capsys.readouterr().out)
+
+
+def by_status(summary: dict, status: str) -> set[str]:
+    return {o["step"] for o in summary["outcomes"] if o["status"] == status}
+
+
+def test_run_writes_maps_runs_reports_and_hive_tables(reference_out: Path) -> None:
+    out = reference_out
+    assert (out / SITE / "map" / "map.yaml").is_file() and (out / SITE / "map" / "doors.parquet").is_file()
+    for log in LOCALIZATION:
+        for method in METHODS:
+            run = out / SITE / "runs" / log / method
+            assert {p.name for p in run.iterdir()} >= {"trajectory.parquet", "door_states.parquet", "trajectory.tum",
+                                                         "annotated.mcap", "manifest.json"}
+    html = (out / "report" / "report.html").read_text()
+    assert html.count("data:image/png;base64,") >= 2  # self-contained, with its plots
+    metrics = pads.dataset(out / "metrics", format="parquet", partitioning="hive").to_table().to_pydict()
+    assert set(metrics["site"]) == {SITE}
+    ape = {(r, v) for r, m, v in zip(metrics["run"], metrics["metric"], metrics["value"], strict=True)
+           if m == "ape_trans_rmse"}
+    assert {r for r, _ in ape} == {f"{log}/{m}" for log in LOCALIZATION for m in METHODS}
+    assert all(0.0 <= v < 0.5 for _, v in ape)  # tracking from the reference pose on the map it was built with
+    trajectories = pads.dataset(out / "trajectories", format="parquet", partitioning="hive").to_table()
+    assert set(trajectories.column("site").to_pylist()) == {SITE}
+    assert set(trajectories.column("method").to_pylist()) == set(METHODS)
+    events = read_run_log(out / "run.log")
+    assert events[0]["event"] == "run_started" and events[-1]["event"] == "run_finished"
+    assert {e["step"] for e in events if e.get("event") == "step_finished"} == ALL_STEPS
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["done"] == len(ALL_STEPS) and summary["failed"] == 0
+    assert not (out / LOCK_NAME).exists()
+
+
+def test_rerun_skips_everything_and_a_changed_log_redoes_only_its_steps(
+        tiny: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "out"
+    assert run_json(tiny, out, capsys)[0] == 0
+    before = output_digests(out, tiny)
+    code, summary = run_json(tiny, out, capsys)
+    assert code == 0 and by_status(summary, "up_to_date") == ALL_STEPS and summary["done"] == 0
+    assert output_digests(out, tiny) == before
+
+    cut_log("loc_open", tiny / "logs", 6.0)  # new content for one localization log
+    code, summary = run_json(tiny, out, capsys)
+    changed = {f"localize:{SITE}/loc_open/{m}" for m in METHODS} | {f"evaluate:{SITE}", "report"}
+    assert code == 0 and by_status(summary, "done") == changed
+    assert by_status(summary, "up_to_date") == ALL_STEPS - changed
+    after = output_digests(out, tiny)
+    assert after[f"{SITE}/map/map.pgm"] == before[f"{SITE}/map/map.pgm"]
+    changed_run = f"{SITE}/runs/loc_open/mcl/trajectory.parquet"
+    assert after[changed_run] != before[changed_run]
+
+    # a localization parameter redoes localization and evaluation, not the map; --force redoes all
+    code, summary = run_json(tiny, out, capsys, "--set", "localize.sigma_hit=0.12")
+    assert code == 0 and by_status(summary, "up_to_date") == {f"map:{SITE}"}
+    code, summary = run_json(tiny, out, capsys, "--set", "localize.sigma_hit=0.12", "--force")
+    assert code == 0 and by_status(summary, "done") == ALL_STEPS
+
+
+def test_corrupt_log_fails_its_steps_and_the_rest_completes(
+        tiny: Path, tiny_master: Path, tmp_path: Path, reference_out: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    log = tiny / "logs" / "loc_open.mcap"
+    data = log.read_bytes()
+    log.write_bytes(data[: len(data) // 2])  # truncated mid-file
+    out = tmp_path / "out"
+    code, summary = run_json(tiny, out, capsys)
+    assert code == 4
+    failed = {f"localize:{SITE}/loc_open/{m}" for m in METHODS}
+    assert {f["step"] for f in summary["failures"]} == failed
+    assert all(str(log) in f["error"] for f in summary["failures"])
+    assert by_status(summary, "done") == ALL_STEPS - failed
+    assert json.loads((out / "summary.json").read_text())["failures"] == summary["failures"]
+    # every other output complete, and equal to the uninterrupted run's
+    ours, theirs = output_digests(out, tiny), output_digests(reference_out, tiny_master)
+    for rel in ("map/map.pgm", "runs/loc_closed/rbpf/trajectory.parquet", "runs/loc_closed/mcl/annotated.mcap"):
+        assert ours[f"{SITE}/{rel}"] == theirs[f"{SITE}/{rel}"]
+    assert not [p for p in (out / SITE / "runs").rglob("*") if p.is_file() and "loc_open" in p.parts]
+    metrics = pads.dataset(out / "metrics", format="parquet", partitioning="hive").to_table()
+    assert {r for r in metrics.column("run").to_pylist() if "/" in r and "map" not in r} == {
+        f"loc_closed/{m}" for m in METHODS}
+
+
+def test_a_live_lock_is_exit_2_and_a_stale_one_is_taken_over(
+        tiny: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "out"
+    out.mkdir()
+    holder = {"pid": os.getpid(), "host": socket.gethostname(), "started_at": utc_now_iso()}
+    (out / LOCK_NAME).write_text(json.dumps(holder))
+    assert main(["run", str(tiny), "-o", str(out), "-q"]) == 2
+    assert f"pid {os.getpid()}" in capsys.readouterr().err
+    assert not (out / "run.log").exists()
+
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True,
+                          check=True)
+    (out / LOCK_NAME).write_text(json.dumps({**holder, "pid": int(gone.stdout)}))
+    code = main(["run", str(tiny), "-o", str(out), "-q", "--set", "run.methods=[mcl]"])
+    assert code == 0 and not (out / LOCK_NAME).exists()
+    assert [e["holder"] for e in read_run_log(out / "run.log") if e.get("event") == "stale_lock"] == [
+        f"pid {gone.stdout.strip()} on {holder['host']} since {holder['started_at']}"]
+
+
+def test_sigterm_midway_leaves_no_partial_output_and_a_rerun_matches(
+        tiny: Path, tiny_master: Path, tmp_path: Path, reference_out: Path) -> None:
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "doorbatch.cli", "run", str(tiny), "-o", str(out), "--workers", "1", "-q"]
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and proc.poll() is None:  # kill once the map is done: mid-localization
+        log = out / "run.log"
+        if log.exists() and '"step_finished"' in log.read_text():
+            break
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(60) == 130, proc.stderr.read() if proc.stderr else ""
+    assert not [p for p in out.rglob("*") if ".tmp" in p.name or p.name.endswith(".old")]
+    assert not (out / LOCK_NAME).exists() and not (out / "report").exists()
+    assert read_run_log(out / "run.log")[-1]["event"] == "run_interrupted"
+    for run in (out / SITE / "runs").glob("*/*") if (out / SITE / "runs").exists() else []:
+        assert (run / "manifest.json").is_file()  # a run folder is there only when complete
+
+    assert subprocess.run(cmd, env=env, capture_output=True, check=False).returncode == 0
+    assert output_digests(out, tiny) == output_digests(reference_out, tiny_master)
+
+
+def test_dask_executor_gives_the_local_outputs(tiny: Path, tiny_master: Path, tmp_path: Path,
+                                               reference_out: Path) -> None:
+    pytest.importorskip("distributed")
+    out = tmp_path / "out"
+    assert main(["run", str(tiny), "-o", str(out), "--executor", "dask", "--workers", "2", "-q"]) == 0
+    assert output_digests(out, tiny) == output_digests(reference_out, tiny_master)
+    assert read_run_log(out / "run.log")[0]["executor"] == "dask"
