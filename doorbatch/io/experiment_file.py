@@ -11,6 +11,16 @@ from doorbatch.errors import ConfigError
 from doorbatch.pipeline.evaluate.experiment import ExperimentSpec
 
 
+def experiment_kind(path: Path) -> str:
+    """``doorpose`` for a door pose experiment (paper 003; it names its ``experiment:`` kind), else
+    ``localization`` (a sweep of localization runs). Unreadable files are ``localization`` and fail there."""
+    try:
+        doc = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        return "localization"
+    return "doorpose" if isinstance(doc, dict) and "experiment" in doc else "localization"
+
+
 def read_experiment(path: Path) -> ExperimentSpec:
     """The experiment in ``path``, relative paths resolved against its folder.
 

@@ -26,6 +26,7 @@ from doorbatch.io.atomic import atomic_write_bytes, atomic_write_text
 from doorbatch.io.parquet import write_table
 from doorbatch.io.run_reader import params_json
 from doorbatch.pipeline.evaluate.report import (
+    DOORPOSE_METRICS,
     MAP_METRICS,
     Evaluation,
     SummaryTable,
@@ -168,7 +169,8 @@ def table_lines(table: SummaryTable) -> list[str]:
 
 def _tables(evaluation: Evaluation) -> list[tuple[str, SummaryTable]]:
     out = [("Localization runs (mean over seeds)", summary_table(evaluation)),
-           ("Door maps", summary_table(evaluation, MAP_METRICS, method_map=True))]
+           ("Door maps", summary_table(evaluation, MAP_METRICS, method_map=True)),
+           ("Door poses (paper 003)", summary_table(evaluation, DOORPOSE_METRICS))]
     return [(title, t) for title, t in out if t.rows]
 
 

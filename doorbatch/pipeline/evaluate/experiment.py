@@ -167,6 +167,33 @@ def run_experiment_file(path: Path, out: Path, config: DoorbatchConfig, *, worke
     Raises:
         ConfigError: the file is not a valid experiment.
     """
-    from doorbatch.io.experiment_file import read_experiment
+    from doorbatch.io.experiment_file import experiment_kind, read_experiment
 
+    if experiment_kind(path) == "doorpose":
+        return run_doorpose_experiment(path, out, config)
     return run_experiment(read_experiment(path), out, config, workers=workers)
+
+
+def run_doorpose_experiment(path: Path, out: Path, config: DoorbatchConfig) -> Evaluation:
+    """A door pose experiment file (paper 003 Table I or II on simulated scenes) evaluated into the same
+    report as the localization experiments (its metrics rows; no trajectory plots).
+
+    Raises:
+        ConfigError: the file is not a valid door pose experiment.
+    """
+    import json
+
+    from doorbatch.io.report_writer import write_report
+    from doorbatch.pipeline.doorpose.experiment import experiment_metrics, load_experiment
+    from doorbatch.pipeline.evaluate.report import MetricRow
+
+    exp, exp_config = load_experiment(path, config)
+    columns, _ = experiment_metrics(exp, exp_config, path.stem)
+    rows = [MetricRow(str(run), str(log), str(method), str(metric), float(str(value)), str(unit),
+                      json.loads(str(params)))
+            for run, log, method, metric, value, unit, params in zip(
+                columns["run"], columns["log"], columns["method"], columns["metric"], columns["value"],
+                columns["unit"], columns["params"], strict=True)]
+    evaluation = Evaluation(rows, [], [], [], [], title=exp.description or exp.experiment)
+    write_report(evaluation, out)
+    return evaluation

@@ -358,6 +358,10 @@ SUMMARY_METRICS = ("ape_trans_rmse", "ape_trans_max", "ape_rot_rmse", "rpe_trans
                    "time_to_converge_s", "global_success", "door_state_error_mean")
 MAP_METRICS = ("door_precision", "door_recall", "door_hinge_error_mean", "door_length_error_mean",
                "door_range_error_mean")
+# Door pose experiments (paper 003 Tables I and II; rows from doorbatch.pipeline.doorpose.experiment).
+DOORPOSE_METRICS = ("door_pose_error_mean", "door_pose_error_std", "positioning_error_mean", "positioning_error_std",
+                    "reached_fraction", "failures", "handle_side_accuracy", "z_test_p_vs_ransac",
+                    "z_test_p_vs_continuous")
 
 
 @dataclass(frozen=True)

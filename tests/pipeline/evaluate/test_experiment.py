@@ -79,3 +79,18 @@ def test_global_experiment_reports_success_against_particles(tmp_path: Path) -> 
 def test_shipped_experiment_files_are_valid(name: str) -> None:
     spec = read_experiment(REPO / "configs" / "experiments" / name)
     assert all(p.exists() for p in spec.logs) and len(sweep_points(spec)) >= 60
+
+
+def test_a_door_pose_experiment_runs_through_evaluate_into_the_same_report(tmp_path: Path) -> None:
+    """Paper 003's Table I file (reduced to 4 samples) through ``doorbatch evaluate --experiment``: one row per
+    fit with the summed error, and the report beside it."""
+    doc = yaml.safe_load((REPO / "configs" / "experiments" / "doorpose_table1.yaml").read_text())
+    exp = _write(tmp_path / "table1.yaml", {**doc, "samples": 4})
+    out = tmp_path / "report"
+    assert main(["evaluate", "--experiment", str(exp), "-o", str(out), "-q"]) == 0
+    rows = _rows(out)
+    fits = {r["method"] for r in rows if r["metric"] == "door_pose_error_mean"}
+    assert fits == {"naive", "lsq", "ransac"}
+    assert all(r["params"]["experiment"] == "doorpose_fit_comparison" for r in rows)
+    assert all(r["run"] == "table1" for r in rows)
+    assert "## Door poses (paper 003)" in (out / "report.md").read_text()
