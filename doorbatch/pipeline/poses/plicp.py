@@ -295,9 +295,17 @@ def _normal_equations(lin: _Linearization, pose: FloatArray, prior: GaussianPrio
     return h, g
 
 
+def _is_singular(h: FloatArray) -> bool:
+    """H is not finite, or singular relative to its diagonal (det of the correlation-normalized H < 1e-12)."""
+    d = np.sqrt(np.abs(np.diag(h)))
+    if not (np.all(np.isfinite(h)) and np.all(d > 0.0)):
+        return True
+    return bool(abs(np.linalg.det(h / np.outer(d, d))) < 1e-12)
+
+
 def _step(h: FloatArray, g: FloatArray) -> FloatArray:
     """Gauss–Newton increment δ = −H⁻¹ g; NaN when H is singular."""
-    if not np.all(np.isfinite(h)) or np.linalg.cond(h) > 1e12:
+    if _is_singular(h):
         return np.full(3, np.nan)
     return np.asarray(np.linalg.solve(h, -g), dtype=np.float64)
 
@@ -384,7 +392,7 @@ def _result(lin: _Linearization, pose: FloatArray, prior: GaussianPrior | None, 
     residual = float(np.mean(np.abs(lin.residuals))) if n else math.nan
     pose[2] = float(wrap_angle(pose[2]))
     h, _ = _normal_equations(lin, pose, prior, _sigma2(lin, scales.sigma_min_m))
-    if np.linalg.cond(h) > 1e12:
+    if _is_singular(h):
         cov = np.full((3, 3), np.inf)
     else:
         cov = np.linalg.inv(h)

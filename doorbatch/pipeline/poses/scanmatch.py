@@ -261,13 +261,22 @@ def _voxel_groups(points: FloatArray, voxel_m: float) -> tuple[IntArray, IntArra
 
 
 def _build_submap(keyframes: tuple[Keyframe, ...], cfg: ScanMatchConfig) -> Submap:
-    """KD-tree and likelihood grid over the local keyframes' samples, one per voxel (the oldest keyframe's wins)."""
+    """KD-tree and likelihood grid over the local keyframes' samples, one per voxel (the oldest keyframe's wins).
+
+    Only samples the next scans can reach are kept: those within the newest keyframe's reach (its farthest
+    sample) plus the largest search window of its pose, per axis.
+    """
+    newest = keyframes[-1]
     poses = np.stack([kf.pose for kf in keyframes])
-    near = np.hypot(*(poses[:, :2] - poses[-1, :2]).T) <= cfg.submap_radius_m
+    near = np.hypot(*(poses[:, :2] - newest.pose[:2]).T) <= cfg.submap_radius_m
     near[-cfg.submap_keyframes :] = True
     local = [keyframes[i] for i in np.flatnonzero(near)]
     pts = np.concatenate([kf.points for kf in local], axis=0)
     nrm = np.concatenate([kf.normals for kf in local], axis=0)
+    if newest.points.shape[0]:
+        reach = float(np.abs(newest.points - newest.pose[:2]).max()) + cfg.correlative_window_max_m
+        inside = np.all(np.abs(pts - newest.pose[:2]) <= reach, axis=1)
+        pts, nrm = pts[inside], nrm[inside]
     if pts.shape[0]:
         first = _voxel_groups(pts, cfg.submap_voxel_m)[0]
         pts, nrm = pts[first], nrm[first]
