@@ -14,10 +14,15 @@ from scanmatch_sim import (
     simulate_scan,
 )
 
+from doorbatch.config import DoorbatchConfig
 from doorbatch.geometry.rotations import wrap_angle
-from doorbatch.geometry.se2 import compose, relative
+from doorbatch.geometry.se2 import compose, interpolate_poses, relative
+from doorbatch.io.recording import load_recording
+from doorbatch.pipeline.evaluate.trajectory_error import align_first_pose, ate_rmse
+from doorbatch.pipeline.mapping import pass_poses
 from doorbatch.pipeline.poses import ScanMatchConfig, scan_match_trajectory
 from doorbatch.pipeline.poses.scanmatch import voxel_downsample
+from tests.conftest import REPO
 
 JUMPS = {60: (0.3, 0.0, np.deg2rad(10.0)), 140: (-0.2, 0.1, np.deg2rad(-8.0))}  # wheel slip, a bump
 
@@ -110,3 +115,17 @@ def test_voxel_downsample_keeps_one_centroid_per_voxel() -> None:
     assert len(out) == 3
     assert any(np.allclose(p, [0.02, 0.025]) for p in out)
     assert any(np.allclose(p, [-0.01, 0.0]) for p in out)
+
+
+def test_scan_matched_sample_pass_follows_the_ground_truth_not_the_drifting_odometry() -> None:
+    """The whole pose source on the bundled sample's first mapping pass (720 beams, people, moving doors)."""
+    config = DoorbatchConfig()
+    rec = load_recording(REPO / "datasets" / "sample" / "logs" / "map_pass1.mcap", config)
+    assert rec.reference is not None and rec.odometry is not None
+    matched = pass_poses(rec, "scanmatch", config)
+    truth, ok = interpolate_poses(rec.reference.stamps_ns, rec.reference.poses, matched.stamps_ns)
+    odom = interpolate_poses(rec.odometry.stamps_ns, rec.odometry.poses, matched.stamps_ns)[0]
+    ok &= matched.valid
+    assert matched.source == "scanmatch" and ok.sum() > 400
+    assert ate_rmse(align_first_pose(odom[ok], truth[ok]), truth[ok]) > 0.3
+    assert ate_rmse(align_first_pose(matched.poses[ok], truth[ok]), truth[ok]) < 0.05

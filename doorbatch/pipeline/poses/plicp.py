@@ -30,9 +30,10 @@ kept (trimmed ICP: a walking person is a compact set of large residuals), and th
 Cauchy M-estimator w_i = 1 / (1 + (r_i / c)²) (iteratively reweighted least squares, c =
 ``robust_scale_m``), so that moderate outliers (a door moved a little, clutter) count little while the few
 points that fix a corridor along its axis (door jambs, niches) still count. The covariance is
-(AᵀWA/σ² + Λ)⁻¹ (without a prior σ²(AᵀWA)⁻¹, inf where singular). ``cost`` is the robust objective
-Σ ρ(r_i)/σ_min² + (T − μ)ᵀ Λ (T − μ), ρ(r) = c²/2 · log(1 + (r/c)²), every scan point without a kept
-correspondence counted at the gate distance, so that two local optima (from two starting poses) compare.
+(AᵀWA/σ² + Λ)⁻¹ (without a prior σ²(AᵀWA)⁻¹, inf where singular). To compare two local optima (from two
+starting poses) the result reports the robust data cost D = Σ ρ(r_i), ρ(r) = c²/2 · log(1 + (r/c)²), every
+scan point without a kept correspondence counted at the gate distance, the prior cost P = (T − μ)ᵀ Λ (T − μ)
+and σ; the MAP objective is D/σ² + P with one σ for both (:func:`map_cost`).
 
 Degeneracy: the smallest eigenvalue of AᵀWA / n with the rotation column scaled by 1/L (L the RMS range
 of the inliers), so that all three axes are dimensionless; a single wall or a featureless corridor gives
@@ -97,7 +98,10 @@ class PlicpResult:
         covariance: (3, 3) (AᵀA/σ² + Λ)⁻¹ in the reference frame (inf where singular without a prior).
         n_inliers: Correspondences used in the last iteration.
         residual_m: Mean |n_iᵀ(R p_i + t − q_i)| over those inliers (m); NaN when there are none.
-        cost: The robust MAP objective at ``pose`` (module docstring); lower is better.
+        data_cost: D = Σ ρ(r_i) over the scan at ``pose`` (m², module docstring).
+        prior_cost: P = (T − μ)ᵀ Λ (T − μ), 0 without a prior.
+        sigma_m: RMS of the kept residuals (unweighted: how well the pose fits), floored at sigma_min_m; inf
+            with three inliers or fewer.
         degeneracy: Smallest eigenvalue of the dimensionless AᵀA / n (0: a direction is unconstrained).
         iterations: Gauss–Newton iterations run.
         converged: The last step was below the convergence thresholds.
@@ -107,7 +111,9 @@ class PlicpResult:
     covariance: FloatArray
     n_inliers: int
     residual_m: float
-    cost: float
+    data_cost: float
+    prior_cost: float
+    sigma_m: float
     degeneracy: float
     iterations: int
     converged: bool
@@ -372,17 +378,25 @@ class _Scales:
     sigma_min_m: float
 
 
-def _cost(lin: _Linearization, pose: FloatArray, prior: GaussianPrior | None, scales: _Scales) -> float:
-    """Σ ρ(r_i)/σ_min² over the matched points, ρ(gate) for the unmatched ones, plus the prior's Mahalanobis²."""
+def _data_cost(lin: _Linearization, scales: _Scales) -> float:
+    """D = Σ ρ(r_i) over the kept correspondences plus ρ(gate) for every other scan point."""
     c2 = scales.robust_m**2
     rho = 0.5 * c2 * np.log1p(lin.residuals**2 / c2)
-    total = float(rho.sum()) + lin.n_unmatched * 0.5 * c2 * math.log1p(scales.gate_m**2 / c2)
-    total /= scales.sigma_min_m**2
-    if prior is not None:
-        e = pose - prior.mean
-        e[2] = math.remainder(e[2], 2.0 * math.pi)
-        total += float(e @ prior.information @ e)
-    return total
+    return float(rho.sum()) + lin.n_unmatched * 0.5 * c2 * math.log1p(scales.gate_m**2 / c2)
+
+
+def _prior_cost(pose: FloatArray, prior: GaussianPrior | None) -> float:
+    """P = (T − μ)ᵀ Λ (T − μ) with the yaw difference wrapped; 0 without a prior."""
+    if prior is None:
+        return 0.0
+    e = pose - prior.mean
+    e[2] = math.remainder(e[2], 2.0 * math.pi)
+    return float(e @ prior.information @ e)
+
+
+def map_cost(result: PlicpResult, sigma_m: float) -> float:
+    """The MAP objective D/σ² + P of a result with a given σ (the same σ for results that are compared)."""
+    return result.data_cost / sigma_m**2 + result.prior_cost
 
 
 def _result(lin: _Linearization, pose: FloatArray, prior: GaussianPrior | None, scales: _Scales,
@@ -397,5 +411,6 @@ def _result(lin: _Linearization, pose: FloatArray, prior: GaussianPrior | None, 
     else:
         cov = np.linalg.inv(h)
         cov = 0.5 * (cov + cov.T)
-    return PlicpResult(pose, cov, n, residual, _cost(lin, pose, prior, scales), _degeneracy(lin), iterations,
-                       converged)
+    sigma2 = max(float(np.mean(lin.residuals**2)), scales.sigma_min_m**2) if n > 3 else math.inf
+    return PlicpResult(pose, cov, n, residual, _data_cost(lin, scales), _prior_cost(pose, prior), math.sqrt(sigma2),
+                       _degeneracy(lin), iterations, converged)

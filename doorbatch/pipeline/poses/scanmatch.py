@@ -31,7 +31,9 @@ and likelihood grid are rebuilt only then, so the cost per scan stays bounded.
 The correlative optimum is a lattice pose that maximizes overlap alone; along a corridor it may sit a few
 cells off the prediction with nothing to tell them apart. MAP-PLICP is therefore run from the prediction as
 well when the two differ, and the local optimum with the lower robust MAP cost wins (both minimize the same
-objective, so this only chooses between its basins).
+objective, so this only chooses between its basins), the data weighted by the smaller of the two residual σ,
+the noise of the better fit (a scan that overlaps the submap poorly fits either pose loosely, and then the
+prediction decides).
 
 A match is rejected when it has too few points or inliers, or the ICP leaves the search window; the scan
 then keeps the prediction (``fallback``, with the prediction's covariance; the number of fallbacks is logged as
@@ -58,6 +60,7 @@ from doorbatch.pipeline.poses.plicp import (
     LineReference,
     PlicpResult,
     line_reference,
+    map_cost,
     placed,
     plicp,
     scan_lines,
@@ -320,7 +323,8 @@ def match_scan(submap: Submap, scan_xy: FloatArray, prior: FloatArray, prior_cov
     fine = _refine(submap, scan_xy, coarse.pose, gaussian, cfg)
     if _lattice_steps_apart(coarse.pose, prior, cfg) > 1.0:
         from_prior = _refine(submap, scan_xy, prior, gaussian, cfg)
-        fine = from_prior if from_prior.cost < fine.cost else fine
+        sigma_m = min(fine.sigma_m, from_prior.sigma_m)  # one σ for both: the better fit's noise estimate
+        fine = from_prior if map_cost(from_prior, sigma_m) < map_cost(fine, sigma_m) else fine
     if not _accept(fine, prior, window_m, window_deg, cfg):
         return ScanMatch(prior, prior_covariance, fine.n_inliers, fine.residual_m, coarse.score, True, False)
     return ScanMatch(fine.pose, fine.covariance, fine.n_inliers, fine.residual_m, coarse.score, False,
