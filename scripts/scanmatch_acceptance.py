@@ -10,7 +10,8 @@ scan's lines, both placed at their reference poses and starting there; ``ref_pai
 the median distance and turn from the reference pose to where it converged. A front end without loop closure
 that agrees with the scans step by step accumulates roughly that much per step in new territory.
 
-Usage: ``python scripts/scanmatch_acceptance.py [--seed N] [--json]``
+Usage: ``python scripts/scanmatch_acceptance.py [--seed N] [--json] [--every K]`` (``--every K``: also the position
+error and the reference position of every K-th scan, to see where a log drifts)
 """
 
 from __future__ import annotations
@@ -62,7 +63,8 @@ def reference_consistency(scans: list[np.ndarray], ref: np.ndarray) -> tuple[flo
     return float(np.median(np.hypot(d[:, 0], d[:, 1]))), float(np.degrees(np.median(np.abs(d[:, 2]))))
 
 
-def evaluate(name: str, recs: list[Recording], drift_seed: int | None, config: DoorbatchConfig) -> dict[str, object]:
+def evaluate(name: str, recs: list[Recording], drift_seed: int | None, config: DoorbatchConfig, every: int = 0
+             ) -> dict[str, object]:
     """ATE of odometry and of scan matching over the concatenated recordings."""
     refs, odoms, scans = [], [], []
     for rec in recs:
@@ -94,6 +96,8 @@ def evaluate(name: str, recs: list[Recording], drift_seed: int | None, config: D
         "first_scan_over_0.2m": int(over[0]) if over.size else None, "fallbacks": int(matched.fallback.sum()),
         "scans_per_s": round(len(scans) / seconds, 1), "ref_pairwise_median_m": round(pair_m, 4),
         "ref_pairwise_median_deg": round(pair_deg, 3),
+        **({"errors_every": [[k, round(float(err[k]), 2), round(float(ref[k, 0]), 1), round(float(ref[k, 1]), 1)]
+                             for k in range(0, len(err), every)]} if every else {}),
     }
 
 
@@ -101,14 +105,16 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seed", type=int, default=7, help="drift seed for the CARMEN logs")
     parser.add_argument("--json", action="store_true")
+    parser.add_argument("--every", type=int, default=0, help="also list [scan, error m, x, y] every K scans")
     args = parser.parse_args()
     config = DoorbatchConfig()
     rows = [evaluate("sample mapping run (3 passes)",
-                     [load_recording(SAMPLE / f"map_pass{k}.mcap", config) for k in (1, 2, 3)], None, config)]
+                     [load_recording(SAMPLE / f"map_pass{k}.mcap", config) for k in (1, 2, 3)], None, config,
+                     args.every)]
     for name in ("orebro", "intel", "aces"):
         path = CARMEN / f"{name}-corrected.log.gz"
         if path.exists():
-            rows.append(evaluate(name, [load_recording(path, config)], args.seed, config))
+            rows.append(evaluate(name, [load_recording(path, config)], args.seed, config, args.every))
     if args.json:
         print(json.dumps(rows, indent=2))
         return
