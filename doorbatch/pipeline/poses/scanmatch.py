@@ -8,9 +8,13 @@ For scans k = 1 … S−1 with odometry o_k (frame odom) and corrected poses x_k
 
 Σ_k comes from the odometry motion model of Probabilistic Robotics (Table 5.6): the increment is split
 into (δrot1, δtrans, δrot2) with independent variances α1 δrot1² + α2 δtrans², α3 δtrans² + α4 (δrot1² +
-δrot2²), α1 δrot2² + α2 δtrans² (the rotations taken modulo a half turn, as AMCL does, so that driving
-backwards is not a half-turn), mapped to (x, y, θ) of the previous pose by the Jacobian of (δtrans cos δrot1,
-δtrans sin δrot1, δrot1 + δrot2), plus standard-deviation floors; G rotates it into the map frame.
+δrot2²), α1 δrot2² + α2 δtrans² (:func:`doorbatch.geometry.odometry.odometry_increments`), mapped to
+(x, y, θ) of the previous pose by the Jacobian of (δtrans cos δrot1, δtrans sin δrot1, δrot1 + δrot2), plus
+standard-deviation floors; G rotates it into the map frame. The rotations enter in full, as the simulator's
+drift model (:mod:`doorbatch.sim.motion`) draws them; AMCL's folding r = min(|δrot|, π − |δrot|) (localization's
+motion model) was tried and made the windows too narrow for the small backward jitters of in-place turns in
+the drift-corrupted CARMEN logs (intel and aces then diverged). A robot that really drives backwards gets
+wide windows here (a cost in speed, not in accuracy).
 
 The correlative search (Olson, ICRA 2009; :mod:`.correlative`) looks ``window_sigmas`` standard deviations
 of that prediction around it on every map axis (clipped to configured limits), so that a 76° turn between
@@ -52,6 +56,7 @@ import numpy as np
 import numpy.typing as npt
 
 from doorbatch.config import ScanMatchConfig
+from doorbatch.geometry.odometry import odometry_increments
 from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.geometry.se2 import compose, relative, rotation_matrix
 from doorbatch.pipeline.poses.correlative import LikelihoodGrid, build_likelihood_grid, correlative_match
@@ -71,8 +76,6 @@ IntArray = npt.NDArray[np.int64]
 BoolArray = npt.NDArray[np.bool_]
 
 log = logging.getLogger(__name__)
-# Below this translation (m) an increment is a pure rotation (its bearing atan2 is meaningless).
-_MIN_TRANS_M = 1e-9
 
 
 @dataclass(frozen=True, slots=True)
@@ -214,10 +217,9 @@ def _is_keyframe(last: FloatArray, pose: FloatArray, cfg: ScanMatchConfig) -> bo
 
 def increment_covariance(increment: npt.ArrayLike, cfg: ScanMatchConfig) -> FloatArray:
     """(3, 3) covariance of an odometry increment (dx, dy, dθ), in the frame of its start pose (module docstring)."""
-    dx, dy, dth = (float(v) for v in np.asarray(increment, dtype=np.float64))
-    trans = math.hypot(dx, dy)
-    rot1 = math.atan2(dy, dx) if trans > _MIN_TRANS_M else 0.0
-    rot2 = math.remainder(dth - rot1, 2.0 * math.pi)
+    d = np.asarray(increment, dtype=np.float64)
+    inc = odometry_increments(np.array([0.0, d[0]]), np.array([0.0, d[1]]), np.array([0.0, d[2]]))
+    rot1, trans, rot2 = float(inc.rot1[0]), float(inc.trans[0]), float(inc.rot2[0])
     var = np.array([cfg.odom_alpha1 * rot1**2 + cfg.odom_alpha2 * trans**2,
                     cfg.odom_alpha3 * trans**2 + cfg.odom_alpha4 * (rot1**2 + rot2**2),
                     cfg.odom_alpha1 * rot2**2 + cfg.odom_alpha2 * trans**2])
