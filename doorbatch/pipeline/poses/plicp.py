@@ -230,12 +230,10 @@ def placed(lines: ScanLines, pose: npt.ArrayLike) -> ScanLines:
     return ScanLines(lines.points @ rot + p[:2], lines.normals @ rot)
 
 
-def scan_line_reference(scan_xy: npt.ArrayLike, pose: npt.ArrayLike, **line_options: float) -> LineReference:
-    """The line reference of one scan (hits in beam order, sensor frame) seen from ``pose``.
-
-    ``line_options`` are those of :func:`scan_lines` (spacing_m, max_incidence_deg, ...).
-    """
-    lines = placed(scan_lines(scan_xy, **line_options), pose)  # type: ignore[arg-type]
+def scan_line_reference(scan_xy: npt.ArrayLike, pose: npt.ArrayLike) -> LineReference:
+    """The line reference of one scan (hits in beam order, sensor frame) seen from ``pose`` (default
+    :func:`scan_lines` options)."""
+    lines = placed(scan_lines(scan_xy), pose)
     return line_reference(lines.points, lines.normals)
 
 
