@@ -129,6 +129,8 @@ class ScanMatchConfig(Section):
     coarse_cells: int = Field(6, ge=1)
     # Point-to-line ICP (Censi 2008), MAP with the odometry prior.
     icp_max_iterations: int = Field(30, ge=1)
+    # Nearest line samples farther than max_correspondence_m are no correspondence; of the rest only the
+    # trim_fraction with the smallest residuals count (a walking person is a compact set of large residuals).
     max_correspondence_m: float = Field(0.3, gt=0.0)
     trim_fraction: float = Field(0.9, gt=0.0, le=1.0)
     # Cauchy weight 1/(1 + (r/c)²) of a point-to-line residual r: c a few times the residual σ of a good

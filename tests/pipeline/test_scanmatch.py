@@ -104,6 +104,8 @@ def test_config_is_frozen_and_rejects_unknown_keys() -> None:
         ScanMatchConfig(window_mm=1.0)  # type: ignore[call-arg]
     with pytest.raises(ValidationError):
         ScanMatchConfig(trim_fraction=1.5)
+    with pytest.raises(ValidationError, match="correlative_window_min_m must not exceed"):
+        ScanMatchConfig(correlative_window_min_m=3.0)
     config = ScanMatchConfig()
     with pytest.raises(ValidationError):
         config.keyframe_min_d_m = 1.0  # type: ignore[misc]
