@@ -1,12 +1,15 @@
 """Grid stage speed: scans/s of occupancy grid integration (360-beam scans, 0.05 m cells) and the overhead that
 door detection (paper 000, Sec. III) adds on top.
 
-Run: ``taskset -c 0 python bench/bench_gridmap.py [--scans N] [--repeats R]``. The scans are simulated once
+Run: ``taskset -c 0 python bench/bench_gridmap.py [--scans N] [--repeats R] [--logs LOG ...]``. The scans are
+simulated once
 (not timed): a 40 m corridor with 16 rooms, doors closed in pass 1 and half of them open 60° in pass 2, a
 person walking against the robot in pass 2. Both timings end with the occupancy map output; each figure is
 the best of R repeats (grid-only and full runs interleaved), in CPU time of the process (the machine is
 shared: wall time also counts the waits for the core). The NumPy reference of the integration kernel is
-timed once, for comparison.
+timed once, for comparison. With ``--logs``, the passes are those logs instead (each log one pass, reference
+poses, read before timing), e.g. the sample's mapping run: more dynamic points per scan than the simulated
+corridor (a person in view most of the time, 720 beams).
 """
 
 from __future__ import annotations
@@ -19,7 +22,8 @@ from collections.abc import Callable
 import numpy as np
 import numpy.typing as npt
 
-from doorbatch.config import GridConfig
+from doorbatch.config import DoorbatchConfig, GridConfig
+from doorbatch.io.recording import load_recording
 from doorbatch.pipeline.gridmap.build import GridMapper, MapScan
 from doorbatch.pipeline.gridmap.occupancy import (
     LogOddsGrid,
@@ -28,6 +32,7 @@ from doorbatch.pipeline.gridmap.occupancy import (
     new_grid,
     to_occupancy_map,
 )
+from doorbatch.pipeline.mapping import map_scans, pass_poses
 
 FloatArray = npt.NDArray[np.float64]
 Integrate = Callable[..., LogOddsGrid]
@@ -88,6 +93,16 @@ def simulate(n_scans: int, beams: int = 360, max_range: float = 20.0, seed: int 
     return passes
 
 
+def read_passes(logs: list[str], config: DoorbatchConfig) -> list[list[MapScan]]:
+    """Each log as one pass of scans in the map frame, from its reference poses."""
+    passes = []
+    for log in logs:
+        rec = load_recording(log, config)
+        passes.append([MapScan(o, np.ascontiguousarray(p), d)
+                       for o, p, d in map_scans(rec, pass_poses(rec, "reference", config))])
+    return passes
+
+
 def time_grid(passes: list[list[MapScan]], config: GridConfig, integrate: Integrate = integrate_scan) -> float:
     """Seconds to integrate every scan and output the map, without door detection."""
     grid = new_grid(config, passes[0][0].origin)
@@ -117,8 +132,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--scans", type=int, default=2000)
     parser.add_argument("--repeats", type=int, default=15)
+    parser.add_argument("--logs", nargs="+", help="time these logs (one pass each, reference poses) instead")
     args = parser.parse_args()
-    passes = simulate(args.scans)
+    passes = read_passes(args.logs, DoorbatchConfig()) if args.logs else simulate(args.scans)
     config = GridConfig()
     n = sum(len(p) for p in passes)
     ranges = np.concatenate([np.hypot(*(s.points - s.origin).T) for p in passes for s in p])
@@ -131,8 +147,9 @@ def main() -> None:
     scan_s = min(f[0] for f in full_runs)
     end_s = min(f[1] for f in full_runs)
     numpy_s = time_grid(passes, config, integrate_scan_numpy)
-    print(f"scans: {n} x 360 beams, resolution {config.resolution_m} m, mean hit range {ranges.mean():.2f} m; "
-          "a person walks through all of pass 2")
+    source = f"{len(passes)} logs" if args.logs else "simulated, a person walks through all of pass 2"
+    print(f"scans: {n}, mean {np.mean([len(s.points) for p in passes for s in p]):.0f} hits/scan, resolution "
+          f"{config.resolution_m} m, mean hit range {ranges.mean():.2f} m; {source}")
     print(f"grid integration: {n / grid_s:,.0f} scans/s ({1e6 * grid_s / n:.0f} us/scan; NumPy reference "
           f"{n / numpy_s:,.0f} scans/s)")
     print(f"with door detection: {n / scan_s:,.0f} scans/s ({1e6 * scan_s / n:.0f} us/scan), "

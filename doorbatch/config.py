@@ -78,35 +78,78 @@ class LaserConfig(Section):
 
 
 class ScanMatchConfig(Section):
-    """Config section ``scanmatch`` (frozen, unknown keys forbidden)."""
+    """Config section ``scanmatch``: odometry corrected by scan-to-submap matching (frozen, unknown keys forbidden)."""
 
     # Each scan is voxel-downsampled before matching (one centroid per voxel; evens out the beam density).
     scan_voxel_m: float = Field(0.05, gt=0.0)
-    # Submap: the last K keyframes in the map frame, voxel-downsampled (one centroid per voxel).
+    # Reference lines from keyframe scans in beam order: consecutive hits are one surface when they are at most
+    # r·Δφ / cos(line_max_incidence_deg) + 3√2·range_sigma_m apart (r the nearer range, Δφ their bearing
+    # difference) with at most line_max_missing_beams beams missing between them; a larger jump is a depth edge.
+    line_max_incidence_deg: float = Field(75.0, gt=0.0, lt=90.0)
+    line_max_missing_beams: int = Field(1, ge=0)
+    # Laser range noise (1σ, m): the joining test's floor, and ×√2 (scan + reference) the ICP residual σ floor.
+    range_sigma_m: float = Field(0.01, gt=0.0)
+    # A hit's normal: PCA of the joined hits within this distance of it along the scan; shorter chains (chair
+    # legs, people) give no lines.
+    normal_radius_m: float = Field(0.25, gt=0.0)
+    # Submap: the line samples of the keyframes within submap_radius_m of the newest one plus the last K
+    # keyframes, in the map frame, one per voxel (also the sampling step). The radius: about half the range
+    # at which a 2D laser still sees walls densely, so that the places the scan overlaps are in the submap.
+    submap_radius_m: float = Field(10.0, ge=0.0)
     submap_keyframes: int = Field(10, ge=1)
     submap_voxel_m: float = Field(0.05, gt=0.0)
     # A scan becomes a keyframe when it moved or turned this much since the last keyframe.
     keyframe_min_d_m: float = Field(0.3, ge=0.0)
     keyframe_min_a_deg: float = Field(10.0, ge=0.0)
-    # Correlative search (Olson 2009): window half-widths around the prior, yaw step; x/y step = grid cell.
-    correlative_window_m: float = Field(0.5, ge=0.0)
-    correlative_window_deg: float = Field(15.0, ge=0.0)
+    # Odometry prior: covariance of the scan-to-scan increment from the odometry motion model (Probabilistic
+    # Robotics Table 5.6; variances per increment): α1 rad²/rad² (rotation from rotation), α2 rad²/m²
+    # (rotation from translation), α3 m²/m² (translation from translation), α4 m²/rad² (translation from
+    # rotation). Defaults: twice the simulator's default scenario (0.02, 0.005, 0.02, 0.001), for the
+    # systematic errors the model leaves out (scale error, yaw drift, slip).
+    odom_alpha1: float = Field(0.04, ge=0.0)
+    odom_alpha2: float = Field(0.01, ge=0.0)
+    odom_alpha3: float = Field(0.04, ge=0.0)
+    odom_alpha4: float = Field(0.002, ge=0.0)
+    # Standard-deviation floors of every increment (a standing robot still has stamp and encoder quantization).
+    odom_min_std_m: float = Field(0.01, gt=0.0)
+    odom_min_std_deg: float = Field(0.5, gt=0.0)
+    # Correlative search (Olson 2009) around the prior: half-widths of window_sigmas × the increment's σ per
+    # map axis, clipped to [min, max] (the min covers events the α-model does not, e.g. a wheel slip).
+    window_sigmas: float = Field(3.0, gt=0.0)
+    correlative_window_min_m: float = Field(0.25, ge=0.0)
+    correlative_window_max_m: float = Field(2.0, gt=0.0)
+    correlative_window_min_deg: float = Field(10.0, ge=0.0)
+    correlative_window_max_deg: float = Field(180.0, gt=0.0, le=180.0)
+    # Yaw step of the search; the x/y step is one grid cell.
     correlative_step_deg: float = Field(1.0, gt=0.0)
     # The search scores an evenly strided subset of at most this many scan points (PLICP uses them all).
     correlative_max_points: int = Field(200, ge=1)
     grid_resolution_m: float = Field(0.05, gt=0.0)
     grid_sigma_m: float = Field(0.05, gt=0.0)
     coarse_cells: int = Field(6, ge=1)
-    # Point-to-line ICP (Censi 2008).
+    # Point-to-line ICP (Censi 2008), MAP with the odometry prior.
     icp_max_iterations: int = Field(30, ge=1)
+    # Nearest line samples farther than max_correspondence_m are no correspondence; of the rest only the
+    # trim_fraction with the smallest residuals count (a walking person is a compact set of large residuals).
     max_correspondence_m: float = Field(0.3, gt=0.0)
     trim_fraction: float = Field(0.9, gt=0.0, le=1.0)
+    # Cauchy weight 1/(1 + (r/c)²) of a point-to-line residual r: c a few times the residual σ of a good
+    # match (range noise √2·σ_r and the 5 cm voxel's ≈1.5 cm), so people, moved doors and clutter count little.
+    robust_scale_m: float = Field(0.03, gt=0.0)
     icp_min_step_m: float = Field(1e-3, gt=0.0)
     icp_min_step_deg: float = Field(0.05, gt=0.0)
-    normal_neighbors: int = Field(8, ge=3)
-    # Acceptance: fewer inliers, or a smaller dimensionless Hessian eigenvalue, falls back to odometry.
+    # Fewer inliers: the match is rejected and the scan keeps the odometry prior (``fallback``). A smaller
+    # dimensionless Hessian eigenvalue flags the scan ``degenerate`` (a direction was left to the prior).
     min_inliers: int = Field(30, ge=3)
     min_degeneracy: float = Field(0.02, ge=0.0)
+
+    @model_validator(mode="after")
+    def _check_windows(self) -> ScanMatchConfig:
+        if self.correlative_window_min_m > self.correlative_window_max_m:
+            raise ValueError("correlative_window_min_m must not exceed correlative_window_max_m")
+        if self.correlative_window_min_deg > self.correlative_window_max_deg:
+            raise ValueError("correlative_window_min_deg must not exceed correlative_window_max_deg")
+        return self
 
 
 def logit(p: float) -> float:

@@ -5,7 +5,13 @@ odometry equals the corrected poses, so their odometry is corrupted with the sim
 (default scenario noise, fixed seed) before scan matching. ATE is against the reference poses (simulator
 ground truth / corrected poses) at the scan stamps, both trajectories starting at the same pose.
 
-Usage: ``python scripts/scanmatch_acceptance.py [--seed N] [--json]``
+How consistent the reference itself is with the scans: each scan is aligned by PLICP (no prior) to the previous
+scan's lines, both placed at their reference poses and starting there; ``ref_pairwise_median_m`` / ``_deg`` are
+the median distance and turn from the reference pose to where it converged. A front end without loop closure
+that agrees with the scans step by step accumulates roughly that much per step in new territory.
+
+Usage: ``python scripts/scanmatch_acceptance.py [--seed N] [--json] [--every K]`` (``--every K``: also the position
+error and the reference position of every K-th scan, to see where a log drifts)
 """
 
 from __future__ import annotations
@@ -18,10 +24,11 @@ from pathlib import Path
 import numpy as np
 
 from doorbatch.config import DoorbatchConfig
-from doorbatch.geometry.se2 import interpolate_poses
+from doorbatch.geometry.se2 import interpolate_poses, relative
 from doorbatch.io.recording import Recording, load_recording
 from doorbatch.pipeline.evaluate.trajectory_error import align_first_pose, ate_rmse, position_errors
 from doorbatch.pipeline.poses import scan_match_trajectory
+from doorbatch.pipeline.poses.plicp import plicp, scan_line_reference
 from doorbatch.sim.motion import OdometryNoise, drift_poses
 
 REPO = Path(__file__).resolve().parents[1]
@@ -45,7 +52,19 @@ def _hits(rec: Recording, idx: np.ndarray) -> list[np.ndarray]:
     return out
 
 
-def evaluate(name: str, recs: list[Recording], drift_seed: int | None, config: DoorbatchConfig) -> dict[str, object]:
+def reference_consistency(scans: list[np.ndarray], ref: np.ndarray) -> tuple[float, float]:
+    """Median (m, deg) of how far PLICP moves each scan from its reference pose against the previous scan."""
+    moved = []
+    for k in range(1, len(scans)):
+        fit = plicp(scan_line_reference(scans[k - 1], ref[k - 1]), scans[k], ref[k], min_step_m=1e-5,
+                    min_step_rad=1e-6)
+        moved.append(relative(ref[k], fit.pose))
+    d = np.asarray(moved)
+    return float(np.median(np.hypot(d[:, 0], d[:, 1]))), float(np.degrees(np.median(np.abs(d[:, 2]))))
+
+
+def evaluate(name: str, recs: list[Recording], drift_seed: int | None, config: DoorbatchConfig, every: int = 0
+             ) -> dict[str, object]:
     """ATE of odometry and of scan matching over the concatenated recordings."""
     refs, odoms, scans = [], [], []
     for rec in recs:
@@ -69,12 +88,16 @@ def evaluate(name: str, recs: list[Recording], drift_seed: int | None, config: D
     err = position_errors(est, ref)
     worst = int(np.argmax(err))
     over = np.flatnonzero(err > 0.2)
+    pair_m, pair_deg = reference_consistency(scans, ref)
     return {
         "log": name, "scans": len(scans), "ate_odometry_m": round(ate_rmse(odom, ref), 4),
         "ate_scanmatch_m": round(ate_rmse(est, ref), 4), "max_error_m": round(float(err[worst]), 3),
         "max_error_at_scan": worst, "max_error_at_xy": [round(float(v), 2) for v in ref[worst, :2]],
         "first_scan_over_0.2m": int(over[0]) if over.size else None, "fallbacks": int(matched.fallback.sum()),
-        "scans_per_s": round(len(scans) / seconds, 1),
+        "scans_per_s": round(len(scans) / seconds, 1), "ref_pairwise_median_m": round(pair_m, 4),
+        "ref_pairwise_median_deg": round(pair_deg, 3),
+        **({"errors_every": [[k, round(float(err[k]), 2), round(float(ref[k, 0]), 1), round(float(ref[k, 1]), 1)]
+                             for k in range(0, len(err), every)]} if every else {}),
     }
 
 
@@ -82,14 +105,16 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seed", type=int, default=7, help="drift seed for the CARMEN logs")
     parser.add_argument("--json", action="store_true")
+    parser.add_argument("--every", type=int, default=0, help="also list [scan, error m, x, y] every K scans")
     args = parser.parse_args()
     config = DoorbatchConfig()
     rows = [evaluate("sample mapping run (3 passes)",
-                     [load_recording(SAMPLE / f"map_pass{k}.mcap", config) for k in (1, 2, 3)], None, config)]
+                     [load_recording(SAMPLE / f"map_pass{k}.mcap", config) for k in (1, 2, 3)], None, config,
+                     args.every)]
     for name in ("orebro", "intel", "aces"):
         path = CARMEN / f"{name}-corrected.log.gz"
         if path.exists():
-            rows.append(evaluate(name, [load_recording(path, config)], args.seed, config))
+            rows.append(evaluate(name, [load_recording(path, config)], args.seed, config, args.every))
     if args.json:
         print(json.dumps(rows, indent=2))
         return

@@ -14,7 +14,7 @@ from __future__ import annotations
 import itertools
 import logging
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -27,7 +27,7 @@ from doorbatch.geometry.se2 import interpolate_poses, rotation_matrix
 from doorbatch.io.preview import PreviewDoor
 from doorbatch.io.recording import Recording, load_recording
 from doorbatch.maps import OccupancyMap
-from doorbatch.pipeline.gridmap.build import GridMapper
+from doorbatch.pipeline.gridmap.build import GridMapper, MapScan
 from doorbatch.pipeline.gridmap.doors import DetectedDoor
 from doorbatch.pipeline.poses import scan_match_trajectory
 
@@ -145,8 +145,8 @@ def _chain_scanmatch(recordings: Sequence[Recording], config: DoorbatchConfig) -
     return out
 
 
-def integrate_pass(mapper: GridMapper, rec: Recording, poses: PassPoses, stride: int) -> None:
-    """Add every valid scan of one pass to the mapper (map frame), then close the pass."""
+def map_scans(rec: Recording, poses: PassPoses, stride: int = 1) -> Iterator[MapScan]:
+    """Every ``stride``-th scan of a pass with a valid pose, in the map frame (the grid stage's input)."""
     scans = rec.scans
     for i in range(0, len(scans), stride):
         if not poses.valid[i]:
@@ -161,7 +161,13 @@ def integrate_pass(mapper: GridMapper, rec: Recording, poses: PassPoses, stride:
             no_return = np.isposinf(r) | (np.isfinite(r) & (r >= scans.range_max[i]))
         angles = scans.angle_min[i] + scans.angle_increment[i] * np.flatnonzero(no_return)
         dirs = np.stack([np.cos(angles), np.sin(angles)], axis=1) @ (rot @ affine[:, :2]).T
-        mapper.add_scan(origin, pts[hit] @ rot.T + pose[:2], dirs)
+        yield MapScan(origin, pts[hit] @ rot.T + pose[:2], dirs)
+
+
+def integrate_pass(mapper: GridMapper, rec: Recording, poses: PassPoses, stride: int) -> None:
+    """Add every valid scan of one pass to the mapper (map frame), then close the pass."""
+    for origin, points, dirs in map_scans(rec, poses, stride):
+        mapper.add_scan(origin, points, dirs)
     mapper.end_pass()
 
 

@@ -10,7 +10,7 @@ from scanmatch_sim import corridor_segments, room_segments, simulate_scan
 from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.geometry.se2 import compose, transform_points
 from doorbatch.pipeline.poses.correlative import _block_max, build_likelihood_grid, correlative_match
-from doorbatch.pipeline.poses.plicp import build_line_reference, plicp
+from doorbatch.pipeline.poses.plicp import plicp, scan_line_reference
 
 P0 = np.array([10.0, 0.0, 0.0])  # in the corridor, between niches
 
@@ -22,15 +22,16 @@ def _errors(estimate: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
 def test_correlative_search_recovers_large_offset_that_plicp_alone_misses() -> None:
     rng = np.random.default_rng(0)
     segments = corridor_segments()
-    ref_points = transform_points(P0, simulate_scan(segments, P0, rng))
-    lines = build_line_reference(ref_points)
-    grid = build_likelihood_grid(ref_points, resolution_m=0.05, sigma_m=0.05, window_m=0.5)
-    for offset in ([0.4, 0.0, 12.0], [0.0, 0.4, 12.0]):
+    ref_scan = simulate_scan(segments, P0, rng)
+    ref_points = transform_points(P0, ref_scan)
+    lines = scan_line_reference(ref_scan, P0)
+    grid = build_likelihood_grid(ref_points, resolution_m=0.05, sigma_m=0.05, window_m=1.5)
+    for offset in ([1.0, 0.0, 10.0], [0.0, 0.6, 30.0], [1.2, 0.3, 30.0]):
         truth = compose(P0, [offset[0], offset[1], np.deg2rad(offset[2])])
         scan = simulate_scan(segments, truth, rng)
         alone = plicp(lines, scan, P0)
         assert _errors(alone.pose, truth)[0] > 0.05, "the scene must defeat plain ICP for this test to mean anything"
-        coarse = correlative_match(grid, scan, P0, window_m=0.5, window_deg=15.0, step_deg=1.0)
+        coarse = correlative_match(grid, scan, P0, window_m=1.5, window_deg=35.0, step_deg=1.0)
         c_xy, c_yaw = _errors(coarse.pose, truth)
         assert c_xy <= 0.05 * np.sqrt(2) and c_yaw <= 0.5 + 1e-9, (c_xy, c_yaw)  # one cell, half a step
         assert coarse.score > 0.5

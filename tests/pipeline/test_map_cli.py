@@ -71,3 +71,12 @@ def test_odometry_pose_source_uses_odometry(write_log: Callable[..., Path], tmp_
     assert main(["map", str(write_log("a.mcap")), "-o", str(out), "--pose-source", "odometry", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["pose_source"] == "odometry"
     assert np.isfinite(read_map(out / "map.yaml").origin_x_m)
+
+
+def test_scanmatch_pose_source_is_used_and_recorded(write_log: Callable[..., Path], tmp_path: Path,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "out"
+    assert main(["map", str(write_log("a.mcap")), "-o", str(out), "--pose-source", "scanmatch", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["pose_source"] == "scanmatch"
+    assert json.loads((out / "manifest.json").read_text())["extra"]["pose_source"] == "scanmatch"
+    assert np.isfinite(read_map(out / "map.yaml").origin_x_m)

@@ -6,15 +6,15 @@ import numpy as np
 from scanmatch_sim import polyline, room_segments, simulate_scan
 
 from doorbatch.geometry.rotations import wrap_angle
-from doorbatch.geometry.se2 import compose, transform_points
-from doorbatch.pipeline.poses.plicp import LineReference, build_line_reference, plicp
+from doorbatch.geometry.se2 import compose
+from doorbatch.pipeline.poses.plicp import GaussianPrior, LineReference, line_reference, plicp, scan_line_reference
 
 P0 = np.array([3.0, 2.5, 0.3])
 
 
 def _reference(segments: np.ndarray, pose: np.ndarray, seed: int) -> LineReference:
     rng = np.random.default_rng(seed)
-    return build_line_reference(transform_points(pose, simulate_scan(segments, pose, rng)))
+    return scan_line_reference(simulate_scan(segments, pose, rng), pose)
 
 
 def _errors(estimate: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
@@ -41,7 +41,7 @@ def test_plicp_covariance_matches_spread_over_noise_draws() -> None:
     estimates, predicted = [], []
     for seed in range(20):
         rng = np.random.default_rng(100 + seed)
-        ref = build_line_reference(transform_points(P0, simulate_scan(room_segments(), P0, rng)))
+        ref = scan_line_reference(simulate_scan(room_segments(), P0, rng), P0)
         result = plicp(ref, simulate_scan(room_segments(), truth, rng), P0, min_step_m=1e-5, min_step_rad=1e-5)
         estimates.append(result.pose - truth)
         predicted.append(np.sqrt(np.diag(result.covariance)))
@@ -72,7 +72,7 @@ def test_plicp_single_wall_is_degenerate_along_the_wall() -> None:
 
 
 def test_plicp_without_reference_or_points_reports_no_inliers() -> None:
-    empty = build_line_reference(np.zeros((0, 2)))
+    empty = line_reference(np.zeros((0, 2)), np.zeros((0, 2)))
     result = plicp(empty, np.ones((10, 2)), P0)
     assert result.n_inliers == 0 and np.isnan(result.residual_m) and np.all(np.isinf(result.covariance))
     assert np.allclose(result.pose, P0, atol=1e-12)
@@ -92,3 +92,16 @@ def test_line_reference_normals_are_perpendicular_to_the_walls() -> None:
     assert np.all(np.abs(ref.normals[on_horizontal, 1]) > 0.99)
     assert np.all(np.abs(ref.normals[on_vertical, 0]) > 0.99)
     assert np.allclose(np.linalg.norm(ref.normals, axis=1), 1.0)
+
+
+def test_plicp_prior_fixes_only_the_direction_the_scan_leaves_open() -> None:
+    wall = polyline([(-20.0, 1.0), (20.0, 1.0)])
+    pose = np.array([0.0, 0.0, 0.0])
+    ref = _reference(wall, pose, seed=3)
+    scan = simulate_scan(wall, pose, np.random.default_rng(4))
+    prior = GaussianPrior(np.array([0.2, 0.1, np.deg2rad(2.0)]), np.diag([1.0 / 0.05**2, 1.0 / 0.05**2, 1.0 / 0.05**2]))
+    result = plicp(ref, scan, prior.mean, prior=prior)
+    # Along the wall the prior's 0.2 m stands; across it and in heading the scan overrules the prior.
+    assert abs(result.pose[0] - 0.2) < 0.005 and abs(result.pose[1]) < 0.005 and abs(result.pose[2]) < np.deg2rad(0.1)
+    std = np.sqrt(np.diag(result.covariance))
+    assert std[0] <= 0.05 and std[1] < 0.005 and std[0] > 5.0 * std[1]  # the prior still carries x

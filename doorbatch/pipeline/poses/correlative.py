@@ -154,17 +154,17 @@ def _coarse_shifts(n: int, r: int) -> IntArray:
     return np.arange(-n, n + 1, r, dtype=np.int64)
 
 
-def _fine_offsets(corner_x: IntArray, corner_y: IntArray, n: int, r: int) -> tuple[IntArray, IntArray]:
-    """All fine shifts inside each coarse block, clamped into [−n, n] (duplicates are harmless)."""
+def _fine_offsets(corner_x: IntArray, corner_y: IntArray, nx: int, ny: int, r: int) -> tuple[IntArray, IntArray]:
+    """All fine shifts inside each coarse block, clamped into [−nx, nx] × [−ny, ny] (duplicates are harmless)."""
     b = np.arange(r, dtype=np.int64)
-    fx = np.minimum(corner_x[:, None, None] + b[None, None, :], n)
-    fy = np.minimum(corner_y[:, None, None] + b[None, :, None], n)
+    fx = np.minimum(corner_x[:, None, None] + b[None, None, :], nx)
+    fy = np.minimum(corner_y[:, None, None] + b[None, :, None], ny)
     fx, fy = np.broadcast_arrays(fx, fy)
     return fx.reshape(len(corner_x), -1), fy.reshape(len(corner_y), -1)
 
 
 def correlative_match(
-    grid: LikelihoodGrid, scan_xy: npt.ArrayLike, prior: npt.ArrayLike, *, window_m: float = 0.5,
+    grid: LikelihoodGrid, scan_xy: npt.ArrayLike, prior: npt.ArrayLike, *, window_m: float | tuple[float, float] = 0.5,
     window_deg: float = 15.0, step_deg: float = 1.0,
 ) -> CorrelativeResult:
     """Exhaustive search of (x, y, yaw) within ±window around ``prior`` for the best-scoring scan pose.
@@ -173,7 +173,8 @@ def correlative_match(
         grid: Likelihood grid of the reference (:func:`build_likelihood_grid`).
         scan_xy: (N, 2) scan points in the sensor (base) frame.
         prior: (3,) prior pose x, y, yaw in the grid's frame.
-        window_m: Half-width of the translation window (m); the x/y step is the grid resolution.
+        window_m: Half-width of the translation window (m), one for both axes or (x, y) of the grid's
+            frame; the x/y step is the grid resolution.
         window_deg: Half-width of the yaw window (deg).
         step_deg: Yaw step (deg).
 
@@ -185,25 +186,25 @@ def correlative_match(
     """
     scan = np.asarray(scan_xy, dtype=np.float64).reshape(-1, 2)
     prior_arr = np.asarray(prior, dtype=np.float64)
-    n, r = round(window_m / grid.resolution_m), grid.coarse_cells
-    if n > grid.max_shift_cells:
+    wx, wy = (window_m, window_m) if isinstance(window_m, float | int) else window_m
+    nx, ny, r = round(wx / grid.resolution_m), round(wy / grid.resolution_m), grid.coarse_cells
+    if max(nx, ny) > grid.max_shift_cells:
         raise ValueError(f"window_m={window_m} exceeds the grid's {grid.max_shift_cells * grid.resolution_m} m")
     if scan.shape[0] == 0:
         return CorrelativeResult(prior_arr.copy(), 0.0)
     n_yaw = math.floor(window_deg / step_deg + 1e-9)
     yaws = prior_arr[2] + np.deg2rad(step_deg) * np.arange(-n_yaw, n_yaw + 1)
     cells = _flat_cells(grid, scan, prior_arr[:2], yaws)
-    corners = _coarse_shifts(n, r)
-    cx, cy = (a.ravel() for a in np.meshgrid(corners, corners))
+    cx, cy = (a.ravel() for a in np.meshgrid(_coarse_shifts(nx, r), _coarse_shifts(ny, r)))
     bounds = _scores(grid.bound, cells, np.broadcast_to(cx, (len(yaws), cx.size)),
                      np.broadcast_to(cy, (len(yaws), cy.size))).ravel()
-    yaw_i, sx, sy, score = _expand(grid, cells, bounds, cx, cy, n)
+    yaw_i, sx, sy, score = _expand(grid, cells, bounds, cx, cy, nx, ny)
     pose = np.array([prior_arr[0] + sx * grid.resolution_m, prior_arr[1] + sy * grid.resolution_m, yaws[yaw_i]])
     return CorrelativeResult(pose, score)
 
 
 def _expand(
-    grid: LikelihoodGrid, cells: IntArray, bounds: FloatArray, cx: IntArray, cy: IntArray, n: int
+    grid: LikelihoodGrid, cells: IntArray, bounds: FloatArray, cx: IntArray, cy: IntArray, nx: int, ny: int
 ) -> tuple[int, int, int, float]:
     """Best-bound-first expansion of coarse candidates into their fine shifts (branch and bound).
 
@@ -221,7 +222,7 @@ def _expand(
         if bounds[batch[0]] <= best[3]:
             break
         yaw_i, coarse_i = np.divmod(batch, n_coarse)
-        fx, fy = _fine_offsets(cx[coarse_i], cy[coarse_i], n, grid.coarse_cells)
+        fx, fy = _fine_offsets(cx[coarse_i], cy[coarse_i], nx, ny, grid.coarse_cells)
         scores = _scores(grid.values, cells[yaw_i], fx, fy)
         b, k = np.unravel_index(int(np.argmax(scores)), scores.shape)
         if scores[b, k] > best[3]:

@@ -2,24 +2,52 @@
 
 For scans k = 1 … S−1 with odometry o_k (frame odom) and corrected poses x_k (frame map, x_0 = o_0):
 
-    prior_k = x_{k−1} ⊕ (o_{k−1}⁻¹ ⊕ o_k)                          odometry increment on the last pose
-    x_k     = PLICP(submap, scan_k, correlative(submap, scan_k, prior_k))
+    u_k     = o_{k−1}⁻¹ ⊕ o_k,   Σ_k = Cov(u_k)                odometry increment and its α-model covariance
+    prior_k = x_{k−1} ⊕ u_k                                    the prediction, N(prior_k, G Σ_k Gᵀ) in the map
+    x_k     = MAP-PLICP(submap, scan_k, start = correlative(submap, scan_k, prior_k, window ∝ √diag Σ))
 
-The correlative search (Olson, ICRA 2009; :mod:`.correlative`) finds the basin of the right optimum within
-a window around the prior, so odometry jumps of a few decimetres and degrees do not derail the
-point-to-line ICP (Censi, ICRA 2008; :mod:`.plicp`) that refines it. The submap holds the points of the
-last K keyframes in the map frame, voxel-downsampled; a scan becomes a keyframe when it moved at least
-``keyframe_min_d_m`` or turned ``keyframe_min_a_deg`` since the last one, and the submap's KD-tree,
-normals and likelihood grid are rebuilt only then, so the cost per scan is bounded and the whole run O(S).
+Σ_k comes from the odometry motion model of Probabilistic Robotics (Table 5.6): the increment is split
+into (δrot1, δtrans, δrot2) with independent variances α1 δrot1² + α2 δtrans², α3 δtrans² + α4 (δrot1² +
+δrot2²), α1 δrot2² + α2 δtrans² (:func:`doorbatch.geometry.odometry.odometry_increments`), mapped to
+(x, y, θ) of the previous pose by the Jacobian of (δtrans cos δrot1, δtrans sin δrot1, δrot1 + δrot2), plus
+standard-deviation floors; G rotates it into the map frame. The rotations enter in full, as the simulator's
+drift model (:mod:`doorbatch.sim.motion`) draws them; AMCL's folding r = min(|δrot|, π − |δrot|) (localization's
+motion model) was tried and made the windows too narrow for the small backward jitters of in-place turns in
+the drift-corrupted CARMEN logs (intel and aces then diverged). A robot that really drives backwards gets
+wide windows here (a cost in speed, not in accuracy).
 
-When a match is not trustworthy (too few points or inliers, a degenerate geometry such as one straight
-wall, or an ICP that leaves the search window), x_k = prior_k and the scan is flagged in ``fallback``.
-A fallback scan still becomes a keyframe when it moved far enough, so that matching resumes against
-fresh geometry instead of a submap the robot has left behind.
+The correlative search (Olson, ICRA 2009; :mod:`.correlative`) looks ``window_sigmas`` standard deviations
+of that prediction around it on every map axis (clipped to configured limits), so that a 76° turn between
+two keyframes of a corrected log is searched as widely as it is uncertain while a 10 Hz scan stream searches a
+few centimetres. The point-to-line ICP (Censi, ICRA 2008; :mod:`.plicp`) that refines the best lattice pose
+minimizes the point-to-line residuals together with the Gaussian prior, so a direction the scan does not
+observe (along a featureless corridor, along one wall) stays at the odometry prediction while the observable
+directions (across the corridor, the heading) are corrected; such scans are flagged ``degenerate``.
+
+The submap is a local piece of the map built so far: the line samples (:func:`.plicp.scan_lines`:
+consecutive hits of one surface, sampled densely, with normals) of every keyframe whose pose lies within
+``submap_radius_m`` of the newest keyframe, together with the last ``submap_keyframes`` keyframes, in the map
+frame, one sample per voxel (the older keyframe's where they overlap, so that a revisited place is matched
+against how it was first mapped and the drift accumulated since is taken out). A scan becomes a keyframe when it
+moved at least ``keyframe_min_d_m`` or turned ``keyframe_min_a_deg`` since the last one; the submap's KD-tree
+and likelihood grid are rebuilt only then, so the cost per scan stays bounded.
+
+The correlative optimum is a lattice pose that maximizes overlap alone; along a corridor it may sit a few
+cells off the prediction with nothing to tell them apart. MAP-PLICP is therefore run from the prediction as
+well when the two differ, and the local optimum with the lower robust MAP cost wins (both minimize the same
+objective, so this only chooses between its basins), the data weighted by the smaller of the two residual σ,
+the noise of the better fit (a scan that overlaps the submap poorly fits either pose loosely, and then the
+prediction decides).
+
+A match is rejected when it has too few points or inliers, or the ICP leaves the search window; the scan
+then keeps the prediction (``fallback``, with the prediction's covariance; the number of fallbacks is logged as
+a warning) and still becomes a keyframe when it moved far enough, so that matching resumes against fresh
+geometry.
 """
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -28,14 +56,26 @@ import numpy as np
 import numpy.typing as npt
 
 from doorbatch.config import ScanMatchConfig
+from doorbatch.geometry.odometry import odometry_increments
 from doorbatch.geometry.rotations import wrap_angle
-from doorbatch.geometry.se2 import compose, relative, transform_points
+from doorbatch.geometry.se2 import compose, relative, rotation_matrix
 from doorbatch.pipeline.poses.correlative import LikelihoodGrid, build_likelihood_grid, correlative_match
-from doorbatch.pipeline.poses.plicp import LineReference, PlicpResult, build_line_reference, plicp
+from doorbatch.pipeline.poses.plicp import (
+    GaussianPrior,
+    LineReference,
+    PlicpResult,
+    line_reference,
+    map_cost,
+    placed,
+    plicp,
+    scan_lines,
+)
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 BoolArray = npt.NDArray[np.bool_]
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True, slots=True)
@@ -44,11 +84,13 @@ class ScanMatchResult:
 
     Attributes:
         poses: (S, 3) x, y, yaw in the map frame (= odom frame at scan 0).
-        covariances: (S, 3, 3) PLICP covariance; zero for scan 0, NaN where ``fallback``.
+        covariances: (S, 3, 3) covariance of each pose given the previous one, map frame: the MAP-PLICP one,
+            the odometry prediction's where ``fallback``; zero for scan 0.
         n_inliers: (S,) PLICP inliers of the final iteration (0 where ICP did not run).
         residual_m: (S,) mean point-to-line residual (m); NaN where ICP did not run.
         score: (S,) correlative score of the coarse match (mean likelihood in [0, 1]).
-        fallback: (S,) the match was rejected and the pose is the odometry prior.
+        fallback: (S,) the match was rejected and the pose is the odometry prediction.
+        degenerate: (S,) the scan left a direction unconstrained, which followed the odometry prediction.
         keyframe: (S,) the scan was added to the submap.
     """
 
@@ -58,22 +100,36 @@ class ScanMatchResult:
     residual_m: FloatArray
     score: FloatArray
     fallback: BoolArray
+    degenerate: BoolArray
     keyframe: BoolArray
+
+
+@dataclass(frozen=True, slots=True)
+class Keyframe:
+    """A keyframe's pose and its line samples with unit normals in the map frame."""
+
+    pose: FloatArray  # (3,)
+    points: FloatArray  # (M, 2)
+    normals: FloatArray  # (M, 2)
 
 
 @dataclass(frozen=True, slots=True, eq=False)
 class Submap:
-    """The last keyframes' points (map frame) and the matching structures built over their union."""
+    """All keyframes so far, and the matching structures over the local ones (module docstring)."""
 
-    keyframe_points: tuple[FloatArray, ...]
-    last_keyframe_pose: FloatArray
+    keyframes: tuple[Keyframe, ...]
     lines: LineReference
     grid: LikelihoodGrid
+
+    @property
+    def last_keyframe_pose(self) -> FloatArray:
+        """Pose of the newest keyframe."""
+        return self.keyframes[-1].pose
 
 
 @dataclass(frozen=True, slots=True)
 class ScanMatch:
-    """One scan's match: the accepted PLICP pose, or the prior when ``fallback``, with its statistics."""
+    """One scan's match: the MAP-PLICP pose, or the prediction when ``fallback``, with its statistics."""
 
     pose: FloatArray
     covariance: FloatArray
@@ -81,15 +137,17 @@ class ScanMatch:
     residual_m: float
     score: float
     fallback: bool
+    degenerate: bool
 
 
 def scan_match_trajectory(
     scans_xy: Sequence[npt.ArrayLike], odometry_poses: npt.ArrayLike, config: ScanMatchConfig | None = None
 ) -> ScanMatchResult:
-    """Correct odometry by matching each scan against a local submap (correlative search, then PLICP).
+    """Correct odometry by matching each scan against a local submap (correlative search, then MAP-PLICP).
 
     Args:
-        scans_xy: S arrays (N_i, 2) of scan end points in base_link (hits only).
+        scans_xy: S arrays (N_i, 2) of scan end points in base_link (hits only, in beam order: the
+            reference lines join consecutive hits).
         odometry_poses: (S, 3) odometry x, y, yaw at the scan times.
         config: Parameters; the defaults when None.
 
@@ -101,20 +159,23 @@ def scan_match_trajectory(
     """
     cfg = config or ScanMatchConfig()
     odom = _check_inputs(scans_xy, odometry_poses)
-    scans = [_prepare_scan(s, cfg.scan_voxel_m) for s in scans_xy]
+    hits = [_finite(s) for s in scans_xy]
     increments = relative(odom[:-1], odom[1:])
     out = _empty_result(odom.shape[0])
     if odom.shape[0] == 0:
         return out
     out.poses[0], out.covariances[0], out.keyframe[0] = odom[0], 0.0, True
-    submap = start_submap(scans[0], odom[0], cfg)
+    submap = start_submap(hits[0], odom[0], cfg)
     for k in range(1, odom.shape[0]):
         prior = compose(out.poses[k - 1], increments[k - 1])
-        match = match_scan(submap, scans[k], prior, cfg)
+        cov = prediction_covariance(increments[k - 1], out.poses[k - 1, 2], cfg)
+        match = match_scan(submap, voxel_downsample(hits[k], cfg.scan_voxel_m), prior, cov, cfg)
         _store(out, k, match)
         if _is_keyframe(submap.last_keyframe_pose, match.pose, cfg):
-            submap = add_keyframe(submap, scans[k], match.pose, cfg)
+            submap = add_keyframe(submap, hits[k], match.pose, cfg)
             out.keyframe[k] = True
+    if out.fallback.any():
+        log.warning("scan matching fell back to odometry on %d of %d scans", int(out.fallback.sum()), len(hits))
     return out
 
 
@@ -127,23 +188,25 @@ def _check_inputs(scans_xy: Sequence[npt.ArrayLike], odometry_poses: npt.ArrayLi
     return odom
 
 
-def _prepare_scan(scan_xy: npt.ArrayLike, voxel_m: float) -> FloatArray:
-    """Finite points only, voxel-downsampled."""
+def _finite(scan_xy: npt.ArrayLike) -> FloatArray:
+    """The finite points, in their order."""
     pts = np.asarray(scan_xy, dtype=np.float64).reshape(-1, 2)
-    return voxel_downsample(pts[np.isfinite(pts).all(axis=1)], voxel_m)
+    out: FloatArray = pts[np.isfinite(pts).all(axis=1)]
+    return out
 
 
 def _empty_result(n: int) -> ScanMatchResult:
     return ScanMatchResult(
         poses=np.zeros((n, 3)), covariances=np.full((n, 3, 3), np.nan), n_inliers=np.zeros(n, dtype=np.int64),
         residual_m=np.full(n, np.nan), score=np.zeros(n), fallback=np.zeros(n, dtype=bool),
-        keyframe=np.zeros(n, dtype=bool),
+        degenerate=np.zeros(n, dtype=bool), keyframe=np.zeros(n, dtype=bool),
     )
 
 
 def _store(out: ScanMatchResult, k: int, match: ScanMatch) -> None:
     out.poses[k], out.covariances[k], out.n_inliers[k] = match.pose, match.covariance, match.n_inliers
     out.residual_m[k], out.score[k], out.fallback[k] = match.residual_m, match.score, match.fallback
+    out.degenerate[k] = match.degenerate
 
 
 def _is_keyframe(last: FloatArray, pose: FloatArray, cfg: ScanMatchConfig) -> bool:
@@ -152,59 +215,146 @@ def _is_keyframe(last: FloatArray, pose: FloatArray, cfg: ScanMatchConfig) -> bo
     return bool(math.hypot(d[0], d[1]) >= cfg.keyframe_min_d_m or abs(d[2]) >= math.radians(cfg.keyframe_min_a_deg))
 
 
+def increment_covariance(increment: npt.ArrayLike, cfg: ScanMatchConfig) -> FloatArray:
+    """(3, 3) covariance of an odometry increment (dx, dy, dθ), in the frame of its start pose (module docstring)."""
+    d = np.asarray(increment, dtype=np.float64)
+    inc = odometry_increments(np.array([0.0, d[0]]), np.array([0.0, d[1]]), np.array([0.0, d[2]]))
+    rot1, trans, rot2 = float(inc.rot1[0]), float(inc.trans[0]), float(inc.rot2[0])
+    var = np.array([cfg.odom_alpha1 * rot1**2 + cfg.odom_alpha2 * trans**2,
+                    cfg.odom_alpha3 * trans**2 + cfg.odom_alpha4 * (rot1**2 + rot2**2),
+                    cfg.odom_alpha1 * rot2**2 + cfg.odom_alpha2 * trans**2])
+    c, s = math.cos(rot1), math.sin(rot1)
+    jac = np.array([[-trans * s, c, 0.0], [trans * c, s, 0.0], [1.0, 0.0, 1.0]])  # ∂(dx, dy, dθ)/∂(r1, t, r2)
+    floor = np.array([cfg.odom_min_std_m, cfg.odom_min_std_m, math.radians(cfg.odom_min_std_deg)]) ** 2
+    cov: FloatArray = (jac * var) @ jac.T + np.diag(floor)
+    return cov
+
+
+def prediction_covariance(increment: npt.ArrayLike, yaw: float, cfg: ScanMatchConfig) -> FloatArray:
+    """Covariance of x ⊕ u in the map frame for a fixed x of heading ``yaw``: G Cov(u) Gᵀ, G = diag(R(yaw), 1)."""
+    g = np.eye(3)
+    g[:2, :2] = rotation_matrix(yaw)
+    cov: FloatArray = g @ increment_covariance(increment, cfg) @ g.T
+    return cov
+
+
+def search_window(covariance: FloatArray, cfg: ScanMatchConfig) -> tuple[tuple[float, float], float]:
+    """Correlative half-widths ((x, y) in m, yaw in deg): window_sigmas standard deviations, clipped to the limits."""
+    std = np.sqrt(np.diag(covariance)) * cfg.window_sigmas
+    wx, wy = np.clip(std[:2], cfg.correlative_window_min_m, cfg.correlative_window_max_m)
+    wyaw = min(max(math.degrees(std[2]), cfg.correlative_window_min_deg), cfg.correlative_window_max_deg)
+    return (float(wx), float(wy)), wyaw
+
+
 def voxel_downsample(points: FloatArray, voxel_m: float) -> FloatArray:
     """One centroid per occupied voxel of edge ``voxel_m`` (order: by voxel key)."""
     if points.shape[0] == 0:
         return points
-    keys = np.floor(points / voxel_m).astype(np.int64)
-    keys -= keys.min(axis=0)
-    flat = keys[:, 0] * (int(keys[:, 1].max()) + 1) + keys[:, 1]
-    _, inverse, counts = np.unique(flat, return_inverse=True, return_counts=True)
+    inverse, counts = _voxel_groups(points, voxel_m)[1:]
     sums = np.stack([np.bincount(inverse, weights=points[:, i]) for i in range(2)], axis=1)
     out: FloatArray = sums / counts[:, None]
     return out
 
 
-def _build_submap(keyframe_points: tuple[FloatArray, ...], last_pose: FloatArray, cfg: ScanMatchConfig) -> Submap:
-    points = voxel_downsample(np.concatenate(keyframe_points, axis=0), cfg.submap_voxel_m)
-    lines = build_line_reference(points, neighbors=cfg.normal_neighbors, max_extent_m=cfg.max_correspondence_m * 2)
-    grid = build_likelihood_grid(points, resolution_m=cfg.grid_resolution_m, sigma_m=cfg.grid_sigma_m,
-                                 window_m=cfg.correlative_window_m, coarse_cells=cfg.coarse_cells)
-    return Submap(keyframe_points, last_pose, lines, grid)
+def _voxel_groups(points: FloatArray, voxel_m: float) -> tuple[IntArray, IntArray, IntArray]:
+    """np.unique over the voxel keys: (first index, inverse, counts) per occupied voxel."""
+    keys = np.floor(points / voxel_m).astype(np.int64)
+    keys -= keys.min(axis=0)
+    flat = keys[:, 0] * (int(keys[:, 1].max()) + 1) + keys[:, 1]
+    first, inverse, counts = np.unique(flat, return_index=True, return_inverse=True, return_counts=True)[1:]
+    return first, inverse, counts
 
 
-def start_submap(scan_xy: FloatArray, pose: FloatArray, cfg: ScanMatchConfig) -> Submap:
-    """A submap holding one keyframe: the scan at ``pose``."""
-    return _build_submap((transform_points(pose, scan_xy),), np.asarray(pose, dtype=np.float64), cfg)
+def _build_submap(keyframes: tuple[Keyframe, ...], cfg: ScanMatchConfig) -> Submap:
+    """KD-tree and likelihood grid over the local keyframes' samples, one per voxel (the oldest keyframe's wins).
+
+    Only samples the next scans can reach are kept: those within the newest keyframe's reach (its farthest
+    sample) plus the largest search window of its pose, per axis.
+    """
+    newest = keyframes[-1]
+    poses = np.stack([kf.pose for kf in keyframes])
+    near = np.hypot(*(poses[:, :2] - newest.pose[:2]).T) <= cfg.submap_radius_m
+    near[-cfg.submap_keyframes :] = True
+    local = [keyframes[i] for i in np.flatnonzero(near)]
+    pts = np.concatenate([kf.points for kf in local], axis=0)
+    nrm = np.concatenate([kf.normals for kf in local], axis=0)
+    if newest.points.shape[0]:
+        reach = float(np.abs(newest.points - newest.pose[:2]).max()) + cfg.correlative_window_max_m
+        inside = np.all(np.abs(pts - newest.pose[:2]) <= reach, axis=1)
+        pts, nrm = pts[inside], nrm[inside]
+    if pts.shape[0]:
+        first = _voxel_groups(pts, cfg.submap_voxel_m)[0]
+        pts, nrm = pts[first], nrm[first]
+    grid = build_likelihood_grid(pts, resolution_m=cfg.grid_resolution_m, sigma_m=cfg.grid_sigma_m,
+                                 window_m=cfg.correlative_window_max_m, coarse_cells=cfg.coarse_cells)
+    return Submap(keyframes, line_reference(pts, nrm), grid)
 
 
-def add_keyframe(submap: Submap, scan_xy: FloatArray, pose: FloatArray, cfg: ScanMatchConfig) -> Submap:
-    """The submap with the scan at ``pose`` added and keyframes beyond the last ``submap_keyframes`` dropped."""
-    kept = (*submap.keyframe_points, transform_points(pose, scan_xy))[-cfg.submap_keyframes :]
-    return _build_submap(kept, np.asarray(pose, dtype=np.float64), cfg)
+def _keyframe(scan_xy: FloatArray, pose: npt.ArrayLike, cfg: ScanMatchConfig) -> Keyframe:
+    """The scan's line samples and normals moved into the map frame at ``pose``."""
+    p = np.asarray(pose, dtype=np.float64)
+    lines = scan_lines(scan_xy, spacing_m=cfg.submap_voxel_m, max_incidence_deg=cfg.line_max_incidence_deg,
+                       range_sigma_m=cfg.range_sigma_m, normal_radius_m=cfg.normal_radius_m,
+                       max_missing_beams=cfg.line_max_missing_beams)
+    lines = placed(lines, p)
+    return Keyframe(p, lines.points, lines.normals)
 
 
-def match_scan(submap: Submap, scan_xy: FloatArray, prior: FloatArray, cfg: ScanMatchConfig) -> ScanMatch:
-    """Correlative search around the prior, PLICP from its best pose, then the acceptance test."""
+def start_submap(scan_xy: FloatArray, pose: npt.ArrayLike, cfg: ScanMatchConfig) -> Submap:
+    """A submap holding one keyframe: the scan (hits in beam order) at ``pose``."""
+    return _build_submap((_keyframe(scan_xy, pose, cfg),), cfg)
+
+
+def add_keyframe(submap: Submap, scan_xy: FloatArray, pose: npt.ArrayLike, cfg: ScanMatchConfig) -> Submap:
+    """The submap with the scan at ``pose`` added, its local part re-selected around that pose."""
+    return _build_submap((*submap.keyframes, _keyframe(scan_xy, pose, cfg)), cfg)
+
+
+def match_scan(submap: Submap, scan_xy: FloatArray, prior: FloatArray, prior_covariance: FloatArray,
+               cfg: ScanMatchConfig) -> ScanMatch:
+    """Correlative search around the prediction, MAP-PLICP from its best pose (and from the prediction), then
+    the acceptance test."""
+    rejected = ScanMatch(prior, prior_covariance, 0, math.nan, 0.0, True, False)
     if scan_xy.shape[0] < cfg.min_inliers or submap.lines.size < cfg.min_inliers:
-        return ScanMatch(prior, np.full((3, 3), np.nan), 0, math.nan, 0.0, True)
+        return rejected
+    window_m, window_deg = search_window(prior_covariance, cfg)
     stride = -(-scan_xy.shape[0] // cfg.correlative_max_points)
-    coarse = correlative_match(submap.grid, scan_xy[::stride], prior, window_m=cfg.correlative_window_m,
-                               window_deg=cfg.correlative_window_deg, step_deg=cfg.correlative_step_deg)
-    fine = plicp(submap.lines, scan_xy, coarse.pose, max_iterations=cfg.icp_max_iterations,
+    coarse = correlative_match(submap.grid, scan_xy[::stride], prior, window_m=window_m, window_deg=window_deg,
+                               step_deg=cfg.correlative_step_deg)
+    gaussian = GaussianPrior(prior, np.asarray(np.linalg.inv(prior_covariance), dtype=np.float64))
+    fine = _refine(submap, scan_xy, coarse.pose, gaussian, cfg)
+    if _lattice_steps_apart(coarse.pose, prior, cfg) > 1.0:
+        from_prior = _refine(submap, scan_xy, prior, gaussian, cfg)
+        sigma_m = min(fine.sigma_m, from_prior.sigma_m)  # one σ for both: the better fit's noise estimate
+        fine = from_prior if map_cost(from_prior, sigma_m) < map_cost(fine, sigma_m) else fine
+    if not _accept(fine, prior, window_m, window_deg, cfg):
+        return ScanMatch(prior, prior_covariance, fine.n_inliers, fine.residual_m, coarse.score, True, False)
+    return ScanMatch(fine.pose, fine.covariance, fine.n_inliers, fine.residual_m, coarse.score, False,
+                     fine.degeneracy < cfg.min_degeneracy)
+
+
+def _refine(submap: Submap, scan_xy: FloatArray, start: FloatArray, prior: GaussianPrior,
+            cfg: ScanMatchConfig) -> PlicpResult:
+    """MAP-PLICP of the scan against the submap's lines from ``start``."""
+    return plicp(submap.lines, scan_xy, start, prior=prior, max_iterations=cfg.icp_max_iterations,
                  max_correspondence_m=cfg.max_correspondence_m, trim_fraction=cfg.trim_fraction,
-                 min_step_m=cfg.icp_min_step_m, min_step_rad=math.radians(cfg.icp_min_step_deg))
-    if not _accept(fine, prior, cfg):
-        return ScanMatch(prior, np.full((3, 3), np.nan), fine.n_inliers, fine.residual_m, coarse.score, True)
-    return ScanMatch(fine.pose, fine.covariance, fine.n_inliers, fine.residual_m, coarse.score, False)
+                 robust_scale_m=cfg.robust_scale_m,
+                 min_step_m=cfg.icp_min_step_m, min_step_rad=math.radians(cfg.icp_min_step_deg),
+                 sigma_min_m=math.sqrt(2.0) * cfg.range_sigma_m)
 
 
-def _accept(fine: PlicpResult, prior: FloatArray, cfg: ScanMatchConfig) -> bool:
-    """Enough inliers, a well-conditioned Hessian, a finite covariance, and a pose inside the window."""
-    shift = math.hypot(*(fine.pose[:2] - prior[:2]))
+def _lattice_steps_apart(a: FloatArray, b: FloatArray, cfg: ScanMatchConfig) -> float:
+    """How many search-lattice steps (cells, yaw steps) two poses differ by on the worst axis."""
+    cells = float(np.max(np.abs(a[:2] - b[:2]))) / cfg.grid_resolution_m
+    steps = abs(float(wrap_angle(a[2] - b[2]))) / math.radians(cfg.correlative_step_deg)
+    return max(cells, steps)
+
+
+def _accept(fine: PlicpResult, prior: FloatArray, window_m: tuple[float, float], window_deg: float,
+            cfg: ScanMatchConfig) -> bool:
+    """Enough inliers, a finite covariance, and a pose inside the search window (plus one gate / one step)."""
+    shift = np.abs(fine.pose[:2] - prior[:2])
     turn = abs(float(wrap_angle(fine.pose[2] - prior[2])))
-    inside = (shift <= cfg.correlative_window_m + cfg.max_correspondence_m
-              and turn <= math.radians(cfg.correlative_window_deg + cfg.correlative_step_deg))
-    return (fine.n_inliers >= cfg.min_inliers and fine.degeneracy >= cfg.min_degeneracy
-            and bool(np.all(np.isfinite(fine.covariance))) and inside)
-
+    inside = (bool(np.all(shift <= np.asarray(window_m) + cfg.max_correspondence_m))
+              and turn <= math.radians(window_deg + cfg.correlative_step_deg))
+    return fine.n_inliers >= cfg.min_inliers and bool(np.all(np.isfinite(fine.covariance))) and inside
