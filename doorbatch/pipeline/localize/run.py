@@ -174,7 +174,7 @@ class _Track:
 def localize(log_path: Path, lmap: LocalizationMap, config: DoorbatchConfig, method: str = "rbpf",
              init: str | tuple[float, float, float] = "reference",
              progress: Callable[[int], object] | None = None) -> LocalizationResult:
-    """Run MCL or the RBPF over a log.
+    """Run MCL or the RBPF over a log (:func:`localize_recording` of the log's recording).
 
     Raises:
         PipelineError: the log has no odometry, or --init reference without a reference.
@@ -182,9 +182,23 @@ def localize(log_path: Path, lmap: LocalizationMap, config: DoorbatchConfig, met
     """
     if method not in ("mcl", "rbpf"):
         raise UsageError(f"--method {method!r}: expected rbpf or mcl")
+    return localize_recording(load_recording(log_path, config), lmap, config, method, init, progress)
+
+
+def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchConfig, method: str = "rbpf",
+                       init: str | tuple[float, float, float] = "reference",
+                       progress: Callable[[int], object] | None = None) -> LocalizationResult:
+    """Run MCL or the RBPF over a recording (e.g. one whose odometry a script has replaced).
+
+    Raises:
+        PipelineError: the recording has no odometry, or --init reference without a reference.
+        UsageError: an unknown method.
+    """
+    if method not in ("mcl", "rbpf"):
+        raise UsageError(f"--method {method!r}: expected rbpf or mcl")
     lc = config.localize
     rng = np.random.default_rng(config.seed if lc.seed is None else lc.seed)
-    rec = load_recording(log_path, config)
+    log_path = Path(rec.path)
     if rec.odometry is None:
         raise PipelineError(f"{log_path}: no odometry (nav_msgs/Odometry or TF odom→base_link): localization "
                             "needs it as the motion input")
