@@ -465,22 +465,11 @@ def cloud_converged(weight: npt.ArrayLike, pose: npt.ArrayLike, config: Localize
                 and yaw_std <= math.radians(config.converged_yaw_std_deg))
 
 
-def cloud_position_std(weight: npt.ArrayLike, pose: npt.ArrayLike) -> float:
-    """Weighted position standard deviation of the particles along their most uncertain axis (m)."""
-    w = np.asarray(weight, dtype=np.float64)
-    w = w / w.sum()
-    xy = np.asarray(pose, dtype=np.float64).reshape(-1, 3)[:, :2]
-    d = xy - w @ xy
-    cov = (d * w[:, None]).T @ d
-    return math.sqrt(max(float(np.linalg.eigvalsh(cov)[-1]), 0.0))
-
-
 def skip_unexplained(pz: npt.ArrayLike, weight: npt.ArrayLike, pose: npt.ArrayLike, config: LocalizeConfig,
                      range_max_m: float, combination: BeamCombination) -> tuple[Float32Array, int]:
     """Per-beam likelihoods (N, B) with :func:`beam_skip_mask` applied when ``do_beamskip`` is on, and the number
     of beams skipped. A beam is explained at a particle when its pz is at least that of an end point
-    ``beam_skip_distance`` (or twice the cloud's position std, if larger) from the model (for the RBPF: from
-    the model the beam was associated with).
+    ``beam_skip_distance`` from the model (for the RBPF: from the model the beam was associated with).
 
     Only a converged filter skips (weighted position std ≤ ``converged_xy_std_m``, yaw std ≤
     ``converged_yaw_std_deg``, particles ``pose`` (N, 3)): "most hypotheses cannot explain this beam" means
@@ -493,11 +482,7 @@ def skip_unexplained(pz: npt.ArrayLike, weight: npt.ArrayLike, pose: npt.ArrayLi
     if not cloud_converged(weight, pose, config):
         return p, 0
     sig = config.sigma_hit
-    # A mismatch the pose uncertainty can explain is no evidence that the map lacks an obstacle: the distance
-    # grows to 2 × the cloud's position std (after a 1 m odometry step, 0.15 m would drop the beams that
-    # correct the pose along a corridor: the CARMEN intel log diverges; scripts/localize_carmen.py).
-    distance = max(config.beam_skip_distance, 2.0 * cloud_position_std(weight, pose))
-    floor = config.z_hit * math.exp(-0.5 * (distance / sig) ** 2) + config.z_rand / range_max_m
+    floor = config.z_hit * math.exp(-0.5 * (config.beam_skip_distance / sig) ** 2) + config.z_rand / range_max_m
     with np.errstate(invalid="ignore"):
         explained = p >= np.float32(floor)
     skip = beam_skip_mask(explained, weight, config.beam_skip_threshold, config.beam_skip_error_threshold)
