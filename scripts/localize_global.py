@@ -22,17 +22,18 @@ from doorbatch.config import load_config
 from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.geometry.se2 import interpolate_poses
 from doorbatch.io.recording import load_recording
-from doorbatch.pipeline.localize.run import load_localization_map, localize
+from doorbatch.pipeline.localize.run import load_localization_map, localize, truth_localization_map
 
 WINDOW_S = 30.0
 MAX_XY_M = 0.3
 MAX_YAW_DEG = 10.0
 
 
-def success(log: Path, map_dir: Path, method: str, n: int, seed: int, overrides: list[str]) -> bool:
+def success(log: Path, map_dir: Path | None, method: str, n: int, seed: int, overrides: list[str]) -> bool:
     config = load_config(overrides=[*overrides, f"seed={seed}", f"localize.global_particles={n}",
                                     f"localize.max_particles={n}"])
-    lmap = load_localization_map(map_dir, config.localize)
+    lmap = (truth_localization_map(log.with_suffix(".truth.yaml"), config.localize) if map_dir is None
+            else load_localization_map(map_dir, config.localize))
     result = localize(log, lmap, config, method, "global")
     if result.converged_ns is None or (result.converged_ns - int(result.stamps_ns[0])) / 1e9 > WINDOW_S:
         return False
@@ -48,21 +49,26 @@ def success(log: Path, map_dir: Path, method: str, n: int, seed: int, overrides:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--map", type=Path, required=True)
+    ap.add_argument("--map", type=Path, default=None)
     ap.add_argument("--logs", type=Path, default=Path("datasets/sample/logs"))
     ap.add_argument("--cases", nargs="+", default=["closed", "partial"])
     ap.add_argument("--methods", nargs="+", default=["mcl", "rbpf"])
     ap.add_argument("--particles", nargs="+", type=int, default=[1000, 2000, 5000, 10000, 20000, 50000])
     ap.add_argument("--seeds", nargs="+", type=int, default=list(range(10)))
+    ap.add_argument("--truth-map", action="store_true",
+                    help="instead of --map, each log's truth: static map and all doors (<log>.truth.yaml)")
     ap.add_argument("--set", dest="overrides", action="append", default=[], help="config override key=value")
     ap.add_argument("--plot", type=Path, default=None, help="PNG of success rate against particles")
     args = ap.parse_args()
+    if (args.map is None) == (not args.truth_map):
+        ap.error("give exactly one of --map and --truth-map")
+    map_dir = None if args.truth_map else args.map
     rates: dict[tuple[str, str], list[float]] = {}
     for case in args.cases:
         log = args.logs / f"loc_{case}.mcap"
         for method in args.methods:
             rates[(case, method)] = [
-                float(np.mean([success(log, args.map, method, n, s, args.overrides) for s in args.seeds]))
+                float(np.mean([success(log, map_dir, method, n, s, args.overrides) for s in args.seeds]))
                 for n in args.particles]
     print(f"success rate over seeds {args.seeds} (≤ {MAX_XY_M} m, ≤ {MAX_YAW_DEG:.0f}°, converged ≤ {WINDOW_S:.0f} s)")
     print("| doors | method | " + " | ".join(f"{n:,}" for n in args.particles) + " |")

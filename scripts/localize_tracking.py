@@ -28,7 +28,7 @@ from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.geometry.se2 import interpolate_poses
 from doorbatch.io.recording import load_recording
 from doorbatch.io.sim_truth import read_truth
-from doorbatch.pipeline.localize.run import load_localization_map, localize
+from doorbatch.pipeline.localize.run import load_localization_map, localize, truth_localization_map
 
 CASES = ("closed", "open", "partial")
 WINDOW_NS = 2_000_000_000
@@ -70,9 +70,11 @@ def door_angle_error(result, lmap, truth_path: Path) -> float:  # type: ignore[n
     return math.degrees(float(np.mean(per_update))) if per_update else math.nan
 
 
-def run_case(log: Path, map_dir: Path, method: str, seed: int, overrides: list[str]) -> dict[str, float | str | int]:
+def run_case(log: Path, map_dir: Path | None, method: str, seed: int, overrides: list[str]
+             ) -> dict[str, float | str | int]:
     config = load_config(overrides=[*overrides, f"seed={seed}"])
-    lmap = load_localization_map(map_dir, config.localize)
+    lmap = (truth_localization_map(log.with_suffix(".truth.yaml"), config.localize) if map_dir is None
+            else load_localization_map(map_dir, config.localize))
     t0 = time.perf_counter()
     result = localize(log, lmap, config, method, "reference")
     wall = time.perf_counter() - t0
@@ -93,15 +95,20 @@ def _deg(value: object) -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--map", type=Path, required=True, help="map directory (doorbatch map)")
+    ap.add_argument("--map", type=Path, default=None, help="map directory (doorbatch map)")
     ap.add_argument("--logs", type=Path, default=Path("datasets/sample/logs"))
     ap.add_argument("--cases", nargs="+", default=list(CASES))
     ap.add_argument("--methods", nargs="+", default=["mcl", "rbpf"])
     ap.add_argument("--seeds", nargs="+", type=int, default=[0])
+    ap.add_argument("--truth-map", action="store_true",
+                    help="instead of --map, each log's truth: static map and all doors (<log>.truth.yaml)")
     ap.add_argument("--set", dest="overrides", action="append", default=[], help="config override key=value")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
-    rows = [run_case(args.logs / f"loc_{case}.mcap", args.map, method, seed, args.overrides)
+    if (args.map is None) == (not args.truth_map):
+        ap.error("give exactly one of --map and --truth-map")
+    rows = [run_case(args.logs / f"loc_{case}.mcap", None if args.truth_map else args.map, method, seed,
+                     args.overrides)
             for case in args.cases for seed in args.seeds for method in args.methods]
     if args.json:
         print(json.dumps(rows, indent=1))

@@ -63,6 +63,21 @@ def load_localization_map(map_path: Path, config: LocalizeConfig) -> Localizatio
     return LocalizationMap(occ, field, free_cells(occ), doors)
 
 
+def truth_localization_map(truth_path: Path, config: LocalizeConfig) -> LocalizationMap:
+    """The map a simulated log deserves (for experiments): the simulator's static truth map (``map_static``, no
+    leaves) and every door of the world with its full opening range, moved or not."""
+    from doorbatch.io.sim_truth import read_truth
+
+    truth = read_truth(truth_path)
+    occ = read_map(truth_path.parent / truth.files["map_static"])
+    ds = truth.doors
+    reach = np.array([d.opening_sign * d.max_angle for d in ds])
+    doors = DoorSet(np.array([[d.hinge_x, d.hinge_y] for d in ds]).reshape(-1, 2), np.array([d.length for d in ds]),
+                    np.array([d.closed_yaw for d in ds]), np.minimum(reach, 0.0), np.maximum(reach, 0.0))
+    field = build_distance_field(occ, config.laser_likelihood_max_dist, config.unknown_as_max_dist)
+    return LocalizationMap(occ, field, free_cells(occ), doors)
+
+
 def parse_init(text: str) -> str | tuple[float, float, float]:
     """``reference``, ``global`` or ``X,Y,YAW`` (yaw in radians).
 
