@@ -354,6 +354,13 @@ class LocalizeConfig(Section):
     init_sigma_yaw_deg: float = Field(5.0, gt=0.0)
     # Global localization: particles for --init global, and convergence (weighted position std and yaw std).
     global_particles: int = Field(20000, ge=1)
+    # Until the cloud converges, weigh each particle with the likelihood averaged over the pose region it
+    # stands for (bandwidth from its KLD bin's particle count) and jitter resampled copies by it
+    # (pipeline/localize/smoothing.py; Pfaff et al. 2006, regularized PF). Without it global localization
+    # collapses on an arbitrary corridor pose after the first scan.
+    global_smoothing: bool = True
+    # ... and temper each scan's likelihood (power β ≤ 1) so that one scan shrinks Neff at most by this factor.
+    global_min_neff_ratio: float = Field(0.25, gt=0.0, le=1.0)
     converged_xy_std_m: float = Field(0.3, gt=0.0)
     converged_yaw_std_deg: float = Field(10.0, gt=0.0)
     # RBPF (paper 000 Sec. IV): door angles follow a random walk, var += sigma_d² · dt (so sigma_d is in

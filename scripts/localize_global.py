@@ -26,7 +26,9 @@ from doorbatch.pipeline.evaluate.experiment import ExperimentSpec, run_experimen
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--map", type=Path, required=True)
+    ap.add_argument("--map", type=Path, default=None)
+    ap.add_argument("--truth-map", action="store_true",
+                    help="instead of --map, each log\'s simulator truth: static map and all doors (<log>.truth.yaml)")
     ap.add_argument("--logs", type=Path, default=Path("datasets/sample/logs"))
     ap.add_argument("--cases", nargs="+", default=["closed", "partial"])
     ap.add_argument("--methods", nargs="+", default=["mcl", "rbpf"])
@@ -36,7 +38,10 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path("/tmp/doorbatch-global"), help="report directory")
     ap.add_argument("--workers", type=int, default=1)
     args = ap.parse_args()
-    spec = ExperimentSpec(name="global", map=args.map.resolve(), init="global", methods=tuple(args.methods),
+    if (args.map is None) == (not args.truth_map):
+        ap.error("give exactly one of --map and --truth-map")
+    map_source = "truth" if args.truth_map else args.map.resolve()
+    spec = ExperimentSpec(name="global", map=map_source, init="global", methods=tuple(args.methods),
                           logs=tuple((args.logs / f"loc_{c}.mcap").resolve() for c in args.cases),
                           particles=tuple(args.particles), seeds=tuple(args.seeds), set=tuple(args.overrides))
     print(stdout_table(run_experiment(spec, args.out, load_config(), workers=args.workers)))

@@ -118,7 +118,8 @@ def _seconds(stamps_ns: npt.NDArray[np.int64], start_ns: int) -> npt.NDArray[np.
     return np.asarray((stamps_ns - start_ns) / NS_PER_S, dtype=np.float64)
 
 
-def _odometry_noise(scenario: Scenario) -> OdometryNoise:
+def odometry_noise(scenario: Scenario) -> OdometryNoise:
+    """The scenario's wheel-odometry noise model (α1–α4, scale error, yaw drift) for :func:`drift_poses`."""
     o = scenario.sensors.odometry
     return OdometryNoise(o.alpha1, o.alpha2, o.alpha3, o.alpha4, o.scale_error, o.yaw_drift_rad_per_m)
 
@@ -222,7 +223,7 @@ def plan_messages(plan: Plan, streams: dict[str, np.random.Generator],
         t0 = truth[_Kind.ODOM]
         origin = (0.0, 0.0, 0.0) if s.odometry.start_at_origin else (float(t0.x[0]), float(t0.y[0]),
                                                                          float(t0.yaw[0]))
-        odom = simulate_odometry(t0, _odometry_noise(sc), streams["odometry"], origin)
+        odom = simulate_odometry(t0, odometry_noise(sc), streams["odometry"], origin)
     sensing = {k: _scene_inputs(plan, _seconds(st, start)) for k, st in stamps.items()
                if k in (_Kind.LASER, _Kind.CAMERA)}
     laser = laser_model(s.laser)

@@ -44,7 +44,9 @@ class ExperimentSpec(BaseModel):
 
     name: str
     title: str = ""
-    map: tuple[Path, ...] | Path
+    # Logs to build the map from, a map directory / map_server YAML, or "truth": each log's simulator truth
+    # (static map and every door, moved or not; doorbatch.pipeline.localize.run.truth_localization_map).
+    map: Literal["truth"] | tuple[Path, ...] | Path
     logs: tuple[Path, ...] = Field(min_length=1)
     methods: tuple[Literal["mcl", "rbpf"], ...] = Field(("mcl", "rbpf"), min_length=1)
     particles: tuple[int | None, ...] = Field((None,), min_length=1)
@@ -58,7 +60,11 @@ class ExperimentSpec(BaseModel):
         def fix(p: Path) -> Path:
             return p if p.is_absolute() else base / p
 
-        map_paths = tuple(fix(p) for p in self.map) if isinstance(self.map, tuple) else fix(self.map)
+        map_paths: Literal["truth"] | tuple[Path, ...] | Path
+        if self.map == "truth":
+            map_paths = "truth"
+        else:
+            map_paths = tuple(fix(p) for p in self.map) if isinstance(self.map, tuple) else fix(Path(self.map))
         return self.model_copy(update={"map": map_paths, "logs": tuple(fix(p) for p in self.logs)})
 
 
@@ -100,17 +106,28 @@ def point_config(config: DoorbatchConfig, point: SweepPoint) -> DoorbatchConfig:
     return config.model_copy(update={"seed": point.seed, "localize": lc.model_copy(update={"seed": None})})
 
 
-def run_point(point: SweepPoint, map_path: Path, run_dir: Path, config: DoorbatchConfig) -> Path:
-    """Localize one sweep point and write its run directory (no annotated MCAP). Runs in a worker process."""
+def run_point(point: SweepPoint, map_path: Path | None, run_dir: Path, config: DoorbatchConfig) -> Path:
+    """Localize one sweep point and write its run directory (no annotated MCAP). Runs in a worker process.
+    ``map_path`` None: the log's simulator truth map (``<log stem>.truth.yaml`` beside it)."""
     from doorbatch.io.rundir import write_run_tables
-    from doorbatch.pipeline.localize.run import load_localization_map, localize, parse_init
+    from doorbatch.pipeline.localize.run import (
+        load_localization_map,
+        localize,
+        parse_init,
+        truth_localization_map,
+    )
 
-    inputs = [point.log, map_path / "map.yaml" if map_path.is_dir() else map_path]
-    if map_path.is_dir() and (map_path / "doors.parquet").exists():
-        inputs.append(map_path / "doors.parquet")
+    truth = point.log.parent / f"{point.log.name.split('.')[0]}.truth.yaml"
+    if map_path is None:
+        inputs = [point.log, truth]
+        lmap = truth_localization_map(truth, config.localize)
+    else:
+        inputs = [point.log, map_path / "map.yaml" if map_path.is_dir() else map_path]
+        if map_path.is_dir() and (map_path / "doors.parquet").exists():
+            inputs.append(map_path / "doors.parquet")
+        lmap = load_localization_map(map_path, config.localize)
     manifest = Manifest.start(config.as_dict(), inputs, command="evaluate --experiment", method=point.method,
                               init=point.init, params=point.params())
-    lmap = load_localization_map(map_path, config.localize)
     result = localize(point.log, lmap, config, point.method, parse_init(point.init))
     write_run_tables(run_dir, result)
     converged_s = None if result.converged_ns is None else (result.converged_ns - int(result.stamps_ns[0])) / 1e9
@@ -122,9 +139,11 @@ def run_point(point: SweepPoint, map_path: Path, run_dir: Path, config: Doorbatc
     return run_dir
 
 
-def _build_map(spec: ExperimentSpec, out: Path, config: DoorbatchConfig) -> Path:
+def _build_map(spec: ExperimentSpec, out: Path, config: DoorbatchConfig) -> Path | None:
+    if spec.map == "truth":
+        return None
     if not isinstance(spec.map, tuple):
-        return spec.map
+        return Path(spec.map)
     from doorbatch.pipeline.map_run import run_map
 
     map_dir = out / "map"
@@ -157,7 +176,7 @@ def run_experiment(spec: ExperimentSpec, out: Path, config: DoorbatchConfig, *, 
             with ProcessPoolExecutor(max_workers=workers) as pool:
                 for _ in pool.map(run_point, *zip(*jobs, strict=True)):
                     bar.update(1)
-    dirs = [job[2] for job in jobs] + ([map_path] if map_path.is_dir() else [])
+    dirs = [job[2] for job in jobs] + ([map_path] if map_path is not None and map_path.is_dir() else [])
     return evaluate_run_dirs(dirs, out, base, title=spec.title or spec.name)
 
 

@@ -8,6 +8,8 @@ One filter update, as nav2_amcl ``AmclNode::laserReceived`` composes it:
 2. ``predict``: the odometry motion model (:mod:`.motion_model`).
 3. ``weigh``: the likelihood-field endpoint model (:mod:`.likelihood_field`) over all particles × beams,
    combined with the prior weights and normalized in log space; the mean weight feeds the recovery averages.
+   Until the cloud has converged (global localization) the model is smoothed over each particle's region and
+   resampled copies are jittered by it (:mod:`.smoothing`; not in nav2_amcl).
 4. ``resample_if_needed``: KLD-adaptive low-variance resampling with random-particle injection
    (:mod:`.resampling`) when Neff < ``resample_neff_ratio``·N (AMCL resamples every ``resample_interval``
    updates instead; ratio 1.0 resamples on every update), and whenever recovery asks for random particles
@@ -52,6 +54,14 @@ from doorbatch.pipeline.localize.likelihood_field import (
 from doorbatch.pipeline.localize.motion_model import sample_motion_model_odometry
 from doorbatch.pipeline.localize.particles import ParticleSet
 from doorbatch.pipeline.localize.resampling import RecoveryState, kld_resample
+from doorbatch.pipeline.localize.smoothing import (
+    Bandwidth,
+    active_bandwidth,
+    endpoint_variance,
+    jitter,
+    smoothed_beam_likelihood,
+    tempering_exponent,
+)
 from doorbatch.records import Scan
 
 FloatArray = npt.NDArray[np.float64]
@@ -151,13 +161,22 @@ def apply_log_likelihood(particles: ParticleSet, log_likelihood: npt.ArrayLike) 
 
 
 def weigh(particles: ParticleSet, beams: BeamSet, field: DistanceField, config: LocalizeConfig,
-          combination: BeamCombination = BeamCombination.AMCL) -> Weighting:
+          combination: BeamCombination = BeamCombination.AMCL, bandwidth: Bandwidth | None = None) -> Weighting:
     """Weigh the particles with a scan: normalized log-weights and the recovery's mean weight.
 
-    With ``do_beamskip`` the per-beam likelihoods are formed first and the beams most particles cannot explain
-    are left out (:func:`~.likelihood_field.beam_skip_mask`); otherwise the fused chunked path runs.
+    With a ``bandwidth`` (global localization, :mod:`.smoothing`) each particle's beams are weighed with the
+    likelihood smoothed over its region. With ``do_beamskip`` the per-beam likelihoods are formed first and the
+    beams most particles cannot explain are left out (:func:`~.likelihood_field.beam_skip_mask`); otherwise the
+    fused chunked path runs.
     """
-    if config.do_beamskip and len(beams.points_base):
+    if bandwidth is not None and len(beams.points_base):
+        dist = endpoint_distances(field, particles.pose, beams.points_base)
+        pz = smoothed_beam_likelihood(dist, endpoint_variance(bandwidth, beams.points_base), config.z_hit,
+                                      config.z_rand, config.sigma_hit, beams.range_max_m)
+        ll = combine_beams(pz, combination)
+        with np.errstate(divide="ignore"):
+            ll = ll * tempering_exponent(np.log(particles.weight), ll, config.global_min_neff_ratio)
+    elif config.do_beamskip and len(beams.points_base):
         dist = endpoint_distances(field, particles.pose, beams.points_base)
         pz = beam_likelihood(dist, config.z_hit, config.z_rand, config.sigma_hit, beams.range_max_m, out=dist)
         pz, _ = skip_unexplained(pz, particles.weight, particles.pose, config, beams.range_max_m, combination)
@@ -174,9 +193,12 @@ def with_log_weights(particles: ParticleSet, log_weight: npt.ArrayLike) -> Parti
 
 
 def resample_if_needed(particles: ParticleSet, config: LocalizeConfig, rng: np.random.Generator,
-                       recovery: RecoveryState | None = None, free: FreeCells | None = None
-                       ) -> tuple[ParticleSet, RecoveryState, int]:
+                       recovery: RecoveryState | None = None, free: FreeCells | None = None,
+                       bandwidth: Bandwidth | None = None) -> tuple[ParticleSet, RecoveryState, int]:
     """KLD-adaptive low-variance resampling when Neff < resample_neff_ratio·N or recovery injects.
+
+    With a ``bandwidth`` (global localization) each drawn copy is moved by its source particle's kernel
+    (regularized resampling, :func:`~.smoothing.jitter`); injected random particles are not.
 
     Returns:
         The particles (the same object when not resampled), the recovery state (reset after an injection,
@@ -194,6 +216,9 @@ def resample_if_needed(particles: ParticleSet, config: LocalizeConfig, rng: np.r
                         random_fraction=fraction, free=free)
     out = particles.take(draw.index)
     out.pose = draw.pose
+    if bandwidth is not None:
+        kept = ~draw.random
+        out.pose[kept] = jitter(draw.pose[kept], bandwidth, rng, draw.index[kept])
     if fraction > 0.0:
         recovery = RecoveryState()
     return out, recovery, int(draw.random.sum())
@@ -222,13 +247,14 @@ def mcl_step(state: MclState, odom_now: npt.ArrayLike, beams: BeamSet, field: Di
         if not (force or update_thresholds_met(state.odom_at_update, odom, config)):
             return state, StepDiagnostics(False, False, particles.neff(), len(particles), 0.0, 0, math.nan)
         particles = predict(particles, state.odom_at_update, odom, config, rng)
-    weighting = weigh(particles, beams, field, config, combination)
+    bandwidth = active_bandwidth(particles.pose, particles.weight, config)
+    weighting = weigh(particles, beams, field, config, combination, bandwidth)
     particles = with_log_weights(particles, weighting.log_weight)
     recovery = state.recovery.update(weighting.log_avg_weight, config.recovery_alpha_slow,
                                      config.recovery_alpha_fast)
     fraction = recovery.random_fraction() if free is not None else 0.0
     neff = particles.neff()
-    particles, recovery, n_random = resample_if_needed(particles, config, rng, recovery, free)
+    particles, recovery, n_random = resample_if_needed(particles, config, rng, recovery, free, bandwidth)
     diag = StepDiagnostics(True, n_random >= 0, neff, len(particles), fraction, max(n_random, 0),
                            weighting.log_avg_weight)
     return MclState(particles, recovery, odom.copy()), diag

@@ -6,7 +6,9 @@ methods differ only in the map model)::
 
     1. sampling     poses by the odometry motion model; door angles d_k,t = d_k,t−1 + ε, ε ~ N(0, σ_d²·Δt)
     2. importance   per beam, ML association between the static likelihood field and each door leaf at the
-                    particle's door estimate, the door term marginalized to first order (eq. 6); once
+                    particle's door estimate, the door term marginalized to first order (eq. 6); until the
+                    cloud converges, smoothed over each particle's pose region and tempered (:mod:`.smoothing`,
+                    as MCL); once
                     converged, beams that most of the weight explains by neither are skipped (Nav2's
                     do_beamskip, likelihood_field.skip_unexplained), as MCL does
     3. door update  one Douglas–Peucker polygon per scan, moved to every particle, associated to doors,
@@ -45,6 +47,12 @@ from doorbatch.pipeline.localize.mcl import (
     update_thresholds_met,
     with_log_weights,
 )
+from doorbatch.pipeline.localize.smoothing import (
+    active_bandwidth,
+    endpoint_variance,
+    smoothed_beam_likelihood,
+    tempering_exponent,
+)
 
 
 def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_stamp_s: float | None,
@@ -80,16 +88,24 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
                             max_var=cap)
         particles = replace(particles, door_var=var)
 
+    bandwidth = active_bandwidth(particles.pose, particles.weight, config)
+    extra = None if bandwidth is None else endpoint_variance(bandwidth, beams.points_base)
     static = endpoint_distances(field, particles.pose, beams.points_base)
     if n_doors:
         dl = door_log_likelihood_at_poses(static, particles.pose, beams.points_base, doors, particles.door_mean,
-                                          particles.door_var, config, beams.range_max_m)
+                                          particles.door_var, config, beams.range_max_m, extra_var=extra)
         pz = dl.beam_likelihood
+    elif extra is not None:
+        pz = smoothed_beam_likelihood(static, extra, config.z_hit, config.z_rand, config.sigma_hit,
+                                      beams.range_max_m)
     else:
         pz = beam_likelihood(static, config.z_hit, config.z_rand, config.sigma_hit, beams.range_max_m)
     combination = BeamCombination(config.beam_combination)
     pz, _ = skip_unexplained(pz, particles.weight, particles.pose, config, beams.range_max_m, combination)
     loglik = combine_beams(pz, combination)
+    if bandwidth is not None:
+        with np.errstate(divide="ignore"):
+            loglik = loglik * tempering_exponent(np.log(particles.weight), loglik, config.global_min_neff_ratio)
     weighting = apply_log_likelihood(particles, loglik)
     particles = with_log_weights(particles, weighting.log_weight)
 
@@ -102,7 +118,7 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
     recovery = state.recovery.update(weighting.log_avg_weight, config.recovery_alpha_slow, config.recovery_alpha_fast)
     fraction = recovery.random_fraction() if free is not None else 0.0
     neff = particles.neff()
-    particles, recovery, n_random = resample_if_needed(particles, config, rng, recovery, free)
+    particles, recovery, n_random = resample_if_needed(particles, config, rng, recovery, free, bandwidth)
     diag = StepDiagnostics(True, n_random >= 0, neff, len(particles), fraction, max(n_random, 0),
                            weighting.log_avg_weight)
     return MclState(particles, recovery, odom.copy()), diag, observed

@@ -63,6 +63,21 @@ def load_localization_map(map_path: Path, config: LocalizeConfig) -> Localizatio
     return LocalizationMap(occ, field, free_cells(occ), doors)
 
 
+def truth_localization_map(truth_path: Path, config: LocalizeConfig) -> LocalizationMap:
+    """The map a simulated log deserves (for experiments): the simulator's static truth map (``map_static``, no
+    leaves) and every door of the world with its full opening range, moved or not."""
+    from doorbatch.io.sim_truth import read_truth
+
+    truth = read_truth(truth_path)
+    occ = read_map(truth_path.parent / truth.files["map_static"])
+    ds = truth.doors
+    reach = np.array([d.opening_sign * d.max_angle for d in ds])
+    doors = DoorSet(np.array([[d.hinge_x, d.hinge_y] for d in ds]).reshape(-1, 2), np.array([d.length for d in ds]),
+                    np.array([d.closed_yaw for d in ds]), np.minimum(reach, 0.0), np.maximum(reach, 0.0))
+    field = build_distance_field(occ, config.laser_likelihood_max_dist, config.unknown_as_max_dist)
+    return LocalizationMap(occ, field, free_cells(occ), doors)
+
+
 def parse_init(text: str) -> str | tuple[float, float, float]:
     """``reference``, ``global`` or ``X,Y,YAW`` (yaw in radians).
 
@@ -174,7 +189,7 @@ class _Track:
 def localize(log_path: Path, lmap: LocalizationMap, config: DoorbatchConfig, method: str = "rbpf",
              init: str | tuple[float, float, float] = "reference",
              progress: Callable[[int], object] | None = None) -> LocalizationResult:
-    """Run MCL or the RBPF over a log.
+    """Run MCL or the RBPF over a log (:func:`localize_recording` of the log's recording).
 
     Raises:
         PipelineError: the log has no odometry, or --init reference without a reference.
@@ -182,9 +197,23 @@ def localize(log_path: Path, lmap: LocalizationMap, config: DoorbatchConfig, met
     """
     if method not in ("mcl", "rbpf"):
         raise UsageError(f"--method {method!r}: expected rbpf or mcl")
+    return localize_recording(load_recording(log_path, config), lmap, config, method, init, progress)
+
+
+def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchConfig, method: str = "rbpf",
+                       init: str | tuple[float, float, float] = "reference",
+                       progress: Callable[[int], object] | None = None) -> LocalizationResult:
+    """Run MCL or the RBPF over a recording (e.g. one whose odometry a script has replaced).
+
+    Raises:
+        PipelineError: the recording has no odometry, or --init reference without a reference.
+        UsageError: an unknown method.
+    """
+    if method not in ("mcl", "rbpf"):
+        raise UsageError(f"--method {method!r}: expected rbpf or mcl")
     lc = config.localize
     rng = np.random.default_rng(config.seed if lc.seed is None else lc.seed)
-    rec = load_recording(log_path, config)
+    log_path = Path(rec.path)
     if rec.odometry is None:
         raise PipelineError(f"{log_path}: no odometry (nav_msgs/Odometry or TF odom→base_link): localization "
                             "needs it as the motion input")

@@ -44,8 +44,24 @@ def test_experiment_file_paths_are_relative_to_the_file(tmp_path: Path) -> None:
     path = _write(tmp_path / "e.yaml", {"name": "e", "map": "maps/m.yaml", "logs": ["l.mcap"]})
     spec = read_experiment(path)
     assert spec.map == tmp_path / "maps" / "m.yaml" and spec.logs == (tmp_path / "l.mcap",)
+    _write(path, {"name": "e", "map": "truth", "logs": ["l.mcap"]})
+    assert read_experiment(path).map == "truth"  # each log's simulator truth map, not a file named "truth"
     _write(path, {"name": "e", "map": "m", "logs": ["l.mcap"], "metods": ["mcl"]})
     assert main(["evaluate", "--experiment", str(path), "-o", str(tmp_path / "o")]) == 2
+
+
+def test_an_experiment_on_the_truth_map_knows_every_door(tmp_path: Path) -> None:
+    """``map: truth``: the RBPF gets all ten doors of the world (the grid map only has the ones that moved) and
+    reports a state for each."""
+    spec = _write(tmp_path / "truth.yaml", {
+        "name": "truth", "map": "truth", "logs": [str(LOGS / "loc_partial.mcap")], "methods": ["rbpf"],
+        "particles": [200], "seeds": [0]})
+    out = tmp_path / "out"
+    assert main(["evaluate", "--experiment", str(spec), "-o", str(out), "-q"]) == 0
+    states = read_table("door_states", out / "runs" / "loc_partial" / "rbpf_n200_s0" / "door_states.parquet")
+    assert len(set(states.column("door_id").to_pylist())) == 10
+    rmse = [r["value"] for r in _rows(out) if r["metric"] == "ape_trans_rmse"]
+    assert len(rmse) == 1 and 0.0 < rmse[0] < 0.2
 
 
 def test_tracking_experiment_runs_in_parallel_and_reports(tmp_path: Path) -> None:

@@ -52,12 +52,18 @@ def test_localize_tracks_the_open_doors_log(sample_map: Path, tmp_path: Path, me
     assert len(states["door_id"]) == (summary["updates"] * n_doors if method == "rbpf" else 0)
 
 
-def test_same_seed_same_outputs(sample_map: Path, tmp_path: Path) -> None:
+@pytest.mark.parametrize(("method", "init"), [("rbpf", "reference"), ("mcl", "global")])
+def test_same_seed_same_outputs(sample_map: Path, tmp_path: Path, method: str, init: str) -> None:
+    # global: the smoothed, tempered, jittered phase too (2,000 particles to keep it short)
     log = str(SAMPLE_LOGS / "loc_partial.mcap")
-    for name in ("a", "b"):
-        assert main(["localize", log, "--map", str(sample_map), "-o", str(tmp_path / name), "-q"]) == 0
+    sets = ["--set", "localize.global_particles=2000", "--set", "localize.max_particles=2000"]
+    for name, seed in (("a", 3), ("b", 3), ("c", 4)):
+        assert main(["localize", log, "--map", str(sample_map), "-o", str(tmp_path / name), "--method", method,
+                     "--init", init, *sets, "--set", f"seed={seed}", "-q"]) == 0
     for name in ("trajectory.parquet", "door_states.parquet", "trajectory.tum"):
         assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes(), name
+    # and the seed is what decides: another one gives another trajectory
+    assert (tmp_path / "a" / "trajectory.tum").read_bytes() != (tmp_path / "c" / "trajectory.tum").read_bytes()
 
 
 def test_runs_on_a_plain_map_server_map_without_doors(sample_map: Path, tmp_path: Path) -> None:

@@ -94,3 +94,4 @@ def test_beam_skipping_leaves_out_beams_most_weight_cannot_explain() -> None:
     pz = np.full((3, 3), 0.5, dtype=np.float32)
     assert np.all(drop_beams(pz, [False, True, False], BeamCombination.PRODUCT)[:, 1] == 1.0)
     assert np.all(drop_beams(pz, [False, True, False], BeamCombination.AMCL)[:, 1] == 0.0)
+
