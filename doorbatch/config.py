@@ -332,6 +332,51 @@ class LocalizeConfig(Section):
     backend: Literal["numpy", "torch"] = "numpy"
 
 
+class ObjectMapConfig(Section):
+    """``doorbatch map`` em stage: EM object maps of walls and doors (paper 001). Paper defaults (Sec. VII):
+    λ = 0.7, σ = 5 cm, ρS = 35, ρD = 1.3·ρS, ρL = 0.7 per cm."""
+
+    validity_prior: float = Field(0.7, gt=0.0, lt=1.0)  # λ = p(v = 1)
+    sigma_m: float = Field(0.05, gt=0.0)  # σ of the range Gaussian
+    rho_global: float = Field(35.0, ge=0.0)  # ρG: the paper gives none; same as ρS
+    rho_static: float = Field(35.0, ge=0.0)  # ρS per static local parameter
+    rho_dynamic: float = Field(45.5, ge=0.0)  # ρD = 1.3·ρS per dynamic parameter (door angle per pass)
+    rho_length_per_m: float = Field(70.0, ge=0.0)  # ρL = 0.7 per cm of segment
+    # dmax: ranges at or beyond min(scan range_max, this) are max-range readings (long CARMEN ranges are sparse).
+    max_range_m: float = Field(20.0, gt=0.0)
+    # Decimation (the stage keeps every n-th scan and every n-th beam of it).
+    scan_stride: int = Field(2, ge=1)
+    beam_stride: int = Field(2, ge=1)
+    use_color: bool = True  # false: range-only EM even when the log has colors
+    color_var_floor: float = Field(4.0, gt=0.0)  # per-channel colour variance floor (RGB units²)
+    em_iterations: int = Field(6, ge=1)
+    structure_rounds: int = Field(3, ge=1)  # outer loop: door proposals (motion, colour) then EM
+    # Hough transform for wall proposals (Sec. VI): angle step, offset bin, dominant-orientation share.
+    hough_step_deg: float = Field(1.0, gt=0.0)
+    hough_offset_bin_m: float = Field(0.05, gt=0.0)
+    hough_orientation_share: float = Field(0.25, gt=0.0, le=1.0)  # orientations with this share of the best
+    hough_min_points: int = Field(20, ge=2)
+    max_wall_proposals: int = Field(80, ge=1)
+    # Pseudo-E-step band: points within this many σ of a new object support it.
+    pseudo_e_sigmas: float = Field(3.0, gt=0.0)
+    # Doors: leaf width search range and start value; a switch for per-door widths (paper's Stanford run).
+    door_width_min_m: float = Field(0.5, gt=0.0)
+    door_width_max_m: float = Field(1.3, gt=0.0)
+    door_width_init_m: float = Field(0.9, gt=0.0)
+    per_door_width: bool = False
+    angle_search_step_deg: float = Field(2.0, gt=0.0)
+    hinge_descent_iterations: int = Field(60, ge=1)
+    # Motion proposals: a ray passes through an object when it ends this far beyond it.
+    through_margin_m: float = Field(0.3, gt=0.0)
+    min_crossing_rays: int = Field(8, ge=1)
+    candidate_cluster_m: float = Field(0.15, gt=0.0)
+    max_door_candidates: int = Field(60, ge=1)
+    # A door is "moved" when its per-pass angles span at least this (seen at two distinguishable angles).
+    min_opening_deg: float = Field(10.0, gt=0.0)
+    # closed_yaw: the direction of the wall line through the hinge within this distance.
+    wall_hinge_distance_m: float = Field(0.3, gt=0.0)
+
+
 class DoorbatchConfig(Section):
     """The whole configuration tree."""
 
@@ -345,6 +390,7 @@ class DoorbatchConfig(Section):
     grid: GridConfig = GridConfig()
     doors: DoorDetectionConfig = DoorDetectionConfig()
     localize: LocalizeConfig = LocalizeConfig()
+    em: ObjectMapConfig = ObjectMapConfig()
 
     def as_dict(self) -> dict[str, Any]:
         """The resolved tree as plain data (what goes into manifests)."""
