@@ -365,6 +365,8 @@ class ObjectMapConfig(Section):
     door_width_init_m: float = Field(0.9, gt=0.0)
     per_door_width: bool = False
     angle_search_step_deg: float = Field(2.0, gt=0.0)
+    # A leaf turns at most this far from its closed direction (keeps the wall behind the hinge out).
+    max_opening_deg: float = Field(135.0, gt=0.0, lt=180.0)
     hinge_descent_iterations: int = Field(60, ge=1)
     # Motion proposals: a ray passes through an object when it ends this far beyond it.
     through_margin_m: float = Field(0.3, gt=0.0)

@@ -95,15 +95,18 @@ def leaf_blocked(origin: FloatArray, end: FloatArray, hinge: FloatArray, yaws: F
 
 
 def initial_angles(beams: BeamSet, hinge: FloatArray, width: float, fallback_yaw: float, sigma: float,
-                   step_deg: float, through_margin_m: float) -> FloatArray:
+                   step_deg: float, through_margin_m: float, max_opening_deg: float) -> FloatArray:
     """Per pass, the leaf direction best supported by that pass's points near the hinge (pseudo-E-step)
-    less the rays of that pass that would pass through the leaf; ``fallback_yaw`` when no direction has
+    less the rays of that pass that would pass through the leaf, within ``max_opening_deg`` of the closed
+    direction ``fallback_yaw`` (so the wall behind the hinge is not taken for the leaf); of directions
+    within 80 % of the best, the one nearest the closed direction; ``fallback_yaw`` when no direction has
     support (the leaf was not seen in that pass)."""
-    yaws = np.deg2rad(np.arange(-180.0, 180.0, step_deg))
+    offsets = np.deg2rad(np.arange(-max_opening_deg, max_opening_deg + 1e-9, step_deg))
+    yaws = fallback_yaw + offsets
     out = np.full(beams.n_passes, fallback_yaw)
     pts = beams.points
     reach = np.linalg.norm(pts - hinge, axis=1)
-    near_o = np.linalg.norm(beams.origin - hinge, axis=1) <= reach + 0.0  # every ray; filtered below
+    near_o = _passes_near(beams, hinge, width + 0.2)
     for t in range(beams.n_passes):
         in_pass = beams.pass_index == t
         sel = in_pass & beams.hit & (reach <= width + 3.0 * sigma)
@@ -111,13 +114,13 @@ def initial_angles(beams: BeamSet, hinge: FloatArray, width: float, fallback_yaw
         if support.max() < 3.0:
             continue
         # rays of this pass passing by the hinge: their piece up to (range − margin) must not cross the leaf
-        rays = in_pass & near_o & _passes_near(beams, hinge, width + 0.2)
+        rays = in_pass & near_o
         end = beams.origin[rays] + np.maximum(beams.range_m[rays] - through_margin_m, 0.0)[:, None] * \
             beams.direction[rays]
         score = support - leaf_blocked(beams.origin[rays], end, hinge, yaws, width)
-        best = int(np.argmax(score))
-        if score[best] >= 3.0:
-            out[t] = yaws[best]
+        good = np.flatnonzero(score >= max(3.0, 0.8 * float(score.max())))
+        if good.size:
+            out[t] = yaws[good[np.argmin(np.abs(offsets[good]))]]
     return out
 
 

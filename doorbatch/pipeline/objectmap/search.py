@@ -19,7 +19,6 @@ import numpy as np
 import numpy.typing as npt
 
 from doorbatch.config import ObjectMapConfig
-from doorbatch.pipeline.gridmap.doors import cluster_points
 from doorbatch.pipeline.objectmap.beams import BeamSet
 from doorbatch.pipeline.objectmap.doors import fit_hinge_angles, initial_angles, rays_near
 from doorbatch.pipeline.objectmap.em import MapState, evaluate, run_em
@@ -27,7 +26,14 @@ from doorbatch.pipeline.objectmap.hough import hough_lines
 from doorbatch.pipeline.objectmap.model import DOOR, WALL, ClassParams, Door, ObjectMap, Wall
 from doorbatch.pipeline.objectmap.prior import log_prior
 from doorbatch.pipeline.objectmap.sensor import FirstObjects, cast_segments, e_step
-from doorbatch.pipeline.objectmap.walls import fit_line, line_crossings, wall_segments
+from doorbatch.pipeline.objectmap.walls import (
+    crossing_gains,
+    first_without,
+    fit_line,
+    line_crossings,
+    segment_dp,
+    wall_segments,
+)
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -114,9 +120,11 @@ def _both_ends(a: FloatArray, b: FloatArray, source: str, support: int) -> list[
 
 
 def motion_candidates(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> list[DoorCandidate]:
-    """Doors from motion (Sec. VI): (1) wall pieces that rays of some pass cross (the ray ends well beyond
-    the wall: the piece was absent then); (2) straight, door-sized segments of one pass's poorly explained
-    points that rays of another pass cross."""
+    """Doors from motion (Sec. VI): wall pieces that rays of some pass cross (the ray ends well beyond the
+    wall: the piece was absent in that pass, present in the others that built it). The hinge is at one
+    end of the crossed piece, the closed leaf along the wall toward the other end (both ends are tried).
+    (The paper's per-pass segment maps of open leaves give the same doors here; an open leaf alone does
+    not tell which way the closed leaf lies along the wall, so we start from the wall.)"""
     out: list[DoorCandidate] = []
     first, obj_map = state.first, state.obj_map
     through = beams.range_m > first.delta + config.through_margin_m
@@ -129,32 +137,6 @@ def motion_candidates(beams: BeamSet, state: MapState, config: ObjectMapConfig) 
             for a, b, n in _intervals(s, config.candidate_cluster_m, config.min_crossing_rays, 0.2):
                 base = wall.offset * wall.normal
                 out += _both_ends(base + a * wall.tangent, base + b * wall.tangent, "motion", n)
-    pts = beams.points
-    poor = beams.hit & (state.e < 0.5) & (beams.range_m < np.minimum(first.delta, beams.dmax)
-                                         - config.through_margin_m)
-    for t in range(beams.n_passes):
-        sel = np.flatnonzero(poor & (beams.pass_index == t))
-        if sel.size < config.min_crossing_rays:
-            continue
-        labels = cluster_points(pts[sel], config.candidate_cluster_m)
-        for lab in np.unique(labels):
-            members = sel[labels == lab]
-            if members.size < config.min_crossing_rays:
-                continue
-            normal, offset = fit_line(pts[members], np.ones(members.size))
-            tangent = np.array([-normal[1], normal[0]])
-            s = pts[members] @ tangent
-            rms = float(np.sqrt(np.mean((pts[members] @ normal - offset) ** 2)))
-            length = float(s.max() - s.min())
-            if rms > 2.0 * config.sigma_m or not 0.3 <= length <= config.door_width_max_m + 0.1:
-                continue
-            a = offset * normal + s.min() * tangent
-            b = offset * normal + s.max() * tangent
-            others = np.flatnonzero(beams.pass_index != t)
-            rng, idx = cast_segments(beams.origin[others], beams.direction[others], np.stack([a, b])[None])
-            crossed = int(np.sum((idx >= 0) & (beams.range_m[others] > rng + config.through_margin_m)))
-            if crossed >= config.min_crossing_rays:
-                out += _both_ends(a, b, "motion", crossed)
     return out
 
 
@@ -198,7 +180,7 @@ def _door_fit(beams: BeamSet, c: DoorCandidate, width: float, config: ObjectMapC
     """Initial angles by the pseudo-E-step search, then eq. (10) on the points near the leaf."""
     sigma = config.sigma_m
     yaws = initial_angles(beams, c.hinge, width, c.fallback_yaw, sigma, config.angle_search_step_deg,
-                          config.through_margin_m)
+                          config.through_margin_m, config.max_opening_deg)
     pts = beams.points
     near = beams.hit & (np.linalg.norm(pts - c.hinge, axis=1) <= width + 3.0 * sigma)
     idx = np.flatnonzero(near)
@@ -212,25 +194,64 @@ def _door_fit(beams: BeamSet, c: DoorCandidate, width: float, config: ObjectMapC
     return Door(hinge, yaws)
 
 
+def _covered(segments: FloatArray, s: float) -> bool:
+    return bool(np.any((segments[:, 0] <= s) & (segments[:, 1] >= s))) if segments.size else False
+
+
+def _merge(intervals: FloatArray) -> FloatArray:
+    """Union of intervals (K, 2), touching ones joined."""
+    if intervals.shape[0] == 0:
+        return intervals
+    iv = intervals[np.argsort(intervals[:, 0])]
+    out = [iv[0].copy()]
+    for a, b in iv[1:]:
+        if a <= out[-1][1] + 1e-9:
+            out[-1][1] = max(out[-1][1], b)
+        else:
+            out.append(np.array([a, b]))
+    return np.array(out)
+
+
+def recut_window(beams: BeamSet, obj_map: ObjectMap, j: int, lo: float, hi: float, config: ObjectMapConfig
+                 ) -> FloatArray:
+    """Wall j's segments with the DP (eq. 9) re-run on the crossings within [lo, hi] only: outside, the
+    segments stay; a segment that runs into the window edge is continued through it (an anchor point of
+    overwhelming gain at the edge), so the splice stays one segment."""
+    w = obj_map.walls[j]
+    cross = line_crossings(beams, w.normal, w.offset, config.sigma_m)
+    inside = (cross.s >= lo) & (cross.s <= hi)
+    idx = cross.beam[inside]
+    empty = FirstObjects(np.full(len(beams), np.inf), np.full(len(beams), -1, dtype=np.int64),
+                         np.full(len(beams), -1, dtype=np.int64))
+    local = _full_first(beams, obj_map, idx, empty)
+    delta, kind = first_without(beams, local, idx, obj_map, WALL, j)
+    gain = crossing_gains(beams, idx, cross.t[inside], delta, kind, WALL, obj_map.classes,
+                          config.validity_prior, config.sigma_m)
+    s_in = cross.s[inside]
+    anchors = [edge for edge in (lo, hi) if _covered(w.segments, edge)]
+    s_all = np.concatenate([s_in, anchors])
+    g_all = np.concatenate([gain, np.full(len(anchors), 1e9)])
+    segs, _ = segment_dp(s_all, g_all, config.rho_length_per_m, 2.0 * config.rho_static)
+    outside = [np.array([a, min(b, lo)]) for a, b in w.segments if a < lo]
+    outside += [np.array([max(a, hi), b]) for a, b in w.segments if b > hi]
+    parts = np.array([*outside, *segs]) if (outside or segs.size) else np.zeros((0, 2))
+    merged = _merge(parts.reshape(-1, 2))
+    return merged[merged[:, 1] > merged[:, 0]] if merged.size else merged
+
+
 def _recut_walls(beams: BeamSet, obj_map: ObjectMap, near: FloatArray, radius: float, config: ObjectMapConfig
-                 ) -> tuple[ObjectMap, list[tuple[int, FloatArray]]]:
-    """Re-run the DP for the walls whose line passes within ``radius`` of ``near``; returns the map and,
-    per changed wall, the positions along it where coverage changed (as intervals (K, 2))."""
+                 ) -> tuple[ObjectMap, list[tuple[int, float, float]]]:
+    """Re-cut (within a window about ``near``) the walls whose line passes within ``radius`` of it."""
     walls = list(obj_map.walls)
-    changed: list[tuple[int, FloatArray]] = []
+    changed: list[tuple[int, float, float]] = []
     for j, w in enumerate(obj_map.walls):
         if abs(float(near @ w.normal) - w.offset) > radius:
             continue
-        current = replace(obj_map, walls=walls)
-        empty_first = FirstObjects(np.full(len(beams), np.inf), np.full(len(beams), -1, dtype=np.int64),
-                                   np.full(len(beams), -1, dtype=np.int64))
-        cross = line_crossings(beams, w.normal, w.offset, config.sigma_m)
-        local = _full_first(beams, current, cross.beam, empty_first)
-        segs, _ = wall_segments(beams, local, current, j, w.normal, w.offset, config.validity_prior,
-                                config.sigma_m, config.rho_length_per_m, 2.0 * config.rho_static)
+        s_near = float(near @ w.tangent)
+        lo, hi = s_near - radius - 1.0, s_near + radius + 1.0
+        segs = recut_window(beams, replace(obj_map, walls=walls), j, lo, hi, config)
         walls[j] = Wall(w.normal, w.offset, segs)
-        changed.append((j, np.concatenate([w.segments, segs]) if (w.segments.size or segs.size)
-                        else np.zeros((0, 2))))
+        changed.append((j, lo, hi))
     return replace(obj_map, walls=walls), changed
 
 
@@ -248,18 +269,14 @@ def _full_first(beams: BeamSet, obj_map: ObjectMap, idx: IntArray, template: Fir
     return FirstObjects(delta, cls, obj)
 
 
-def _affected(beams: BeamSet, door: Door, width: float, changed: list[tuple[int, FloatArray]],
+def _affected(beams: BeamSet, door: Door, width: float, changed: list[tuple[int, float, float]],
               obj_map: ObjectMap, sigma: float) -> IntArray:
-    """Beams whose likelihood may change: rays passing near the door, and rays crossing a re-cut wall
-    within the span of its old or new segments near the door."""
+    """Beams whose likelihood may change: rays passing near the door, and rays crossing a re-cut wall in
+    its window."""
     mask = rays_near(beams, door.hinge, width + 0.3)
-    for j, spans in changed:
+    for j, lo, hi in changed:
         w = obj_map.walls[j]
         cross = line_crossings(beams, w.normal, w.offset, sigma)
-        s_h = float(door.hinge @ w.tangent)
-        lo, hi = s_h - width - 1.5, s_h + width + 1.5
-        if spans.size:
-            lo, hi = min(lo, float(spans.min())), max(hi, float(spans.max()))
         mask[cross.beam[(cross.s >= lo) & (cross.s <= hi)]] = True
     return np.flatnonzero(mask)
 
@@ -288,8 +305,13 @@ def add_doors(beams: BeamSet, state: MapState, candidates: list[DoorCandidate], 
     raises the log posterior."""
     added = 0
     order = sorted(range(0, len(candidates), 2), key=lambda k: -candidates[k].support)
-    for k in order[: config.max_door_candidates]:
+    kept: list[list[DoorCandidate]] = []
+    for k in order:  # one pair per doorway: pairs whose ends coincide (within a cluster distance) are one
         pair = candidates[k: k + 2]
+        if not any(min(float(np.linalg.norm(a.hinge - b.hinge)) for a in pair for b in other) < 0.3
+                   for other in kept):
+            kept.append(pair)
+    for pair in kept[: config.max_door_candidates]:
         if any(_near_existing(c, state.obj_map, 0.25) for c in pair):
             continue
         results = [try_door(beams, state, c, config) for c in pair]
