@@ -148,7 +148,9 @@ def color_candidates(beams: BeamSet, state: MapState, config: ObjectMapConfig) -
     if not classes.has_color:
         return []
     col = beams.color
-    ok = beams.hit & np.isfinite(col[:, 0]) & (state.first.cls == WALL) & (state.e > 0.5)
+    # the range must fit the wall (the colour may not: under the wall class a door's colour is 'invalid')
+    fits = np.abs(beams.range_m - state.first.delta) < config.pseudo_e_sigmas * config.sigma_m
+    ok = beams.hit & np.isfinite(col[:, 0]) & (state.first.cls == WALL) & fits
     ll = [-0.5 * np.sum((col - classes.color_mean[c]) ** 2 / classes.color_var[c]
                         + np.log(classes.color_var[c]), axis=1) for c in (WALL, DOOR)]
     door_like = ok & (ll[1] > ll[0])
