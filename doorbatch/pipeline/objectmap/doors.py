@@ -32,7 +32,7 @@ def door_objective(hinge: FloatArray, yaws: FloatArray, points: FloatArray, pass
     g_h = -2.0 * (weights * r) @ normal
     dr_dyaw = -np.sum(_unit(yaw) * rel, axis=1)  # d/dψ of (−sin ψ, cos ψ)·v = −(cos ψ, sin ψ)·v
     g_y = np.bincount(passes, weights=2.0 * weights * r * dr_dyaw, minlength=yaws.shape[0])
-    return f, g_h, g_y
+    return f, np.asarray(g_h, dtype=np.float64), np.asarray(g_y, dtype=np.float64)
 
 
 def fit_hinge_angles(hinge: FloatArray, yaws: FloatArray, points: FloatArray, passes: IntArray,

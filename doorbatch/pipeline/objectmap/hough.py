@@ -34,18 +34,18 @@ def hough_lines(points: FloatArray, step_deg: float, bin_m: float, orientation_s
     prev, nxt = np.roll(peaked, 1), np.roll(peaked, -1)
     dominant = np.flatnonzero((peaked >= prev) & (peaked >= nxt) & (peaked >= orientation_share * peaked.max()))
     found: dict[tuple[int, int], int] = {}
-    for a0 in dominant:
-        for a in (a0 - 1, a0, a0 + 1):
-            a %= thetas.shape[0]
+    for a0 in dominant.tolist():
+        for a_raw in (a0 - 1, a0, a0 + 1):
+            a = a_raw % thetas.shape[0]
             row = acc[a]
             left = np.concatenate([[-1.0], row[:-1]])
             right = np.concatenate([row[1:], [-1.0]])
             peaks = np.flatnonzero((row >= left) & (row > right) & (row >= min_votes))
-            for p in peaks:
-                found[(int(a), int(p))] = int(row[p])
+            for p in peaks.tolist():
+                found[(a, p)] = int(row[p])
     ranked = sorted(found.items(), key=lambda kv: -kv[1])[:max_lines]
-    out = []
-    for (a, p), votes in ranked:
-        th = thetas[a]
-        out.append((np.array([np.cos(th), np.sin(th)]), lo + (p + 0.5) * bin_m, votes))
+    out: list[tuple[FloatArray, float, int]] = []
+    for (ai, pi), votes in ranked:
+        th = thetas[ai]
+        out.append((np.array([np.cos(th), np.sin(th)]), float(lo + (pi + 0.5) * bin_m), votes))
     return out

@@ -38,8 +38,9 @@ def pass_scans(rec: Recording, poses: PassPoses, scan_stride: int, with_color: b
         colors = None
         if with_color and rec.colors is not None and rec.colors[i].shape[0] == n:
             colors = rec.colors[i].astype(np.float64)
-        out.append(ScanBeams(poses.poses[i], sc.laser_to_base[i], sc.angle_min[i] + sc.angle_increment[i] * np.arange(n),
-                             sc.ranges[i].astype(np.float64), float(sc.range_min[i]), float(sc.range_max[i]), colors))
+        angles = sc.angle_min[i] + sc.angle_increment[i] * np.arange(n)
+        out.append(ScanBeams(poses.poses[i], sc.laser_to_base[i], angles, sc.ranges[i].astype(np.float64),
+                             float(sc.range_min[i]), float(sc.range_max[i]), colors))
     return out
 
 
