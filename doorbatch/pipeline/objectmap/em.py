@@ -39,6 +39,38 @@ def evaluate(beams: BeamSet, obj_map: ObjectMap, config: ObjectMapConfig) -> Map
     return MapState(obj_map, first, e, ll, float(ll.sum()) + log_prior(obj_map, config))
 
 
+def merge_collinear(walls: list[Wall], max_angle_deg: float, max_offset_m: float) -> list[Wall]:
+    """Walls whose lines coincide (within the angle and offset) become one wall with the union of their
+    segments on the first one's line: a wall is the set of collinear segments (Sec. II)."""
+    out: list[Wall] = []
+    cos_max = np.cos(np.deg2rad(max_angle_deg))
+    for w in walls:
+        for k, o in enumerate(out):
+            c = float(w.normal @ o.normal)
+            if abs(c) >= cos_max and abs(w.offset * np.sign(c) - o.offset) <= max_offset_m:
+                base = w.offset * w.normal
+                ends = (base + w.segments[:, :, None] * w.tangent) @ o.tangent  # (K, 2) along o
+                segs = np.sort(ends, axis=1)
+                out[k] = Wall(o.normal, o.offset, _union(np.concatenate([o.segments, segs])))
+                break
+        else:
+            out.append(w)
+    return out
+
+
+def _union(segs: FloatArray) -> FloatArray:
+    if segs.shape[0] == 0:
+        return segs
+    segs = segs[np.argsort(segs[:, 0])]
+    merged = [segs[0].copy()]
+    for a, b in segs[1:]:
+        if a <= merged[-1][1]:
+            merged[-1][1] = max(merged[-1][1], b)
+        else:
+            merged.append(np.array([a, b]))
+    return np.array(merged)
+
+
 def m_step_walls(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> ObjectMap:
     """Each wall: its line by weighted least squares on the points it explains (eq. 8), then its segments
     by the DP (eq. 9). A wall whose segments no longer pay for its line parameters is dropped."""
@@ -58,7 +90,8 @@ def m_step_walls(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> Ob
                                    config.sigma_m, config.rho_length_per_m, 2.0 * config.rho_static)
         walls[j] = Wall(normal, offset, segs)
         keep.append(segs.shape[0] > 0 and cost + 2.0 * config.rho_static < 0.0)
-    return replace(obj_map, walls=[w for w, k in zip(walls, keep, strict=True) if k])
+    kept = [w for w, k in zip(walls, keep, strict=True) if k]
+    return replace(obj_map, walls=merge_collinear(kept, 2.0, config.pseudo_e_sigmas * config.sigma_m))
 
 
 def m_step_doors(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> ObjectMap:

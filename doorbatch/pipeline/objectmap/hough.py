@@ -15,8 +15,8 @@ def hough_lines(points: FloatArray, step_deg: float, bin_m: float, orientation_s
                 max_lines: int) -> list[tuple[FloatArray, float, int]]:
     """Lines (normal n, offset β, votes) with n = (cos θ, sin θ), β = ρ: the accumulator A[θ, ρ] of
     ρ = x cos θ + y sin θ; dominant orientations are the θ whose peakedness Σ_ρ A² is a local maximum
-    with at least ``orientation_share`` of the largest; at those θ (± one step) every local maximum in ρ
-    with ≥ ``min_votes`` is a proposal."""
+    with at least ``orientation_share`` of the largest, and the perpendicular of the largest; at those θ
+    (± one step) every local maximum in ρ with ≥ ``min_votes`` is a proposal, most votes first."""
     if points.shape[0] < min_votes:
         return []
     stride = max(1, points.shape[0] // _MAX_POINTS)
@@ -33,6 +33,10 @@ def hough_lines(points: FloatArray, step_deg: float, bin_m: float, orientation_s
     peaked = np.sum(acc * acc, axis=1)
     prev, nxt = np.roll(peaked, 1), np.roll(peaked, -1)
     dominant = np.flatnonzero((peaked >= prev) & (peaked >= nxt) & (peaked >= orientation_share * peaked.max()))
+    # the perpendicular of the strongest orientation too: buildings are mostly rectangular, and a corridor's
+    # short end walls would otherwise fall under the share of its long side walls
+    best = int(np.argmax(peaked))
+    dominant = np.union1d(dominant, [(best + thetas.shape[0] // 2) % thetas.shape[0]])
     found: dict[tuple[int, int], int] = {}
     for a0 in dominant.tolist():
         for a_raw in (a0 - 1, a0, a0 + 1):

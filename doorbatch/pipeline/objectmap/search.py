@@ -283,19 +283,56 @@ def _affected(beams: BeamSet, door: Door, width: float, changed: list[tuple[int,
     return np.flatnonzero(mask)
 
 
+def _walls_behind(beams: BeamSet, obj_map: ObjectMap, idx: IntArray, first: FirstObjects, config: ObjectMapConfig
+                  ) -> tuple[ObjectMap, IntArray]:
+    """Walls seen only through a doorway, introduced with its door (the pseudo-E-step's point: before the
+    door, the wall piece over the doorway occludes them). Hough lines of the affected rays' end points that
+    the map leaves unexplained; each is kept when its DP (given the map with the door) pays for it.
+    Returns the map and the beams whose first object may have changed."""
+    sub = beams.subset(idx)
+    far = sub.hit & (sub.range_m > first.delta[idx] + config.pseudo_e_sigmas * config.sigma_m) | (
+        sub.hit & ~np.isfinite(first.delta[idx]))
+    pts = sub.points[far]
+    extra: list[IntArray] = []
+    walls = list(obj_map.walls)
+    for normal, offset, _ in hough_lines(pts, config.hough_step_deg, config.hough_offset_bin_m,
+                                         config.hough_orientation_share, config.hough_min_points, 4):
+        r = pts @ normal - offset
+        sel = np.abs(r) < config.pseudo_e_sigmas * config.sigma_m + config.hough_offset_bin_m
+        if int(sel.sum()) < config.hough_min_points:
+            continue
+        normal, offset = fit_line(pts[sel], np.exp(-0.5 * (r[sel] / config.sigma_m) ** 2) + 1e-12)
+        current = replace(obj_map, walls=walls)
+        cross = line_crossings(beams, normal, offset, config.sigma_m)
+        empty = FirstObjects(np.full(len(beams), np.inf), np.full(len(beams), -1, dtype=np.int64),
+                             np.full(len(beams), -1, dtype=np.int64))
+        local = _full_first(beams, current, cross.beam, empty)
+        segs, cost = wall_segments(beams, local, current, -1, normal, offset, config.validity_prior,
+                                   config.sigma_m, config.rho_length_per_m, 2.0 * config.rho_static)
+        if segs.shape[0] and cost + 2.0 * config.rho_static < 0.0:
+            walls.append(Wall(normal, offset, segs))
+            extra.append(cross.beam[(cross.s >= segs[0, 0] - 0.1) & (cross.s <= segs[-1, 1] + 0.1)])
+    return replace(obj_map, walls=walls), (np.concatenate(extra) if extra else np.zeros(0, dtype=np.int64))
+
+
 def try_door(beams: BeamSet, state: MapState, c: DoorCandidate, config: ObjectMapConfig
              ) -> tuple[float, ObjectMap]:
-    """Fit a door at candidate ``c`` and return (log-posterior change, new map)."""
+    """Fit a door at candidate ``c`` (with the walls seen through its doorway) and return (log-posterior
+    change, new map)."""
     obj_map = state.obj_map
     width = obj_map.classes.door_width_m
     door = _door_fit(beams, c, width, config)
     with_door = replace(obj_map, doors=[*obj_map.doors, door])
     new_map, changed = _recut_walls(beams, with_door, door.hinge, width + 0.2, config)
     idx = _affected(beams, door, width, changed, new_map, config.sigma_m)
+    empty = FirstObjects(np.full(len(beams), np.inf), np.full(len(beams), -1, dtype=np.int64),
+                         np.full(len(beams), -1, dtype=np.int64))
+    first_mid = _full_first(beams, new_map, idx, empty)
+    new_map, extra = _walls_behind(beams, new_map, idx, first_mid, config)
+    idx = np.union1d(idx, extra)
     sub = beams.subset(idx)
-    empty = FirstObjects(np.full(idx.size, np.inf), np.full(idx.size, -1, dtype=np.int64),
-                         np.full(idx.size, -1, dtype=np.int64))
-    first_new = _full_first(sub, new_map, np.arange(idx.size), empty)
+    first_new = _full_first(sub, new_map, np.arange(idx.size), FirstObjects(
+        np.full(idx.size, np.inf), np.full(idx.size, -1, dtype=np.int64), np.full(idx.size, -1, dtype=np.int64)))
     _, ll_new = e_step(sub, first_new, new_map.classes, config.validity_prior, config.sigma_m)
     gain = float(ll_new.sum() - state.loglik[idx].sum()) + log_prior(new_map, config) - log_prior(obj_map, config)
     return gain, new_map
