@@ -19,6 +19,7 @@ import numpy as np
 import numpy.typing as npt
 
 from doorbatch.config import ObjectMapConfig
+from doorbatch.pipeline.gridmap.doors import cluster_points
 from doorbatch.pipeline.objectmap.beams import BeamSet
 from doorbatch.pipeline.objectmap.doors import fit_hinge_angles, initial_angles, rays_near
 from doorbatch.pipeline.objectmap.em import MapState, evaluate, run_em
@@ -122,9 +123,8 @@ def _both_ends(a: FloatArray, b: FloatArray, source: str, support: int) -> list[
 def motion_candidates(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> list[DoorCandidate]:
     """Doors from motion (Sec. VI): wall pieces that rays of some pass cross (the ray ends well beyond the
     wall: the piece was absent in that pass, present in the others that built it). The hinge is at one
-    end of the crossed piece, the closed leaf along the wall toward the other end (both ends are tried).
-    (The paper's per-pass segment maps of open leaves give the same doors here; an open leaf alone does
-    not tell which way the closed leaf lies along the wall, so we start from the wall.)"""
+    end of the crossed piece, the closed leaf along the wall toward the other end (both ends are tried);
+    and (2) leaf-like pieces of one pass crossed by rays of another (:func:`_leaf_candidates`)."""
     out: list[DoorCandidate] = []
     first, obj_map = state.first, state.obj_map
     through = beams.range_m > first.delta + config.through_margin_m
@@ -137,6 +137,39 @@ def motion_candidates(beams: BeamSet, state: MapState, config: ObjectMapConfig) 
             for a, b, n in _intervals(s, config.candidate_cluster_m, config.min_crossing_rays, 0.2):
                 base = wall.offset * wall.normal
                 out += _both_ends(base + a * wall.tangent, base + b * wall.tangent, "motion", n)
+    return out + _leaf_candidates(beams, state, config)
+
+
+def _leaf_candidates(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> list[DoorCandidate]:
+    """Straight, door-sized pieces of one pass's points that the map does not explain (they stand in front
+    of the modelled object) and that rays of another pass cross: a leaf that was elsewhere then."""
+    out: list[DoorCandidate] = []
+    first = state.first
+    pts = beams.points
+    poor = beams.hit & (state.e < 0.5) & (beams.range_m < np.minimum(first.delta, beams.dmax)
+                                         - config.through_margin_m)
+    for t in range(beams.n_passes):
+        sel = np.flatnonzero(poor & (beams.pass_index == t))
+        if sel.size < config.min_crossing_rays:
+            continue
+        labels = cluster_points(pts[sel], config.candidate_cluster_m)
+        others = np.flatnonzero(beams.pass_index != t)
+        for lab in np.unique(labels):
+            members = sel[labels == lab]
+            if members.size < config.min_crossing_rays:
+                continue
+            normal, offset = fit_line(pts[members], np.ones(members.size))
+            tangent = np.array([-normal[1], normal[0]])
+            along = pts[members] @ tangent
+            rms = float(np.sqrt(np.mean((pts[members] @ normal - offset) ** 2)))
+            if rms > 2.0 * config.sigma_m or not 0.3 <= float(np.ptp(along)) <= config.door_width_max_m + 0.1:
+                continue
+            a = offset * normal + along.min() * tangent
+            b = offset * normal + along.max() * tangent
+            rng, idx = cast_segments(beams.origin[others], beams.direction[others], np.stack([a, b])[None])
+            crossed = int(np.sum((idx >= 0) & (beams.range_m[others] > rng + config.through_margin_m)))
+            if crossed >= config.min_crossing_rays:
+                out += _both_ends(a, b, "motion", crossed)
     return out
 
 
@@ -335,7 +368,27 @@ def try_door(beams: BeamSet, state: MapState, c: DoorCandidate, config: ObjectMa
         np.full(idx.size, np.inf), np.full(idx.size, -1, dtype=np.int64), np.full(idx.size, -1, dtype=np.int64)))
     _, ll_new = e_step(sub, first_new, new_map.classes, config.validity_prior, config.sigma_m)
     gain = float(ll_new.sum() - state.loglik[idx].sum()) + log_prior(new_map, config) - log_prior(obj_map, config)
-    return gain, new_map
+    # Sec. VI: the door is adopted only if it scores higher than the map without it, "i.e. when the segment
+    # is static": the same leaf (first pass's direction) as a wall of its own
+    static = _as_static_segment(new_map, len(new_map.doors) - 1)
+    first_static = _full_first(sub, static, np.arange(idx.size), FirstObjects(
+        np.full(idx.size, np.inf), np.full(idx.size, -1, dtype=np.int64), np.full(idx.size, -1, dtype=np.int64)))
+    _, ll_static = e_step(sub, first_static, static.classes, config.validity_prior, config.sigma_m)
+    gain_static = float(ll_static.sum() - state.loglik[idx].sum()) + log_prior(static, config) - log_prior(
+        obj_map, config)
+    return min(gain, gain - gain_static), new_map
+
+
+def _as_static_segment(obj_map: ObjectMap, i: int) -> ObjectMap:
+    """The map with door i replaced by a static wall segment where its leaf stands in the first pass."""
+    door = obj_map.doors[i]
+    yaw = float(door.yaws[0])
+    tangent = np.array([np.cos(yaw), np.sin(yaw)])
+    normal = np.array([tangent[1], -tangent[0]])  # so that (−n_y, n_x) = tangent
+    s0 = float(door.hinge @ tangent)
+    wall = Wall(normal, float(door.hinge @ normal), np.array([[s0, s0 + obj_map.door_width(i)]]))
+    doors = obj_map.doors[:i] + obj_map.doors[i + 1:]
+    return replace(obj_map, doors=doors, walls=[*obj_map.walls, wall])
 
 
 def add_doors(beams: BeamSet, state: MapState, candidates: list[DoorCandidate], config: ObjectMapConfig
