@@ -16,7 +16,7 @@ from doorbatch.io.parquet import read_table
 from doorbatch.io.recording import load_recording
 from doorbatch.pipeline.mapping import pass_poses
 from doorbatch.pipeline.objectmap.model import ClassParams
-from doorbatch.pipeline.objectmap.stage import ObjectMapResult, collect_beams, build_object_map
+from doorbatch.pipeline.objectmap.stage import ObjectMapResult, build_object_map, collect_beams
 from doorbatch.sim.simulate import run_simulation
 
 WORLD = """

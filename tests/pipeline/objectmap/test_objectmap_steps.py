@@ -81,7 +81,7 @@ def test_hinge_and_angles_are_recovered_by_gradient_descent() -> None:
         u = rng.uniform(0.05, 0.9, 60)
         pts.append(hinge + u[:, None] * [np.cos(yaw), np.sin(yaw)] + rng.normal(0, 0.005, (60, 2)))
         passes.append(np.full(60, t))
-    h, y = fit_hinge_angles(hinge + [0.12, -0.08], yaws + np.deg2rad([6.0, -5.0, 4.0]), np.concatenate(pts),
+    h, y = fit_hinge_angles(hinge + np.array([0.12, -0.08]), yaws + np.deg2rad([6.0, -5.0, 4.0]), np.concatenate(pts),
                             np.concatenate(passes), np.ones(180), iterations=300)
     assert np.linalg.norm(h - hinge) < 0.01
     np.testing.assert_allclose(np.rad2deg(y), np.rad2deg(yaws), atol=0.5)
@@ -128,7 +128,7 @@ def test_first_object_and_e_step_on_a_wall_and_a_door() -> None:
 def test_hough_proposes_the_two_walls_of_a_corridor_first() -> None:
     x = np.linspace(0, 10, 400)
     pts = np.concatenate([np.stack([x, np.full_like(x, 1.1)], 1), np.stack([x, np.full_like(x, -1.1)], 1),
-                          np.random.default_rng(0).uniform(-1, 1, (40, 2)) + [5, 0]])
+                          np.random.default_rng(0).uniform(-1, 1, (40, 2)) + np.array([5.0, 0.0])])
     lines = hough_lines(pts, 1.0, 0.05, 0.25, 20, 10)
     top = sorted(abs(b) for _, b, _ in lines[:2])
     assert all(abs(abs(n[1]) - 1.0) < 1e-3 for n, _, _ in lines[:2])
