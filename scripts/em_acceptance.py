@@ -142,27 +142,35 @@ def color_only(site: Site, beams: BeamSet) -> dict[str, int]:
     return score(site, np.array(centres).reshape(-1, 2))
 
 
-def wall_accuracy(site: Site, result: ObjectMapResult) -> dict[str, float]:
+def wall_accuracy(site: Site, result: ObjectMapResult) -> dict[str, dict[str, float]]:
     """EM segment end points on lines that match a truth line (3°, 0.15 m): distance to the nearest truth
-    segment end point on that line; line direction errors."""
+    segment end point on that line, and line direction errors; separately for the corridor walls (truth
+    kind ``wall``: the robot sees all of them) and the room walls (kind ``room``: seen only through open
+    doorways, so their segments end where the view ends, not where the wall does)."""
     segs = site.truth.segments
+    kinds = np.array(site.truth.segment_kinds)
     d = segs[:, 1] - segs[:, 0]
     tn = np.stack([-d[:, 1], d[:, 0]], 1) / np.linalg.norm(d, axis=1, keepdims=True)
     toff = np.sum(tn * segs[:, 0], axis=1)
-    errs, dirs = [], []
-    for w in result.object_map.walls:
-        c = tn @ w.normal
-        same = (np.abs(c) > np.cos(np.deg2rad(3.0))) & (np.abs(toff * np.sign(c) - w.offset) < 0.15)
-        if not same.any():
-            continue
-        dirs.append(np.rad2deg(np.arccos(min(1.0, float(np.max(np.abs(c[same])))))))
-        ends = segs[same].reshape(-1, 2)
-        for e in w.endpoints().reshape(-1, 2):
-            errs.append(float(np.min(np.linalg.norm(ends - e, axis=1))))
-    e = np.array(errs)
-    return {"walls_matched": len(dirs), "walls": len(result.object_map.walls), "endpoints": int(e.size),
-            "within_0.10m": float(np.mean(e <= 0.10)) if e.size else 0.0, "median_m": float(np.median(e)),
-            "max_dir_deg": float(max(dirs)) if dirs else float("nan")}
+    out: dict[str, dict[str, float]] = {}
+    for kind in ("wall", "room"):
+        errs, dirs = [], []
+        for w in result.object_map.walls:
+            c = tn @ w.normal
+            same = (np.abs(c) > np.cos(np.deg2rad(3.0))) & (np.abs(toff * np.sign(c) - w.offset) < 0.15)
+            if not same.any() or np.mean(kinds[same] == kind) < 0.5:
+                continue
+            dirs.append(np.rad2deg(np.arccos(min(1.0, float(np.max(np.abs(c[same])))))))
+            ends = segs[same].reshape(-1, 2)
+            errs += [float(np.min(np.linalg.norm(ends - e, axis=1))) for e in w.endpoints().reshape(-1, 2)]
+        e = np.array(errs)
+        out[kind] = {"walls": len(dirs), "endpoints": int(e.size),
+                     "within_0.10m": float(np.mean(e <= 0.10)) if e.size else float("nan"),
+                     "median_m": float(np.median(e)) if e.size else float("nan"),
+                     "max_m": float(np.max(e)) if e.size else float("nan"),
+                     "max_dir_deg": float(max(dirs)) if dirs else float("nan")}
+    out["all"] = {"em_walls": len(result.object_map.walls)}
+    return out
 
 
 def main() -> None:
@@ -219,7 +227,14 @@ def main() -> None:
         assert isinstance(r, dict)
         print(f"| {label} | {r['moved_found']}/{r['moved']} | {r['still_found']}/{r['still']} | "
               f"{r['false_positives']} |")
-    print(f"\nwalls (site A): {json.dumps(out['walls_a'])}")
+    print("\n| walls (site A) | lines | end points | within 0.10 m | median | max | max direction error |")
+    print("| --- | --- | --- | --- | --- | --- | --- |")
+    walls = out["walls_a"]
+    assert isinstance(walls, dict)
+    for kind, label in (("wall", "corridor walls"), ("room", "room walls (seen through doorways)")):
+        r = walls[kind]
+        print(f"| {label} | {r['walls']} | {r['endpoints']} | {100 * r['within_0.10m']:.0f} % | "
+              f"{100 * r['median_m']:.1f} cm | {100 * r['max_m']:.1f} cm | {r['max_dir_deg']:.2f}° |")
     print(f"classes (site A): {json.dumps(out['classes_a'])}")
     print(f"seconds: range+colour EM {full.seconds:.1f} ({full.n_beams} beams); all {out['total_seconds']:.0f}")
 
