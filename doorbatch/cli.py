@@ -22,7 +22,7 @@ import click
 
 from doorbatch import __version__
 from doorbatch.config import DoorbatchConfig, load_config
-from doorbatch.errors import DoorbatchError, ExitCode, LogContentError
+from doorbatch.errors import DoorbatchError, ExitCode, LogContentError, UsageError
 from doorbatch.progress import set_progress_enabled
 
 log = logging.getLogger("doorbatch")
@@ -212,6 +212,40 @@ def localize_cmd(ctx: Context, log_path: Path, map_path: Path, output: Path, met
         _, summary = run_localize(log_path, map_path, output, config, method or lc.method, init, bar.update)
     ctx.summary(f"{summary.method}: {summary.updates} updates, {summary.mean_particles:.0f} particles on average"
                 f"{', ambiguous' if summary.ambiguous else ''} → {summary.run_dir}", asdict(summary))
+
+
+@cli.command("doorpose")
+@click.argument("log_path", metavar="LOG", type=click.Path(path_type=Path), required=False)
+@click.option("-o", "--output", type=click.Path(path_type=Path, file_okay=False), required=True,
+              help="Run directory to write.")
+@click.option("--map", "map_path", type=click.Path(path_type=Path), default=None,
+              help="Map directory: match each door pose to a mapped door and report its angle.")
+@click.option("--detector", default=None, help="topic, or a YOLO model file (.onnx, .pt TorchScript).")
+@click.option("--fit", type=click.Choice(["ransac", "lsq", "naive"]), default=None, help="Default: doorpose.fit.")
+@click.option("--simulate-approach", is_flag=True,
+              help="Run a door pose experiment on simulated scenes instead; LOG is its file "
+                   "(default configs/experiments/doorpose_table2.yaml).")
+@common_options
+def doorpose_cmd(ctx: Context, log_path: Path | None, output: Path, map_path: Path | None, detector: str | None,
+                 fit: str | None, simulate_approach: bool) -> None:
+    """Door poses from camera boxes fused with the laser (paper 003), goal poses in front of the doors."""
+    from doorbatch.pipeline.doorpose.run import run_doorpose, run_simulated_experiment
+    from doorbatch.progress import progress_bar
+    from doorbatch.sim.scenario import configs_dir
+
+    if simulate_approach:
+        experiment = log_path or configs_dir() / "experiments" / "doorpose_table2.yaml"
+        s = run_simulated_experiment(experiment, output, ctx.config)
+        means = ", ".join(f"{k} {v:.4f}" for k, v in s.mean_error.items())
+        ctx.summary(f"{s.experiment}, {s.samples} samples: mean summed error {means} → {s.run_dir}", asdict(s))
+        return
+    if log_path is None:
+        raise UsageError("doorpose needs LOG (or --simulate-approach)")
+    with progress_bar(None, "doorpose", unit="image") as bar:
+        _, summary = run_doorpose(log_path, output, ctx.config, map_path, detector, fit, bar.update)
+    ctx.summary(f"{summary.door_poses} door pose(s) from {summary.paired} image(s) paired with scans "
+                f"({summary.fit}, frame {summary.frame}), {summary.matched} matched → {summary.run_dir}",
+                asdict(summary))
 
 
 @cli.command("config")

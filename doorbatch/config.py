@@ -379,6 +379,69 @@ class ObjectMapConfig(Section):
     wall_hinge_distance_m: float = Field(0.3, gt=0.0)
 
 
+class DoorPoseConfig(Section):
+    """``doorbatch doorpose``: door poses from camera boxes fused with a laser line, goal poses, and the
+    positioning controller (paper 003, Sec. III-B and III-C)."""
+
+    # Where boxes come from: "topic" (vision_msgs/Detection2DArray in the log) or a model file (.onnx, .pt).
+    detector: str = "topic"
+    # Model class index → name (YOLO export order); door_class / handle_class name the two classes used.
+    class_names: list[str] = ["door", "handle"]
+    door_class: str = "door"
+    handle_class: str = "handle"
+    # YOLO inference: square letterbox input, score threshold (v5: objectness × class), NMS IoU threshold.
+    input_size_px: int = Field(640, ge=32)
+    confidence_threshold: float = Field(0.25, ge=0.0, le=1.0)
+    nms_iou_threshold: float = Field(0.45, ge=0.0, le=1.0)
+    # Output layout: v5 [1, N, 5+C] with objectness, v8 [1, 4+C, N]; auto: the larger dimension is N.
+    yolo_layout: Literal["auto", "v5", "v8"] = "auto"
+    # TorchScript device: "cpu" or "cuda".
+    torch_device: str = "cpu"
+    # Sec. III-B: a door box within this many pixels of the left or right image border is not fully seen
+    # (about 3σ of a detector's box-edge noise, so that a box cut by the border and then jittered is caught).
+    border_margin_px: float = Field(8.0, ge=0.0)
+    # Line fit and the paper's RANSAC parameters (Sec. IV-B: max trials 1000, residual threshold 0.01 m).
+    fit: Literal["naive", "lsq", "ransac"] = "ransac"
+    ransac_max_trials: int = Field(1000, ge=1)
+    ransac_residual_m: float = Field(0.01, gt=0.0)
+    # Fewer door points than this: no estimate (two define a line; three let RANSAC reject one).
+    min_door_points: int = Field(3, ge=2)
+    # Sec. III-B "evaluate if a valid door was detected": an estimate narrower or wider than a door (standard
+    # leaves are 0.6-1.25 m) is not one (a false box, or a line fitted to an obstacle); 0 and inf disable it.
+    door_width_min_m: float = Field(0.5, ge=0.0)
+    door_width_max_m: float = Field(1.4, gt=0.0)
+    # Goal pose: this far from the door centre along its normal, facing the door (Sec. IV-C: 0.5 m).
+    goal_offset_m: float = Field(0.5, gt=0.0)
+    # Association with --map: the nearest mapped doorway (closed-leaf midpoint) within this distance.
+    association_max_distance_m: float = Field(0.6, gt=0.0)
+    # Output frame: "auto" (map when the log has a reference pose, else odom, else base_link).
+    frame: Literal["auto", "map", "odom", "base_link"] = "auto"
+    # Positioning controller (Siegwart et al.): v = k_rho·ρ, ω = k_alpha·α + k_beta·β; stable for
+    # k_rho > 0, k_beta < 0, k_alpha − k_rho > 0 (the book's example gains 3, 8, −1.5).
+    k_rho: float = Field(3.0, gt=0.0)
+    k_alpha: float = 8.0
+    k_beta: float = Field(-1.5, lt=0.0)
+    max_linear_mps: float = Field(0.3, gt=0.0)
+    max_angular_rps: float = Field(1.0, gt=0.0)
+    control_rate_hz: float = Field(10.0, gt=0.0)
+    # Sec. III-C: "initial" estimates the goal once; "continuous" re-estimates until this close (0.2 m).
+    goal_updating: Literal["initial", "continuous"] = "continuous"
+    stop_updating_within_m: float = Field(0.2, ge=0.0)
+    # Done when within both tolerances, or after max_duration_s.
+    goal_tolerance_m: float = Field(0.01, gt=0.0)
+    goal_tolerance_deg: float = Field(1.0, gt=0.0)
+    max_duration_s: float = Field(60.0, gt=0.0)
+    seed: int | None = None  # None: the top-level seed
+
+    @model_validator(mode="after")
+    def _stable_gains(self) -> DoorPoseConfig:
+        if self.k_alpha - self.k_rho <= 0.0:
+            raise ValueError("k_alpha - k_rho must be > 0 (stability of the polar control law)")
+        if self.door_class not in self.class_names and self.detector != "topic":
+            raise ValueError(f"door_class {self.door_class!r} is not in class_names {self.class_names}")
+        return self
+
+
 class DoorbatchConfig(Section):
     """The whole configuration tree."""
 
@@ -393,6 +456,7 @@ class DoorbatchConfig(Section):
     doors: DoorDetectionConfig = DoorDetectionConfig()
     localize: LocalizeConfig = LocalizeConfig()
     em: ObjectMapConfig = ObjectMapConfig()
+    doorpose: DoorPoseConfig = DoorPoseConfig()
 
     def as_dict(self) -> dict[str, Any]:
         """The resolved tree as plain data (what goes into manifests)."""

@@ -244,3 +244,23 @@ def detection_array(stamp_ns: int, frame_id: str,
             id=str(i),
         ))
     return _t("vision_msgs/msg/Detection2DArray")(header=header(stamp_ns, frame_id), detections=dets)
+
+
+def pose_stamped(stamp_ns: int, frame_id: str, x: float, y: float, yaw: float) -> Any:
+    """geometry_msgs/PoseStamped of a planar pose."""
+    return _t("geometry_msgs/msg/PoseStamped")(header=header(stamp_ns, frame_id), pose=pose(x, y, yaw))
+
+
+def image_box_marker(stamp_ns: int, frame_id: str, ns: str, marker_id: int, box_uv: Sequence[float],
+                     rgba: tuple[float, float, float, float], width_px: float = 2.0) -> Any:
+    """visualization_msgs/ImageMarker: a closed LINE_STRIP around the pixel box (u0, v0, u1, v1)."""
+    u0, v0, u1, v1 = (float(b) for b in box_uv)
+    duration = _t("builtin_interfaces/msg/Duration")(sec=0, nanosec=0)
+    color = color_rgba(*rgba)
+    return _t("visualization_msgs/msg/ImageMarker")(
+        header=header(stamp_ns, frame_id), ns=ns, id=int(marker_id), type=1, action=0,  # 1: LINE_STRIP
+        position=point(0.0, 0.0), scale=float(width_px), outline_color=color, filled=0,
+        fill_color=color_rgba(0.0, 0.0, 0.0, 0.0), lifetime=duration,
+        points=[point(u, v) for u, v in ((u0, v0), (u1, v0), (u1, v1), (u0, v1), (u0, v0))],
+        outline_colors=[],
+    )

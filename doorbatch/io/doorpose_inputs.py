@@ -1,0 +1,90 @@
+"""What ``doorbatch doorpose`` reads from a log: TF, camera intrinsics, scans, robot poses, and door boxes
+(from a vision_msgs/Detection2DArray topic, or by running a detector over the log's images as they stream,
+so that no log of images is ever held in memory)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from doorbatch.config import DoorbatchConfig
+from doorbatch.errors import LogContentError
+from doorbatch.geometry.tf_buffer import TfBuffer
+from doorbatch.io.reader import open_log
+from doorbatch.io.recording import PoseSeries
+from doorbatch.records import CameraInfo, Detection, Detections, Image, Pose2D, Role, Scan, Transform
+
+ImageDetector = Callable[[Image], tuple[Detection, ...]]
+
+
+@dataclass
+class DoorPoseInputs:
+    """A log's inputs to the door pose stage. Scans and detections are sorted by stamp."""
+
+    path: str
+    tf: TfBuffer
+    camera_info: CameraInfo
+    scans: list[Scan]
+    detections: list[Detections]
+    reference: PoseSeries | None
+    odometry: PoseSeries | None
+    warnings: list[str] = field(default_factory=list)
+
+
+def _series(poses: list[Pose2D]) -> PoseSeries | None:
+    if not poses:
+        return None
+    poses = sorted(poses, key=lambda p: p.stamp_ns)
+    return PoseSeries(np.array([p.stamp_ns for p in poses], dtype=np.int64),
+                      np.array([[p.x, p.y, p.yaw] for p in poses], dtype=np.float64), poses[0].frame_id)
+
+
+def read_doorpose_inputs(path: Path, config: DoorbatchConfig, detector: ImageDetector | None = None
+                         ) -> DoorPoseInputs:
+    """Read the log once for TF, once for the rest; with ``detector`` the images are run through it one
+    by one, else the detections topic is read.
+
+    Raises:
+        LogContentError: no scan, no camera_info, or no detections topic (and no detector).
+        LogReadError: the log cannot be read.
+    """
+    tf = TfBuffer(int(config.io.tf_extrapolation_limit_s * 1e9))
+    box_role = Role.IMAGE if detector is not None else Role.DETECTIONS
+    roles = [Role.SCAN, Role.ODOMETRY, Role.REFERENCE, Role.CAMERA_INFO, box_role]
+    scans: list[Scan] = []
+    odom: list[Pose2D] = []
+    ref: list[Pose2D] = []
+    boxes: list[Detections] = []
+    info: CameraInfo | None = None
+    with open_log(path, config) as reader:
+        for item in reader.messages([Role.TRANSFORMS]):
+            if isinstance(item.record, Transform):
+                tf.add(item.record)
+        for role, what in ((Role.SCAN, "a sensor_msgs/LaserScan topic"),
+                           (Role.CAMERA_INFO, "a sensor_msgs/CameraInfo topic (the camera intrinsics)"),
+                           (box_role, "an image topic for --detector" if detector is not None else
+                            "a vision_msgs/Detection2DArray topic (or give --detector MODEL)")):
+            if reader.roles.topic(role) is None:
+                raise LogContentError(f"doorpose needs {what}", path=path)
+        for item in reader.messages(roles):
+            rec = item.record
+            if isinstance(rec, Scan):
+                scans.append(rec)
+            elif isinstance(rec, Pose2D):
+                (ref if item.role is Role.REFERENCE else odom).append(rec)
+            elif isinstance(rec, CameraInfo):
+                info = info or rec
+            elif isinstance(rec, Detections):
+                boxes.append(rec)
+            elif isinstance(rec, Image) and detector is not None:
+                boxes.append(Detections(rec.stamp_ns, rec.log_time_ns, rec.frame_id, detector(rec)))
+        warnings = list(reader.warnings)
+    if info is None:
+        raise LogContentError("camera_info topic has no messages", path=path)
+    if not scans:
+        raise LogContentError("scan topic has no messages", path=path)
+    return DoorPoseInputs(str(path), tf, info, sorted(scans, key=lambda s: s.stamp_ns),
+                          sorted(boxes, key=lambda d: d.stamp_ns), _series(ref), _series(odom), warnings)

@@ -1,0 +1,1 @@
+"""Door poses from camera detections fused with a laser line fit, goal poses, positioning (paper 003)."""

@@ -1,0 +1,168 @@
+"""Door pose from one door box and one laser scan (paper 003, Sec. III-B, Fig. 3).
+
+In the camera's horizontal plane (optical x right, z forward; the paper's 2D assumption, a level camera):
+
+1. the highest-scoring door box whose left and right edges keep off the image border;
+2. bearings β_l, β_r of the rays through its left and right edge columns (intrinsics and distortion, at
+   the horizon row c_y: the paper's constant row for the camera's height);
+3. door points: laser hits, moved into the camera frame by TF, with β_l ≤ atan2(x, z) ≤ β_r and z > 0;
+4. a line z = a + b·x through them (``naive``, ``lsq`` or ``ransac``, see :mod:`.line_fit`);
+5. door edges where the rays meet the line: t = a / (cos β − b·sin β), e = t·(sin β, cos β);
+6. centre c = (e_l + e_r)/2, width |e_r − e_l| (outside [door_width_min_m, door_width_max_m]: not a door),
+   normal n ⊥ (e_r − e_l) pointing to the camera, and the goal g = c + offset·n facing the door (heading −n);
+7. handle side: the best handle box whose centre lies in the door box, left or right of the box centre.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from enum import StrEnum
+
+import numpy as np
+import numpy.typing as npt
+
+from doorbatch.config import DoorPoseConfig
+from doorbatch.geometry.camera import PinholeCamera, column_bearings
+from doorbatch.geometry.rotations import wrap_angle
+from doorbatch.pipeline.doorpose.line_fit import DepthLine, LineFit, fit_line
+from doorbatch.records import Detection
+
+FloatArray = npt.NDArray[np.float64]
+
+
+class HandleSide(StrEnum):
+    """Which half of the door box holds the handle, as the camera sees it."""
+
+    LEFT = "left"
+    RIGHT = "right"
+    NONE = "none"
+
+
+def box_edges_px(box: Detection) -> tuple[float, float]:
+    """Left and right edge columns (u_min, u_max) of a box given by centre and size."""
+    return box.center_x - box.size_x / 2, box.center_x + box.size_x / 2
+
+
+def select_door_box(detections: Sequence[Detection], image_width_px: int, door_class: str,
+                    border_margin_px: float) -> Detection | None:
+    """The highest-scoring door box that does not reach the left or right image border (Sec. III-B).
+
+    The image spans u ∈ [−0.5, W − 0.5]; a box within ``border_margin_px`` of either end is cut by it.
+    """
+    lo, hi = -0.5 + border_margin_px, image_width_px - 0.5 - border_margin_px
+    inside = [d for d in detections if d.class_id == door_class and box_edges_px(d)[0] > lo
+              and box_edges_px(d)[1] < hi and d.size_x > 0]
+    return max(inside, key=lambda d: d.score) if inside else None
+
+
+def handle_side(door: Detection, detections: Sequence[Detection], handle_class: str) -> HandleSide:
+    """Side of the best handle box whose centre lies inside the door box: left or right of the door box's
+    centre column (Sec. III-B); NONE without such a handle."""
+    u0, u1 = box_edges_px(door)
+    v0, v1 = door.center_y - door.size_y / 2, door.center_y + door.size_y / 2
+    inside = [h for h in detections if h.class_id == handle_class and u0 <= h.center_x <= u1
+              and v0 <= h.center_y <= v1]
+    if not inside:
+        return HandleSide.NONE
+    best = max(inside, key=lambda h: h.score)
+    return HandleSide.LEFT if best.center_x < door.center_x else HandleSide.RIGHT
+
+
+@dataclass(frozen=True)
+class CameraDoor:
+    """A door estimated in the camera's horizontal plane, (x right, z forward) metres."""
+
+    left_xz: FloatArray  # (2,) where the left ray meets the line
+    right_xz: FloatArray  # (2,)
+    center_xz: FloatArray  # (2,)
+    normal_xz: FloatArray  # (2,) unit, pointing to the camera
+    width_m: float
+    goal_xz: FloatArray  # (2,) centre + offset·normal; the goal heading is −normal
+    handle_side: HandleSide
+    box: Detection
+    door_points_xz: FloatArray  # (N, 2) points between the rays
+    line: DepthLine
+
+
+def door_points(points_cam: FloatArray, bearing_left: float, bearing_right: float) -> FloatArray:
+    """(x, z) of the points (N, 3, optical frame) in front of the camera between the two ray bearings."""
+    x, z = points_cam[:, 0], points_cam[:, 2]
+    beta = np.arctan2(x, z)
+    keep = (z > 0.0) & (beta >= bearing_left) & (beta <= bearing_right) & np.isfinite(x) & np.isfinite(z)
+    return np.stack([x[keep], z[keep]], axis=1)
+
+
+def ray_line_intersection(bearing: float, line: DepthLine) -> FloatArray | None:
+    """Where the ray t·(sin β, cos β), t > 0, meets z = a + b·x; None if parallel or behind."""
+    denom = np.cos(bearing) - line.slope * np.sin(bearing)
+    if abs(denom) < 1e-9:
+        return None
+    t = line.intercept_m / denom
+    return None if t <= 0.0 else np.array([t * np.sin(bearing), t * np.cos(bearing)])
+
+
+def estimate_door(camera: PinholeCamera, detections: Sequence[Detection], points_cam: FloatArray,
+                  config: DoorPoseConfig, rng: np.random.Generator, fit: LineFit | None = None) -> CameraDoor | None:
+    """One door estimate from one image's boxes and one scan's points in the camera frame (module docstring);
+    None when no door box is usable, too few points fall between the rays, the rays miss the line, or the
+    width is not a door's."""
+    box = select_door_box(detections, camera.width, config.door_class, config.border_margin_px)
+    if box is None:
+        return None
+    beta_l, beta_r = column_bearings(camera, box_edges_px(box))
+    pts = door_points(points_cam, float(beta_l), float(beta_r))
+    if pts.shape[0] < config.min_door_points:
+        return None
+    method = LineFit(config.fit) if fit is None else fit
+    line = fit_line(pts, method, config.ransac_max_trials, config.ransac_residual_m, rng)
+    if line is None:
+        return None
+    left, right = ray_line_intersection(float(beta_l), line), ray_line_intersection(float(beta_r), line)
+    if left is None or right is None:
+        return None
+    center = (left + right) / 2
+    along = right - left
+    width = float(np.hypot(*along))
+    if not config.door_width_min_m <= width <= config.door_width_max_m or width <= 0.0:
+        return None
+    normal = np.array([-along[1], along[0]]) / width
+    if normal @ center > 0.0:  # point from the door toward the camera at the origin
+        normal = -normal
+    return CameraDoor(left, right, center, normal, width, center + config.goal_offset_m * normal,
+                      handle_side(box, detections, config.handle_class), box, pts, line)
+
+
+@dataclass(frozen=True)
+class PlanarDoor:
+    """A door pose in a planar frame: centre, yaw of the normal toward the robot, width, goal pose."""
+
+    center: FloatArray  # (2,)
+    yaw: float
+    width_m: float
+    goal: FloatArray  # (3,) x, y, yaw (facing the door: yaw + π)
+    left: FloatArray  # (2,) door edges
+    right: FloatArray  # (2,)
+
+
+def camera_plane_to_base(camera_to_base: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """(origin (2,), 2×2 matrix) taking camera-plane (x, z) to base_link (x, y): p = o + [R_x | R_z]·(x, z),
+    with R_x, R_z the optical x and z axes in base_link projected to the floor (level camera)."""
+    rot = camera_to_base[:3, :3]
+    return camera_to_base[:2, 3].copy(), np.stack([rot[:2, 0], rot[:2, 2]], axis=1)
+
+
+def to_planar(door: CameraDoor, camera_to_base: FloatArray, robot_pose: FloatArray | None = None) -> PlanarDoor:
+    """The door in base_link (from the 4×4 optical→base_link transform), or in the robot pose's frame."""
+    origin, mat = camera_plane_to_base(camera_to_base)
+    pts = np.stack([door.center_xz, door.left_xz, door.right_xz, door.goal_xz]) @ mat.T + origin
+    n = mat @ door.normal_xz
+    yaw = float(np.arctan2(n[1], n[0]))
+    if robot_pose is not None:
+        x, y, th = (float(v) for v in robot_pose)
+        c, s = np.cos(th), np.sin(th)
+        pts = pts @ np.array([[c, s], [-s, c]]) + np.array([x, y])
+        yaw += th
+    yaw = float(wrap_angle(yaw))
+    goal = np.array([pts[3, 0], pts[3, 1], float(wrap_angle(yaw + np.pi))])
+    return PlanarDoor(pts[0], yaw, door.width_m, goal, pts[1], pts[2])

@@ -1,0 +1,236 @@
+"""``doorbatch doorpose``: door poses over a log (paper 003, Sec. III-B), optionally matched to a map.
+
+The stage in outline::
+
+    inputs   = TF, camera_info, scans, robot poses, and door boxes (topic, or the user's model per image)
+    for each image's boxes:  the scan nearest in time (within io.stamp_tolerance_s)
+                             → door in the camera plane (fusion) → base_link → output frame (robot pose)
+                             → the mapped door it belongs to (with --map) and that door's current angle
+    outputs  = door_poses.parquet, annotated.mcap, manifest.json
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+
+from doorbatch.config import DoorbatchConfig
+from doorbatch.errors import TransformError
+from doorbatch.geometry.camera import camera_from_info, scan_in_camera
+from doorbatch.geometry.se2 import interpolate_poses
+from doorbatch.io.doorpose_inputs import DoorPoseInputs
+from doorbatch.io.recording import PoseSeries
+from doorbatch.maps import DoorSet
+from doorbatch.pipeline.doorpose.association import associate
+from doorbatch.pipeline.doorpose.fusion import estimate_door, to_planar
+from doorbatch.pipeline.doorpose.line_fit import LineFit
+from doorbatch.records import Detection
+
+log = logging.getLogger(__name__)
+FloatArray = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class DoorPoseEstimate:
+    """One door pose (output frame) with what it came from, for the table and the annotations."""
+
+    stamp_ns: int  # the image's stamp
+    scan_stamp_ns: int
+    door_id: int
+    door_angle: float  # the matched door's current angle (rad, CCW +), NaN if unmatched
+    center: FloatArray  # (2,)
+    yaw: float
+    width_m: float
+    handle_side: str
+    goal: FloatArray  # (3,)
+    left: FloatArray  # (2,) door edges
+    right: FloatArray  # (2,)
+    box: Detection
+    camera_frame: str
+
+
+@dataclass(frozen=True)
+class DoorPoses:
+    """All door poses of a log (DESIGN: pipeline/doorpose → DoorPoses)."""
+
+    log: str
+    fit: str
+    frame: str
+    estimates: list[DoorPoseEstimate]
+    images: int  # images (box sets) considered
+    paired: int  # of those with a scan within the stamp tolerance
+    warnings: list[str] = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return len(self.estimates)
+
+
+def output_frame(inputs: DoorPoseInputs, config: DoorbatchConfig) -> tuple[str, PoseSeries | None]:
+    """The frame door poses are given in, and the robot poses that put them there (None: base_link)."""
+    want = config.doorpose.frame
+    if want == "auto":
+        want = "map" if inputs.reference is not None else "odom" if inputs.odometry is not None else "base_link"
+    if want == "base_link":
+        return config.frames.base_link, None
+    series = inputs.reference if want == "map" else inputs.odometry
+    if series is None:
+        raise TransformError(f"doorpose.frame={want} needs {'a reference pose' if want == 'map' else 'odometry'} "
+                             "in the log", path=inputs.path)
+    return series.frame_id or want, series
+
+
+def nearest_scan(scan_stamps_ns: npt.NDArray[np.int64], stamp_ns: int, tolerance_ns: int) -> int | None:
+    """Index of the scan nearest in time to ``stamp_ns``, if within the tolerance."""
+    if scan_stamps_ns.size == 0:
+        return None
+    i = int(np.searchsorted(scan_stamps_ns, stamp_ns))
+    cands = [j for j in (i - 1, i) if 0 <= j < scan_stamps_ns.size]
+    best = min(cands, key=lambda j: abs(int(scan_stamps_ns[j]) - stamp_ns))
+    return best if abs(int(scan_stamps_ns[best]) - stamp_ns) <= tolerance_ns else None
+
+
+def estimate_door_poses(inputs: DoorPoseInputs, config: DoorbatchConfig, doors: DoorSet | None = None,
+                        fit: LineFit | None = None, progress: Callable[[int], object] | None = None) -> DoorPoses:
+    """Door poses of every image with a usable door box (module docstring)."""
+    dc = config.doorpose
+    method = fit or LineFit(dc.fit)
+    camera = camera_from_info(inputs.camera_info)
+    frame, series = output_frame(inputs, config)
+    rng = np.random.default_rng(config.seed if dc.seed is None else dc.seed)
+    scan_stamps = np.array([s.stamp_ns for s in inputs.scans], dtype=np.int64)
+    tol = int(config.io.stamp_tolerance_s * 1e9)
+    warnings: list[str] = []
+    out: list[DoorPoseEstimate] = []
+    paired = 0
+    for boxes in inputs.detections:
+        if progress is not None:
+            progress(1)
+        i = nearest_scan(scan_stamps, boxes.stamp_ns, tol)
+        if i is None or not boxes.detections:
+            continue
+        paired += 1
+        scan = inputs.scans[i]
+        try:
+            points, _ = scan_in_camera(scan, inputs.tf, camera.frame_id)
+            cam_to_base = inputs.tf.lookup(config.frames.base_link, camera.frame_id, boxes.stamp_ns)
+        except TransformError as err:
+            warnings.append(f"image at {boxes.stamp_ns / 1e9:.3f} s skipped: {err.reason}")
+            continue
+        door = estimate_door(camera, boxes.detections, points, dc, rng, method)
+        if door is None:
+            continue
+        pose = None
+        if series is not None:
+            poses, valid = interpolate_poses(series.stamps_ns, series.poses, [scan.stamp_ns])
+            if not valid[0]:
+                continue
+            pose = poses[0]
+        planar = to_planar(door, cam_to_base, pose)
+        match = associate(planar.left, planar.right, doors, dc.association_max_distance_m) if doors else None
+        out.append(DoorPoseEstimate(boxes.stamp_ns, scan.stamp_ns, -1 if match is None else match.door_id,
+                                    float("nan") if match is None else match.angle, planar.center, planar.yaw,
+                                    planar.width_m, door.handle_side.value, planar.goal, planar.left, planar.right,
+                                    door.box, camera.frame_id))
+    if len(warnings) > 3:
+        warnings = [*warnings[:3], f"... and {len(warnings) - 3} more images skipped for missing transforms"]
+    return DoorPoses(Path(inputs.path).name, method.value, frame, out, len(inputs.detections), paired,
+                     [*inputs.warnings, *warnings])
+
+
+@dataclass(frozen=True)
+class DoorPoseRunSummary:
+    """What ``doorbatch doorpose`` wrote."""
+
+    run_dir: str
+    fit: str
+    frame: str
+    images: int
+    paired: int
+    door_poses: int
+    matched: int
+    door_angles: dict[int, float]  # matched door → median current angle (rad)
+    files: list[str]
+
+
+def run_doorpose(log_path: Path, out: Path, config: DoorbatchConfig, map_path: Path | None = None,
+                 detector: str | None = None, fit: str | None = None,
+                 progress: Callable[[int], object] | None = None) -> tuple[DoorPoses, DoorPoseRunSummary]:
+    """Estimate door poses over a log and write the run directory: door_poses.parquet, annotated.mcap,
+    manifest.json."""
+    from doorbatch.io.annotated_mcap import write_annotated_mcap
+    from doorbatch.io.detector_model import load_detector
+    from doorbatch.io.doorpose_inputs import read_doorpose_inputs
+    from doorbatch.io.doorpose_rundir import doorpose_annotations, write_door_poses
+    from doorbatch.io.manifest import Manifest
+    from doorbatch.io.mapdir import read_door_set
+    from doorbatch.pipeline.doorpose.yolo import detect_image
+
+    dc = config.doorpose.model_copy(update={k: v for k, v in (("detector", detector), ("fit", fit)) if v})
+    config = config.model_copy(update={"doorpose": dc})
+    inputs_list = [log_path]
+    model = None
+    if dc.detector != "topic":
+        inputs_list.append(Path(dc.detector))
+        model = load_detector(Path(dc.detector), dc.torch_device)
+    if map_path is not None:
+        inputs_list.append(map_path / "doors.parquet" if map_path.is_dir() else map_path)
+    manifest = Manifest.start(config.as_dict(), inputs_list, command="doorpose", fit=dc.fit, detector=dc.detector)
+    forward = model.forward if model is not None else None
+    inputs = read_doorpose_inputs(log_path, config, None if forward is None else
+                                  (lambda image: detect_image(forward, image.pixels, dc)))
+    doors = read_door_set(map_path) if map_path is not None else None
+    result = estimate_door_poses(inputs, config, doors, LineFit(dc.fit), progress)
+    out.mkdir(parents=True, exist_ok=True)
+    write_door_poses(out / "door_poses.parquet", result)
+    write_annotated_mcap(log_path, out / "annotated.mcap", doorpose_annotations(result), config)
+    for w in result.warnings:
+        manifest.warn(w)
+    matched = [e for e in result.estimates if e.door_id >= 0]
+    angles = {k: float(np.median([e.door_angle for e in matched if e.door_id == k]))
+              for k in sorted({e.door_id for e in matched})}
+    manifest.extra.update({"door_poses": len(result), "matched": len(matched), "door_angles": angles})
+    manifest.finish()
+    manifest.write(out / "manifest.json")
+    files = [str(out / f) for f in ("door_poses.parquet", "annotated.mcap", "manifest.json")]
+    summary = DoorPoseRunSummary(str(out), result.fit, result.frame, result.images, result.paired, len(result),
+                                 len(matched), angles, files)
+    log.debug("doorpose summary: %s", asdict(summary))
+    return result, summary
+
+
+@dataclass(frozen=True)
+class ApproachRunSummary:
+    """What ``doorbatch doorpose --simulate-approach`` wrote: per method the mean summed error."""
+
+    run_dir: str
+    experiment: str
+    samples: int
+    mean_error: dict[str, float]
+    files: list[str]
+
+
+def run_simulated_experiment(experiment_path: Path, out: Path, config: DoorbatchConfig
+                             ) -> ApproachRunSummary:
+    """Run a door pose experiment file (Table I or II on simulated scenes) and write metrics.parquet and
+    manifest.json into ``out``."""
+    from doorbatch.io.manifest import Manifest
+    from doorbatch.io.parquet import write_table
+    from doorbatch.pipeline.doorpose.experiment import experiment_metrics, load_experiment
+
+    exp, config = load_experiment(experiment_path, config)
+    manifest = Manifest.start(config.as_dict(), [experiment_path], command="doorpose --simulate-approach",
+                              experiment=exp.experiment)
+    columns, result = experiment_metrics(exp, config, experiment_path.stem)
+    out.mkdir(parents=True, exist_ok=True)
+    write_table("metrics", columns, out / "metrics.parquet")
+    means = {k: float(np.mean(v[np.isfinite(v)])) for k, v in result.errors.items()}
+    manifest.extra.update({"mean_error": means})
+    manifest.finish()
+    manifest.write(out / "manifest.json")
+    return ApproachRunSummary(str(out), exp.experiment, exp.samples, means,
+                              [str(out / "metrics.parquet"), str(out / "manifest.json")])

@@ -1,0 +1,102 @@
+"""Pinhole camera: projection and pixel rays on known geometry, distortion round trips, laser points via TF."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from doorbatch.errors import LogContentError
+from doorbatch.geometry.camera import (
+    camera_from_info,
+    column_bearings,
+    in_image,
+    pixel_rays,
+    point_bearings,
+    project_points,
+    scan_in_camera,
+)
+from doorbatch.geometry.tf_buffer import TfBuffer
+from doorbatch.records import CameraInfo, Scan, Transform
+
+K = np.array([[400.0, 0.0, 319.5], [0.0, 410.0, 239.5], [0.0, 0.0, 1.0]])
+PLUMB_BOB = np.array([-0.28, 0.07, 0.001, -0.0005, 0.0])
+
+
+def _info(d: np.ndarray | None = None, model: str = "plumb_bob") -> CameraInfo:
+    d = np.zeros(5) if d is None else d
+    p = np.zeros((3, 4))
+    p[:, :3] = K
+    return CameraInfo(0, 0, "camera_optical", 640, 480, model, d, K, p)
+
+
+def test_projection_without_distortion_is_the_pinhole_formula() -> None:
+    cam = camera_from_info(_info())
+    px = project_points(cam, [[1.0, 0.5, 2.0], [0.0, 0.0, 5.0], [-0.4, -0.2, 1.0]])
+    np.testing.assert_allclose(px, [[319.5 + 200.0, 239.5 + 102.5], [319.5, 239.5], [159.5, 157.5]], atol=1e-9)
+
+
+def test_points_behind_the_camera_project_to_nan() -> None:
+    cam = camera_from_info(_info(PLUMB_BOB))
+    px = project_points(cam, [[0.0, 0.0, -1.0], [0.1, 0.0, 0.0], [0.1, 0.1, 1.0], [np.nan, 0.0, 1.0]])
+    assert np.isnan(px[[0, 1, 3]]).all()
+    assert np.isfinite(px[2]).all()
+    assert not in_image(cam, px)[0]
+
+
+def test_barrel_distortion_pulls_off_axis_points_toward_the_centre() -> None:
+    ideal = project_points(camera_from_info(_info()), [[0.6, 0.0, 1.0]])
+    distorted = project_points(camera_from_info(_info(PLUMB_BOB)), [[0.6, 0.0, 1.0]])
+    x = 0.6
+    r2 = x * x
+    radial = 1 + PLUMB_BOB[0] * r2 + PLUMB_BOB[1] * r2 * r2
+    # plumb_bob: x_d = x·radial + 2 p1 x y + p2 (r² + 2x²), y = 0
+    x_d = x * radial + PLUMB_BOB[3] * (r2 + 2 * x * x)
+    assert distorted[0, 0] == pytest.approx(400.0 * x_d + 319.5, abs=1e-6)
+    assert distorted[0, 0] < ideal[0, 0]
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.floats(-0.5, 0.5), st.floats(-0.4, 0.4), st.floats(0.5, 20.0), st.sampled_from(["plumb_bob", "none"]))
+def test_pixel_rays_invert_projection(xn: float, yn: float, depth: float, model: str) -> None:
+    cam = camera_from_info(_info(PLUMB_BOB if model == "plumb_bob" else np.zeros(5), model))
+    point = np.array([[xn * depth, yn * depth, depth]])
+    ray = pixel_rays(cam, project_points(cam, point))
+    np.testing.assert_allclose(ray[0] * depth, point[0], atol=1e-6 * depth)
+
+
+def test_column_bearings_known_angles() -> None:
+    cam = camera_from_info(_info())
+    b = column_bearings(cam, [319.5, 319.5 + 400.0, 319.5 - 400.0 * math.tan(math.radians(20.0))])
+    np.testing.assert_allclose(b, [0.0, math.pi / 4, -math.radians(20.0)], atol=1e-9)
+    np.testing.assert_allclose(point_bearings([[1.0, 3.0, 1.0], [-2.0, 0.0, 2.0]]), [math.pi / 4, -math.pi / 4])
+
+
+def test_column_bearing_matches_the_bearing_of_the_point_it_sees_with_distortion() -> None:
+    cam = camera_from_info(_info(PLUMB_BOB))
+    points = np.array([[-1.5, 0.0, 3.0], [0.3, 0.0, 1.0], [2.0, 0.0, 4.0]])
+    px = project_points(cam, points)
+    for (u, v), expected in zip(px, point_bearings(points), strict=True):
+        assert column_bearings(cam, [u], row_px=v)[0] == pytest.approx(expected, abs=1e-9)
+
+
+def test_unknown_distortion_model_is_bad_input() -> None:
+    with pytest.raises(LogContentError, match="distortion model"):
+        camera_from_info(_info(model="kannala_weird"))
+
+
+def test_scan_points_reach_the_camera_frame_through_tf() -> None:
+    tf = TfBuffer()
+    tf.add(Transform(0, "base_link", "laser", np.array([0.2, 0.0, 0.3]), np.array([0.0, 0.0, 0.0, 1.0]), True))
+    # REP 103 optical frame of a forward-looking camera 1 m up
+    tf.add(Transform(0, "base_link", "camera_optical", np.array([0.1, 0.0, 1.0]), np.array([-0.5, 0.5, -0.5, 0.5]),
+                     True))
+    ranges = np.array([2.0, np.nan, 1.0, np.inf], dtype=np.float32)
+    scan = Scan(5, 5, "laser", 0.0, math.pi / 4, 0.1, 30.0, ranges)  # beams at 0, 45, 90, 135 deg
+    pts, idx = scan_in_camera(scan, tf, "camera_optical")
+    np.testing.assert_array_equal(idx, [0, 2])
+    # forward 2 m: optical z = 2 + 0.2 − 0.1, y (down) = 1.0 − 0.3; left 1 m: optical x = −1
+    np.testing.assert_allclose(pts, [[0.0, 0.7, 2.1], [-1.0, 0.7, 0.1]], atol=1e-12)

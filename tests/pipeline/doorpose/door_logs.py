@@ -1,0 +1,47 @@
+"""Logs of a robot in front of a simulated door, written with the real writers (for the doorpose tests)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from doorbatch.io import ros_messages as m
+from doorbatch.sim.door_scene import CAMERA_FRAME, LASER_FRAME, DoorScene, observe
+from doorbatch.sim.sensors import camera_rotation_xyzw
+from tests.conftest import T0, write_messages
+
+STEP_NS = 200_000_000
+
+
+def door_log(path: Path, scene: DoorScene, poses: np.ndarray, rng: np.random.Generator, images: bool = False) -> Path:
+    """A log of the robot at ``poses`` in a door scene: static TF, camera_info, and per pose ground truth, a
+    scan, the detector's boxes (5 ms later) and, with ``images``, the rendered image."""
+    cam = scene.camera_model
+    lm = scene.laser
+    msgs: list[tuple[str, str, int, object]] = [
+        ("/tf_static", "tf2_msgs/msg/TFMessage", T0, m.tf_message([
+            m.planar_transform(T0, "base_link", LASER_FRAME, lm.mount_xy_m[0], lm.mount_xy_m[1], 0.0, z=lm.mount_z_m),
+            m.transform_stamped(T0, "base_link", CAMERA_FRAME, (*cam.mount_xy_m, cam.mount_z_m),
+                                tuple(camera_rotation_xyzw(cam.mount_yaw_rad)))])),
+        ("/camera/camera_info", "sensor_msgs/msg/CameraInfo", T0,
+         m.camera_info(T0, CAMERA_FRAME, cam.width, cam.height, cam.k)),
+    ]
+    for i, pose in enumerate(poses):
+        t = T0 + STEP_NS * (i + 1)
+        x, y, yaw = (float(v) for v in pose)
+        obs = observe(scene, pose, rng)
+        ranges = obs.ranges
+        boxes = [(d.class_id, d.score, d.center_x, d.center_y, d.size_x, d.size_y) for d in obs.detections]
+        msgs += [
+            ("/ground_truth", "nav_msgs/msg/Odometry", t, m.odometry(t, "map", "base_link", x, y, yaw)),
+            ("/scan", "sensor_msgs/msg/LaserScan", t,
+             m.laser_scan(t, LASER_FRAME, lm.angle_min_rad, lm.angle_increment_rad, lm.range_min_m, lm.range_max_m,
+                          ranges)),
+            ("/detections", "vision_msgs/msg/Detection2DArray", t + 5_000_000,
+             m.detection_array(t + 5_000_000, CAMERA_FRAME, boxes)),
+        ]
+        if images:
+            msgs.append(("/camera/image_raw", "sensor_msgs/msg/Image", t + 5_000_000,
+                         m.image_rgb8(t + 5_000_000, CAMERA_FRAME, obs.image)))
+    return write_messages(path, sorted(msgs, key=lambda msg: msg[2]))

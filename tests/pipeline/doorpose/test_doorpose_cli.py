@@ -1,0 +1,121 @@
+"""doorbatch doorpose end to end: a log written with the real writers from a simulated door scene (laser,
+camera_info, detector boxes, TF, ground truth), a map directory with that door, and the run directory."""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+from door_logs import door_log
+from mcap.reader import make_reader
+
+from doorbatch.cli import main
+from doorbatch.config import DoorbatchConfig
+from doorbatch.io.doorpose_inputs import read_doorpose_inputs
+from doorbatch.io.log_writer import LogFormat, LogWriter
+from doorbatch.io.parquet import read_table, write_table
+from doorbatch.io.reader import open_log
+from doorbatch.maps import DoorSet
+from doorbatch.pipeline.doorpose.association import associate
+from doorbatch.records import Detection, Image
+from doorbatch.sim.door_scene import DoorScene, DoorSceneSpec, make_door_scene
+
+
+def _map_dir(path: Path, scene: DoorScene) -> Path:
+    d = scene.world.doors
+    path.mkdir()
+    write_table("doors", {
+        "door_id": np.array([0, 1], dtype=np.int32),
+        "hinge_x": [float(d.hinge_xy[0, 0]), 4.0], "hinge_y": [float(d.hinge_xy[0, 1]), 0.0],
+        "length": [float(d.length_m[0]), 0.9], "closed_yaw": [float(d.closed_yaw_rad[0]), 0.0],
+        "angle_min": [0.0, 0.0], "angle_max": [1.5, 1.5], "n_observations": np.array([3, 3], dtype=np.int32),
+        "source": ["grid", "grid"], "moved": [True, True],
+    }, path / "doors.parquet")
+    return path
+
+
+def test_doorpose_writes_door_poses_matched_to_the_map(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    rng = np.random.default_rng(11)
+    scene = make_door_scene(rng, DoorSceneSpec(obstacles_per_scene=(1, 1)))
+    poses = np.array([[0.1 * k - 0.3, -2.6 + 0.15 * k, math.pi / 2 + 0.03 * k] for k in range(8)])
+    log = door_log(tmp_path / "door.mcap", scene, poses, rng)
+    out = tmp_path / "run"
+    assert main(["doorpose", str(log), "-o", str(out), "--map", str(_map_dir(tmp_path / "map", scene)),
+                 "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["paired"] == 8 and summary["frame"] == "map"
+    t = read_table("door_poses", out / "door_poses.parquet").to_pydict()
+    n = len(t["stamp_ns"])
+    assert n == summary["door_poses"] >= 6
+    assert set(t["door_id"]) == {0} and set(t["fit"]) == {"ransac"} and set(t["frame"]) == {"map"}
+    np.testing.assert_allclose(t["center_x"], 0.0, atol=0.05)
+    np.testing.assert_allclose(t["center_y"], 0.0, atol=0.05)
+    np.testing.assert_allclose(t["yaw"], -math.pi / 2, atol=0.06)
+    np.testing.assert_allclose(t["width"], scene.door_width_m, atol=0.06)
+    np.testing.assert_allclose(t["goal_y"], -0.5, atol=0.06)
+    np.testing.assert_allclose(t["goal_yaw"], math.pi / 2, atol=0.06)
+    truth_side = scene.true_handle_side(poses[0])
+    assert set(t["handle_side"]) <= {truth_side, "none"} and truth_side in t["handle_side"]
+    assert abs(summary["door_angles"]["0"]) < 0.1  # the door is closed
+    with (out / "annotated.mcap").open("rb") as f:
+        topics = [c.topic for _, c, _ in make_reader(f).iter_messages()]
+    assert topics.count("/doorbatch/door_goal") == n and topics.count("/doorbatch/door_boxes") == n
+    assert topics.count("/scan") == 8  # the input is kept
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["extra"]["matched"] == n
+
+
+def test_doorpose_without_camera_info_is_bad_input(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    rng = np.random.default_rng(2)
+    scene = make_door_scene(rng)
+    log = door_log(tmp_path / "door.mcap", scene, np.array([[0.0, -2.0, math.pi / 2]]), rng)
+    with open_log(log) as reader, LogWriter(tmp_path / "nocam2.mcap", LogFormat.MCAP) as writer:
+        for raw in reader.raw_messages():
+            if raw.topic != "/camera/camera_info":
+                writer.write_raw(raw)
+    assert main(["doorpose", str(tmp_path / "nocam2.mcap"), "-o", str(tmp_path / "out")]) == 3
+    assert "CameraInfo" in capsys.readouterr().err
+
+
+def test_simulate_approach_writes_metrics(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    exp = tmp_path / "exp.yaml"
+    exp.write_text("experiment: doorpose_goal_updating\nsamples: 2\nseed: 4\nobstacles_per_scene: [0, 0]\n"
+                   "config: {doorpose: {max_duration_s: 20.0}}\n")
+    assert main(["doorpose", str(exp), "--simulate-approach", "-o", str(tmp_path / "sim"), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert set(summary["mean_error"]) == {"initial", "continuous"}
+    t = read_table("metrics", tmp_path / "sim" / "metrics.parquet").to_pydict()
+    rows = dict(zip(zip(t["method"], t["metric"], strict=True), t["value"], strict=True))
+    assert rows[("continuous", "samples")] == 2
+    assert rows[("continuous", "positioning_error_mean")] == pytest.approx(summary["mean_error"]["continuous"])
+
+
+def test_a_detector_runs_on_every_image_of_the_log(write_log: Callable[..., Path]) -> None:
+    log = write_log("sample.mcap")
+    seen: list[tuple[int, tuple[int, ...]]] = []
+
+    def detector(image: Image) -> tuple[Detection, ...]:
+        seen.append((image.stamp_ns, image.pixels.shape))
+        return (Detection("door", 0.8, 20.0, 24.0, 10.0, 30.0),)
+
+    inputs = read_doorpose_inputs(log, DoorbatchConfig(), detector)
+    assert len(seen) == 20 and all(shape == (48, 64, 3) for _, shape in seen)
+    assert [d.stamp_ns for d in inputs.detections] == [s for s, _ in seen]
+    assert all(d.detections[0].center_x == 20.0 for d in inputs.detections)
+    assert len(inputs.scans) == 20 and inputs.camera_info.width == 64
+
+
+def test_association_reports_the_current_angle_of_the_mapped_door() -> None:
+    doors = DoorSet(np.array([[0.0, 0.0], [5.0, 0.0]]), np.array([0.9, 0.9]), np.array([0.0, math.pi]),
+                    np.zeros(2), np.full(2, 1.5))
+    opened = 0.4  # door 0 opened 0.4 rad counter-clockwise: leaf from (0, 0) toward (0.9 cos, 0.9 sin)
+    far = 0.9 * np.array([math.cos(opened), math.sin(opened)])
+    match = associate(far, np.array([0.02, -0.01]), doors, 0.6)
+    assert match.door_id == 0 and match.angle == pytest.approx(opened, abs=0.03)
+    assert associate(np.array([2.0, 2.0]), np.array([2.9, 2.0]), doors, 0.6).door_id == -1
+    closed = associate(np.array([4.1, 0.0]), np.array([5.0, 0.0]), doors, 0.6)
+    assert closed.door_id == 1 and closed.angle == pytest.approx(0.0, abs=1e-9)

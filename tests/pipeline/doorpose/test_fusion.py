@@ -1,0 +1,102 @@
+"""Door pose fusion (paper 003, Sec. III-B) on constructed geometry with known answers."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from doorbatch.config import DoorPoseConfig
+from doorbatch.geometry.camera import camera_from_info, project_points
+from doorbatch.geometry.rotations import transform_matrix
+from doorbatch.pipeline.doorpose.fusion import (
+    HandleSide,
+    estimate_door,
+    handle_side,
+    select_door_box,
+    to_planar,
+)
+from doorbatch.pipeline.doorpose.line_fit import LineFit
+from doorbatch.records import CameraInfo, Detection
+from doorbatch.sim.sensors import camera_rotation_xyzw
+
+K = np.array([[554.0, 0.0, 319.5], [0.0, 554.0, 239.5], [0.0, 0.0, 1.0]])
+CAMERA = camera_from_info(CameraInfo(0, 0, "cam", 640, 480, "plumb_bob", np.array([-0.2, 0.05, 0.0, 0.0, 0.0]),
+                                     K, np.concatenate([K, np.zeros((3, 1))], axis=1)))
+
+
+def _door(center_xz: tuple[float, float], yaw: float, width: float = 0.9) -> tuple[np.ndarray, np.ndarray]:
+    """Edges (2, 2) of a door whose leaf runs along angle ``yaw`` in the (x, z) plane, and 40 laser points
+    on it with a wall continuing on both sides (collinear: the box may overlap it)."""
+    c = np.asarray(center_xz)
+    d = np.array([math.cos(yaw), math.sin(yaw)])
+    edges = np.stack([c - width / 2 * d, c + width / 2 * d])
+    s = np.linspace(-width / 2 - 0.5, width / 2 + 0.5, 120)
+    pts = c + s[:, None] * d
+    return edges, np.column_stack([pts[:, 0], np.full(s.size, 0.8), pts[:, 1]])
+
+
+def _box(edges_xz: np.ndarray, score: float = 0.9, cls: str = "door") -> Detection:
+    px = project_points(CAMERA, [[edges_xz[0, 0], 0.0, edges_xz[0, 1]], [edges_xz[1, 0], 0.0, edges_xz[1, 1]]])
+    u0, u1 = sorted(px[:, 0])
+    return Detection(cls, score, (u0 + u1) / 2, 240.0, u1 - u0, 300.0)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.floats(-0.3, 0.3), st.floats(1.8, 4.0), st.floats(-0.5, 0.5), st.sampled_from(list(LineFit)))
+def test_door_pose_is_exact_for_exact_boxes_and_points(x: float, z: float, yaw: float, fit: LineFit) -> None:
+    edges, points = _door((x, z), yaw)
+    door = estimate_door(CAMERA, [_box(edges)], points, DoorPoseConfig(), np.random.default_rng(0), fit)
+    assert door is not None
+    np.testing.assert_allclose(door.center_xz, [x, z], atol=1e-6)
+    assert door.width_m == pytest.approx(0.9, abs=1e-6)
+    # the normal is perpendicular to the leaf and points back to the camera at the origin
+    assert abs(door.normal_xz @ [math.cos(yaw), math.sin(yaw)]) < 1e-6
+    assert door.normal_xz @ door.center_xz < 0
+    np.testing.assert_allclose(door.goal_xz, door.center_xz + 0.5 * door.normal_xz, atol=1e-12)
+
+
+def test_box_touching_the_border_is_skipped_for_a_weaker_whole_one() -> None:
+    cut = Detection("door", 0.99, 30.0, 240.0, 62.0, 300.0)  # reaches u = −1
+    whole = Detection("door", 0.6, 300.0, 240.0, 100.0, 300.0)
+    better = Detection("door", 0.8, 500.0, 240.0, 100.0, 300.0)
+    handle = Detection("handle", 0.95, 320.0, 240.0, 10.0, 5.0)
+    assert select_door_box([cut, whole, better, handle], 640, "door", 1.0) is better
+    assert select_door_box([cut], 640, "door", 1.0) is None
+
+
+def test_handle_side_from_the_half_of_the_door_box() -> None:
+    door = Detection("door", 0.9, 300.0, 240.0, 100.0, 300.0)
+    left = Detection("handle", 0.7, 265.0, 250.0, 10.0, 5.0)
+    right = Detection("handle", 0.8, 340.0, 250.0, 10.0, 5.0)
+    outside = Detection("handle", 0.99, 420.0, 250.0, 10.0, 5.0)
+    assert handle_side(door, [door, left], "handle") is HandleSide.LEFT
+    assert handle_side(door, [door, left, right, outside], "handle") is HandleSide.RIGHT
+    assert handle_side(door, [door, outside], "handle") is HandleSide.NONE
+
+
+def test_camera_door_to_map_through_the_mount_and_robot_pose() -> None:
+    edges, points = _door((0.0, 2.0), 0.0)
+    door = estimate_door(CAMERA, [_box(edges)], points, DoorPoseConfig(), np.random.default_rng(0), LineFit.LSQ)
+    assert door is not None
+    # optical frame 0.15 m ahead of base_link, 1.1 m up, looking along base x
+    cam_to_base = transform_matrix([0.15, 0.0, 1.1], camera_rotation_xyzw(0.0))
+    in_base = to_planar(door, cam_to_base)
+    np.testing.assert_allclose(in_base.center, [2.15, 0.0], atol=1e-6)
+    assert in_base.yaw == pytest.approx(math.pi, abs=1e-6)  # normal points back at the robot
+    np.testing.assert_allclose(in_base.goal, [1.65, 0.0, 0.0], atol=1e-6)
+    # the left edge (smaller optical x) is at +y in base_link
+    assert in_base.left[1] == pytest.approx(0.45, abs=1e-6)
+    in_map = to_planar(door, cam_to_base, np.array([1.0, 2.0, math.pi / 2]))
+    np.testing.assert_allclose(in_map.center, [1.0, 4.15], atol=1e-6)
+    assert in_map.yaw == pytest.approx(-math.pi / 2, abs=1e-6)
+    np.testing.assert_allclose(in_map.goal, [1.0, 3.65, math.pi / 2], atol=1e-6)
+
+
+def test_too_few_points_between_the_rays_give_no_estimate() -> None:
+    edges, points = _door((0.0, 2.0), 0.0)
+    far_right = points[points[:, 0] > 1.0]
+    assert estimate_door(CAMERA, [_box(edges)], far_right, DoorPoseConfig(), np.random.default_rng(0)) is None
