@@ -38,6 +38,8 @@ def pass_scans(rec: Recording, poses: PassPoses, scan_stride: int, with_color: b
         colors = None
         if with_color and rec.colors is not None and rec.colors[i].shape[0] == n:
             colors = rec.colors[i].astype(np.float64)
+            if rec.color_valid is not None:
+                colors[~rec.color_valid[i]] = np.nan
         angles = sc.angle_min[i] + sc.angle_increment[i] * np.arange(n)
         out.append(ScanBeams(poses.poses[i], sc.laser_to_base[i], angles, sc.ranges[i].astype(np.float64),
                              float(sc.range_min[i]), float(sc.range_max[i]), colors))
