@@ -3,6 +3,7 @@
 Sites (simulated unless their logs are in ``--work`` already, scenario ``em_mapping``: three passes,
 d01..d05 move between passes, the other doors stay closed): A = ``em_corridor`` seed 5 (10 doors),
 B = ``em_corridor_b`` seed 6 (8 doors). Reference poses; the default config (every 2nd scan and beam).
+``--camera-only``: site A with scenario ``em_mapping_camera`` (colours projected from camera images).
 
 Tables printed (Markdown):
 1. Ablation on A (paper 001 Sec. VII): range + colour, range only, colour only (a mixture of two
@@ -17,7 +18,7 @@ moved shows no hinge (its hinge end is a guess, as the paper says of Fig. 5b).
 
 Usage::
 
-    python scripts/em_acceptance.py [--work DIR] [--json]
+    python scripts/em_acceptance.py [--work DIR] [--json] [--camera-only]
 """
 
 from __future__ import annotations
@@ -57,10 +58,10 @@ class Site:
     moved: np.ndarray  # (D,) bool
 
 
-def load_site(world: str, seed: int, work: Path, config: DoorbatchConfig) -> Site:
-    folder = work / f"{world}_seed{seed}"
+def load_site(world: str, seed: int, work: Path, config: DoorbatchConfig, scenario: str = "em_mapping") -> Site:
+    folder = work / (f"{world}_seed{seed}" + ("" if scenario == "em_mapping" else f"_{scenario}"))
     if not sorted(folder.glob("map_pass*.mcap")):
-        run_simulation(ROOT / "configs" / "worlds" / f"{world}.yaml", folder / "map.mcap", scenario="em_mapping",
+        run_simulation(ROOT / "configs" / "worlds" / f"{world}.yaml", folder / "map.mcap", scenario=scenario,
                        seed=seed, split_passes=True)
         (folder / "map.mcap").unlink(missing_ok=True)
     recs = [load_recording(p, config, with_colors=True) for p in sorted(folder.glob("map_pass*.mcap"))]
@@ -177,8 +178,18 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--work", type=Path, default=None)
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--camera-only", action="store_true",
+                    help="only site A with colours from a camera (scenario em_mapping_camera), range + colour")
     args = ap.parse_args()
     config = DoorbatchConfig()
+    if args.camera_only:
+        with tempfile.TemporaryDirectory() as tmp:
+            cam = load_site("em_corridor", 5, args.work or Path(tmp), config, "em_mapping_camera")
+            res, beams = run(cam, config.em)
+            row = {**score(cam, detected_centres(res)), "coloured_beams": int(np.isfinite(beams.color[:, 0]).sum()),
+                   "beams": len(beams), "seconds": res.seconds}
+        print(json.dumps(row))
+        return
     with tempfile.TemporaryDirectory() as tmp:
         work = args.work or Path(tmp)
         a = load_site("em_corridor", 5, work, config)
