@@ -377,6 +377,24 @@ class ObjectMapConfig(Section):
     min_opening_deg: float = Field(10.0, gt=0.0)
     # closed_yaw: the direction of the wall line through the hinge within this distance.
     wall_hinge_distance_m: float = Field(0.3, gt=0.0)
+    # Two walls are one (collinear segment set) when their lines differ by less than this angle (and 3σ).
+    collinear_angle_deg: float = Field(2.0, gt=0.0)
+    # Structure search bookkeeping: a crossed wall piece shorter than this is no doorway; a leaf-like piece
+    # of one pass at least this long; candidates whose ends lie closer than this are one doorway; a
+    # candidate this close to a door's hinge, leaf ends or middles is that door.
+    min_doorway_m: float = Field(0.2, gt=0.0)
+    min_leaf_piece_m: float = Field(0.3, gt=0.0)
+    candidate_merge_m: float = Field(0.3, gt=0.0)
+    existing_door_radius_m: float = Field(0.25, gt=0.0)
+    # A door changes the likelihood of rays passing within (width + this) of its hinge, and walls whose
+    # line passes within (width + door_wall_margin_m) are re-cut over a window (width + both margins).
+    door_ray_margin_m: float = Field(0.3, gt=0.0)
+    door_wall_margin_m: float = Field(0.2, gt=0.0)
+    recut_window_margin_m: float = Field(1.0, gt=0.0)
+    # Angle search: a pass shows the leaf when this much pseudo-E-step support is there; of directions with
+    # this share of the best score, the one nearest the closed direction.
+    min_leaf_support: float = Field(3.0, gt=0.0)
+    angle_tie_share: float = Field(0.8, gt=0.0, le=1.0)
 
 
 class DoorPoseConfig(Section):

@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
+from doorbatch.config import ObjectMapConfig
 from doorbatch.pipeline.objectmap.beams import BeamSet
 from doorbatch.pipeline.objectmap.model import DOOR, ObjectMap
 from doorbatch.pipeline.objectmap.sensor import FirstObjects
@@ -94,47 +95,45 @@ def leaf_blocked(origin: FloatArray, end: FloatArray, hinge: FloatArray, yaws: F
     return np.asarray(hit.sum(axis=0), dtype=np.float64)
 
 
-def initial_angles(beams: BeamSet, hinge: FloatArray, width: float, fallback_yaw: float, sigma: float,
-                   step_deg: float, through_margin_m: float, max_opening_deg: float) -> FloatArray:
+def initial_angles(beams: BeamSet, hinge: FloatArray, width: float, fallback_yaw: float, config: ObjectMapConfig
+                   ) -> FloatArray:
     """Per pass, the leaf direction best supported by that pass's points near the hinge (pseudo-E-step)
     less the rays of that pass that would pass through the leaf, within ``max_opening_deg`` of the closed
     direction ``fallback_yaw`` (so the wall behind the hinge is not taken for the leaf); of directions
-    within 80 % of the best, the one nearest the closed direction; ``fallback_yaw`` when no direction has
-    support (the leaf was not seen in that pass)."""
-    offsets = np.deg2rad(np.arange(-max_opening_deg, max_opening_deg + 1e-9, step_deg))
+    within ``angle_tie_share`` of the best, the one nearest the closed direction; ``fallback_yaw`` when no
+    direction has support (the leaf was not seen in that pass)."""
+    sigma = config.sigma_m
+    offsets = np.deg2rad(np.arange(-config.max_opening_deg, config.max_opening_deg + 1e-9,
+                                   config.angle_search_step_deg))
     yaws = fallback_yaw + offsets
     out = np.full(beams.n_passes, fallback_yaw)
     pts = beams.points
     reach = np.linalg.norm(pts - hinge, axis=1)
-    near_o = _passes_near(beams, hinge, width + 0.2)
+    near_o = rays_near(beams, hinge, width + config.door_wall_margin_m)
     for t in range(beams.n_passes):
         in_pass = beams.pass_index == t
         sel = in_pass & beams.hit & (reach <= width + 3.0 * sigma)
         support = leaf_support(pts[sel], hinge, yaws, width, sigma)
-        if support.max() < 3.0:
+        if support.max() < config.min_leaf_support:
             continue
         # rays of this pass passing by the hinge: their piece up to (range − margin) must not cross the leaf
         rays = in_pass & near_o
-        end = beams.origin[rays] + np.maximum(beams.range_m[rays] - through_margin_m, 0.0)[:, None] * \
+        end = beams.origin[rays] + np.maximum(beams.range_m[rays] - config.through_margin_m, 0.0)[:, None] * \
             beams.direction[rays]
         score = support - leaf_blocked(beams.origin[rays], end, hinge, yaws, width)
-        good = np.flatnonzero(score >= max(3.0, 0.8 * float(score.max())))
+        good = np.flatnonzero(score >= max(config.min_leaf_support, config.angle_tie_share * float(score.max())))
         if good.size:
             out[t] = yaws[good[np.argmin(np.abs(offsets[good]))]]
     return out
 
 
-def _passes_near(beams: BeamSet, point: FloatArray, radius: float) -> BoolArray:
-    """Rays (origin → measured end) that pass within ``radius`` of ``point``."""
+def rays_near(beams: BeamSet, point: FloatArray, radius: float) -> BoolArray:
+    """Rays (origin → measured end, the max-range mark for no-return beams) passing within ``radius`` of
+    ``point``."""
     rel = point - beams.origin
     along = np.clip(np.sum(rel * beams.direction, axis=1), 0.0, beams.range_m)
     closest = beams.origin + along[:, None] * beams.direction
     return np.asarray(np.linalg.norm(closest - point, axis=1) <= radius, dtype=np.bool_)
-
-
-def rays_near(beams: BeamSet, point: FloatArray, radius: float) -> BoolArray:
-    """Public form of the ray-near-point test (rays to their measured end, max-range ones included)."""
-    return _passes_near(beams, point, radius)
 
 
 def leaf_crossings(beams: BeamSet, hinge: FloatArray, yaws: FloatArray, max_width: float, sigma: float

@@ -91,7 +91,8 @@ def m_step_walls(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> Ob
         walls[j] = Wall(normal, offset, segs)
         keep.append(segs.shape[0] > 0 and cost + 2.0 * config.rho_static < 0.0)
     kept = [w for w, k in zip(walls, keep, strict=True) if k]
-    return replace(obj_map, walls=merge_collinear(kept, 2.0, config.pseudo_e_sigmas * config.sigma_m))
+    return replace(obj_map, walls=merge_collinear(kept, config.collinear_angle_deg,
+                                                             config.pseudo_e_sigmas * config.sigma_m))
 
 
 def m_step_doors(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> ObjectMap:

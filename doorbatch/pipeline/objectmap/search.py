@@ -22,7 +22,7 @@ from doorbatch.config import ObjectMapConfig
 from doorbatch.pipeline.gridmap.doors import cluster_points
 from doorbatch.pipeline.objectmap.beams import BeamSet
 from doorbatch.pipeline.objectmap.doors import fit_hinge_angles, initial_angles, rays_near
-from doorbatch.pipeline.objectmap.em import MapState, evaluate, run_em
+from doorbatch.pipeline.objectmap.em import EmTrace, MapState, evaluate, run_em
 from doorbatch.pipeline.objectmap.hough import hough_lines
 from doorbatch.pipeline.objectmap.model import DOOR, WALL, ClassParams, Door, ObjectMap, Wall
 from doorbatch.pipeline.objectmap.prior import log_prior
@@ -90,7 +90,7 @@ def propose_walls(beams: BeamSet, obj_map: ObjectMap, config: ObjectMapConfig) -
                 break
             normal, offset = fit_line(pts[sel], np.exp(-0.5 * (r[sel] / sigma) ** 2) + 1e-12)
         else:
-            if any(abs(float(normal @ w.normal)) > np.cos(np.deg2rad(2.0))
+            if any(abs(float(normal @ w.normal)) > np.cos(np.deg2rad(config.collinear_angle_deg))
                    and abs(offset * np.sign(normal @ w.normal) - w.offset) < band for w in walls):
                 continue
             current = replace(obj_map, walls=walls)
@@ -134,7 +134,8 @@ def motion_candidates(beams: BeamSet, state: MapState, config: ObjectMapConfig) 
             if int(sel.sum()) < config.min_crossing_rays:
                 continue
             s = (beams.origin[sel] + first.delta[sel, None] * beams.direction[sel]) @ wall.tangent
-            for a, b, n in _intervals(s, config.candidate_cluster_m, config.min_crossing_rays, 0.2):
+            for a, b, n in _intervals(s, config.candidate_cluster_m, config.min_crossing_rays,
+                                      config.min_doorway_m):
                 base = wall.offset * wall.normal
                 out += _both_ends(base + a * wall.tangent, base + b * wall.tangent, "motion", n)
     return out + _leaf_candidates(beams, state, config)
@@ -162,7 +163,8 @@ def _leaf_candidates(beams: BeamSet, state: MapState, config: ObjectMapConfig) -
             tangent = np.array([-normal[1], normal[0]])
             along = pts[members] @ tangent
             rms = float(np.sqrt(np.mean((pts[members] @ normal - offset) ** 2)))
-            if rms > 2.0 * config.sigma_m or not 0.3 <= float(np.ptp(along)) <= config.door_width_max_m + 0.1:
+            if rms > 2.0 * config.sigma_m or not (config.min_leaf_piece_m <= float(np.ptp(along))
+                                                  <= config.door_width_max_m + 2.0 * config.sigma_m):
                 continue
             a = offset * normal + along.min() * tangent
             b = offset * normal + along.max() * tangent
@@ -214,8 +216,7 @@ def _near_existing(c: DoorCandidate, obj_map: ObjectMap, radius: float) -> bool:
 def _door_fit(beams: BeamSet, c: DoorCandidate, width: float, config: ObjectMapConfig) -> Door:
     """Initial angles by the pseudo-E-step search, then eq. (10) on the points near the leaf."""
     sigma = config.sigma_m
-    yaws = initial_angles(beams, c.hinge, width, c.fallback_yaw, sigma, config.angle_search_step_deg,
-                          config.through_margin_m, config.max_opening_deg)
+    yaws = initial_angles(beams, c.hinge, width, c.fallback_yaw, config)
     pts = beams.points
     near = beams.hit & (np.linalg.norm(pts - c.hinge, axis=1) <= width + 3.0 * sigma)
     idx = np.flatnonzero(near)
@@ -283,7 +284,7 @@ def _recut_walls(beams: BeamSet, obj_map: ObjectMap, near: FloatArray, radius: f
         if abs(float(near @ w.normal) - w.offset) > radius:
             continue
         s_near = float(near @ w.tangent)
-        lo, hi = s_near - radius - 1.0, s_near + radius + 1.0
+        lo, hi = s_near - radius - config.recut_window_margin_m, s_near + radius + config.recut_window_margin_m
         segs = recut_window(beams, replace(obj_map, walls=walls), j, lo, hi, config)
         walls[j] = Wall(w.normal, w.offset, segs)
         changed.append((j, lo, hi))
@@ -305,10 +306,10 @@ def _full_first(beams: BeamSet, obj_map: ObjectMap, idx: IntArray, template: Fir
 
 
 def _affected(beams: BeamSet, door: Door, width: float, changed: list[tuple[int, float, float]],
-              obj_map: ObjectMap, sigma: float) -> IntArray:
+              obj_map: ObjectMap, sigma: float, margin_m: float) -> IntArray:
     """Beams whose likelihood may change: rays passing near the door, and rays crossing a re-cut wall in
     its window."""
-    mask = rays_near(beams, door.hinge, width + 0.3)
+    mask = rays_near(beams, door.hinge, width + margin_m)
     for j, lo, hi in changed:
         w = obj_map.walls[j]
         cross = line_crossings(beams, w.normal, w.offset, sigma)
@@ -356,8 +357,8 @@ def try_door(beams: BeamSet, state: MapState, c: DoorCandidate, config: ObjectMa
     width = obj_map.classes.door_width_m
     door = _door_fit(beams, c, width, config)
     with_door = replace(obj_map, doors=[*obj_map.doors, door])
-    new_map, changed = _recut_walls(beams, with_door, door.hinge, width + 0.2, config)
-    idx = _affected(beams, door, width, changed, new_map, config.sigma_m)
+    new_map, changed = _recut_walls(beams, with_door, door.hinge, width + config.door_wall_margin_m, config)
+    idx = _affected(beams, door, width, changed, new_map, config.sigma_m, config.door_ray_margin_m)
     empty = FirstObjects(np.full(len(beams), np.inf), np.full(len(beams), -1, dtype=np.int64),
                          np.full(len(beams), -1, dtype=np.int64))
     first_mid = _full_first(beams, new_map, idx, empty)
@@ -400,11 +401,11 @@ def add_doors(beams: BeamSet, state: MapState, candidates: list[DoorCandidate], 
     kept: list[list[DoorCandidate]] = []
     for k in order:  # one pair per doorway: pairs whose ends coincide (within a cluster distance) are one
         pair = candidates[k: k + 2]
-        if not any(min(float(np.linalg.norm(a.hinge - b.hinge)) for a in pair for b in other) < 0.3
+        if not any(min(float(np.linalg.norm(a.hinge - b.hinge)) for a in pair for b in other) < config.candidate_merge_m
                    for other in kept):
             kept.append(pair)
     for pair in kept[: config.max_door_candidates]:
-        if any(_near_existing(c, state.obj_map, 0.25) for c in pair):
+        if any(_near_existing(c, state.obj_map, config.existing_door_radius_m) for c in pair):
             continue
         results = [try_door(beams, state, c, config) for c in pair]
         gain, new_map = max(results, key=lambda r: r[0])
@@ -415,7 +416,7 @@ def add_doors(beams: BeamSet, state: MapState, candidates: list[DoorCandidate], 
 
 
 def search_structure(beams: BeamSet, config: ObjectMapConfig, classes: ClassParams | None = None,
-                     trace: object | None = None) -> MapState:
+                     trace: EmTrace | None = None) -> MapState:
     """The whole stage: walls, EM, then rounds of door proposals and EM. ``classes`` given: they are
     applied as they are (not relearned), as in paper 001 Fig. 5b."""
     learn = classes is None
@@ -424,7 +425,7 @@ def search_structure(beams: BeamSet, config: ObjectMapConfig, classes: ClassPara
         cls0 = replace(cls0, has_color=False)
     obj_map = ObjectMap([], [], cls0, beams.n_passes)
     obj_map = propose_walls(beams, obj_map, config)
-    state = run_em(beams, obj_map, config, learn, trace=trace)  # type: ignore[arg-type]
+    state = run_em(beams, obj_map, config, learn, trace=trace)
     for _ in range(config.structure_rounds):
         candidates = motion_candidates(beams, state, config)
         if state.obj_map.doors or not learn:
@@ -432,5 +433,5 @@ def search_structure(beams: BeamSet, config: ObjectMapConfig, classes: ClassPara
         state, added = add_doors(beams, state, candidates, config)
         if not added:
             break
-        state = run_em(beams, state.obj_map, config, learn, trace=trace)  # type: ignore[arg-type]
+        state = run_em(beams, state.obj_map, config, learn, trace=trace)
     return state

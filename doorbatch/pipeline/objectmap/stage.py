@@ -98,7 +98,7 @@ def describe_doors(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> 
     for i, door in enumerate(obj_map.doors):
         mine = (state.first.cls == DOOR) & (state.first.obj == i) & beams.hit & (state.e > 0.5)
         counts = np.bincount(beams.pass_index[mine], minlength=obj_map.n_passes)
-        observed = counts >= 3
+        observed = counts >= config.min_leaf_support
         closed = closed_yaw(obj_map, i, config.wall_hinge_distance_m)
         rel = wrap_angle(door.yaws - closed)
         seen = rel[observed] if observed.any() else rel
