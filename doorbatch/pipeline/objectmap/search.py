@@ -177,7 +177,8 @@ def _leaf_candidates(beams: BeamSet, state: MapState, config: ObjectMapConfig) -
 
 def color_candidates(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> list[DoorCandidate]:
     """Doors from colour (Sec. VI): runs along a wall whose beams' colours are better explained by the
-    door class than by the wall class, about a door width long."""
+    door class than by the wall class, at least half a door width long; in a run longer than 1.5 widths
+    (overlapping colour classes), the door-wide window with the largest summed log-likelihood ratio."""
     obj_map = state.obj_map
     classes = obj_map.classes
     if not classes.has_color:
@@ -188,7 +189,8 @@ def color_candidates(beams: BeamSet, state: MapState, config: ObjectMapConfig) -
     ok = beams.hit & np.isfinite(col[:, 0]) & (state.first.cls == WALL) & fits
     ll = [-0.5 * np.sum((col - classes.color_mean[c]) ** 2 / classes.color_var[c]
                         + np.log(classes.color_var[c]), axis=1) for c in (WALL, DOOR)]
-    door_like = ok & (ll[1] > ll[0])
+    ratio = ll[1] - ll[0]
+    door_like = ok & (ratio > 0.0)
     out: list[DoorCandidate] = []
     width = classes.door_width_m
     for j, wall in enumerate(obj_map.walls):
@@ -196,8 +198,17 @@ def color_candidates(beams: BeamSet, state: MapState, config: ObjectMapConfig) -
         if int(sel.sum()) < config.min_crossing_rays:
             continue
         s = beams.points[sel] @ wall.tangent
+        on_wall = ok & (state.first.obj == j)
+        s_all = beams.points[on_wall] @ wall.tangent
+        order = np.argsort(s_all)
+        s_all, csum = s_all[order], np.concatenate([[0.0], np.cumsum(ratio[on_wall][order])])
+        base = wall.offset * wall.normal
         for a, b, n in _intervals(s, config.candidate_cluster_m, config.min_crossing_rays, 0.5 * width):
-            base = wall.offset * wall.normal
+            if b - a > 1.5 * width:  # a long run (colours overlap): the door-wide window most door-like
+                starts = s_all[(s_all >= a) & (s_all <= b - width)]
+                score = csum[np.searchsorted(s_all, starts + width, "right")] - csum[np.searchsorted(s_all, starts)]
+                a = float(starts[int(np.argmax(score))])
+                b = a + width
             out += _both_ends(base + a * wall.tangent, base + b * wall.tangent, "color", n)
     return out
 
