@@ -4,6 +4,7 @@ Sites (simulated unless their logs are in ``--work`` already, scenario ``em_mapp
 d01..d05 move between passes, the other doors stay closed): A = ``em_corridor`` seed 5 (10 doors),
 B = ``em_corridor_b`` seed 6 (8 doors). Reference poses; the default config (every 2nd scan and beam).
 ``--camera-only``: site A with scenario ``em_mapping_camera`` (colours projected from camera images).
+``--sample-only``: the bundled sample (office_corridor seed 1; d02 and d05 never move).
 
 Tables printed (Markdown):
 1. Ablation on A (paper 001 Sec. VII): range + colour, range only, colour only (a mixture of two
@@ -18,7 +19,7 @@ moved shows no hinge (its hinge end is a guess, as the paper says of Fig. 5b).
 
 Usage::
 
-    python scripts/em_acceptance.py [--work DIR] [--json] [--camera-only]
+    python scripts/em_acceptance.py [--work DIR] [--json] [--camera-only | --sample-only]
 """
 
 from __future__ import annotations
@@ -64,6 +65,11 @@ def load_site(world: str, seed: int, work: Path, config: DoorbatchConfig, scenar
         run_simulation(ROOT / "configs" / "worlds" / f"{world}.yaml", folder / "map.mcap", scenario=scenario,
                        seed=seed, split_passes=True)
         (folder / "map.mcap").unlink(missing_ok=True)
+    return site_from_folder(f"{world}:{seed}", folder, config)
+
+
+def site_from_folder(name: str, folder: Path, config: DoorbatchConfig) -> Site:
+    """A site from a folder of pass logs ``map_pass*.mcap`` and their truth ``map.truth.yaml``."""
     recs = [load_recording(p, config, with_colors=True) for p in sorted(folder.glob("map_pass*.mcap"))]
     truth = read_truth(folder / "map.truth.yaml")
     mids = np.array([(p.stationary_ns + p.end_ns) // 2 for p in truth.passes], dtype=np.int64)
@@ -73,8 +79,7 @@ def load_site(world: str, seed: int, work: Path, config: DoorbatchConfig, scenar
         yaw = d.closed_yaw + angles[:, k]
         centres.append(np.array([d.hinge_x, d.hinge_y]) + 0.5 * d.length * np.stack([np.cos(yaw), np.sin(yaw)], 1))
     moved = np.ptp(angles, axis=0) > np.deg2rad(10.0)
-    return Site(f"{world}:{seed}", recs, [pass_poses(r, "reference", config) for r in recs], truth,
-                np.array(centres), moved)
+    return Site(name, recs, [pass_poses(r, "reference", config) for r in recs], truth, np.array(centres), moved)
 
 
 def detected_centres(result: ObjectMapResult) -> np.ndarray:
@@ -178,10 +183,19 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--work", type=Path, default=None)
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--sample-only", action="store_true",
+                    help="only the bundled sample's mapping passes: range + colour and range only")
     ap.add_argument("--camera-only", action="store_true",
                     help="only site A with colours from a camera (scenario em_mapping_camera), range + colour")
     args = ap.parse_args()
     config = DoorbatchConfig()
+    if args.sample_only:
+        sample = site_from_folder("sample", ROOT / "datasets" / "sample" / "logs", config)
+        rows = {"range_color": score(sample, detected_centres(run(sample, config.em)[0])),
+                "range_only": score(sample, detected_centres(
+                    run(sample, config.em.model_copy(update={"use_color": False}))[0]))}
+        print(json.dumps(rows))
+        return
     if args.camera_only:
         with tempfile.TemporaryDirectory() as tmp:
             cam = load_site("em_corridor", 5, args.work or Path(tmp), config, "em_mapping_camera")
