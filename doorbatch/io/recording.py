@@ -85,7 +85,8 @@ class Recording:
     color_valid: list[npt.NDArray[np.bool_]] | None = None
 
 
-def _series(poses: list[Pose2D]) -> PoseSeries | None:
+def pose_series(poses: list[Pose2D]) -> PoseSeries | None:
+    """Poses as a stamp-sorted PoseSeries (None when there are none)."""
     if not poses:
         return None
     poses = sorted(poses, key=lambda p: p.stamp_ns)
@@ -170,7 +171,7 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
         aligned, valid = camera_beam_colors(path, scans, tf, config)
         if not any(v.any() for v in valid):
             aligned, valid = None, None
-    return Recording(str(path), scan_set, _series(odom), _series(ref), aligned, warnings, valid)
+    return Recording(str(path), scan_set, pose_series(odom), pose_series(ref), aligned, warnings, valid)
 
 
 def _aligned_colors(colors: BeamColors | None, beams: int) -> npt.NDArray[np.uint8]:
