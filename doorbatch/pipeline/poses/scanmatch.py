@@ -39,6 +39,13 @@ objective, so this only chooses between its basins), the data weighted by the sm
 the noise of the better fit (a scan that overlaps the submap poorly fits either pose loosely, and then the
 prediction decides).
 
+The window is a modelled 3σ, and the odometry has tails beyond it (the rotation error of an in-place turn
+with a few centimetres of jitter, a wheel slip). When the lattice optimum lies on the window's border, the
+optimum may lie beyond it: the window grows by ``window_growth`` on those axes and the search is repeated; and
+when the match is rejected, the window grows on all axes and the scan is matched again, up to the configured
+maxima (Olson's multi-resolution search bounds a window it is given; choosing the window is the front end's
+job, and a border optimum or a failed match is the evidence that it was too narrow).
+
 A match is rejected when it has too few points or inliers, or the ICP leaves the search window; the scan
 then keeps the prediction (``fallback``, with the prediction's covariance; the number of fallbacks is logged as
 a warning) and still becomes a keyframe when it moved far enough, so that matching resumes against fresh
@@ -246,6 +253,31 @@ def search_window(covariance: FloatArray, cfg: ScanMatchConfig) -> tuple[tuple[f
     return (float(wx), float(wy)), wyaw
 
 
+Window = tuple[tuple[float, float], float]  # correlative half-widths: (x, y) in m, yaw in deg
+
+
+def border_axes(best: FloatArray, prior: FloatArray, window: Window, cfg: ScanMatchConfig) -> tuple[bool, bool, bool]:
+    """Whether the lattice optimum ``best`` lies on the outermost shift of the window on x, y, yaw."""
+    (wx, wy), wyaw = window
+    res, step = cfg.grid_resolution_m, cfg.correlative_step_deg
+    # The outermost lattice shifts as correlative_match lays them out, less half a step.
+    edge_x, edge_y = (round(w / res) * res - 0.5 * res for w in (wx, wy))
+    edge_yaw = math.floor(wyaw / step + 1e-9) * step - 0.5 * step
+    turn = abs(math.degrees(float(wrap_angle(best[2] - prior[2]))))
+    return (abs(best[0] - prior[0]) >= edge_x, abs(best[1] - prior[1]) >= edge_y, turn >= edge_yaw)
+
+
+def grown_window(window: Window, axes: tuple[bool, bool, bool], cfg: ScanMatchConfig) -> Window | None:
+    """The window ``window_growth`` times wider on the given axes (x, y, yaw), clipped to the maxima; None
+    when none of those axes can grow."""
+    (wx, wy), wyaw = window
+    grow = cfg.window_growth
+    new = ((min(wx * grow, cfg.correlative_window_max_m) if axes[0] else wx,
+            min(wy * grow, cfg.correlative_window_max_m) if axes[1] else wy),
+           min(wyaw * grow, cfg.correlative_window_max_deg) if axes[2] else wyaw)
+    return None if new == window else new
+
+
 def voxel_downsample(points: FloatArray, voxel_m: float) -> FloatArray:
     """One centroid per occupied voxel of edge ``voxel_m`` (order: by voxel key)."""
     if points.shape[0] == 0:
@@ -317,20 +349,29 @@ def match_scan(submap: Submap, scan_xy: FloatArray, prior: FloatArray, prior_cov
     rejected = ScanMatch(prior, prior_covariance, 0, math.nan, 0.0, True, False)
     if scan_xy.shape[0] < cfg.min_inliers or submap.lines.size < cfg.min_inliers:
         return rejected
-    window_m, window_deg = search_window(prior_covariance, cfg)
+    window: Window = search_window(prior_covariance, cfg)
     stride = -(-scan_xy.shape[0] // cfg.correlative_max_points)
-    coarse = correlative_match(submap.grid, scan_xy[::stride], prior, window_m=window_m, window_deg=window_deg,
-                               step_deg=cfg.correlative_step_deg)
     gaussian = GaussianPrior(prior, np.asarray(np.linalg.inv(prior_covariance), dtype=np.float64))
-    fine = _refine(submap, scan_xy, coarse.pose, gaussian, cfg)
-    if _lattice_steps_apart(coarse.pose, prior, cfg) > 1.0:
-        from_prior = _refine(submap, scan_xy, prior, gaussian, cfg)
-        sigma_m = min(fine.sigma_m, from_prior.sigma_m)  # one σ for both: the better fit's noise estimate
-        fine = from_prior if map_cost(from_prior, sigma_m) < map_cost(fine, sigma_m) else fine
-    if not _accept(fine, prior, window_m, window_deg, cfg):
-        return ScanMatch(prior, prior_covariance, fine.n_inliers, fine.residual_m, coarse.score, True, False)
-    return ScanMatch(fine.pose, fine.covariance, fine.n_inliers, fine.residual_m, coarse.score, False,
-                     fine.degeneracy < cfg.min_degeneracy)
+    while True:
+        (window_m, window_deg) = window
+        coarse = correlative_match(submap.grid, scan_xy[::stride], prior, window_m=window_m, window_deg=window_deg,
+                                   step_deg=cfg.correlative_step_deg)
+        wider = grown_window(window, border_axes(coarse.pose, prior, window, cfg), cfg)
+        if wider is not None:  # the optimum may lie beyond the border: search on
+            window = wider
+            continue
+        fine = _refine(submap, scan_xy, coarse.pose, gaussian, cfg)
+        if _lattice_steps_apart(coarse.pose, prior, cfg) > 1.0:
+            from_prior = _refine(submap, scan_xy, prior, gaussian, cfg)
+            sigma_m = min(fine.sigma_m, from_prior.sigma_m)  # one σ for both: the better fit's noise estimate
+            fine = from_prior if map_cost(from_prior, sigma_m) < map_cost(fine, sigma_m) else fine
+        if _accept(fine, prior, window_m, window_deg, cfg):
+            return ScanMatch(fine.pose, fine.covariance, fine.n_inliers, fine.residual_m, coarse.score, False,
+                             fine.degeneracy < cfg.min_degeneracy)
+        wider = grown_window(window, (True, True, True), cfg)  # no match here: search wider before giving up
+        if wider is None:
+            return ScanMatch(prior, prior_covariance, fine.n_inliers, fine.residual_m, coarse.score, True, False)
+        window = wider
 
 
 def _refine(submap: Submap, scan_xy: FloatArray, start: FloatArray, prior: GaussianPrior,
