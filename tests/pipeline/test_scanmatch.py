@@ -23,7 +23,6 @@ from doorbatch.pipeline.evaluate.trajectory_error import align_first_pose, ate_r
 from doorbatch.pipeline.mapping import pass_poses
 from doorbatch.pipeline.poses import ScanMatchConfig, scan_match_trajectory
 from doorbatch.pipeline.poses.scanmatch import (
-    border_axes,
     grown_window,
     prediction_covariance,
     search_window,
@@ -135,17 +134,11 @@ def test_rotation_error_beyond_the_modelled_window_is_found_by_growing_the_windo
     assert np.abs(result.poses[:, :2] - truth[:, :2]).max() < 0.02
 
 
-def test_window_grows_only_on_the_axes_whose_border_holds_the_optimum() -> None:
+def test_window_grows_on_every_axis_up_to_the_maxima() -> None:
     cfg = ScanMatchConfig(window_growth=2.0, correlative_window_max_m=2.0, correlative_window_max_deg=90.0)
-    prior = np.array([1.0, 2.0, 0.0])
-    window = ((0.25, 0.5), 20.0)
-    # 0.25 m = 5 cells: on the x border; y 0.2 of 0.5 m inside; 20° = the outermost yaw step.
-    on_border = border_axes(np.array([0.75, 2.2, np.deg2rad(-20.0)]), prior, window, cfg)
-    assert on_border == (True, False, True)
-    assert grown_window(window, on_border, cfg) == ((0.5, 0.5), 40.0)
-    assert border_axes(np.array([1.1, 2.1, 0.1]), prior, window, cfg) == (False, False, False)
-    assert grown_window(((1.5, 2.0), 60.0), (True, True, True), cfg) == ((2.0, 2.0), 90.0)  # clipped to maxima
-    assert grown_window(((2.0, 2.0), 90.0), (True, True, True), cfg) is None  # nothing left to grow
+    assert grown_window(((0.25, 0.5), 20.0), cfg) == ((0.5, 1.0), 40.0)
+    assert grown_window(((1.5, 0.5), 60.0), cfg) == ((2.0, 1.0), 90.0)  # clipped to the maxima
+    assert grown_window(((2.0, 2.0), 90.0), cfg) is None  # nothing left to grow
 
 
 def test_voxel_downsample_keeps_one_centroid_per_voxel() -> None:
