@@ -116,6 +116,9 @@ class ScanMatchConfig(Section):
     # Correlative search (Olson 2009) around the prior: half-widths of window_sigmas × the increment's σ per
     # map axis, clipped to [min, max] (the min covers events the α-model does not, e.g. a wheel slip).
     window_sigmas: float = Field(3.0, gt=0.0)
+    # A rejected match is retried in a window this many times wider (up to the maxima), until one is accepted:
+    # the prediction may be off by more than window_sigmas of its σ (a tail of the odometry).
+    window_growth: float = Field(2.0, gt=1.0)
     correlative_window_min_m: float = Field(0.25, ge=0.0)
     correlative_window_max_m: float = Field(2.0, gt=0.0)
     correlative_window_min_deg: float = Field(10.0, ge=0.0)

@@ -11,7 +11,10 @@ the median distance and turn from the reference pose to where it converged. A fr
 that agrees with the scans step by step accumulates roughly that much per step in new territory.
 
 Usage: ``python scripts/scanmatch_acceptance.py [--seed N] [--json] [--every K]`` (``--every K``: also the position
-error and the reference position of every K-th scan, to see where a log drifts)
+error, the reference position and the running sum of the pairwise turns of every K-th scan, to see where a log
+drifts; ``--no-drift``: the CARMEN logs keep their own odometry, in orebro exactly the corrected poses);
+``--seeds 1-8`` instead gives each CARMEN log's scan-matching ATE for each of those drift seeds, its median and
+its worst (one seed's figure is one draw of the drift: a matcher that derails on another draw is not robust).
 """
 
 from __future__ import annotations
@@ -52,20 +55,22 @@ def _hits(rec: Recording, idx: np.ndarray) -> list[np.ndarray]:
     return out
 
 
-def reference_consistency(scans: list[np.ndarray], ref: np.ndarray) -> tuple[float, float]:
-    """Median (m, deg) of how far PLICP moves each scan from its reference pose against the previous scan."""
-    moved = []
+def reference_consistency(scans: list[np.ndarray], ref: np.ndarray) -> tuple[float, float, np.ndarray]:
+    """Median (m, deg) of how far PLICP moves each scan from its reference pose against the previous scan, and
+    the running sum of its signed turns (deg, one per scan): how far the scans alone would turn the reference."""
+    moved = [np.zeros(3)]
     for k in range(1, len(scans)):
         fit = plicp(scan_line_reference(scans[k - 1], ref[k - 1]), scans[k], ref[k], min_step_m=1e-5,
                     min_step_rad=1e-6)
         moved.append(relative(ref[k], fit.pose))
-    d = np.asarray(moved)
-    return float(np.median(np.hypot(d[:, 0], d[:, 1]))), float(np.degrees(np.median(np.abs(d[:, 2]))))
+    d = np.asarray(moved)[1:]
+    turned = np.degrees(np.cumsum(np.asarray(moved)[:, 2]))
+    return float(np.median(np.hypot(d[:, 0], d[:, 1]))), float(np.degrees(np.median(np.abs(d[:, 2])))), turned
 
 
-def evaluate(name: str, recs: list[Recording], drift_seed: int | None, config: DoorbatchConfig, every: int = 0
-             ) -> dict[str, object]:
-    """ATE of odometry and of scan matching over the concatenated recordings."""
+def _inputs(recs: list[Recording], drift_seed: int | None) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+    """Reference and odometry at the scan stamps (odometry drifted from the reference when a seed is given;
+    first poses aligned) and the scans' hits, over the concatenated recordings."""
     refs, odoms, scans = [], [], []
     for rec in recs:
         ref, ok = _at_scans(rec, "reference")
@@ -80,7 +85,23 @@ def evaluate(name: str, recs: list[Recording], drift_seed: int | None, config: D
         scans += _hits(rec, idx)
     ref = np.concatenate(refs)
     odom = np.concatenate(odoms) if drift_seed is None else drift_poses(ref, NOISE, np.random.default_rng(drift_seed))
-    odom = align_first_pose(odom, ref)
+    return ref, align_first_pose(odom, ref), scans
+
+
+def ate_over_seeds(name: str, recs: list[Recording], seeds: list[int], config: DoorbatchConfig) -> dict[str, object]:
+    """Scan-matching ATE for each drift seed, with the median and the worst (how robust, not one draw)."""
+    ates = []
+    for seed in seeds:
+        ref, odom, scans = _inputs(recs, seed)
+        ates.append(ate_rmse(align_first_pose(scan_match_trajectory(scans, odom, config.scanmatch).poses, ref), ref))
+    return {"log": name, "seeds": seeds, "ate_scanmatch_m": [round(a, 3) for a in ates],
+            "median_m": round(float(np.median(ates)), 3), "worst_m": round(max(ates), 3)}
+
+
+def evaluate(name: str, recs: list[Recording], drift_seed: int | None, config: DoorbatchConfig, every: int = 0
+             ) -> dict[str, object]:
+    """ATE of odometry and of scan matching over the concatenated recordings."""
+    ref, odom, scans = _inputs(recs, drift_seed)
     t0 = time.perf_counter()
     matched = scan_match_trajectory(scans, odom, config.scanmatch)
     seconds = time.perf_counter() - t0
@@ -88,7 +109,7 @@ def evaluate(name: str, recs: list[Recording], drift_seed: int | None, config: D
     err = position_errors(est, ref)
     worst = int(np.argmax(err))
     over = np.flatnonzero(err > 0.2)
-    pair_m, pair_deg = reference_consistency(scans, ref)
+    pair_m, pair_deg, turned = reference_consistency(scans, ref)
     return {
         "log": name, "scans": len(scans), "ate_odometry_m": round(ate_rmse(odom, ref), 4),
         "ate_scanmatch_m": round(ate_rmse(est, ref), 4), "max_error_m": round(float(err[worst]), 3),
@@ -96,7 +117,8 @@ def evaluate(name: str, recs: list[Recording], drift_seed: int | None, config: D
         "first_scan_over_0.2m": int(over[0]) if over.size else None, "fallbacks": int(matched.fallback.sum()),
         "scans_per_s": round(len(scans) / seconds, 1), "ref_pairwise_median_m": round(pair_m, 4),
         "ref_pairwise_median_deg": round(pair_deg, 3),
-        **({"errors_every": [[k, round(float(err[k]), 2), round(float(ref[k, 0]), 1), round(float(ref[k, 1]), 1)]
+        **({"errors_every": [[k, round(float(err[k]), 2), round(float(ref[k, 0]), 1), round(float(ref[k, 1]), 1),
+                              round(float(turned[k]), 2)]
                              for k in range(0, len(err), every)]} if every else {}),
     }
 
@@ -105,16 +127,30 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seed", type=int, default=7, help="drift seed for the CARMEN logs")
     parser.add_argument("--json", action="store_true")
-    parser.add_argument("--every", type=int, default=0, help="also list [scan, error m, x, y] every K scans")
+    parser.add_argument("--every", type=int, default=0,
+                        help="also list [scan, error m, x, y, pairwise turn so far deg] every K scans")
+    parser.add_argument("--no-drift", action="store_true",
+                        help="CARMEN logs keep their own odometry (in corrected logs: the corrected poses)")
+    parser.add_argument("--seeds", type=str, default="",
+                        help="instead: ATE of the CARMEN logs over these drift seeds, e.g. 1-8 (median, worst)")
     args = parser.parse_args()
     config = DoorbatchConfig()
+    if args.seeds:
+        first, _, last = args.seeds.partition("-")
+        seeds = list(range(int(first), int(last or first) + 1))
+        for name in ("orebro", "intel", "aces"):
+            path = CARMEN / f"{name}-corrected.log.gz"
+            if path.exists():
+                print(json.dumps(ate_over_seeds(name, [load_recording(path, config)], seeds, config)), flush=True)
+        return
     rows = [evaluate("sample mapping run (3 passes)",
                      [load_recording(SAMPLE / f"map_pass{k}.mcap", config) for k in (1, 2, 3)], None, config,
                      args.every)]
     for name in ("orebro", "intel", "aces"):
         path = CARMEN / f"{name}-corrected.log.gz"
         if path.exists():
-            rows.append(evaluate(name, [load_recording(path, config)], args.seed, config, args.every))
+            seed = None if args.no_drift else args.seed
+            rows.append(evaluate(name, [load_recording(path, config)], seed, config, args.every))
     if args.json:
         print(json.dumps(rows, indent=2))
         return

@@ -11,6 +11,7 @@ from scanmatch_sim import (
     corridor_truth,
     drifting_odometry,
     polyline,
+    room_segments,
     simulate_scan,
 )
 
@@ -21,7 +22,12 @@ from doorbatch.io.recording import load_recording
 from doorbatch.pipeline.evaluate.trajectory_error import align_first_pose, ate_rmse
 from doorbatch.pipeline.mapping import pass_poses
 from doorbatch.pipeline.poses import ScanMatchConfig, scan_match_trajectory
-from doorbatch.pipeline.poses.scanmatch import voxel_downsample
+from doorbatch.pipeline.poses.scanmatch import (
+    grown_window,
+    prediction_covariance,
+    search_window,
+    voxel_downsample,
+)
 from tests.conftest import REPO
 
 JUMPS = {60: (0.3, 0.0, np.deg2rad(10.0)), 140: (-0.2, 0.1, np.deg2rad(-8.0))}  # wheel slip, a bump
@@ -109,6 +115,30 @@ def test_config_is_frozen_and_rejects_unknown_keys() -> None:
     config = ScanMatchConfig()
     with pytest.raises(ValidationError):
         config.keyframe_min_d_m = 1.0  # type: ignore[misc]
+
+
+def test_rotation_error_beyond_the_modelled_window_is_found_by_growing_the_window() -> None:
+    """An in-place turn whose odometry is 30° off in one step (a tail the α-model's 3σ window leaves out)."""
+    rng = np.random.default_rng(11)
+    truth = np.array([[3.0, 2.6, np.deg2rad(10.0 * k)] for k in range(12)])
+    scans = [simulate_scan(room_segments(), pose, rng) for pose in truth]
+    inc = relative(truth[:-1], truth[1:])
+    inc[3, 2] += np.deg2rad(30.0)
+    odom = np.vstack([truth[:1], compose(truth[0], np.cumsum(inc, axis=0))])  # pure turns: increments add up
+    cfg = ScanMatchConfig()
+    window_deg = search_window(prediction_covariance(inc[3], odom[3, 2], cfg), cfg)[1]
+    assert window_deg < 30.0  # the error lies outside the first window
+    result = scan_match_trajectory(scans, odom, cfg)
+    assert not result.fallback.any()
+    assert np.rad2deg(np.abs(wrap_angle(result.poses[:, 2] - truth[:, 2]))).max() < 0.5
+    assert np.abs(result.poses[:, :2] - truth[:, :2]).max() < 0.02
+
+
+def test_window_grows_on_every_axis_up_to_the_maxima() -> None:
+    cfg = ScanMatchConfig(window_growth=2.0, correlative_window_max_m=2.0, correlative_window_max_deg=90.0)
+    assert grown_window(((0.25, 0.5), 20.0), cfg) == ((0.5, 1.0), 40.0)
+    assert grown_window(((1.5, 0.5), 60.0), cfg) == ((2.0, 1.0), 90.0)  # clipped to the maxima
+    assert grown_window(((2.0, 2.0), 90.0), cfg) is None  # nothing left to grow
 
 
 def test_voxel_downsample_keeps_one_centroid_per_voxel() -> None:
