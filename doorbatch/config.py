@@ -325,7 +325,9 @@ class LocalizeConfig(Section):
     beam_combination: Literal["product", "amcl"] = "product"
     # Beam skipping (Nav2 do_beamskip, beam_skip_distance/threshold/error_threshold): leave out the beams whose
     # end point is farther than beam_skip_distance from the model (RBPF: static map or the associated door) at
-    # particles holding more than 1 - beam_skip_threshold of the weight, unless more than
+    # particles holding more than 1 - beam_skip_threshold of the weight given the other beams (not the
+    # prediction: a wide predicted cloud would skip its corrective beams; likelihood_field.beam_support_weights),
+    # unless more than
     # beam_skip_error_threshold of the beams would go. Unexplained obstacles (people, doors the map lacks)
     # otherwise drag the filter along corridors (docs/localization.md).
     do_beamskip: bool = True
