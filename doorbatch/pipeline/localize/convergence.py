@@ -13,7 +13,8 @@ detector therefore asks for more than a small covariance:
    robot ``converged_min_travel_m`` (a stationary robot keeps seeing the same scan; a hypothesis that is
    wrong has to survive new views).
 
-The claimed convergence time is the update at which 3 is first met (the time a user could act on it).
+The claimed convergence time is the update at which 3 is met for the streak that lasts to the end of the log
+(the time a user could act on it); a streak that breaks later withdraws its claim.
 """
 
 from __future__ import annotations
@@ -59,7 +60,7 @@ class ConvergenceMonitor:
         since_ns: stamp of the first update of the current tight-and-unimodal streak (None: no streak).
         travel_m: odometry path length since then.
         last_odom: (3,) odometry pose at the previous update (None before the first).
-        converged_ns: stamp at which convergence was claimed (None: not yet).
+        converged_ns: stamp at which the current streak's convergence was claimed (None: no claim stands).
     """
 
     since_ns: int | None = None
@@ -69,13 +70,14 @@ class ConvergenceMonitor:
 
     def update(self, stamp_ns: int, odom: npt.ArrayLike, particles: ParticleSet,
                config: LocalizeConfig) -> ConvergenceMonitor:
-        """The state after one filter update (a claimed convergence is kept)."""
+        """The state after one filter update. A claim is withdrawn when the cloud later spreads or splits (a
+        hypothesis the scans went on to contradict was not a convergence); a new streak must then hold again."""
         o = np.asarray(odom, dtype=np.float64).reshape(3)
-        if self.converged_ns is not None:
-            return self
         step = 0.0 if self.last_odom is None else float(np.hypot(*(o[:2] - self.last_odom[:2])))
         if not (is_tight(particles, config) and not multimodal(particles, config)):
             return ConvergenceMonitor(None, 0.0, o, None)
+        if self.converged_ns is not None:
+            return ConvergenceMonitor(self.since_ns, self.travel_m + step, o, self.converged_ns)
         since = stamp_ns if self.since_ns is None else self.since_ns
         travel = 0.0 if self.since_ns is None else self.travel_m + step
         held = (stamp_ns - since) / 1e9 >= config.converged_hold_s and travel >= config.converged_min_travel_m

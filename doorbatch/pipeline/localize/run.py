@@ -235,7 +235,7 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
         p = state.particles
         mean, cov = p.mean_and_covariance()
         dmean, dstd = p.door_estimate()
-        if converged_ns is None:
+        if init == "global":
             monitor = monitor.update(int(scan.stamp_ns), odom[i], p, lc)
             converged_ns = monitor.converged_ns
         # a fixed-size draw of the (equally weighted after resampling) particles for the annotated MCAP

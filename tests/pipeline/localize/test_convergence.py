@@ -57,3 +57,13 @@ def test_a_streak_broken_by_a_wide_cloud_starts_over() -> None:
         p = wide if k == 15 else tight
         monitor = monitor.update(k * 100_000_000, (0.5 * k / 10, 0.0, 0.0), p, CONFIG)
     assert monitor.converged_ns == 3_600_000_000  # 2 s after the streak restarted at 1.6 s
+
+
+def test_a_claim_is_withdrawn_when_the_cloud_later_splits() -> None:
+    tight, split = cloud([(1.0, 2.0, 0.3)], [1.0]), cloud([(1.0, 2.0, 0.3), (6.0, 2.0, 0.3)], [0.6, 0.4])
+    monitor = ConvergenceMonitor()
+    for k in range(31):
+        monitor = monitor.update(k * 100_000_000, (0.5 * k / 10, 0.0, 0.0), tight, CONFIG)
+    assert monitor.converged_ns == 2_000_000_000
+    monitor = monitor.update(3_100_000_000, (1.55, 0.0, 0.0), split, CONFIG)
+    assert monitor.converged_ns is None
