@@ -169,9 +169,13 @@ def simulate_cmd(ctx: Context, world: Path, output: Path, scenario: str | None, 
               help="Map directory to write.")
 @click.option("--pose-source", type=click.Choice(["reference", "odometry", "scanmatch"]), default=None,
               help="Where robot poses come from (default: reference if every log has one, else scanmatch).")
-@click.option("--stages", default="grid", show_default=True, help="Comma-separated stages to run.")
+@click.option("--stages", default=None, help="Comma-separated stages: grid, em (default: grid,em when the logs "
+              "have per-beam colours, else grid).")
+@click.option("--classes", "classes_file", type=click.Path(path_type=Path, dir_okay=False), default=None,
+              help="classes.json of an earlier em run: apply its class parameters without relearning.")
 @common_options
-def map_cmd(ctx: Context, logs: tuple[Path, ...], output: Path, pose_source: str | None, stages: str) -> None:
+def map_cmd(ctx: Context, logs: tuple[Path, ...], output: Path, pose_source: str | None, stages: str | None,
+            classes_file: Path | None) -> None:
     """Occupancy grid map with doors from LOG... (each log one pass; doors may move between passes)."""
     from doorbatch.pipeline.map_run import run_map
     from doorbatch.progress import progress_bar
@@ -180,8 +184,8 @@ def map_cmd(ctx: Context, logs: tuple[Path, ...], output: Path, pose_source: str
     if pose_source is not None:
         config = config.model_copy(update={"mapping": config.mapping.model_copy(update={"pose_source": pose_source})})
     with progress_bar(len(logs), "map", unit="pass") as bar:
-        _, summary = run_map(list(logs), output, config, [s.strip() for s in stages.split(",") if s.strip()],
-                             progress=bar.update)
+        wanted = None if stages is None else [s.strip() for s in stages.split(",") if s.strip()]
+        _, summary = run_map(list(logs), output, config, wanted, progress=bar.update, classes_file=classes_file)
     ctx.summary(f"map of {summary.passes} pass(es) from {summary.pose_source} poses: {summary.doors} door(s) "
                 f"→ {summary.map_dir}", asdict(summary))
 

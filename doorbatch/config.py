@@ -418,6 +418,73 @@ class EvaluateConfig(Section):
     global_success_yaw_deg: float = Field(10.0, gt=0.0)
     # Bin width of the error-along-the-corridor curves (paper 000 Figs. 5-7).
     along_x_bin_m: float = Field(0.5, gt=0.0)
+
+
+class ObjectMapConfig(Section):
+    """``doorbatch map`` em stage: EM object maps of walls and doors (paper 001). Paper defaults (Sec. VII):
+    λ = 0.7, σ = 5 cm, ρS = 35, ρD = 1.3·ρS, ρL = 0.7 per cm."""
+
+    validity_prior: float = Field(0.7, gt=0.0, lt=1.0)  # λ = p(v = 1)
+    sigma_m: float = Field(0.05, gt=0.0)  # σ of the range Gaussian
+    rho_global: float = Field(35.0, ge=0.0)  # ρG: the paper gives none; same as ρS
+    rho_static: float = Field(35.0, ge=0.0)  # ρS per static local parameter
+    rho_dynamic: float = Field(45.5, ge=0.0)  # ρD = 1.3·ρS per dynamic parameter (door angle per pass)
+    rho_length_per_m: float = Field(70.0, ge=0.0)  # ρL = 0.7 per cm of segment
+    # dmax: ranges at or beyond min(scan range_max, this) are max-range readings (long CARMEN ranges are sparse).
+    max_range_m: float = Field(20.0, gt=0.0)
+    # Decimation (the stage keeps every n-th scan and every n-th beam of it).
+    scan_stride: int = Field(2, ge=1)
+    beam_stride: int = Field(2, ge=1)
+    use_color: bool = True  # false: range-only EM even when the log has colors
+    color_var_floor: float = Field(4.0, gt=0.0)  # per-channel colour variance floor (RGB units²)
+    em_iterations: int = Field(6, ge=1)
+    structure_rounds: int = Field(3, ge=1)  # outer loop: door proposals (motion, colour) then EM
+    # Hough transform for wall proposals (Sec. VI): angle step, offset bin, dominant-orientation share.
+    hough_step_deg: float = Field(1.0, gt=0.0)
+    hough_offset_bin_m: float = Field(0.05, gt=0.0)
+    hough_orientation_share: float = Field(0.25, gt=0.0, le=1.0)  # orientations with this share of the best
+    hough_min_points: int = Field(20, ge=2)
+    max_wall_proposals: int = Field(80, ge=1)
+    # Pseudo-E-step band: points within this many σ of a new object support it.
+    pseudo_e_sigmas: float = Field(3.0, gt=0.0)
+    # Doors: leaf width search range and start value; a switch for per-door widths (paper's Stanford run).
+    door_width_min_m: float = Field(0.5, gt=0.0)
+    door_width_max_m: float = Field(1.3, gt=0.0)
+    door_width_init_m: float = Field(0.9, gt=0.0)
+    per_door_width: bool = False
+    angle_search_step_deg: float = Field(2.0, gt=0.0)
+    # A leaf turns at most this far from its closed direction (keeps the wall behind the hinge out).
+    max_opening_deg: float = Field(135.0, gt=0.0, lt=180.0)
+    hinge_descent_iterations: int = Field(60, ge=1)
+    # Motion proposals: a ray passes through an object when it ends this far beyond it.
+    through_margin_m: float = Field(0.3, gt=0.0)
+    min_crossing_rays: int = Field(8, ge=1)
+    candidate_cluster_m: float = Field(0.15, gt=0.0)
+    max_door_candidates: int = Field(60, ge=1)
+    # A door is "moved" when its per-pass angles span at least this (seen at two distinguishable angles).
+    min_opening_deg: float = Field(10.0, gt=0.0)
+    # closed_yaw: the direction of the wall line through the hinge within this distance.
+    wall_hinge_distance_m: float = Field(0.3, gt=0.0)
+    # Two walls are one (collinear segment set) when their lines differ by less than this angle (and 3σ).
+    collinear_angle_deg: float = Field(2.0, gt=0.0)
+    # Structure search bookkeeping: a crossed wall piece shorter than this is no doorway; a leaf-like piece
+    # of one pass at least this long; candidates whose ends lie closer than this are one doorway; a
+    # candidate this close to a door's hinge, leaf ends or middles is that door.
+    min_doorway_m: float = Field(0.2, gt=0.0)
+    min_leaf_piece_m: float = Field(0.3, gt=0.0)
+    candidate_merge_m: float = Field(0.3, gt=0.0)
+    existing_door_radius_m: float = Field(0.25, gt=0.0)
+    # A door changes the likelihood of rays passing within (width + this) of its hinge, and walls whose
+    # line passes within (width + door_wall_margin_m) are re-cut over a window (width + both margins).
+    door_ray_margin_m: float = Field(0.3, gt=0.0)
+    door_wall_margin_m: float = Field(0.2, gt=0.0)
+    recut_window_margin_m: float = Field(1.0, gt=0.0)
+    # Angle search: a pass shows the leaf when this much pseudo-E-step support is there; of directions with
+    # this share of the best score, the one nearest the closed direction.
+    min_leaf_support: float = Field(3.0, gt=0.0)
+    angle_tie_share: float = Field(0.8, gt=0.0, le=1.0)
+
+
 class DoorPoseConfig(Section):
     """``doorbatch doorpose``: door poses from camera boxes fused with a laser line, goal poses, and the
     positioning controller (paper 003, Sec. III-B and III-C)."""
@@ -509,6 +576,7 @@ class DoorbatchConfig(Section):
     doors: DoorDetectionConfig = DoorDetectionConfig()
     localize: LocalizeConfig = LocalizeConfig()
     evaluate: EvaluateConfig = EvaluateConfig()
+    em: ObjectMapConfig = ObjectMapConfig()
     doorpose: DoorPoseConfig = DoorPoseConfig()
     run: RunConfig = RunConfig()
 

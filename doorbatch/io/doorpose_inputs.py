@@ -8,13 +8,11 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-
 from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import LogContentError
 from doorbatch.geometry.tf_buffer import TfBuffer
 from doorbatch.io.reader import open_log
-from doorbatch.io.recording import PoseSeries
+from doorbatch.io.recording import PoseSeries, pose_series
 from doorbatch.records import CameraInfo, Detection, Detections, Image, Pose2D, Role, Scan, Transform
 
 ImageDetector = Callable[[Image], tuple[Detection, ...]]
@@ -32,14 +30,6 @@ class DoorPoseInputs:
     reference: PoseSeries | None
     odometry: PoseSeries | None
     warnings: list[str] = field(default_factory=list)
-
-
-def _series(poses: list[Pose2D]) -> PoseSeries | None:
-    if not poses:
-        return None
-    poses = sorted(poses, key=lambda p: p.stamp_ns)
-    return PoseSeries(np.array([p.stamp_ns for p in poses], dtype=np.int64),
-                      np.array([[p.x, p.y, p.yaw] for p in poses], dtype=np.float64), poses[0].frame_id)
 
 
 def read_doorpose_inputs(path: Path, config: DoorbatchConfig, detector: ImageDetector | None = None
@@ -87,4 +77,4 @@ def read_doorpose_inputs(path: Path, config: DoorbatchConfig, detector: ImageDet
     if not scans:
         raise LogContentError("scan topic has no messages", path=path)
     return DoorPoseInputs(str(path), tf, info, sorted(scans, key=lambda s: s.stamp_ns),
-                          sorted(boxes, key=lambda d: d.stamp_ns), _series(ref), _series(odom), warnings)
+                          sorted(boxes, key=lambda d: d.stamp_ns), pose_series(ref), pose_series(odom), warnings)

@@ -33,12 +33,13 @@ def doors_columns(doors: Sequence[PreviewDoor], n_observations: Sequence[int], s
 
 
 def write_map_dir(out: Path, static_map: OccupancyMap, doors: Sequence[PreviewDoor], n_observations: Sequence[int],
-                  source: str, trajectories: Sequence[np.ndarray]) -> list[Path]:
-    """Write map.yaml/map.pgm, doors.parquet and preview.png into ``out``; returns the files written."""
+                  source: str, trajectories: Sequence[np.ndarray], walls: np.ndarray | None = None) -> list[Path]:
+    """Write map.yaml/map.pgm, doors.parquet and preview.png (with ``walls`` (K, 2, 2) segments of the em
+    stage drawn, when given) into ``out``; returns the files written."""
     out.mkdir(parents=True, exist_ok=True)
     write_map(static_map, out / "map.yaml")
     write_table("doors", doors_columns(doors, n_observations, source), out / "doors.parquet")
-    write_preview(out / "preview.png", render_preview(static_map, doors, trajectories))
+    write_preview(out / "preview.png", render_preview(static_map, doors, trajectories, walls=walls))
     return [out / "map.yaml", out / "map.pgm", out / "doors.parquet", out / "preview.png"]
 
 

@@ -45,10 +45,11 @@ def crop_to_known(occ: OccupancyMap, margin_cells: int = 20) -> OccupancyMap:
 
 
 def render_preview(occ: OccupancyMap, doors: Sequence[PreviewDoor] = (),
-                   trajectories: Sequence[npt.NDArray[np.float64]] = (), max_side_px: int = 2000
-                   ) -> npt.NDArray[np.uint8]:
+                   trajectories: Sequence[npt.NDArray[np.float64]] = (), max_side_px: int = 2000,
+                   walls: npt.NDArray[np.float64] | None = None) -> npt.NDArray[np.uint8]:
     """BGR image of the known part of the map: free white, occupied black, unknown grey; doors red (moved)
-    or orange (never seen moving) with their opening arcs; trajectories as coloured lines."""
+    or orange (never seen moving) with their opening arcs; trajectories as coloured lines; ``walls``
+    (K, 2, 2) wall segments of the em stage as dark blue lines."""
     occ = crop_to_known(occ)
     scale = _pixel_scale(occ, max_side_px)
     grid = occ.occupancy
@@ -67,6 +68,9 @@ def render_preview(occ: OccupancyMap, doors: Sequence[PreviewDoor] = (),
     for k, traj in enumerate(trajectories):
         if len(traj) > 1:
             cv2.polylines(img, [px(traj[:, :2])], False, _COLORS_BGR[k % len(_COLORS_BGR)], 1, cv2.LINE_AA)
+    for seg in ([] if walls is None else walls):
+        a, b = px(seg)
+        cv2.line(img, tuple(a), tuple(b), (140, 40, 0), 2, cv2.LINE_AA)
     for door in doors:
         color = (0, 0, 230) if door.moved else (0, 140, 255)
         hinge = np.array([door.hinge_x, door.hinge_y])

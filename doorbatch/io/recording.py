@@ -73,7 +73,8 @@ class ScanSet:
 
 @dataclass(frozen=True)
 class Recording:
-    """One log as arrays. ``colors[i]`` is (B_i, 3) uint8 aligned with scan i, when the log has colors."""
+    """One log as arrays. ``colors[i]`` is (B_i, 3) uint8 aligned with scan i, when the log has colors;
+    ``color_valid[i]`` (B_i,) marks the beams that have one (None: all that have a colour array)."""
 
     path: str
     scans: ScanSet
@@ -81,9 +82,11 @@ class Recording:
     reference: PoseSeries | None
     colors: list[npt.NDArray[np.uint8]] | None = None
     warnings: list[str] = field(default_factory=list)
+    color_valid: list[npt.NDArray[np.bool_]] | None = None
 
 
-def _series(poses: list[Pose2D]) -> PoseSeries | None:
+def pose_series(poses: list[Pose2D]) -> PoseSeries | None:
+    """Poses as a stamp-sorted PoseSeries (None when there are none)."""
     if not poses:
         return None
     poses = sorted(poses, key=lambda p: p.stamp_ns)
@@ -138,6 +141,7 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
             elif item.role is Role.COLORS and isinstance(rec, BeamColors):
                 colors[rec.stamp_ns] = rec
         warnings = list(reader.warnings)
+        camera = reader.roles.topic(Role.IMAGE) is not None and reader.roles.topic(Role.CAMERA_INFO) is not None
     if not scans:
         raise LogContentError("scan topic has no messages", path=path, topic=scan_topic)
     base = config.frames.base_link
@@ -158,9 +162,16 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
         frame_id=scans[0].frame_id,
     )
     aligned = None
+    valid = None
     if with_colors and colors:
         aligned = [_aligned_colors(colors.get(s.stamp_ns), s.ranges.shape[0]) for s in scans]
-    return Recording(str(path), scan_set, _series(odom), _series(ref), aligned, warnings)
+    elif with_colors and camera:  # no /scan_colors: project the scan into the camera images
+        from doorbatch.io.camera_colors import camera_beam_colors
+
+        aligned, valid = camera_beam_colors(path, scans, tf, config)
+        if not any(v.any() for v in valid):
+            aligned, valid = None, None
+    return Recording(str(path), scan_set, pose_series(odom), pose_series(ref), aligned, warnings, valid)
 
 
 def _aligned_colors(colors: BeamColors | None, beams: int) -> npt.NDArray[np.uint8]:

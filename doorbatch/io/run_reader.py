@@ -138,7 +138,9 @@ def read_map_dir(map_dir: Path, name: str | None = None) -> MapTables:
         candidates = [_sibling(p, "truth") for p in logs] + [p.parent / "map.truth.yaml" for p in logs[:1]]
         found = next((c for c in candidates if c.is_file()), None)
         truth = read_truth(found) if found is not None else None
-    return MapTables(name or map_dir.name, read_door_set(map_dir), truth)
+    sources = set(read_table("doors", map_dir / "doors.parquet").column("source").to_pylist()) if (
+        map_dir / "doors.parquet").is_file() else set()
+    return MapTables(name or map_dir.name, read_door_set(map_dir), truth, source="em" if "em" in sources else "grid")
 
 
 def params_json(params: dict[str, Any]) -> str:

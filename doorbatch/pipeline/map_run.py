@@ -2,17 +2,28 @@
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
 
 from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import UsageError
 from doorbatch.io.manifest import Manifest
 from doorbatch.io.mapdir import write_map_dir
+from doorbatch.io.object_map import read_classes, write_classes, write_walls
+from doorbatch.io.recording import Recording, load_recording
 from doorbatch.pipeline.mapping import DoorMap, build_map, preview_doors
+from doorbatch.pipeline.objectmap.stage import ObjectMapResult, em_stage
 
-STAGES = ("grid",)  # the em stage arrives with paper 001's object maps
+STAGES = ("grid", "em")  # em (paper 001) takes the grid stage's poses: grid always runs
+
+
+def default_stages(recordings: Sequence[Recording]) -> list[str]:
+    """grid,em when every log has per-beam colours, else grid (DESIGN: em is the default with colour)."""
+    return ["grid", "em"] if recordings and all(r.colors is not None for r in recordings) else ["grid"]
 
 
 @dataclass(frozen=True)
@@ -27,29 +38,57 @@ class MapRunSummary:
     warnings: list[str]
 
 
-def run_map(logs: Sequence[Path], out: Path, config: DoorbatchConfig, stages: Sequence[str] = ("grid",),
-            progress: Callable[[int], object] | None = None) -> tuple[DoorMap, MapRunSummary]:
+def run_map(logs: Sequence[Path], out: Path, config: DoorbatchConfig, stages: Sequence[str] | None = ("grid",),
+            progress: Callable[[int], object] | None = None, classes_file: Path | None = None
+            ) -> tuple[DoorMap, MapRunSummary]:
     """Build the door map of ``logs`` (one pass each) and write ``out``/{map.yaml, map.pgm, doors.parquet,
-    preview.png, manifest.json}.
+    preview.png, manifest.json}; with the em stage also walls.parquet and classes.json, and doors.parquet
+    holds the em doors (source ``em``). ``stages`` None: :func:`default_stages`. ``classes_file``: class
+    parameters applied without relearning (paper 001 Fig. 5b).
 
     Raises:
-        UsageError: an unknown stage.
-        PipelineError, InputDataError: as :func:`build_map`.
+        UsageError: an unknown stage, or --classes without the em stage.
+        PipelineError, InputDataError: as :func:`build_map`; a bad classes file.
     """
-    unknown = [s for s in stages if s not in STAGES]
+    unknown = [s for s in (stages or ()) if s not in STAGES]
     if unknown:
         raise UsageError(f"--stages {','.join(unknown)} is not available (stages: {', '.join(STAGES)})")
+    classes = read_classes(classes_file) if classes_file is not None else None
+    recordings = None
+    if stages is None or "em" in stages:
+        recordings = [load_recording(Path(p), config, with_colors=True) for p in logs]
+        stages = default_stages(recordings) if stages is None else list(stages)
+    if classes is not None and "em" not in stages:
+        raise UsageError("--classes applies to the em stage: add it with --stages grid,em")
     manifest = Manifest.start(config.as_dict(), [Path(p) for p in logs], command="map", stages=list(stages))
-    door_map = build_map(logs, config, progress)
-    files = write_map_dir(out, door_map.static_map, preview_doors(door_map.doors),
-                          [d.n_observations for d in door_map.doors], "grid",
-                          [p.poses[p.valid] for p in door_map.passes])
+    door_map = build_map(logs, config, progress, recordings)
+    em: ObjectMapResult | None = None
+    if "em" in stages and recordings is not None:
+        t0 = time.perf_counter()
+        em = em_stage(recordings, door_map.passes, config, classes)
+        door_map.stage_seconds["em"] = time.perf_counter() - t0
+    trajectories = [p.poses[p.valid] for p in door_map.passes]
+    if em is None:
+        files = write_map_dir(out, door_map.static_map, preview_doors(door_map.doors),
+                              [d.n_observations for d in door_map.doors], "grid", trajectories)
+    else:
+        walls = [w.endpoints() for w in em.object_map.walls if w.segments.size]
+        files = write_map_dir(out, door_map.static_map, [d.preview for d in em.doors],
+                              [d.n_observations for d in em.doors], "em", trajectories,
+                              walls=np.concatenate(walls) if walls else None)
+        write_walls(out / "walls.parquet", em.object_map.walls)
+        write_classes(out / "classes.json", em.object_map.classes)
+        files += [out / "walls.parquet", out / "classes.json"]
+        manifest.extra["em"] = {"beams": em.n_beams, "log_posterior": em.log_posterior,
+                                "walls": len(em.object_map.walls), "doors": len(em.doors),
+                                "grid_doors": len(door_map.doors), "classes_given": classes is not None}
     manifest.extra["pose_source"] = door_map.pose_source
     for w in door_map.warnings:
         manifest.warn(w)
     manifest.stage_seconds.update(door_map.stage_seconds)
     manifest.finish()
     manifest.write(out / "manifest.json")
-    summary = MapRunSummary(str(out), door_map.pose_source, len(door_map.doors), len(door_map.passes),
+    n_doors = len(em.doors) if em is not None else len(door_map.doors)
+    summary = MapRunSummary(str(out), door_map.pose_source, n_doors, len(door_map.passes),
                             [str(f) for f in [*files, out / "manifest.json"]], door_map.warnings)
     return door_map, summary

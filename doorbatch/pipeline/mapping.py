@@ -172,8 +172,10 @@ def integrate_pass(mapper: GridMapper, rec: Recording, poses: PassPoses, stride:
 
 
 def build_map(logs: Sequence[Path], config: DoorbatchConfig | None = None,
-              progress: Callable[[int], object] | None = None) -> DoorMap:
-    """Door-augmented occupancy grid from logs, each one pass (doors stationary within a pass).
+              progress: Callable[[int], object] | None = None,
+              recordings: Sequence[Recording] | None = None) -> DoorMap:
+    """Door-augmented occupancy grid from logs, each one pass (doors stationary within a pass);
+    ``recordings``: the logs already loaded (the em stage loads them with colours).
 
     Raises:
         PipelineError: no usable pose source, or passes in disjoint coordinate frames.
@@ -182,7 +184,8 @@ def build_map(logs: Sequence[Path], config: DoorbatchConfig | None = None,
     config = config or DoorbatchConfig()
     seconds: dict[str, float] = {}
     t0 = time.perf_counter()
-    recordings = [load_recording(Path(p), config) for p in logs]
+    if recordings is None:
+        recordings = [load_recording(Path(p), config) for p in logs]
     seconds["read"] = time.perf_counter() - t0
     source = choose_pose_source(recordings, config.mapping.pose_source)
     check_common_frame(recordings, source, config)

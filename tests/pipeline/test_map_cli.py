@@ -21,7 +21,7 @@ SAMPLE_LOGS = REPO / "datasets" / "sample" / "logs"
 def test_map_on_the_sample_writes_the_map_directory(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     logs = [str(SAMPLE_LOGS / f"map_pass{k}.mcap") for k in (1, 2, 3)]
     out = tmp_path / "map"
-    assert main(["map", *logs, "-o", str(out), "--json"]) == 0
+    assert main(["map", *logs, "-o", str(out), "--stages", "grid", "--json"]) == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["pose_source"] == "reference" and summary["passes"] == 3
     occ = read_map(out / "map.yaml")

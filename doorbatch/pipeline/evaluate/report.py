@@ -122,6 +122,8 @@ class MapTables:
     doors: DoorSet
     truth: SimTruth | None = None
     params: dict[str, Any] = field(default_factory=dict)
+    # "em" when doors.parquet holds the EM stage's doors (moved and never moved), else "grid" (moved only).
+    source: str = "grid"
 
 
 @dataclass(frozen=True)
@@ -259,7 +261,17 @@ def _map_rows(door_map: MapTables, truth: SimTruth | None, cfg: DoorbatchConfig)
     if truth is None:
         return []
     truth_set, moved = truth_doors(truth, math.radians(cfg.doors.min_opening_deg))
-    score = score_doors(door_map.doors, truth_set, moved, cfg.evaluate.door_match_max_hinge_m)
+    max_m = cfg.evaluate.door_match_max_hinge_m
+    if door_map.source == "em":  # EM also finds doors that never moved (paper 001): every truth door counts
+        score = score_doors(door_map.doors, truth_set, np.ones(len(moved), dtype=bool), max_m)
+        found = np.zeros(len(moved), dtype=bool)
+        found[[j for _, j in score.matches]] = True
+        extra = [("door_recall_moved", _fraction(found[moved]), "ratio"),
+                 ("door_recall_never_moved", _fraction(found[~moved]), "ratio"),
+                 ("doors_truth_never_moved", float((~moved).sum()), "count")]
+    else:
+        score = score_doors(door_map.doors, truth_set, moved, max_m)
+        extra = []
 
     def mean(a: FloatArray) -> float:
         return float(np.mean(np.abs(a))) if a.size else math.nan
@@ -268,8 +280,14 @@ def _map_rows(door_map: MapTables, truth: SimTruth | None, cfg: DoorbatchConfig)
               ("door_hinge_error_mean", mean(score.hinge_error_m), "m"),
               ("door_length_error_mean", mean(score.length_error_m), "m"),
               ("door_range_error_mean", mean(score.range_error_rad), "rad"),
-              ("doors_detected", float(len(door_map.doors)), "count"), ("doors_truth", float(moved.sum()), "count")]
+              ("doors_detected", float(len(door_map.doors)), "count"), ("doors_truth", float(moved.sum()), "count"),
+              *extra]
     return [MetricRow(door_map.name, "", "map", k, float(v), u, door_map.params) for k, v, u in values]
+
+
+def _fraction(found: npt.NDArray[np.bool_]) -> float:
+    """Share of True (NaN when there is nothing to find)."""
+    return float(found.mean()) if found.size else math.nan
 
 
 def along_corridor(series: Sequence[ErrorSeries], bin_m: float) -> list[AlongCorridor]:
@@ -356,8 +374,8 @@ def evaluate_runs(runs: Sequence[RunTables], config: DoorbatchConfig, *,
 
 SUMMARY_METRICS = ("ape_trans_rmse", "ape_trans_max", "ape_rot_rmse", "rpe_trans_rmse", "rpe_rot_rmse",
                    "time_to_converge_s", "global_success", "door_state_error_mean")
-MAP_METRICS = ("door_precision", "door_recall", "door_hinge_error_mean", "door_length_error_mean",
-               "door_range_error_mean")
+MAP_METRICS = ("door_precision", "door_recall", "door_recall_moved", "door_recall_never_moved",
+               "door_hinge_error_mean", "door_length_error_mean", "door_range_error_mean")
 # Door pose experiments (paper 003 Tables I and II; rows from doorbatch.pipeline.doorpose.experiment).
 DOORPOSE_METRICS = ("door_pose_error_mean", "door_pose_error_std", "positioning_error_mean", "positioning_error_std",
                     "reached_fraction", "failures", "handle_side_accuracy", "z_test_p_vs_ransac",

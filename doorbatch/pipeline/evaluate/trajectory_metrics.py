@@ -29,8 +29,8 @@ import numpy as np
 import numpy.typing as npt
 
 from doorbatch.errors import PipelineError
-from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.geometry.se2 import compose, relative
+from doorbatch.pipeline.evaluate.trajectory_error import position_errors, yaw_errors
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.intp]
@@ -129,16 +129,13 @@ def align_se2(estimate: npt.ArrayLike, reference: npt.ArrayLike) -> FloatArray:
 
 def ape_translation(estimate: npt.ArrayLike, reference: npt.ArrayLike) -> FloatArray:
     """APE translation part: ‖p_est − p_ref‖ per pose (m)."""
-    est = np.asarray(estimate, dtype=np.float64).reshape(-1, 3)
-    ref = np.asarray(reference, dtype=np.float64).reshape(-1, 3)
-    return np.asarray(np.hypot(est[:, 0] - ref[:, 0], est[:, 1] - ref[:, 1]), dtype=np.float64)
+    return position_errors(estimate, reference)
 
 
 def ape_rotation(estimate: npt.ArrayLike, reference: npt.ArrayLike) -> FloatArray:
-    """APE rotation angle: |θ(P_est⁻¹ P_ref)| = |wrap(θ_ref − θ_est)| per pose (rad)."""
-    est = np.asarray(estimate, dtype=np.float64).reshape(-1, 3)
-    ref = np.asarray(reference, dtype=np.float64).reshape(-1, 3)
-    return np.abs(wrap_angle(ref[:, 2] - est[:, 2]))
+    """APE rotation angle: |θ(P_est⁻¹ P_ref)| = |wrap(θ_ref − θ_est)| per pose (rad); in the plane the same
+    as |wrap(θ_est − θ_ref)|."""
+    return yaw_errors(estimate, reference)
 
 
 def rpe_pairs(poses: npt.ArrayLike, delta_m: float, all_pairs: bool = False,

@@ -196,7 +196,7 @@ def test_a_run_in_memory_scores_as_its_run_directory(tmp_path: Path) -> None:
     assert a.value("r", "door_state_error_mean") == pytest.approx(np.mean(np.abs(0.45 - truth_angle)))
 
 
-def _map_dir(folder: Path, doors: DoorSet) -> Path:
+def _map_dir(folder: Path, doors: DoorSet, source: str = "grid") -> Path:
     import shutil
 
     from doorbatch.io.parquet import write_table
@@ -209,7 +209,7 @@ def _map_dir(folder: Path, doors: DoorSet) -> Path:
     write_table("doors", {"door_id": np.arange(n, dtype=np.int32), "hinge_x": doors.hinge[:, 0],
                           "hinge_y": doors.hinge[:, 1], "length": doors.length, "closed_yaw": doors.closed_yaw,
                           "angle_min": doors.angle_min, "angle_max": doors.angle_max,
-                          "n_observations": np.full(n, 5, np.int32), "source": ["grid"] * n, "moved": [True] * n},
+                          "n_observations": np.full(n, 5, np.int32), "source": [source] * n, "moved": [True] * n},
                 folder / "doors.parquet")
     manifest = Manifest.start(DoorbatchConfig().as_dict(), [SAMPLE_LOGS / "map_pass1.mcap"], command="map")
     manifest.write(folder / "manifest.json")
@@ -265,3 +265,30 @@ def test_a_log_without_truth_files_gives_its_reference_topic(tmp_path: Path) -> 
     ev = evaluate_runs([run], DoorbatchConfig())
     assert ev.value("run", "ape_trans_rmse") == pytest.approx(0.25, abs=1e-6)
     assert read_run_dir(tmp_path / "run", DoorbatchConfig(), find_reference=False).reference is None
+
+
+def test_em_door_maps_count_the_doors_that_never_moved(tmp_path: Path) -> None:
+    """An em map (paper 001) also reports doors that never moved: they are true detections, not false
+    positives, and recall is given for moved and never-moved doors apart."""
+    from doorbatch.io.sim_truth import read_truth
+    from doorbatch.pipeline.evaluate.door_map import truth_doors
+
+    doors, moved = truth_doors(read_truth(SAMPLE_LOGS / "map.truth.yaml"),
+                               math.radians(DoorbatchConfig().doors.min_opening_deg))
+    assert moved.any() and (~moved).any()
+    never = np.flatnonzero(~moved)
+    keep = np.concatenate([np.flatnonzero(moved), never[:-1]])  # every moved door, all but one never-moved
+    found = DoorSet(doors.hinge[keep], doors.length[keep], doors.closed_yaw[keep], doors.angle_min[keep],
+                    doors.angle_max[keep])
+    out = tmp_path / "report"
+    assert main(["evaluate", str(_map_dir(tmp_path / "em", found, "em")), str(_map_dir(tmp_path / "grid", found)),
+                 "-o", str(out), "-q"]) == 0
+    table = read_table("metrics", out / "metrics.parquet").to_pydict()
+    got = {(r, m): v for r, m, v in zip(table["run"], table["metric"], table["value"], strict=True)}
+    assert got[("em", "door_precision")] == 1.0
+    assert got[("em", "door_recall_moved")] == 1.0
+    assert got[("em", "door_recall_never_moved")] == pytest.approx((len(never) - 1) / len(never))
+    assert got[("em", "door_recall")] == pytest.approx((len(keep)) / len(moved))
+    # the same doors as a grid map: the never-moved ones are not what the grid stage may report
+    assert got[("grid", "door_precision")] == pytest.approx(moved.sum() / len(keep))
+    assert ("grid", "door_recall_never_moved") not in got

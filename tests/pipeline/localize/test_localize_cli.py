@@ -23,7 +23,7 @@ SAMPLE_LOGS = REPO / "datasets" / "sample" / "logs"
 def sample_map(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("map") / "map"
     logs = [str(SAMPLE_LOGS / f"map_pass{k}.mcap") for k in (1, 2, 3)]
-    assert main(["map", *logs, "-o", str(out), "-q"]) == 0
+    assert main(["map", *logs, "-o", str(out), "--stages", "grid", "-q"]) == 0
     return out
 
 

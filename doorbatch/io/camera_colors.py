@@ -1,0 +1,90 @@
+"""Per-beam colours from a camera (DESIGN: per-beam colour role, second source): each scan's end points are
+moved into the camera's optical frame with TF and projected through its CameraInfo (the pinhole model of
+:mod:`doorbatch.geometry.camera`, shared with the doorpose stage); the colour is the pixel there in the
+image nearest in time. Images stream one at a time: a log of images is never held in memory."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+
+from doorbatch.config import DoorbatchConfig
+from doorbatch.errors import TransformError
+from doorbatch.geometry.camera import PinholeCamera, camera_from_info, in_image, project_points, scan_in_camera
+from doorbatch.geometry.tf_buffer import TfBuffer
+from doorbatch.io.reader import open_log
+from doorbatch.records import CameraInfo, Image, Role, Scan
+
+UInt8Array = npt.NDArray[np.uint8]
+BoolArray = npt.NDArray[np.bool_]
+
+
+def _nearest_images(scan_stamps: npt.NDArray[np.int64], image_stamps: npt.NDArray[np.int64], max_offset_ns: int
+                    ) -> npt.NDArray[np.int64]:
+    """For each scan, the index of the image nearest in time (−1 when none is within ``max_offset_ns``)."""
+    if image_stamps.size == 0:
+        return np.full(scan_stamps.shape[0], -1, dtype=np.int64)
+    order = np.argsort(image_stamps, kind="stable")
+    sorted_stamps = image_stamps[order]
+    pos = np.clip(np.searchsorted(sorted_stamps, scan_stamps), 1, max(sorted_stamps.size - 1, 1))
+    left = np.clip(pos - 1, 0, sorted_stamps.size - 1)
+    right = np.clip(pos, 0, sorted_stamps.size - 1)
+    pick = np.where(np.abs(sorted_stamps[left] - scan_stamps) <= np.abs(sorted_stamps[right] - scan_stamps),
+                    left, right)
+    near = np.abs(sorted_stamps[pick] - scan_stamps) <= max_offset_ns
+    return np.where(near, order[pick], -1).astype(np.int64)
+
+
+def camera_beam_colors(path: Path, scans: Sequence[Scan], tf: TfBuffer, config: DoorbatchConfig,
+                       max_offset_s: float = 0.1) -> tuple[list[UInt8Array], list[BoolArray]]:
+    """(B_i, 3) uint8 colours aligned with each scan and (B_i,) masks of the beams that have one: those
+    whose end point projects into the image nearest in time (within ``max_offset_s``).
+
+    Two passes over the image topic: stamps first, then each image colours the scans that chose it.
+    """
+    with open_log(path, config) as reader:
+        stamps = np.array([item.record.stamp_ns for item in reader.messages([Role.IMAGE])
+                           if isinstance(item.record, Image)], dtype=np.int64)
+    scan_stamps = np.array([s.stamp_ns for s in scans], dtype=np.int64)
+    choice = _nearest_images(scan_stamps, stamps, int(max_offset_s * 1e9))
+    colors = [np.zeros((s.ranges.shape[0], 3), dtype=np.uint8) for s in scans]
+    valid = [np.zeros(s.ranges.shape[0], dtype=bool) for s in scans]
+    info: CameraInfo | None = None
+    k = -1
+    with open_log(path, config) as reader:
+        for item in reader.messages([Role.CAMERA_INFO, Role.IMAGE]):
+            rec = item.record
+            if isinstance(rec, CameraInfo):
+                info = info or rec
+                continue
+            if not isinstance(rec, Image):
+                continue
+            k += 1
+            users = np.flatnonzero(choice == k)
+            if users.size == 0 or info is None:
+                continue
+            camera = camera_from_info(info)
+            pixels = rec.pixels if rec.pixels.ndim == 3 else np.repeat(rec.pixels[:, :, None], 3, axis=2)
+            for i in users.tolist():
+                _scan_colors(scans[i], tf, camera, pixels, rec.frame_id or info.frame_id, colors[i], valid[i])
+    return colors, valid
+
+
+def _scan_colors(scan: Scan, tf: TfBuffer, camera: PinholeCamera, pixels: UInt8Array, frame: str,
+                 out: UInt8Array, valid: BoolArray) -> None:
+    """Fill one scan's beam colours (and their mask) from one image."""
+    try:
+        pts, idx = scan_in_camera(scan, tf, frame)
+    except TransformError:
+        return
+    front = pts[:, 2] > 0.05
+    uv = project_points(camera, pts[front])
+    inside = in_image(camera, uv)
+    cols = np.clip(np.rint(uv[inside, 0]).astype(int), 0, pixels.shape[1] - 1)
+    rows = np.clip(np.rint(uv[inside, 1]).astype(int), 0, pixels.shape[0] - 1)
+    beams = idx[front][inside]
+    out[beams] = pixels[rows, cols, :3]
+    valid[beams] = True

@@ -1,0 +1,448 @@
+"""The structure search of paper 001 Sec. VI: walls from a Hough transform, doors from motion and from
+colour; each new object is fitted after a pseudo-E-step and kept only if the log posterior improves.
+
+Outline::
+
+    walls  = Hough lines at the dominant orientations, each: pseudo-E-step → line fit (eq. 8) → DP (eq. 9)
+    EM
+    repeat: door candidates from motion (wall pieces crossed by rays of some pass; leaf-like segments of
+            one pass crossed by rays of another) and colour (wall runs better explained by the door colour)
+            each: per-pass angles by a pseudo-E-step search → hinge/angles (eq. 10) → walls re-cut (eq. 9)
+            → kept if the log posterior rises;  EM
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+import numpy.typing as npt
+
+from doorbatch.config import ObjectMapConfig
+from doorbatch.pipeline.gridmap.doors import cluster_points
+from doorbatch.pipeline.objectmap.beams import BeamSet
+from doorbatch.pipeline.objectmap.doors import fit_hinge_angles, initial_angles, rays_near
+from doorbatch.pipeline.objectmap.em import EmTrace, MapState, evaluate, run_em
+from doorbatch.pipeline.objectmap.hough import hough_lines
+from doorbatch.pipeline.objectmap.model import DOOR, WALL, ClassParams, Door, ObjectMap, Wall
+from doorbatch.pipeline.objectmap.prior import log_prior
+from doorbatch.pipeline.objectmap.sensor import FirstObjects, cast_segments, e_step
+from doorbatch.pipeline.objectmap.walls import (
+    crossing_gains,
+    first_without,
+    fit_line,
+    line_crossings,
+    segment_dp,
+    wall_segments,
+)
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+BoolArray = npt.NDArray[np.bool_]
+
+
+@dataclass(frozen=True)
+class DoorCandidate:
+    """A proposed hinge and the leaf direction to assume where a pass does not show the leaf."""
+
+    hinge: FloatArray
+    fallback_yaw: float
+    source: str  # "motion" or "color"
+    support: int
+
+
+def initial_classes(beams: BeamSet, config: ObjectMapConfig) -> ClassParams:
+    """Class parameters before learning: the configured width; both colours the overall colour spread."""
+    has = config.use_color and beams.has_color
+    if not has:
+        return ClassParams(config.door_width_init_m)
+    col = beams.color[np.isfinite(beams.color[:, 0])]
+    mean = np.tile(col.mean(axis=0), (2, 1))
+    var = np.tile(np.maximum(col.var(axis=0), config.color_var_floor), (2, 1))
+    return ClassParams(config.door_width_init_m, mean, var, True)
+
+
+def _add_to_first(beams: BeamSet, first: FirstObjects, segs: FloatArray, cls: int, obj: int) -> FirstObjects:
+    rng, idx = cast_segments(beams.origin, beams.direction, segs)
+    closer = (idx >= 0) & (rng < first.delta)
+    return FirstObjects(np.where(closer, rng, first.delta), np.where(closer, cls, first.cls),
+                        np.where(closer, obj, first.obj))
+
+
+def propose_walls(beams: BeamSet, obj_map: ObjectMap, config: ObjectMapConfig) -> ObjectMap:
+    """Walls from the Hough transform of all points, strongest first. Each proposal: a pseudo-E-step
+    (points within ``pseudo_e_sigmas``·σ of the line, occlusion ignored, weighted by the Gaussian),
+    two line fits (eq. 8), then the DP (eq. 9) given the walls already accepted; kept when the DP's gain
+    pays for the line's two parameters."""
+    pts = beams.points[beams.hit]
+    sigma = config.sigma_m
+    band = config.pseudo_e_sigmas * sigma
+    state = evaluate(beams, obj_map, config)
+    first = state.first
+    walls = list(obj_map.walls)
+    for normal, offset, _ in hough_lines(pts, config.hough_step_deg, config.hough_offset_bin_m,
+                                         config.hough_orientation_share, config.hough_min_points,
+                                         config.max_wall_proposals):
+        for _ in range(2):
+            r = pts @ normal - offset
+            sel = np.abs(r) < band + config.hough_offset_bin_m
+            if int(sel.sum()) < config.hough_min_points:
+                break
+            normal, offset = fit_line(pts[sel], np.exp(-0.5 * (r[sel] / sigma) ** 2) + 1e-12)
+        else:
+            if any(abs(float(normal @ w.normal)) > np.cos(np.deg2rad(config.collinear_angle_deg))
+                   and abs(offset * np.sign(normal @ w.normal) - w.offset) < band for w in walls):
+                continue
+            current = replace(obj_map, walls=walls)
+            segs, cost = wall_segments(beams, first, current, -1, normal, offset, config.validity_prior, sigma,
+                                       config.rho_length_per_m, 2.0 * config.rho_static)
+            if segs.shape[0] and cost + 2.0 * config.rho_static < 0.0:
+                wall = Wall(normal, offset, segs)
+                walls.append(wall)
+                first = _add_to_first(beams, first, wall.endpoints(), WALL, len(walls) - 1)
+    return replace(obj_map, walls=walls)
+
+
+def _intervals(s: FloatArray, gap: float, min_count: int, min_extent: float) -> list[tuple[float, float, int]]:
+    """Runs of sorted positions with gaps ≤ ``gap``: (start, end, count) of those big enough."""
+    if s.size == 0:
+        return []
+    s = np.sort(s)
+    cuts = np.flatnonzero(np.diff(s) > gap)
+    starts = np.concatenate([[0], cuts + 1])
+    ends = np.concatenate([cuts, [s.size - 1]])
+    return [(float(s[a]), float(s[b]), int(b - a + 1)) for a, b in zip(starts, ends, strict=True)
+            if b - a + 1 >= min_count and s[b] - s[a] >= min_extent]
+
+
+def _both_ends(a: FloatArray, b: FloatArray, source: str, support: int) -> list[DoorCandidate]:
+    yaw_ab = float(np.arctan2(*(b - a)[::-1]))
+    return [DoorCandidate(a, yaw_ab, source, support), DoorCandidate(b, yaw_ab + np.pi, source, support)]
+
+
+def motion_candidates(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> list[DoorCandidate]:
+    """Doors from motion (Sec. VI): wall pieces that rays of some pass cross (the ray ends well beyond the
+    wall: the piece was absent in that pass, present in the others that built it). The hinge is at one
+    end of the crossed piece, the closed leaf along the wall toward the other end (both ends are tried);
+    and (2) leaf-like pieces of one pass crossed by rays of another (:func:`_leaf_candidates`)."""
+    out: list[DoorCandidate] = []
+    first, obj_map = state.first, state.obj_map
+    through = beams.range_m > first.delta + config.through_margin_m
+    for j, wall in enumerate(obj_map.walls):
+        for t in range(beams.n_passes):
+            sel = through & (first.cls == WALL) & (first.obj == j) & (beams.pass_index == t)
+            if int(sel.sum()) < config.min_crossing_rays:
+                continue
+            s = (beams.origin[sel] + first.delta[sel, None] * beams.direction[sel]) @ wall.tangent
+            for a, b, n in _intervals(s, config.candidate_cluster_m, config.min_crossing_rays,
+                                      config.min_doorway_m):
+                base = wall.offset * wall.normal
+                out += _both_ends(base + a * wall.tangent, base + b * wall.tangent, "motion", n)
+    return out + _leaf_candidates(beams, state, config)
+
+
+def _leaf_candidates(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> list[DoorCandidate]:
+    """Straight, door-sized pieces of one pass's points that the map does not explain (they stand in front
+    of the modelled object) and that rays of another pass cross: a leaf that was elsewhere then."""
+    out: list[DoorCandidate] = []
+    first = state.first
+    pts = beams.points
+    poor = beams.hit & (state.e < 0.5) & (beams.range_m < np.minimum(first.delta, beams.dmax)
+                                         - config.through_margin_m)
+    for t in range(beams.n_passes):
+        sel = np.flatnonzero(poor & (beams.pass_index == t))
+        if sel.size < config.min_crossing_rays:
+            continue
+        labels = cluster_points(pts[sel], config.candidate_cluster_m)
+        others = np.flatnonzero(beams.pass_index != t)
+        for lab in np.unique(labels):
+            members = sel[labels == lab]
+            if members.size < config.min_crossing_rays:
+                continue
+            normal, offset = fit_line(pts[members], np.ones(members.size))
+            tangent = np.array([-normal[1], normal[0]])
+            along = pts[members] @ tangent
+            rms = float(np.sqrt(np.mean((pts[members] @ normal - offset) ** 2)))
+            if rms > 2.0 * config.sigma_m or not (config.min_leaf_piece_m <= float(np.ptp(along))
+                                                  <= config.door_width_max_m + 2.0 * config.sigma_m):
+                continue
+            a = offset * normal + along.min() * tangent
+            b = offset * normal + along.max() * tangent
+            rng, idx = cast_segments(beams.origin[others], beams.direction[others], np.stack([a, b])[None])
+            crossed = int(np.sum((idx >= 0) & (beams.range_m[others] > rng + config.through_margin_m)))
+            if crossed >= config.min_crossing_rays:
+                out += _both_ends(a, b, "motion", crossed)
+    return out
+
+
+def color_candidates(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> list[DoorCandidate]:
+    """Doors from colour (Sec. VI): runs along a wall whose beams' colours are better explained by the
+    door class than by the wall class, at least half a door width long; in a run longer than 1.5 widths
+    (overlapping colour classes), the door-wide window with the largest summed log-likelihood ratio."""
+    obj_map = state.obj_map
+    classes = obj_map.classes
+    if not classes.has_color:
+        return []
+    col = beams.color
+    # the range must fit the wall (the colour may not: under the wall class a door's colour is 'invalid')
+    fits = np.abs(beams.range_m - state.first.delta) < config.pseudo_e_sigmas * config.sigma_m
+    ok = beams.hit & np.isfinite(col[:, 0]) & (state.first.cls == WALL) & fits
+    ll = [-0.5 * np.sum((col - classes.color_mean[c]) ** 2 / classes.color_var[c]
+                        + np.log(classes.color_var[c]), axis=1) for c in (WALL, DOOR)]
+    ratio = ll[1] - ll[0]
+    door_like = ok & (ratio > 0.0)
+    out: list[DoorCandidate] = []
+    width = classes.door_width_m
+    for j, wall in enumerate(obj_map.walls):
+        sel = door_like & (state.first.obj == j)
+        if int(sel.sum()) < config.min_crossing_rays:
+            continue
+        s = beams.points[sel] @ wall.tangent
+        on_wall = ok & (state.first.obj == j)
+        s_all = beams.points[on_wall] @ wall.tangent
+        order = np.argsort(s_all)
+        s_all, csum = s_all[order], np.concatenate([[0.0], np.cumsum(ratio[on_wall][order])])
+        base = wall.offset * wall.normal
+        for a, b, n in _intervals(s, config.candidate_cluster_m, config.min_crossing_rays, 0.5 * width):
+            if b - a > 1.5 * width:  # a long run (colours overlap): the door-wide window most door-like
+                starts = s_all[(s_all >= a) & (s_all <= b - width)]
+                score = csum[np.searchsorted(s_all, starts + width, "right")] - csum[np.searchsorted(s_all, starts)]
+                a = float(starts[int(np.argmax(score))])
+                b = a + width
+            out += _both_ends(base + a * wall.tangent, base + b * wall.tangent, "color", n)
+    return out
+
+
+def _near_existing(c: DoorCandidate, obj_map: ObjectMap, radius: float) -> bool:
+    for i, d in enumerate(obj_map.doors):
+        w = obj_map.door_width(i)
+        ends = d.hinge + w * np.stack([np.cos(d.yaws), np.sin(d.yaws)], axis=1)
+        mids = 0.5 * (d.hinge + ends)
+        pts = np.concatenate([d.hinge[None], ends, mids])
+        if float(np.min(np.linalg.norm(pts - c.hinge, axis=1))) < radius:
+            return True
+    return False
+
+
+def _door_fit(beams: BeamSet, c: DoorCandidate, width: float, config: ObjectMapConfig) -> Door:
+    """Initial angles by the pseudo-E-step search, then eq. (10) on the points near the leaf."""
+    sigma = config.sigma_m
+    yaws = initial_angles(beams, c.hinge, width, c.fallback_yaw, config)
+    pts = beams.points
+    near = beams.hit & (np.linalg.norm(pts - c.hinge, axis=1) <= width + 3.0 * sigma)
+    idx = np.flatnonzero(near)
+    yaw = yaws[beams.pass_index[idx]]
+    rel = pts[idx] - c.hinge
+    along = rel[:, 0] * np.cos(yaw) + rel[:, 1] * np.sin(yaw)
+    across = -rel[:, 0] * np.sin(yaw) + rel[:, 1] * np.cos(yaw)
+    on = (np.abs(across) < config.pseudo_e_sigmas * sigma) & (along > -sigma) & (along < width + sigma)
+    hinge, yaws = fit_hinge_angles(c.hinge, yaws, pts[idx[on]], beams.pass_index[idx[on]],
+                                   np.exp(-0.5 * (across[on] / sigma) ** 2), config.hinge_descent_iterations)
+    return Door(hinge, yaws)
+
+
+def _covered(segments: FloatArray, s: float) -> bool:
+    return bool(np.any((segments[:, 0] <= s) & (segments[:, 1] >= s))) if segments.size else False
+
+
+def _merge(intervals: FloatArray) -> FloatArray:
+    """Union of intervals (K, 2), touching ones joined."""
+    if intervals.shape[0] == 0:
+        return intervals
+    iv = intervals[np.argsort(intervals[:, 0])]
+    out = [iv[0].copy()]
+    for a, b in iv[1:]:
+        if a <= out[-1][1] + 1e-9:
+            out[-1][1] = max(out[-1][1], b)
+        else:
+            out.append(np.array([a, b]))
+    return np.array(out)
+
+
+def recut_window(beams: BeamSet, obj_map: ObjectMap, j: int, lo: float, hi: float, config: ObjectMapConfig
+                 ) -> FloatArray:
+    """Wall j's segments with the DP (eq. 9) re-run on the crossings within [lo, hi] only: outside, the
+    segments stay; a segment that runs into the window edge is continued through it (an anchor point of
+    overwhelming gain at the edge), so the splice stays one segment."""
+    w = obj_map.walls[j]
+    cross = line_crossings(beams, w.normal, w.offset, config.sigma_m)
+    inside = (cross.s >= lo) & (cross.s <= hi)
+    idx = cross.beam[inside]
+    empty = FirstObjects(np.full(len(beams), np.inf), np.full(len(beams), -1, dtype=np.int64),
+                         np.full(len(beams), -1, dtype=np.int64))
+    local = _full_first(beams, obj_map, idx, empty)
+    delta, kind = first_without(beams, local, idx, obj_map, WALL, j)
+    gain = crossing_gains(beams, idx, cross.t[inside], delta, kind, WALL, obj_map.classes,
+                          config.validity_prior, config.sigma_m)
+    s_in = cross.s[inside]
+    anchors = [edge for edge in (lo, hi) if _covered(w.segments, edge)]
+    s_all = np.concatenate([s_in, anchors])
+    g_all = np.concatenate([gain, np.full(len(anchors), 1e9)])
+    segs, _ = segment_dp(s_all, g_all, config.rho_length_per_m, 2.0 * config.rho_static)
+    outside = [np.array([a, min(b, lo)]) for a, b in w.segments if a < lo]
+    outside += [np.array([max(a, hi), b]) for a, b in w.segments if b > hi]
+    parts = np.array([*outside, *segs]) if (outside or segs.size) else np.zeros((0, 2))
+    merged = _merge(parts.reshape(-1, 2))
+    return merged[merged[:, 1] > merged[:, 0]] if merged.size else merged
+
+
+def _recut_walls(beams: BeamSet, obj_map: ObjectMap, near: FloatArray, radius: float, config: ObjectMapConfig
+                 ) -> tuple[ObjectMap, list[tuple[int, float, float]]]:
+    """Re-cut (within a window about ``near``) the walls whose line passes within ``radius`` of it."""
+    walls = list(obj_map.walls)
+    changed: list[tuple[int, float, float]] = []
+    for j, w in enumerate(obj_map.walls):
+        if abs(float(near @ w.normal) - w.offset) > radius:
+            continue
+        s_near = float(near @ w.tangent)
+        lo, hi = s_near - radius - config.recut_window_margin_m, s_near + radius + config.recut_window_margin_m
+        segs = recut_window(beams, replace(obj_map, walls=walls), j, lo, hi, config)
+        walls[j] = Wall(w.normal, w.offset, segs)
+        changed.append((j, lo, hi))
+    return replace(obj_map, walls=walls), changed
+
+
+def _full_first(beams: BeamSet, obj_map: ObjectMap, idx: IntArray, template: FirstObjects) -> FirstObjects:
+    """First objects of the beams ``idx`` under ``obj_map`` (the others left as in ``template``)."""
+    delta, cls, obj = template.delta.copy(), template.cls.copy(), template.obj.copy()
+    for t in range(beams.n_passes):
+        sel = idx[beams.pass_index[idx] == t]
+        segs, seg_cls, seg_obj = obj_map.segments(t)
+        rng, hit = cast_segments(beams.origin[sel], beams.direction[sel], segs)
+        delta[sel] = rng
+        got = hit >= 0
+        cls[sel] = np.where(got, seg_cls[np.maximum(hit, 0)], -1)
+        obj[sel] = np.where(got, seg_obj[np.maximum(hit, 0)], -1)
+    return FirstObjects(delta, cls, obj)
+
+
+def _affected(beams: BeamSet, door: Door, width: float, changed: list[tuple[int, float, float]],
+              obj_map: ObjectMap, sigma: float, margin_m: float) -> IntArray:
+    """Beams whose likelihood may change: rays passing near the door, and rays crossing a re-cut wall in
+    its window."""
+    mask = rays_near(beams, door.hinge, width + margin_m)
+    for j, lo, hi in changed:
+        w = obj_map.walls[j]
+        cross = line_crossings(beams, w.normal, w.offset, sigma)
+        mask[cross.beam[(cross.s >= lo) & (cross.s <= hi)]] = True
+    return np.flatnonzero(mask)
+
+
+def _walls_behind(beams: BeamSet, obj_map: ObjectMap, idx: IntArray, first: FirstObjects, config: ObjectMapConfig
+                  ) -> tuple[ObjectMap, IntArray]:
+    """Walls seen only through a doorway, introduced with its door (the pseudo-E-step's point: before the
+    door, the wall piece over the doorway occludes them). Hough lines of the affected rays' end points that
+    the map leaves unexplained; each is kept when its DP (given the map with the door) pays for it.
+    Returns the map and the beams whose first object may have changed."""
+    sub = beams.subset(idx)
+    far = sub.hit & (sub.range_m > first.delta[idx] + config.pseudo_e_sigmas * config.sigma_m) | (
+        sub.hit & ~np.isfinite(first.delta[idx]))
+    pts = sub.points[far]
+    extra: list[IntArray] = []
+    walls = list(obj_map.walls)
+    for normal, offset, _ in hough_lines(pts, config.hough_step_deg, config.hough_offset_bin_m,
+                                         config.hough_orientation_share, config.hough_min_points, 4):
+        r = pts @ normal - offset
+        sel = np.abs(r) < config.pseudo_e_sigmas * config.sigma_m + config.hough_offset_bin_m
+        if int(sel.sum()) < config.hough_min_points:
+            continue
+        normal, offset = fit_line(pts[sel], np.exp(-0.5 * (r[sel] / config.sigma_m) ** 2) + 1e-12)
+        current = replace(obj_map, walls=walls)
+        cross = line_crossings(beams, normal, offset, config.sigma_m)
+        empty = FirstObjects(np.full(len(beams), np.inf), np.full(len(beams), -1, dtype=np.int64),
+                             np.full(len(beams), -1, dtype=np.int64))
+        local = _full_first(beams, current, cross.beam, empty)
+        segs, cost = wall_segments(beams, local, current, -1, normal, offset, config.validity_prior,
+                                   config.sigma_m, config.rho_length_per_m, 2.0 * config.rho_static)
+        if segs.shape[0] and cost + 2.0 * config.rho_static < 0.0:
+            walls.append(Wall(normal, offset, segs))
+            extra.append(cross.beam[(cross.s >= segs[0, 0] - 0.1) & (cross.s <= segs[-1, 1] + 0.1)])
+    return replace(obj_map, walls=walls), (np.concatenate(extra) if extra else np.zeros(0, dtype=np.int64))
+
+
+def try_door(beams: BeamSet, state: MapState, c: DoorCandidate, config: ObjectMapConfig
+             ) -> tuple[float, ObjectMap]:
+    """Fit a door at candidate ``c`` (with the walls seen through its doorway) and return (log-posterior
+    change, new map)."""
+    obj_map = state.obj_map
+    width = obj_map.classes.door_width_m
+    door = _door_fit(beams, c, width, config)
+    with_door = replace(obj_map, doors=[*obj_map.doors, door])
+    new_map, changed = _recut_walls(beams, with_door, door.hinge, width + config.door_wall_margin_m, config)
+    idx = _affected(beams, door, width, changed, new_map, config.sigma_m, config.door_ray_margin_m)
+    empty = FirstObjects(np.full(len(beams), np.inf), np.full(len(beams), -1, dtype=np.int64),
+                         np.full(len(beams), -1, dtype=np.int64))
+    first_mid = _full_first(beams, new_map, idx, empty)
+    new_map, extra = _walls_behind(beams, new_map, idx, first_mid, config)
+    idx = np.union1d(idx, extra)
+    sub = beams.subset(idx)
+    first_new = _full_first(sub, new_map, np.arange(idx.size), FirstObjects(
+        np.full(idx.size, np.inf), np.full(idx.size, -1, dtype=np.int64), np.full(idx.size, -1, dtype=np.int64)))
+    _, ll_new = e_step(sub, first_new, new_map.classes, config.validity_prior, config.sigma_m)
+    gain = float(ll_new.sum() - state.loglik[idx].sum()) + log_prior(new_map, config) - log_prior(obj_map, config)
+    # Sec. VI: the door is adopted only if it scores higher than the map without it, "i.e. when the segment
+    # is static": the same leaf (first pass's direction) as a wall of its own
+    static = _as_static_segment(new_map, len(new_map.doors) - 1)
+    first_static = _full_first(sub, static, np.arange(idx.size), FirstObjects(
+        np.full(idx.size, np.inf), np.full(idx.size, -1, dtype=np.int64), np.full(idx.size, -1, dtype=np.int64)))
+    _, ll_static = e_step(sub, first_static, static.classes, config.validity_prior, config.sigma_m)
+    gain_static = float(ll_static.sum() - state.loglik[idx].sum()) + log_prior(static, config) - log_prior(
+        obj_map, config)
+    return min(gain, gain - gain_static), new_map
+
+
+def _as_static_segment(obj_map: ObjectMap, i: int) -> ObjectMap:
+    """The map with door i replaced by a static wall segment where its leaf stands in the first pass."""
+    door = obj_map.doors[i]
+    yaw = float(door.yaws[0])
+    tangent = np.array([np.cos(yaw), np.sin(yaw)])
+    normal = np.array([tangent[1], -tangent[0]])  # so that (−n_y, n_x) = tangent
+    s0 = float(door.hinge @ tangent)
+    wall = Wall(normal, float(door.hinge @ normal), np.array([[s0, s0 + obj_map.door_width(i)]]))
+    doors = obj_map.doors[:i] + obj_map.doors[i + 1:]
+    return replace(obj_map, doors=doors, walls=[*obj_map.walls, wall])
+
+
+def add_doors(beams: BeamSet, state: MapState, candidates: list[DoorCandidate], config: ObjectMapConfig
+              ) -> tuple[MapState, int]:
+    """Try the candidates, strongest first, in pairs (both ends of one piece); keep the better end when it
+    raises the log posterior."""
+    added = 0
+    order = sorted(range(0, len(candidates), 2), key=lambda k: -candidates[k].support)
+    kept: list[list[DoorCandidate]] = []
+    for k in order:  # one pair per doorway: pairs whose ends coincide (within a cluster distance) are one
+        pair = candidates[k: k + 2]
+        if not any(min(float(np.linalg.norm(a.hinge - b.hinge)) for a in pair for b in other) < config.candidate_merge_m
+                   for other in kept):
+            kept.append(pair)
+    for pair in kept[: config.max_door_candidates]:
+        if any(_near_existing(c, state.obj_map, config.existing_door_radius_m) for c in pair):
+            continue
+        results = [try_door(beams, state, c, config) for c in pair]
+        gain, new_map = max(results, key=lambda r: r[0])
+        if gain > 0.0:
+            state = evaluate(beams, new_map, config)
+            added += 1
+    return state, added
+
+
+def search_structure(beams: BeamSet, config: ObjectMapConfig, classes: ClassParams | None = None,
+                     trace: EmTrace | None = None) -> MapState:
+    """The whole stage: walls, EM, then rounds of door proposals and EM. ``classes`` given: they are
+    applied as they are (not relearned), as in paper 001 Fig. 5b."""
+    learn = classes is None
+    cls0 = classes if classes is not None else initial_classes(beams, config)
+    if cls0.has_color and not (config.use_color and beams.has_color):
+        cls0 = replace(cls0, has_color=False)
+    obj_map = ObjectMap([], [], cls0, beams.n_passes)
+    obj_map = propose_walls(beams, obj_map, config)
+    state = run_em(beams, obj_map, config, learn, trace=trace)
+    for _ in range(config.structure_rounds):
+        candidates = motion_candidates(beams, state, config)
+        if state.obj_map.doors or not learn:
+            candidates += color_candidates(beams, state, config)
+        state, added = add_doors(beams, state, candidates, config)
+        if not added:
+            break
+        state = run_em(beams, state.obj_map, config, learn, trace=trace)
+    return state

@@ -1,0 +1,124 @@
+"""The em stage of ``doorbatch map``: recordings and their pass poses → beams → object map → outputs.
+
+    beams  = every scan_stride-th scan, beam_stride-th beam of every pass, in the map frame (+ colours)
+    state  = structure search with EM (search.py), or with given class parameters (paper 001 Fig. 5b)
+    doors  = hinge, width, closed direction (the wall line through the hinge), opening range, moved
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from doorbatch.config import DoorbatchConfig, ObjectMapConfig
+from doorbatch.geometry.rotations import wrap_angle
+from doorbatch.io.preview import PreviewDoor
+from doorbatch.io.recording import Recording
+from doorbatch.pipeline.mapping import PassPoses
+from doorbatch.pipeline.objectmap.beams import BeamSet, ScanBeams, beams_from_scans
+from doorbatch.pipeline.objectmap.em import EmTrace, MapState
+from doorbatch.pipeline.objectmap.model import DOOR, ClassParams, ObjectMap
+from doorbatch.pipeline.objectmap.search import search_structure
+
+FloatArray = npt.NDArray[np.float64]
+
+
+def pass_scans(rec: Recording, poses: PassPoses, scan_stride: int, with_color: bool) -> list[ScanBeams]:
+    """The scans of one pass that have a pose, every ``scan_stride``-th."""
+    sc = rec.scans
+    out = []
+    for i in range(0, len(sc), scan_stride):
+        if not poses.valid[i]:
+            continue
+        n = sc.ranges[i].shape[0]
+        colors = None
+        if with_color and rec.colors is not None and rec.colors[i].shape[0] == n:
+            colors = rec.colors[i].astype(np.float64)
+            if rec.color_valid is not None:
+                colors[~rec.color_valid[i]] = np.nan
+        angles = sc.angle_min[i] + sc.angle_increment[i] * np.arange(n)
+        out.append(ScanBeams(poses.poses[i], sc.laser_to_base[i], angles, sc.ranges[i].astype(np.float64),
+                             float(sc.range_min[i]), float(sc.range_max[i]), colors))
+    return out
+
+
+def collect_beams(recordings: Sequence[Recording], passes: Sequence[PassPoses], config: ObjectMapConfig) -> BeamSet:
+    """All passes' kept beams in the map frame."""
+    scans = [pass_scans(r, p, config.scan_stride, config.use_color) for r, p in zip(recordings, passes, strict=True)]
+    return beams_from_scans(scans, config.max_range_m, config.beam_stride)
+
+
+@dataclass(frozen=True)
+class EmDoor:
+    """A door of the object map as doors.parquet describes it, with its per-pass angles."""
+
+    preview: PreviewDoor
+    n_observations: int
+    pass_yaws: FloatArray
+    pass_observed: npt.NDArray[np.bool_]
+
+
+@dataclass(frozen=True)
+class ObjectMapResult:
+    """What the em stage returns."""
+
+    object_map: ObjectMap
+    doors: list[EmDoor]
+    log_posterior: float
+    n_beams: int
+    trace: EmTrace
+    seconds: float
+
+
+def closed_yaw(obj_map: ObjectMap, i: int, max_distance_m: float) -> float:
+    """The closed direction of door i: the direction of the nearest wall line through its hinge (of the
+    two, the one closest to its per-pass directions); the first pass's direction without such a wall."""
+    door = obj_map.doors[i]
+    best, best_d = None, max_distance_m
+    for w in obj_map.walls:
+        dist = abs(float(door.hinge @ w.normal) - w.offset)
+        if dist <= best_d:
+            best, best_d = w, dist
+    if best is None:
+        return float(door.yaws[0])
+    base = float(np.arctan2(best.tangent[1], best.tangent[0]))
+    options = np.array([base, base + np.pi])
+    cost = [np.min(np.abs(wrap_angle(door.yaws - o))) for o in options]
+    return float(wrap_angle(options[int(np.argmin(cost))]))
+
+
+def describe_doors(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> list[EmDoor]:
+    """Doors as rows: angles relative to the closed direction over the passes the leaf was seen in."""
+    out = []
+    obj_map = state.obj_map
+    for i, door in enumerate(obj_map.doors):
+        mine = (state.first.cls == DOOR) & (state.first.obj == i) & beams.hit & (state.e > 0.5)
+        counts = np.bincount(beams.pass_index[mine], minlength=obj_map.n_passes)
+        observed = counts >= config.min_leaf_support
+        closed = closed_yaw(obj_map, i, config.wall_hinge_distance_m)
+        rel = wrap_angle(door.yaws - closed)
+        seen = rel[observed] if observed.any() else rel
+        lo, hi = float(np.min(seen)), float(np.max(seen))
+        moved = bool(observed.sum() >= 2 and hi - lo >= np.deg2rad(config.min_opening_deg))
+        out.append(EmDoor(PreviewDoor(float(door.hinge[0]), float(door.hinge[1]), obj_map.door_width(i), closed,
+                                      lo, hi, moved), int(mine.sum()), door.yaws.copy(), observed))
+    return out
+
+
+def build_object_map(beams: BeamSet, config: ObjectMapConfig, classes: ClassParams | None = None) -> ObjectMapResult:
+    """The em stage on beams (see :func:`collect_beams`); ``classes`` given: applied without relearning."""
+    t0 = time.perf_counter()
+    trace = EmTrace()
+    state = search_structure(beams, config, classes, trace)
+    return ObjectMapResult(state.obj_map, describe_doors(beams, state, config), state.log_posterior, len(beams),
+                           trace, time.perf_counter() - t0)
+
+
+def em_stage(recordings: Sequence[Recording], passes: Sequence[PassPoses], config: DoorbatchConfig,
+             classes: ClassParams | None = None) -> ObjectMapResult:
+    """The em stage of ``doorbatch map`` on loaded recordings and their poses."""
+    return build_object_map(collect_beams(recordings, passes, config.em), config.em, classes)

@@ -1,0 +1,159 @@
+"""Wall M-step sub-steps of paper 001 Sec. V: the line by weighted least squares (eq. 8), then the number
+and end points of its segments by an exact dynamic program over the rays that cross the line (eq. 9)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba  # type: ignore[import-untyped]
+import numpy as np
+import numpy.typing as npt
+
+from doorbatch.pipeline.objectmap.beams import BeamSet
+from doorbatch.pipeline.objectmap.model import WALL, ClassParams, ObjectMap, Wall
+from doorbatch.pipeline.objectmap.sensor import FirstObjects, beam_logliks, cast_segments
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+BoolArray = npt.NDArray[np.bool_]
+
+
+def fit_line(points: FloatArray, weights: FloatArray) -> tuple[FloatArray, float]:
+    """Eq. (8): the line n·p = β minimising Σ w (nᵀπ − β)² with ‖n‖ = 1 (weighted total least squares:
+    β = nᵀ p̄ with p̄ the weighted mean, n the eigenvector of the smallest eigenvalue of the weighted
+    scatter matrix)."""
+    w = weights / np.sum(weights)
+    mean = w @ points
+    centered = points - mean
+    scatter = (centered * w[:, None]).T @ centered
+    _, vecs = np.linalg.eigh(scatter)
+    normal = vecs[:, 0]
+    return normal, float(normal @ mean)
+
+
+@numba.njit(cache=True)  # type: ignore[misc]
+def _segment_dp(s: FloatArray, gain: FloatArray, rho_length: float, start_cost: float) -> BoolArray:
+    n = s.shape[0]
+    c_in = np.empty(n)
+    c_out = np.empty(n)
+    from_in = np.zeros(n, dtype=np.bool_)  # c_in[k] came from c_in[k − 1] (segment continues)
+    out_from_in = np.zeros(n, dtype=np.bool_)  # c_out[k] came from c_in[k − 1]
+    c_in[0] = start_cost - gain[0]
+    c_out[0] = 0.0
+    for k in range(1, n):
+        cont = c_in[k - 1] + rho_length * (s[k] - s[k - 1])
+        new = c_out[k - 1] + start_cost
+        if cont <= new:
+            c_in[k] = cont - gain[k]
+            from_in[k] = True
+        else:
+            c_in[k] = new - gain[k]
+        if c_in[k - 1] < c_out[k - 1]:
+            c_out[k] = c_in[k - 1]
+            out_from_in[k] = True
+        else:
+            c_out[k] = c_out[k - 1]
+    include = np.zeros(n, dtype=np.bool_)
+    state = c_in[n - 1] < c_out[n - 1]
+    for k in range(n - 1, -1, -1):
+        include[k] = state
+        if k == 0:
+            break
+        state = from_in[k] if state else out_from_in[k]
+    return include
+
+
+def segment_dp(s: FloatArray, gain: FloatArray, rho_length_per_m: float, start_cost: float
+               ) -> tuple[FloatArray, float]:
+    """Eq. (9) solved exactly: choose which crossing points lie on a segment.
+
+    Points sorted by s; x_k ∈ {0, 1}. Cost = −Σ x_k Δ_k + ρL·Σ(length of segments) + start_cost·#segments,
+    where a segment spans consecutive included points. Two costs are carried along the line (point in a
+    segment or not), then a backward pass reads off the optimum. Returns the segments (K, 2) [s0, s1]
+    (zero-length ones dropped) and the optimal cost (0 = no segment).
+    """
+    if s.shape[0] == 0:
+        return np.zeros((0, 2)), 0.0
+    order = np.argsort(s, kind="stable")
+    ss, gg = s[order], gain[order]
+    inc = _segment_dp(ss, gg, float(rho_length_per_m), float(start_cost))
+    padded = np.concatenate([[False], inc, [False]])
+    starts = np.flatnonzero(padded[1:-1] & ~padded[:-2])
+    ends = np.flatnonzero(padded[1:-1] & ~padded[2:])
+    segs = np.stack([ss[starts], ss[ends]], axis=1) if starts.size else np.zeros((0, 2))
+    cost = float(-gg[inc].sum() + rho_length_per_m * np.sum(segs[:, 1] - segs[:, 0]) + start_cost * segs.shape[0])
+    keep = segs[:, 1] > segs[:, 0]
+    return segs[keep], cost
+
+
+@dataclass(frozen=True)
+class LineCrossings:
+    """Beams whose ray crosses a line: beam index, distance t along the ray, position s along the line."""
+
+    beam: IntArray
+    t: FloatArray
+    s: FloatArray
+
+
+def line_crossings(beams: BeamSet, normal: FloatArray, offset: float, sigma: float) -> LineCrossings:
+    """R_W: beams whose ray meets the line n·p = β before its measured end (+5σ) and within dmax."""
+    denom = beams.direction @ normal
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (offset - beams.origin @ normal) / denom
+    ok = np.isfinite(t) & (t > 0.0) & (t <= np.minimum(beams.range_m + 5.0 * sigma, beams.dmax))
+    idx = np.flatnonzero(ok)
+    tangent = np.array([-normal[1], normal[0]])
+    s = (beams.origin[idx] + t[idx, None] * beams.direction[idx]) @ tangent
+    return LineCrossings(idx, t[idx], s)
+
+
+def first_without(beams: BeamSet, first: FirstObjects, idx: IntArray, obj_map: ObjectMap, cls: int,
+                  obj: int) -> tuple[FloatArray, IntArray]:
+    """δ and class of the first object along beams ``idx`` when object (cls, obj) is left out."""
+    delta = first.delta[idx].copy()
+    kind = first.cls[idx].copy()
+    redo = (kind == cls) & (first.obj[idx] == obj)
+    for t in range(beams.n_passes):
+        sel = np.flatnonzero(redo & (beams.pass_index[idx] == t))
+        if sel.size == 0:
+            continue
+        segs, seg_cls, seg_obj = obj_map.segments(t)
+        keep = ~((seg_cls == cls) & (seg_obj == obj))
+        b = idx[sel]
+        rng, hit = cast_segments(beams.origin[b], beams.direction[b], segs[keep], None)
+        delta[sel] = rng
+        kind[sel] = np.where(hit >= 0, seg_cls[keep][np.maximum(hit, 0)], -1)
+    return delta, kind
+
+
+def crossing_gains(beams: BeamSet, idx: IntArray, t_obj: FloatArray, delta_other: FloatArray,
+                   cls_other: IntArray, obj_cls: int, classes: ClassParams, lam: float, sigma: float) -> FloatArray:
+    """Δ_k of eq. (9): the log-likelihood change of beam k when an object of class ``obj_cls`` is present
+    where its ray crosses at t (δ⁺ = min(δ⁻, t)) rather than absent (δ⁻: the first other object).
+
+    Deviation from the paper (one line): Δ is the change of the marginal log-likelihood log Σ_v p(d, l, v)
+    instead of e·(log p⁺ − log p⁻), so that rays the current map calls noise (e ≈ 0) still count."""
+    b = beams.subset(idx)
+    nearer = t_obj < delta_other
+    d_plus = np.where(nearer, t_obj, delta_other)
+    c_plus = np.where(nearer, obj_cls, cls_other)
+    v_plus, inv = beam_logliks(b, d_plus, c_plus, classes, lam, sigma)
+    v_minus, _ = beam_logliks(b, delta_other, cls_other, classes, lam, sigma)
+    return np.asarray(np.logaddexp(v_plus, inv) - np.logaddexp(v_minus, inv), dtype=np.float64)
+
+
+def wall_segments(beams: BeamSet, first: FirstObjects, obj_map: ObjectMap, j: int, normal: FloatArray,
+                  offset: float, lam: float, sigma: float, rho_length_per_m: float, start_cost: float
+                  ) -> tuple[FloatArray, float]:
+    """The segments of wall ``j`` (or a new wall, j = −1) on the line (normal, offset) by the DP, given
+    every other object; and the DP's optimal cost (log-posterior change against no segment)."""
+    cross = line_crossings(beams, normal, offset, sigma)
+    if cross.beam.size == 0:
+        return np.zeros((0, 2)), 0.0
+    delta, kind = first_without(beams, first, cross.beam, obj_map, WALL, j)
+    gain = crossing_gains(beams, cross.beam, cross.t, delta, kind, WALL, obj_map.classes, lam, sigma)
+    return segment_dp(cross.s, gain, rho_length_per_m, start_cost)
+
+
+def wall_from_fit(normal: FloatArray, offset: float, segments: FloatArray) -> Wall:
+    return Wall(np.asarray(normal, dtype=np.float64), float(offset), np.asarray(segments, dtype=np.float64))

@@ -1,0 +1,147 @@
+"""The em stage end to end on a tiny simulated site with ground truth: a 9 m corridor, one door that moves
+between passes and one that never moves (painted like the moving one), three passes with colours."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from doorbatch.cli import main
+from doorbatch.config import DoorbatchConfig
+from doorbatch.io.object_map import read_classes, read_walls, write_classes
+from doorbatch.io.parquet import read_table
+from doorbatch.io.recording import load_recording
+from doorbatch.pipeline.mapping import pass_poses
+from doorbatch.pipeline.objectmap.model import ClassParams
+from doorbatch.pipeline.objectmap.stage import ObjectMapResult, build_object_map, collect_beams
+from doorbatch.sim.simulate import run_simulation
+
+WORLD = """
+name: tiny_em
+materials:
+  wall: {mean_rgb: [196, 192, 182], std_rgb: [7, 7, 7]}
+  door: {mean_rgb: [158, 122, 92], std_rgb: [14, 14, 14]}
+  handle: {mean_rgb: [48, 48, 52], std_rgb: [3, 3, 3]}
+walls:
+  - {points_m: [[0.0, 1.1], [9.0, 1.1]]}
+  - {points_m: [[0.0, -1.1], [9.0, -1.1]]}
+  - {points_m: [[0.0, -1.1], [0.0, 1.1]]}
+  - {points_m: [[9.0, -1.1], [9.0, 1.1]]}
+rooms:
+  - {points_m: [[1.0, 1.1], [1.0, 2.8], [8.0, 2.8], [8.0, 1.1]]}
+  - {points_m: [[1.0, -1.1], [1.0, -2.8], [8.0, -2.8], [8.0, -1.1]]}
+doors:
+  - {name: d01, hinge_m: [3.0, 1.1], length_m: 0.9, closed_yaw_deg: 0, opening_sign: 1, max_angle_deg: 100}
+  - {name: d02, hinge_m: [5.5, -1.1], length_m: 0.9, closed_yaw_deg: 0, opening_sign: -1, max_angle_deg: 100}
+routes:
+  main: {points_m: [[1.0, 0.0], [8.0, 0.0]]}
+"""
+SCENARIO = """
+name: tiny_em_mapping
+robot: {max_speed_mps: 0.7}
+passes:
+  - {name: p1, route: main, dwell_s: 0.5, doors: closed, door_states: {d01: open}}
+  - {name: p2, route: main, reverse: true, dwell_s: 0.5, doors: closed}
+  - {name: p3, route: main, dwell_s: 0.5, doors: closed, door_states: {d01: partial}}
+sensors:
+  laser: {rate_hz: 10, fov_deg: 270, beams: 360, max_range_m: 15.0, sigma_m: 0.01}
+  odometry: {rate_hz: 10}
+  ground_truth: {rate_hz: 10}
+  camera: {enabled: false}
+  detections: {enabled: false}
+"""
+
+
+@pytest.fixture(scope="module")
+def tiny_site(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
+    folder = tmp_path_factory.mktemp("tiny_em")
+    (folder / "world.yaml").write_text(WORLD)
+    (folder / "scenario.yaml").write_text(SCENARIO)
+    run_simulation(folder / "world.yaml", folder / "map.mcap", scenario=str(folder / "scenario.yaml"), seed=3,
+                   split_passes=True)
+    return sorted(folder.glob("map_pass*.mcap"))
+
+
+def _em(logs: list[Path], classes: ClassParams | None = None, **em: object) -> ObjectMapResult:
+    config = DoorbatchConfig.model_validate({"em": {"scan_stride": 1, "beam_stride": 1, **em}})
+    recs = [load_recording(p, config, with_colors=True) for p in logs]
+    beams = collect_beams(recs, [pass_poses(r, "reference", config) for r in recs], config.em)
+    return build_object_map(beams, config.em, classes)
+
+
+@pytest.fixture(scope="module")
+def learned(tiny_site: list[Path]) -> ObjectMapResult:
+    return _em(tiny_site)
+
+
+def test_moved_door_hinge_angles_and_width_are_recovered(learned: ObjectMapResult) -> None:
+    moved = [d for d in learned.doors if d.preview.moved]
+    assert len(moved) == 1
+    door = moved[0].preview
+    assert np.hypot(door.hinge_x - 3.0, door.hinge_y - 1.1) < 0.05
+    assert abs(door.length - 0.9) < 0.05
+    np.testing.assert_allclose(np.rad2deg(moved[0].pass_yaws), [100.0, 0.0, 50.0], atol=3.0)
+    assert abs(np.rad2deg(door.closed_yaw)) < 1.0
+
+
+def test_never_moved_door_is_found_by_its_learned_colour(learned: ObjectMapResult) -> None:
+    still = [d.preview for d in learned.doors if not d.preview.moved]
+    assert len(still) == 1  # and nothing else: no false positive
+    centre = np.array([still[0].hinge_x, still[0].hinge_y]) + 0.45 * np.array(
+        [np.cos(still[0].closed_yaw), np.sin(still[0].closed_yaw)])
+    assert np.linalg.norm(centre - [5.95, -1.1]) < 0.1
+    mean = learned.object_map.classes.color_mean
+    wall_rgb, door_rgb = np.array([196, 192, 182]), np.array([158, 122, 92])
+    apart = np.linalg.norm(wall_rgb - door_rgb)  # the simulated lighting scales colours by up to ±12 %
+    assert np.linalg.norm(mean[1] - door_rgb) < 0.3 * apart and np.linalg.norm(mean[0] - wall_rgb) < 0.3 * apart
+
+
+def test_corridor_walls_are_straight_and_where_they_should_be(learned: ObjectMapResult) -> None:
+    long_walls = [w for w in learned.object_map.walls if w.length > 3.0]
+    offsets = sorted(abs(w.offset) for w in long_walls if abs(w.normal[1]) > 0.99)
+    assert len(offsets) >= 2 and abs(offsets[0] - 1.1) < 0.02
+    for w in long_walls:
+        assert min(abs(w.normal[0]), abs(w.normal[1])) < np.sin(np.deg2rad(1.0))
+
+
+def test_range_only_finds_the_moved_door_only(tiny_site: list[Path]) -> None:
+    result = _em(tiny_site, use_color=False)
+    assert [d.preview.moved for d in result.doors] == [True]
+
+
+def test_learned_classes_find_the_still_door_without_relearning(tiny_site: list[Path], learned: ObjectMapResult,
+                                                               tmp_path: Path) -> None:
+    write_classes(tmp_path / "classes.json", learned.object_map.classes)
+    given = read_classes(tmp_path / "classes.json")
+    result = _em(tiny_site[1:2], classes=given)  # pass 2 alone: both doors closed, colour and width alone
+    assert result.object_map.classes.door_width_m == pytest.approx(learned.object_map.classes.door_width_m)
+    centres = sorted((round(d.preview.hinge_x + 0.45 * np.cos(d.preview.closed_yaw), 1), round(d.preview.hinge_y, 1))
+                     for d in result.doors)
+    assert centres == [(3.5, 1.1), (5.9, -1.1)] or centres == [(3.4, 1.1), (5.9, -1.1)]
+    assert not any(d.preview.moved for d in result.doors)
+
+
+def test_map_cli_writes_the_em_outputs_and_applies_classes(tiny_site: list[Path], tmp_path: Path,
+                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "map"
+    logs = [str(p) for p in tiny_site]
+    sets = ["--set", "em.scan_stride=1", "--set", "em.beam_stride=1"]
+    assert main(["map", *logs, "-o", str(out), *sets, "--json"]) == 0  # colours: em runs by default
+    summary = json.loads(capsys.readouterr().out)
+    doors = read_table("doors", out / "doors.parquet").to_pydict()
+    assert set(doors["source"]) == {"em"} and len(doors["door_id"]) == summary["doors"] == 2
+    assert sorted(doors["moved"]) == [False, True]
+    walls = read_walls(out / "walls.parquet")
+    assert sum(w.segments.shape[0] for w in walls) == len(read_table("walls", out / "walls.parquet"))
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["extra"]["stages"] == ["grid", "em"] and manifest["extra"]["em"]["doors"] == 2
+    out2 = tmp_path / "map2"
+    assert main(["map", logs[1], "-o", str(out2), "--classes", str(out / "classes.json"), *sets, "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["doors"] == 2  # pass 2: both doors closed, found by colour
+    bad = tmp_path / "bad.json"
+    bad.write_text("{}")
+    assert main(["map", logs[1], "-o", str(tmp_path / "m3"), "--classes", str(bad)]) == 3
+    assert "classes" in capsys.readouterr().err

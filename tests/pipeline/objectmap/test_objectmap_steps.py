@@ -1,0 +1,144 @@
+"""Known-answer tests of the EM sub-steps of paper 001: line fit (eq. 8), segment DP (eq. 9), hinge and
+angles (eq. 10), width, sensor model and E-step, Hough proposals."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.integrate import quad
+
+from doorbatch.pipeline.objectmap.beams import BeamSet
+from doorbatch.pipeline.objectmap.colors import two_gaussian_mixture
+from doorbatch.pipeline.objectmap.doors import best_width, fit_hinge_angles
+from doorbatch.pipeline.objectmap.hough import hough_lines
+from doorbatch.pipeline.objectmap.model import DOOR, WALL, ClassParams, Door, ObjectMap, Wall
+from doorbatch.pipeline.objectmap.sensor import e_step, first_objects, range_loglik_valid
+from doorbatch.pipeline.objectmap.walls import fit_line, segment_dp
+
+
+def test_line_fit_recovers_an_exact_line_and_ignores_zero_weights() -> None:
+    angle = np.deg2rad(30.0)
+    normal = np.array([np.cos(angle), np.sin(angle)])
+    tangent = np.array([-normal[1], normal[0]])
+    pts = 2.5 * normal + np.linspace(-3, 4, 50)[:, None] * tangent
+    outliers = np.array([[10.0, -3.0], [0.0, 7.0]])
+    weights = np.concatenate([np.ones(50), np.zeros(2)])
+    n, beta = fit_line(np.concatenate([pts, outliers]), weights)
+    if n @ normal < 0:
+        n, beta = -n, -beta
+    np.testing.assert_allclose(n, normal, atol=1e-9)
+    assert abs(beta - 2.5) < 1e-9
+
+
+def test_segment_dp_finds_the_supported_runs_and_bridges_short_gaps() -> None:
+    s = np.arange(0.0, 10.0, 0.05)
+    gain = np.where(((s >= 1.0) & (s <= 3.0)) | ((s >= 3.5) & (s <= 4.0)) | ((s >= 6.0) & (s <= 7.0)), 20.0, -20.0)
+    # each run pays for itself (e.g. 3.5..4.0: 11·20 = 220 > 70 + 0.5·70); joining 3.0 and 3.5 would take the
+    # 9 points between (9·20 = 180) plus 0.5·70 = 35 of length, more than a new segment's 70: two segments
+    segs, cost = segment_dp(s, gain, rho_length_per_m=70.0, start_cost=70.0)
+    np.testing.assert_allclose(segs, [[1.0, 3.0], [3.5, 4.0], [6.0, 7.0]], atol=1e-9)
+    assert cost < 0
+    no_points_in_gap = s[(s < 3.05) | (s > 3.45)]
+    g2 = np.where(((no_points_in_gap >= 1.0) & (no_points_in_gap <= 3.0))
+                  | ((no_points_in_gap >= 3.5) & (no_points_in_gap <= 4.0)), 20.0, -20.0)
+    segs2, _ = segment_dp(no_points_in_gap, g2, 70.0, 70.0)  # an empty 0.5 m gap costs 35 < 70: bridged
+    np.testing.assert_allclose(segs2[0], [1.0, 4.0], atol=1e-9)
+
+
+def _brute_force_cost(s: np.ndarray, gain: np.ndarray, rho: float, start: float) -> float:
+    best = 0.0
+    for bits in itertools.product([False, True], repeat=s.size):
+        x = np.array(bits)
+        cost = -gain[x].sum()
+        for k in range(s.size):
+            if x[k] and (k == 0 or not x[k - 1]):
+                cost += start
+            if x[k] and k > 0 and x[k - 1]:
+                cost += rho * (s[k] - s[k - 1])
+        best = min(best, cost)
+    return best
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.tuples(st.floats(0.0, 5.0), st.floats(-60.0, 60.0)), min_size=1, max_size=9))
+def test_segment_dp_is_the_exact_optimum(points: list[tuple[float, float]]) -> None:
+    s = np.array(sorted(p[0] for p in points))
+    gain = np.array([p[1] for p in sorted(points)])
+    _, cost = segment_dp(s, gain, 20.0, 30.0)
+    assert cost <= _brute_force_cost(s, gain, 20.0, 30.0) + 1e-6
+    assert cost >= _brute_force_cost(s, gain, 20.0, 30.0) - 1e-6
+
+
+def test_hinge_and_angles_are_recovered_by_gradient_descent() -> None:
+    rng = np.random.default_rng(3)
+    hinge = np.array([2.0, 1.0])
+    yaws = np.deg2rad([0.0, 50.0, 95.0])
+    pts, passes = [], []
+    for t, yaw in enumerate(yaws):
+        u = rng.uniform(0.05, 0.9, 60)
+        pts.append(hinge + u[:, None] * [np.cos(yaw), np.sin(yaw)] + rng.normal(0, 0.005, (60, 2)))
+        passes.append(np.full(60, t))
+    h, y = fit_hinge_angles(hinge + np.array([0.12, -0.08]), yaws + np.deg2rad([6.0, -5.0, 4.0]), np.concatenate(pts),
+                            np.concatenate(passes), np.ones(180), iterations=300)
+    assert np.linalg.norm(h - hinge) < 0.01
+    np.testing.assert_allclose(np.rad2deg(y), np.rad2deg(yaws), atol=0.5)
+
+
+def test_width_is_where_the_gain_stops_paying_for_the_length() -> None:
+    u = np.linspace(0.01, 1.3, 130)
+    gain = np.where(u <= 0.9, 3.0, -3.0)  # rays stopped by the leaf up to 0.9 m, then passing
+    assert abs(best_width(u, gain, 2, 70.0, 0.5, 1.3, 0.8) - 0.9) < 0.011
+
+
+def test_range_density_is_normalised_on_zero_to_dmax() -> None:
+    for delta in (0.02, 3.0, 19.99, np.inf):
+        total, _ = quad(lambda d, dl=delta: float(np.exp(range_loglik_valid(np.array([d]), np.array([dl]),
+                                                                              np.array([20.0]), 0.05))[0]),
+                        0.0, 20.0, points=[min(delta, 20.0)], limit=200)
+        assert abs(total - 1.0) < 1e-3
+
+
+def _beams(origin: np.ndarray, yaws: np.ndarray, ranges: np.ndarray, colors: np.ndarray) -> BeamSet:
+    n = yaws.size
+    return BeamSet(np.zeros(n, dtype=np.int64), np.tile(origin, (n, 1)), np.stack([np.cos(yaws), np.sin(yaws)], 1),
+                   ranges, np.full(n, 20.0), ranges < 20.0, colors, 1)
+
+
+def test_first_object_and_e_step_on_a_wall_and_a_door() -> None:
+    wall = Wall(np.array([1.0, 0.0]), 2.0, np.array([[-5.0, 5.0]]))  # x = 2
+    door = Door(np.array([1.0, -0.5]), np.array([np.pi / 2]))  # leaf x = 1, y ∈ [−0.5, 0.4]
+    classes = ClassParams(0.9, np.array([[200.0, 200, 200], [150, 100, 60]]), np.full((2, 3), 25.0), True)
+    obj_map = ObjectMap([wall], [door], classes, 1)
+    yaws = np.array([0.0, 0.0, np.deg2rad(60.0), 0.0])
+    ranges = np.array([1.0, 1.0, 2.0 / np.cos(np.deg2rad(60.0)), 5.0])
+    colors = np.array([[150.0, 100, 60], [200, 200, 200], [200, 200, 200], [np.nan] * 3])
+    beams = _beams(np.zeros(2), yaws, ranges, colors)
+    first = first_objects(beams, obj_map)
+    np.testing.assert_allclose(first.delta[:3], [1.0, 1.0, 4.0], atol=1e-9)
+    assert list(first.cls) == [DOOR, DOOR, WALL, DOOR]
+    e, _ = e_step(beams, first, classes, 0.7, 0.05)
+    assert e[0] > 0.99 and e[2] > 0.99  # range and colour fit
+    assert e[1] < 0.01  # right range, wall colour on the door: explained as invalid
+    assert e[3] < 0.01  # 4 m past the door
+
+
+def test_hough_proposes_the_two_walls_of_a_corridor_first() -> None:
+    x = np.linspace(0, 10, 400)
+    pts = np.concatenate([np.stack([x, np.full_like(x, 1.1)], 1), np.stack([x, np.full_like(x, -1.1)], 1),
+                          np.random.default_rng(0).uniform(-1, 1, (40, 2)) + np.array([5.0, 0.0])])
+    lines = hough_lines(pts, 1.0, 0.05, 0.25, 20, 10)
+    top = sorted(abs(b) for _, b, _ in lines[:2])
+    assert all(abs(abs(n[1]) - 1.0) < 1e-3 for n, _, _ in lines[:2])
+    np.testing.assert_allclose(top, [1.1, 1.1], atol=0.05)
+
+
+def test_two_gaussian_mixture_separates_two_colours() -> None:
+    rng = np.random.default_rng(1)
+    col = np.concatenate([rng.normal([200, 200, 190], 6, (300, 3)), rng.normal([150, 110, 80], 10, (100, 3))])
+    mix = two_gaussian_mixture(col)
+    door = int(np.argmin(mix.weights))
+    np.testing.assert_allclose(mix.mean[door], [150, 110, 80], atol=5)
+    assert (mix.labels[300:] == door).mean() > 0.95
