@@ -28,6 +28,7 @@ from doorbatch.io.mapdir import read_door_set
 from doorbatch.io.recording import Recording, load_recording
 from doorbatch.maps import DoorSet, OccupancyMap
 from doorbatch.pipeline.localize.convergence import ConvergenceMonitor, multimodal
+from doorbatch.pipeline.localize.door_geometry import with_closed_in_range
 from doorbatch.pipeline.localize.likelihood_field import (
     BeamCombination,
     DistanceField,
@@ -60,6 +61,7 @@ def load_localization_map(map_path: Path, config: LocalizeConfig) -> Localizatio
     yaml_path = map_path / "map.yaml" if map_path.is_dir() else map_path
     occ = read_map(yaml_path)
     doors = read_door_set(yaml_path.parent) if map_path.is_dir() else read_door_set(Path("/nonexistent"))
+    doors = with_closed_in_range(doors)
     field = build_distance_field(occ, config.laser_likelihood_max_dist, config.unknown_as_max_dist)
     return LocalizationMap(occ, field, free_cells(occ), doors)
 
