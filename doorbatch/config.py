@@ -328,7 +328,9 @@ class LocalizeConfig(Section):
     beam_combination: Literal["product", "amcl"] = "product"
     # Beam skipping (Nav2 do_beamskip, beam_skip_distance/threshold/error_threshold): leave out the beams whose
     # end point is farther than beam_skip_distance from the model (RBPF: static map or the associated door) at
-    # particles holding more than 1 - beam_skip_threshold of the weight, unless more than
+    # particles holding more than 1 - beam_skip_threshold of the weight given the other beams (not the
+    # prediction: a wide predicted cloud would skip its corrective beams; likelihood_field.beam_support_weights),
+    # unless more than
     # beam_skip_error_threshold of the beams would go. Unexplained obstacles (people, doors the map lacks)
     # otherwise drag the filter along corridors (docs/localization.md).
     do_beamskip: bool = True
@@ -366,6 +368,16 @@ class LocalizeConfig(Section):
     global_min_neff_ratio: float = Field(0.25, gt=0.0, le=1.0)
     converged_xy_std_m: float = Field(0.3, gt=0.0)
     converged_yaw_std_deg: float = Field(10.0, gt=0.0)
+    # ... and only once the cloud has also been unimodal (below) for converged_hold_s while the robot moved
+    # converged_min_travel_m (pipeline/localize/convergence.py): a tight cloud after a few scans of a
+    # symmetric corridor is often tight on the wrong pose.
+    converged_hold_s: float = Field(3.0, ge=0.0)  # expert choice: several scans at 10 Hz, ~1 s of walking twice
+    converged_min_travel_m: float = Field(1.0, ge=0.0)  # new views, not the same scan again
+    # Multimodal (reported as `ambiguous`): >= ambiguity_min_weight of the weight farther than
+    # ambiguity_radius_m or ambiguity_yaw_deg from the strongest hypothesis.
+    ambiguity_radius_m: float = Field(1.0, gt=0.0)
+    ambiguity_yaw_deg: float = Field(45.0, gt=0.0)
+    ambiguity_min_weight: float = Field(0.1, gt=0.0, le=1.0)
     # RBPF (paper 000 Sec. IV): door angles follow a random walk, var += sigma_d² · dt (so sigma_d is in
     # rad/√s); the initial door angle std, which also caps the variance of a door left unobserved.
     door_sigma_rad_per_sqrt_s: float = Field(0.1, ge=0.0)

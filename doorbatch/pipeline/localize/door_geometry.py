@@ -161,3 +161,12 @@ def jit_kernel(fn: Callable[..., Any]) -> Callable[..., Any] | None:
             _COMPILED[key] = numba.njit(cache=True, nogil=True)(fn)
     kernel: Callable[..., Any] | None = _COMPILED[key]
     return kernel
+
+
+def with_closed_in_range(doors: DoorSet) -> DoorSet:
+    """The doors with every opening range widened to include the closed angle 0: [min(angle_min, 0),
+    max(angle_max, 0)]. Any door can close; a door the map saw only open (the em stage's never-moved doors
+    carry a zero-width range at the angle mapping saw, e.g. [−90°, −90°]) would otherwise have its closed leaf
+    rejected by the RBPF's orientation gate (range ± door_angle_margin_deg) and never be tracked closed."""
+    return DoorSet(doors.hinge, doors.length, doors.closed_yaw, np.minimum(doors.angle_min, 0.0),
+                   np.maximum(doors.angle_max, 0.0))

@@ -434,22 +434,56 @@ def beam_skip_mask(explained: npt.ArrayLike, weight: npt.ArrayLike, skip_thresho
 
     A beam is skipped when the particles that explain it (``explained`` (N, B): its end point lies within
     ``beam_skip_distance`` of the model, per particle) carry less than ``skip_threshold`` of the weight
-    (nav2_amcl counts particles; after resampling the two agree). Such a beam hit something the map does
-    not hold at most hypotheses (a person, a closed door whose leaf the static map lacks, a door mapping never
-    saw move): kept, it pulls every particle towards a pose where the end point happens to meet a wall, and
-    in a corridor, which constrains the position along its axis only weakly, a few such beams multiplied in
-    (``product``) outweigh all the others. When the filter disagrees with more than ``error_threshold`` of
-    the beams (it is lost, or the map is wrong everywhere), nothing is skipped, as in nav2_amcl.
+    (``weight`` (N,), or (N, B): a weight per particle per beam, :func:`beam_support_weights`). Such a beam
+    hit something the map does not hold at the poses the filter believes in (a person, a closed door whose
+    leaf the static map lacks, a door mapping never saw move): kept, it pulls every particle towards a pose
+    where the end point happens to meet a wall, and in a corridor, which constrains the position along its
+    axis only weakly, a few such beams multiplied in (``product``) outweigh all the others. When the filter
+    disagrees with more than ``error_threshold`` of the beams (it is lost, or the map is wrong everywhere),
+    nothing is skipped, as in nav2_amcl.
     """
     ok = np.asarray(explained, dtype=bool)
-    w = np.asarray(weight, dtype=np.float64)
+    w = np.asarray(weight)
     if ok.shape[1] == 0:
         return np.zeros(0, dtype=bool)
-    support = w @ ok / max(float(w.sum()), 1e-300)
+    if w.ndim == 1:
+        w = w[:, None]
+    support = np.where(ok, w, 0).sum(axis=0, dtype=np.float64) / np.maximum(w.sum(axis=0, dtype=np.float64), 1e-300)
     skip = support < skip_threshold
     if skip.mean() > error_threshold:
         return np.zeros_like(skip)
     return np.asarray(skip, dtype=bool)
+
+
+def beam_support_weights(pz: npt.ArrayLike, weight: npt.ArrayLike, floor: float,
+                         combination: BeamCombination) -> Float32Array:
+    """Per beam b, the particles' posterior weight (N, B) given the *other* beams, each clipped at ``floor``.
+
+    w_ib ∝ w_i · L_i^(−b), with L^(−b) the scan likelihood (``combination``) without beam b and every pz
+    raised to at least ``floor`` (the pz of an end point ``beam_skip_distance`` from the model). Asking
+    which particles explain a beam under the *prior* weight (nav2_amcl counts the predicted particles) fails
+    after a long odometry step: the predicted cloud is wider than ``beam_skip_distance``, only the minority
+    near the true pose explains the beams that would pull the cloud back, and they are skipped (the CARMEN
+    logs, scans 0.5–1 m apart: intel lost). Under the posterior of the other beams those particles carry the
+    weight, so their beams count. The clip makes every unexplained beam the same constant at all particles:
+    an obstacle the map lacks neither earns nor costs weight here, so it cannot pull the support towards a
+    pose where it happens to meet a wall. Leaving beam b out keeps it from vouching for itself.
+    """
+    # float32 throughout (N×B work arrays at 50,000 particles): sums of ~60 log terms lose ~1e-4 nats
+    p = np.fmax(np.asarray(pz, dtype=np.float32), np.float32(floor))  # NaN (a dropped beam) becomes the floor
+    with np.errstate(divide="ignore"):
+        log_w = np.log(np.asarray(weight, dtype=np.float64)).astype(np.float32)[:, None]
+    if combination is BeamCombination.AMCL:
+        cubed = p * p * p
+        log_post = np.log1p(cubed.sum(axis=1, keepdims=True) - cubed)
+    else:
+        log_post = np.log(p, out=p)
+        log_post = np.subtract(log_post.sum(axis=1, keepdims=True), log_post, out=log_post)
+    log_post += log_w
+    log_post -= log_post.max(axis=0, keepdims=True)
+    post: Float32Array = np.exp(log_post, out=log_post)
+    post /= post.sum(axis=0, keepdims=True)
+    return post
 
 
 def cloud_converged(weight: npt.ArrayLike, pose: npt.ArrayLike, config: LocalizeConfig) -> bool:
@@ -469,7 +503,9 @@ def skip_unexplained(pz: npt.ArrayLike, weight: npt.ArrayLike, pose: npt.ArrayLi
                      range_max_m: float, combination: BeamCombination) -> tuple[Float32Array, int]:
     """Per-beam likelihoods (N, B) with :func:`beam_skip_mask` applied when ``do_beamskip`` is on, and the number
     of beams skipped. A beam is explained at a particle when its pz is at least that of an end point
-    ``beam_skip_distance`` from the model (for the RBPF: from the model the beam was associated with).
+    ``beam_skip_distance`` from the model (for the RBPF: from the model the beam was associated with); the
+    share of the weight that explains it is taken under the other beams' clipped posterior
+    (:func:`beam_support_weights`).
 
     Only a converged filter skips (weighted position std ≤ ``converged_xy_std_m``, yaw std ≤
     ``converged_yaw_std_deg``, particles ``pose`` (N, 3)): "most hypotheses cannot explain this beam" means
@@ -485,7 +521,8 @@ def skip_unexplained(pz: npt.ArrayLike, weight: npt.ArrayLike, pose: npt.ArrayLi
     floor = config.z_hit * math.exp(-0.5 * (config.beam_skip_distance / sig) ** 2) + config.z_rand / range_max_m
     with np.errstate(invalid="ignore"):
         explained = p >= np.float32(floor)
-    skip = beam_skip_mask(explained, weight, config.beam_skip_threshold, config.beam_skip_error_threshold)
+    support = beam_support_weights(p, weight, floor, combination)
+    skip = beam_skip_mask(explained, support, config.beam_skip_threshold, config.beam_skip_error_threshold)
     return drop_beams(p, skip, combination), int(skip.sum())
 
 

@@ -27,6 +27,8 @@ from doorbatch.io.map_server import read_map
 from doorbatch.io.mapdir import read_door_set
 from doorbatch.io.recording import Recording, load_recording
 from doorbatch.maps import DoorSet, OccupancyMap
+from doorbatch.pipeline.localize.convergence import ConvergenceMonitor, multimodal
+from doorbatch.pipeline.localize.door_geometry import with_closed_in_range
 from doorbatch.pipeline.localize.likelihood_field import (
     BeamCombination,
     DistanceField,
@@ -59,6 +61,7 @@ def load_localization_map(map_path: Path, config: LocalizeConfig) -> Localizatio
     yaml_path = map_path / "map.yaml" if map_path.is_dir() else map_path
     occ = read_map(yaml_path)
     doors = read_door_set(yaml_path.parent) if map_path.is_dir() else read_door_set(Path("/nonexistent"))
+    doors = with_closed_in_range(doors)
     field = build_distance_field(occ, config.laser_likelihood_max_dist, config.unknown_as_max_dist)
     return LocalizationMap(occ, field, free_cells(occ), doors)
 
@@ -125,24 +128,6 @@ def _initial_particles(rec: Recording, lmap: LocalizationMap, init: str | tuple[
     particles.door_mean = np.broadcast_to(mid, (n, d)).copy()
     particles.door_var = np.full((n, d), math.radians(config.door_init_sigma_deg) ** 2)
     return particles
-
-
-def _converged(particles: ParticleSet, config: LocalizeConfig) -> bool:
-    _, cov = particles.mean_and_covariance()
-    xy_std = math.sqrt(max(cov[0, 0], cov[1, 1]))
-    return xy_std <= config.converged_xy_std_m and math.sqrt(cov[2, 2]) <= math.radians(config.converged_yaw_std_deg)
-
-
-def ambiguous(particles: ParticleSet, radius_m: float = 1.0, yaw_rad: float = math.pi / 4,
-              min_weight: float = 0.1) -> bool:
-    """Whether at least ``min_weight`` of the weight lies away from the strongest hypothesis (outside
-    ``radius_m`` and ``yaw_rad`` of the heaviest particle's neighbourhood mean), e.g. a symmetric corridor's
-    pose turned by 180°."""
-    w, pose = particles.weight, particles.pose
-    best = pose[int(np.argmax(w))]
-    dyaw = np.abs(np.arctan2(np.sin(pose[:, 2] - best[2]), np.cos(pose[:, 2] - best[2])))
-    near = (np.hypot(pose[:, 0] - best[0], pose[:, 1] - best[1]) <= radius_m) & (dyaw <= yaw_rad)
-    return float(w[~near].sum()) >= min_weight
 
 
 @dataclass
@@ -224,6 +209,7 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
     combination = BeamCombination(lc.beam_combination)
     track = _Track()
     converged_ns = None if init == "global" else int(rec.scans.stamps_ns[0])
+    monitor = ConvergenceMonitor()
     last_s: float | None = None
     k_draw = max(1, lc.annotate_particles)
     for i in range(len(rec.scans)):
@@ -251,15 +237,16 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
         p = state.particles
         mean, cov = p.mean_and_covariance()
         dmean, dstd = p.door_estimate()
-        if converged_ns is None and _converged(p, lc):
-            converged_ns = int(scan.stamp_ns)
+        if init == "global":
+            monitor = monitor.update(int(scan.stamp_ns), odom[i], p, lc)
+            converged_ns = monitor.converged_ns
         # a fixed-size draw of the (equally weighted after resampling) particles for the annotated MCAP
         pick = np.linspace(0, len(p) - 1, k_draw).round().astype(np.intp)
         track.add(scan.stamp_ns, mean, cov, odom[i], len(p), diag.neff, dmean, dstd, observed, p.pose[pick])
     if not track.stamps:
         raise PipelineError(f"{log_path}: no scan had an odometry pose; nothing was localized")
     return track.result(Path(log_path).name, method, state.particles.n_doors, converged_ns,
-                        ambiguous(state.particles), list(rec.warnings))
+                        multimodal(state.particles, lc), list(rec.warnings))
 
 
 @dataclass(frozen=True)

@@ -15,6 +15,7 @@ from doorbatch.pipeline.localize.door_geometry import (
     leaf_endpoints,
     point_to_leaf_distance,
     subset_doors,
+    with_closed_in_range,
 )
 
 FloatArray = npt.NDArray[np.float64]
@@ -126,3 +127,14 @@ def test_doors_in_reach_keeps_doors_near_the_points_only() -> None:
     assert not doors_in_reach(doors, np.full((1, 1, 2), np.nan), 100.0).any()
     sub = subset_doors(doors, doors_in_reach(doors, pts, 1.6))
     np.testing.assert_array_equal(sub.hinge, [[0.0, 0.0], [3.4, 0.0]])
+
+
+def test_every_door_range_includes_closed() -> None:
+    """A never-moved door mapped open at −90° (zero-width range), one seen only between 20° and 80°, and one
+    with a range across closed: the first two widen to closed, the third is unchanged."""
+    doors = DoorSet(np.zeros((3, 2)), np.ones(3), np.zeros(3), np.radians([-90.0, 20.0, -10.0]),
+                    np.radians([-90.0, 80.0, 70.0]))
+    out = with_closed_in_range(doors)
+    np.testing.assert_allclose(np.degrees(out.angle_min), [-90.0, 0.0, -10.0])
+    np.testing.assert_allclose(np.degrees(out.angle_max), [0.0, 80.0, 70.0])
+    np.testing.assert_array_equal(out.hinge, doors.hinge)

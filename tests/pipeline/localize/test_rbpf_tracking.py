@@ -15,6 +15,7 @@ from doorbatch.maps import DoorSet
 from doorbatch.pipeline.localize.likelihood_field import (
     BeamCombination,
     beam_skip_mask,
+    beam_support_weights,
     build_distance_field,
     drop_beams,
 )
@@ -95,3 +96,26 @@ def test_beam_skipping_leaves_out_beams_most_weight_cannot_explain() -> None:
     assert np.all(drop_beams(pz, [False, True, False], BeamCombination.PRODUCT)[:, 1] == 1.0)
     assert np.all(drop_beams(pz, [False, True, False], BeamCombination.AMCL)[:, 1] == 0.0)
 
+
+
+def test_beam_skipping_keeps_the_corrective_beams_of_a_wide_predicted_cloud() -> None:
+    """After a long odometry step only the minority of particles near the true pose (0.3 of the prior weight)
+    explains the beams on the wall that pulls the cloud back (beams 4 and 5): under the prior weight they
+    would be skipped; under the other beams' posterior they count. Beam 6 (an obstacle the map lacks) is
+    explained nowhere and is skipped either way."""
+    config = LocalizeConfig()
+    floor = config.z_hit * math.exp(-0.5 * (config.beam_skip_distance / config.sigma_hit) ** 2)
+    pz = np.full((10, 7), 0.8)
+    pz[3:, 4:6] = 0.01  # the majority misses the corrective wall
+    pz[:, 6] = 0.01  # nobody explains the obstacle
+    explained = pz >= floor
+    w = np.full(10, 0.1)
+    np.testing.assert_array_equal(beam_skip_mask(explained, w, 0.5, 0.9), [0, 0, 0, 0, 1, 1, 1])
+    support = beam_support_weights(pz, w, floor, BeamCombination.PRODUCT)
+    np.testing.assert_allclose(support.sum(axis=0), 1.0, rtol=1e-6)  # float32
+    np.testing.assert_array_equal(beam_skip_mask(explained, support, 0.5, 0.9), [0, 0, 0, 0, 0, 0, 1])
+    # the obstacle's own floor-level pz does not move any particle's support weight
+    np.testing.assert_allclose(support[:, 6], beam_support_weights(pz[:, :6], w, floor,
+                                                                   BeamCombination.PRODUCT)[:, 0], rtol=1e-6)
+    support_amcl = beam_support_weights(pz, w, floor, BeamCombination.AMCL)
+    assert np.all(support_amcl[:3, 4].sum() > w[:3].sum())

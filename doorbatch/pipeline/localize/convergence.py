@@ -1,0 +1,84 @@
+"""When a global localization may claim convergence, and when it must report ambiguity instead.
+
+A cloud that is tight after a few scans of a uniform start is often tight on the wrong pose: a corridor with
+similar ends, or closed doors flush with the walls, is symmetric (DESIGN pitfall), and KLD-sampling plus
+resampling thin a cloud to one cluster by chance along an axis the scans do not observe. An expert's
+detector therefore asks for more than a small covariance:
+
+1. **tight**: weighted position std ≤ ``converged_xy_std_m`` (both axes) and yaw std ≤
+   ``converged_yaw_std_deg``;
+2. **unimodal**: less than ``ambiguity_min_weight`` of the weight lies outside ``ambiguity_radius_m`` and
+   ``ambiguity_yaw_deg`` of the strongest hypothesis (:func:`is_multimodal`);
+3. **held**: 1 and 2 have held without a break for ``converged_hold_s`` seconds while the odometry moved the
+   robot ``converged_min_travel_m`` (a stationary robot keeps seeing the same scan; a hypothesis that is
+   wrong has to survive new views).
+
+The claimed convergence time is the update at which 3 is met for the streak that lasts to the end of the log
+(the time a user could act on it); a streak that breaks later withdraws its claim.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from doorbatch.config import LocalizeConfig
+from doorbatch.pipeline.localize.likelihood_field import cloud_converged
+from doorbatch.pipeline.localize.particles import ParticleSet
+
+
+def is_tight(particles: ParticleSet, config: LocalizeConfig) -> bool:
+    """Weighted position std (each axis) ≤ ``converged_xy_std_m`` and yaw std ≤ ``converged_yaw_std_deg``."""
+    return cloud_converged(particles.weight, particles.pose, config)
+
+
+def is_multimodal(particles: ParticleSet, radius_m: float, yaw_rad: float, min_weight: float) -> bool:
+    """Whether at least ``min_weight`` of the weight lies away from the strongest hypothesis: outside
+    ``radius_m`` (position) or ``yaw_rad`` (heading) of the heaviest particle, e.g. a symmetric corridor's
+    pose turned by 180° or shifted by a door spacing."""
+    w, pose = particles.weight, particles.pose
+    best = pose[int(np.argmax(w))]
+    dyaw = np.abs(np.arctan2(np.sin(pose[:, 2] - best[2]), np.cos(pose[:, 2] - best[2])))
+    near = (np.hypot(pose[:, 0] - best[0], pose[:, 1] - best[1]) <= radius_m) & (dyaw <= yaw_rad)
+    return float(w[~near].sum()) >= min_weight
+
+
+def multimodal(particles: ParticleSet, config: LocalizeConfig) -> bool:
+    """:func:`is_multimodal` with the ``localize.ambiguity_*`` settings."""
+    return is_multimodal(particles, config.ambiguity_radius_m, math.radians(config.ambiguity_yaw_deg),
+                         config.ambiguity_min_weight)
+
+
+@dataclass(frozen=True)
+class ConvergenceMonitor:
+    """The detector's state between updates.
+
+    Attributes:
+        since_ns: stamp of the first update of the current tight-and-unimodal streak (None: no streak).
+        travel_m: odometry path length since then.
+        last_odom: (3,) odometry pose at the previous update (None before the first).
+        converged_ns: stamp at which the current streak's convergence was claimed (None: no claim stands).
+    """
+
+    since_ns: int | None = None
+    travel_m: float = 0.0
+    last_odom: npt.NDArray[np.float64] | None = None
+    converged_ns: int | None = None
+
+    def update(self, stamp_ns: int, odom: npt.ArrayLike, particles: ParticleSet,
+               config: LocalizeConfig) -> ConvergenceMonitor:
+        """The state after one filter update. A claim is withdrawn when the cloud later spreads or splits (a
+        hypothesis the scans went on to contradict was not a convergence); a new streak must then hold again."""
+        o = np.asarray(odom, dtype=np.float64).reshape(3)
+        step = 0.0 if self.last_odom is None else float(np.hypot(*(o[:2] - self.last_odom[:2])))
+        if not (is_tight(particles, config) and not multimodal(particles, config)):
+            return ConvergenceMonitor(None, 0.0, o, None)
+        if self.converged_ns is not None:
+            return ConvergenceMonitor(self.since_ns, self.travel_m + step, o, self.converged_ns)
+        since = stamp_ns if self.since_ns is None else self.since_ns
+        travel = 0.0 if self.since_ns is None else self.travel_m + step
+        held = (stamp_ns - since) / 1e9 >= config.converged_hold_s and travel >= config.converged_min_travel_m
+        return ConvergenceMonitor(since, travel, o, stamp_ns if held else None)

@@ -1,0 +1,69 @@
+"""The global-localization convergence detector: tight, unimodal, held over time and travel."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from doorbatch.config import LocalizeConfig
+from doorbatch.pipeline.localize.convergence import ConvergenceMonitor, multimodal
+from doorbatch.pipeline.localize.particles import ParticleSet
+
+CONFIG = LocalizeConfig(converged_hold_s=2.0, converged_min_travel_m=1.0)
+
+
+def cloud(centres: list[tuple[float, float, float]], weights: list[float], n: int = 400,
+          seed: int = 0) -> ParticleSet:
+    """Tight clusters (0.05 m, 1°) around ``centres`` holding ``weights`` of the weight."""
+    rng = np.random.default_rng(seed)
+    k = len(centres)
+    pose = np.repeat(np.asarray(centres, dtype=np.float64), n // k, axis=0)
+    pose += rng.normal(0.0, [0.05, 0.05, np.radians(1.0)], pose.shape)
+    w = np.repeat(np.asarray(weights, dtype=np.float64) / (n // k), n // k)
+    return ParticleSet(pose, w / w.sum(), np.zeros((len(w), 0)), np.zeros((len(w), 0)))
+
+
+def run(particles: ParticleSet, speed_m_s: float, seconds: float = 5.0) -> int | None:
+    """Feed the same cloud at 10 Hz while the odometry moves at ``speed_m_s``; the claimed stamp (ns)."""
+    monitor = ConvergenceMonitor()
+    for k in range(int(seconds * 10) + 1):
+        monitor = monitor.update(k * 100_000_000, (speed_m_s * k / 10, 0.0, 0.0), particles, CONFIG)
+    return monitor.converged_ns
+
+
+def test_a_tight_unimodal_cloud_converges_after_the_hold_time_and_travel() -> None:
+    # 0.5 m/s: 2 s of hold and 1 m of travel are both met at t = 2 s
+    assert run(cloud([(1.0, 2.0, 0.3)], [1.0]), 0.5) == 2_000_000_000
+    # 0.25 m/s: the travel decides (1 m at 4 s)
+    assert run(cloud([(1.0, 2.0, 0.3)], [1.0]), 0.25) == 4_000_000_000
+
+
+def test_a_standing_robot_never_claims_convergence() -> None:
+    assert run(cloud([(1.0, 2.0, 0.3)], [1.0]), 0.0) is None
+
+
+def test_two_clusters_with_substantial_weight_are_ambiguous_not_converged() -> None:
+    mirrored = cloud([(1.0, 2.0, 0.0), (9.0, 2.0, np.pi)], [0.7, 0.3])
+    assert multimodal(mirrored, CONFIG)
+    assert run(mirrored, 0.5) is None
+    # a second cluster with little weight is not an ambiguity; nor is a cluster within the radius
+    assert not multimodal(cloud([(1.0, 2.0, 0.0), (9.0, 2.0, np.pi)], [0.97, 0.03]), CONFIG)
+    assert not multimodal(cloud([(1.0, 2.0, 0.0), (1.5, 2.0, 0.0)], [0.5, 0.5]), CONFIG)
+
+
+def test_a_streak_broken_by_a_wide_cloud_starts_over() -> None:
+    tight, wide = cloud([(1.0, 2.0, 0.3)], [1.0]), cloud([(1.0, 2.0, 0.3), (6.0, 2.0, 0.3)], [0.5, 0.5])
+    monitor = ConvergenceMonitor()
+    for k in range(41):  # tight for 1.5 s, wide once, then tight again
+        p = wide if k == 15 else tight
+        monitor = monitor.update(k * 100_000_000, (0.5 * k / 10, 0.0, 0.0), p, CONFIG)
+    assert monitor.converged_ns == 3_600_000_000  # 2 s after the streak restarted at 1.6 s
+
+
+def test_a_claim_is_withdrawn_when_the_cloud_later_splits() -> None:
+    tight, split = cloud([(1.0, 2.0, 0.3)], [1.0]), cloud([(1.0, 2.0, 0.3), (6.0, 2.0, 0.3)], [0.6, 0.4])
+    monitor = ConvergenceMonitor()
+    for k in range(31):
+        monitor = monitor.update(k * 100_000_000, (0.5 * k / 10, 0.0, 0.0), tight, CONFIG)
+    assert monitor.converged_ns == 2_000_000_000
+    monitor = monitor.update(3_100_000_000, (1.55, 0.0, 0.0), split, CONFIG)
+    assert monitor.converged_ns is None
