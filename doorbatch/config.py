@@ -419,6 +419,9 @@ class EvaluateConfig(Section):
     global_success_window_s: float = Field(30.0, gt=0.0)
     global_success_xy_m: float = Field(0.3, gt=0.0)
     global_success_yaw_deg: float = Field(10.0, gt=0.0)
+    # The reference is interpolated at the success check's instants across gaps up to this long (a ground
+    # truth at its own rate seldom has a pose at a scan's stamp; evo-style association would miss it).
+    global_success_max_reference_gap_s: float = Field(0.5, gt=0.0)
     # Bin width of the error-along-the-corridor curves (paper 000 Figs. 5-7).
     along_x_bin_m: float = Field(0.5, gt=0.0)
 

@@ -234,7 +234,7 @@ def _convergence_rows(run: RunTables, reference: ReferenceTrajectory | None,
             MetricRow(run.name, run.log, run.method, "ambiguous", float(run.ambiguous), "bool", run.params)]
     if run.init == "global" and reference is not None:
         check = ConvergenceCheck(cfg.global_success_window_s, cfg.global_success_xy_m,
-                                 math.radians(cfg.global_success_yaw_deg), cfg.max_time_diff_s)
+                                 math.radians(cfg.global_success_yaw_deg), cfg.global_success_max_reference_gap_s)
         ok = global_success(run.stamps_ns, run.pose, run.converged_ns, reference.stamps_ns, reference.pose, check)
         rows.append(MetricRow(run.name, run.log, run.method, "global_success", float(ok), "bool", run.params))
     return rows

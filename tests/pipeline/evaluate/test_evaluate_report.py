@@ -89,6 +89,20 @@ def test_global_success_needs_convergence_at_the_right_pose() -> None:
     assert math.isnan(ev.value("late", "time_to_converge_s")) and ev.value("late", "converged") == 0.0
 
 
+def test_global_success_interpolates_a_reference_at_its_own_rate() -> None:
+    """A ground truth at 25 Hz has no pose at a 10 Hz scan's stamp half of the time (20 ms off): the check
+    interpolates it instead of failing the run; a reference that stops early still fails it."""
+    stamps, ref = _straight()
+    t25 = T0 + 40_000_000 * np.arange(500, dtype=np.int64)  # 25 Hz over the same 20 s
+    ref25 = np.stack([0.5 * (t25 - T0) / 1e9, np.zeros(500), np.zeros(500)], axis=1)
+    run = RunTables("ok", "l", "rbpf", stamps, ref + np.array([0.05, 0, 0]), init="global",
+                    converged_ns=int(stamps[21]))  # 2.1 s and the last update (19.9 s): 20 ms from any truth pose
+    assert evaluate_runs([run], DoorbatchConfig(), reference=ReferenceTrajectory(t25, ref25)).value(
+        "ok", "global_success") == 1.0
+    short = ReferenceTrajectory(t25[:100], ref25[:100])  # no reference at the end of the run
+    assert evaluate_runs([run], DoorbatchConfig(), reference=short).value("ok", "global_success") == 0.0
+
+
 def test_door_state_error_counts_recently_observed_doors_only() -> None:
     truth = _truth(math.radians(40))
     stamps = T0 + DT * np.arange(100, dtype=np.int64)
