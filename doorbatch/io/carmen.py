@@ -9,7 +9,7 @@ topic           type                        from
 ==============  ==========================  =====================================================
 /scan           sensor_msgs/LaserScan       FLASER and ROBOTLASER1 readings, frame ``laser``
 /odom           nav_msgs/Odometry           FLASER odometry fields (one per scan), ROBOTLASER1 robot
-                                            pose, and ODOM lines (not those at a scan's stamp)
+                                            pose, and ODOM lines (moved off the scans' stamps)
 /ground_truth   nav_msgs/Odometry           FLASER and ROBOTLASER1 laser pose (the corrected pose in
                                             corrected logs), moved back to base_link
 /tf             tf2_msgs/TFMessage          odom→base_link, one per odometry pose
@@ -18,7 +18,8 @@ topic           type                        from
 
 The file has no index, so :meth:`CarmenReader.open` makes one pass over it: it validates every line,
 counts messages, reads the PARAMs, finds the largest reading and repairs the time stamps
-(:func:`repair_stamps`); :meth:`CarmenReader.raw_messages` then streams a second pass.
+(:func:`repair_stamps`, then :func:`separate_odom_from_scan_stamps`, so that at a scan's stamp the
+odometry is the scan's own field); :meth:`CarmenReader.raw_messages` then streams a second pass.
 """
 
 from __future__ import annotations
@@ -244,7 +245,7 @@ def separate_odom_from_scan_stamps(stamps_ns: Int64Array, is_scan: BoolArray) ->
     A laser line's odometry field is the odometry at its instant. In intel and aces, ODOM lines just before
     and after each scan carry the scan's stamp (the logger's stamps jitter by up to a second around the
     file order; in the corrected logs the ones before the scan are dead reckoning from the previous
-    corrected pose, up to 0.5 m from the scan's field), and with equal stamps the interpolated odometry
+    corrected pose, up to 0.54 m from the scan's field), and with equal stamps the interpolated odometry
     takes whichever comes first. Each such line gets a stamp by linear interpolation, by line index, between
     the nearest lines before and after it that are not such lines (file order is the order of the motion);
     one that still lands on a scan's stamp (no room between equal neighbours, or at either end) is dropped.
@@ -558,8 +559,7 @@ class CarmenReader(LogReader):
         self.stamp_method = repair.method
         for message in repair.warnings:
             self._warn(message)
-        # Re-stamped by file order rather than dropped: they record motion just before or after the scan
-        # (only those left on a scan's stamp are dropped).
+        # Choice: re-stamped by file order, not dropped: they record motion just before or after the scan.
         separation = separate_odom_from_scan_stamps(self._stamps, np.array(is_scan, dtype=bool))
         self._stamps, self._dropped = separation.stamps_ns, separation.dropped
         n_dropped = int(np.count_nonzero(self._dropped))
