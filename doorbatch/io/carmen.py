@@ -8,8 +8,8 @@ role detection and MCAP conversion treat it like any bag:
 topic           type                        from
 ==============  ==========================  =====================================================
 /scan           sensor_msgs/LaserScan       FLASER and ROBOTLASER1 readings, frame ``laser``
-/odom           nav_msgs/Odometry           FLASER odometry fields (one per scan), ODOM lines, and
-                                            ROBOTLASER1 robot pose
+/odom           nav_msgs/Odometry           FLASER odometry fields (one per scan), ROBOTLASER1 robot
+                                            pose, and ODOM lines (moved off the scans' stamps)
 /ground_truth   nav_msgs/Odometry           FLASER and ROBOTLASER1 laser pose (the corrected pose in
                                             corrected logs), moved back to base_link
 /tf             tf2_msgs/TFMessage          odom→base_link, one per odometry pose
@@ -18,7 +18,8 @@ topic           type                        from
 
 The file has no index, so :meth:`CarmenReader.open` makes one pass over it: it validates every line,
 counts messages, reads the PARAMs, finds the largest reading and repairs the time stamps
-(:func:`repair_stamps`); :meth:`CarmenReader.raw_messages` then streams a second pass.
+(:func:`repair_stamps`, then :func:`separate_odom_from_scan_stamps`, so that at a scan's stamp the
+odometry is the scan's own field); :meth:`CarmenReader.raw_messages` then streams a second pass.
 """
 
 from __future__ import annotations
@@ -219,6 +220,48 @@ def _interpolate_bad(stamps: Int64Array, kept: Int64Array) -> Int64Array:
     repaired = base + np.rint(filled).astype(np.int64)
     repaired[kept] = stamps[kept]
     return np.maximum.accumulate(repaired)
+
+
+@dataclass(frozen=True, slots=True)
+class ScanStampSeparation:
+    """Stamps with no ODOM line on a laser line's stamp, and the ODOM lines that could not be moved off it."""
+
+    stamps_ns: Int64Array
+    dropped: BoolArray  # ODOM lines still on a scan's stamp: not emitted
+    n_restamped: int
+
+
+def odom_at_scan_stamps(stamps_ns: Int64Array, is_scan: BoolArray) -> BoolArray:
+    """Which timed lines are ODOM lines whose stamp equals a laser line's stamp."""
+    stamps = np.asarray(stamps_ns, dtype=np.int64)
+    scan = np.asarray(is_scan, dtype=bool)
+    mask: BoolArray = ~scan & np.isin(stamps, stamps[scan])
+    return mask
+
+
+def separate_odom_from_scan_stamps(stamps_ns: Int64Array, is_scan: BoolArray) -> ScanStampSeparation:
+    """Move ODOM lines off the laser lines' stamps, so that at a scan's instant its own odometry field wins.
+
+    A laser line's odometry field is the odometry at its instant. In intel and aces, ODOM lines just before
+    and after each scan carry the scan's stamp (the logger's stamps jitter by up to a second around the
+    file order; in the corrected logs the ones before the scan are dead reckoning from the previous
+    corrected pose, up to 0.54 m from the scan's field), and with equal stamps the interpolated odometry
+    takes whichever comes first. Each such line gets a stamp by linear interpolation, by line index, between
+    the nearest lines before and after it that are not such lines (file order is the order of the motion);
+    one that still lands on a scan's stamp (no room between equal neighbours, or at either end) is dropped.
+
+    Args:
+        stamps_ns: non-decreasing stamps of the timed lines in file order (after :func:`repair_stamps`).
+        is_scan: which of those lines are laser scans.
+    """
+    stamps = np.asarray(stamps_ns, dtype=np.int64)
+    scan = np.asarray(is_scan, dtype=bool)
+    on_scan = odom_at_scan_stamps(stamps, scan)
+    if not on_scan.any():
+        return ScanStampSeparation(stamps.copy(), on_scan, 0)
+    moved = _interpolate_bad(stamps, np.flatnonzero(~on_scan).astype(np.int64))
+    dropped = on_scan & odom_at_scan_stamps(moved, scan)
+    return ScanStampSeparation(moved, dropped, int(np.count_nonzero(on_scan & ~dropped)))
 
 
 def _coarse_message(scan_stamps: Int64Array, coarse: float) -> str:
@@ -442,6 +485,7 @@ class CarmenReader(LogReader):
         self.stamp_method = "logged"
         self.laser_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self._stamps: Int64Array = np.empty(0, dtype=np.int64)
+        self._dropped: BoolArray = np.empty(0, dtype=bool)  # ODOM lines at a scan's stamp (not emitted)
         self._topics: dict[str, TopicInfo] = {}
         self._fov_deg = self.io_config.carmen_fov_deg
         self._resolution_deg: float | None = None  # PARAM laser_front_laser_resolution
@@ -515,7 +559,16 @@ class CarmenReader(LogReader):
         self.stamp_method = repair.method
         for message in repair.warnings:
             self._warn(message)
-        n_odom = n_scans + counts[_ODOM]
+        # Choice: re-stamped by file order, not dropped: they record motion just before or after the scan.
+        separation = separate_odom_from_scan_stamps(self._stamps, np.array(is_scan, dtype=bool))
+        self._stamps, self._dropped = separation.stamps_ns, separation.dropped
+        n_dropped = int(np.count_nonzero(self._dropped))
+        if separation.n_restamped or n_dropped:
+            self._warn(f"{separation.n_restamped + n_dropped} of {counts[_ODOM]} ODOM lines share a scan's time "
+                       f"stamp (the scan's own odometry field is the odometry at that instant): re-stamped "
+                       f"{separation.n_restamped} by interpolation between their neighbours in file order, "
+                       f"dropped {n_dropped}")
+        n_odom = n_scans + counts[_ODOM] - n_dropped
         self._topics = {
             SCAN_TOPIC: TopicInfo(SCAN_TOPIC, LASERSCAN, n_scans, ENCODING),
             ODOM_TOPIC: TopicInfo(ODOM_TOPIC, ODOMETRY, n_odom, ENCODING),
@@ -613,6 +666,8 @@ class CarmenReader(LogReader):
             if index >= self._stamps.size:
                 raise LogReadError(f"line {lineno}: the log changed since it was opened", path=self.path)
             stamp = int(self._stamps[index])
+            if self._dropped[index]:
+                continue
             if stamp < lo:
                 continue
             if hi is not None and stamp >= hi:
