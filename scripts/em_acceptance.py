@@ -41,6 +41,7 @@ from doorbatch.pipeline.mapping import PassPoses, pass_poses
 from doorbatch.pipeline.objectmap.beams import BeamSet
 from doorbatch.pipeline.objectmap.colors import two_gaussian_mixture
 from doorbatch.pipeline.objectmap.model import ClassParams
+from doorbatch.pipeline.objectmap.sensor import cast_segments
 from doorbatch.pipeline.objectmap.stage import ObjectMapResult, build_object_map, collect_beams
 from doorbatch.sim.simulate import run_simulation
 
@@ -167,14 +168,27 @@ def observed_ends(segment: np.ndarray, points: np.ndarray, near_m: float = 0.05,
     return a + np.outer(np.r_[ts[first[keep]], ts[last[keep]]], u)
 
 
+def hits_by_truth_segment(beams: BeamSet, segments: np.ndarray, near_m: float = 0.05) -> list[np.ndarray]:
+    """The hits each truth wall segment (S, 2, 2) produced: the ray cast against all truth segments meets
+    that segment first and the measured range is within ``near_m`` of it. Proximity alone is not enough:
+    at a corner the hits on the adjoining wall (e.g. the corridor wall's face at a room wall's end, seen
+    from the corridor) lie within a few cm of the room wall's end point but were never reflected by it."""
+    hit = np.flatnonzero(beams.hit)
+    rng, idx = cast_segments(beams.origin[hit], beams.direction[hit], segments)
+    own = np.abs(beams.range_m[hit] - rng) <= near_m
+    points = beams.points[hit]
+    return [points[own & (idx == k)] for k in range(segments.shape[0])]
+
+
 def wall_accuracy(site: Site, result: ObjectMapResult, beams: BeamSet | None = None) -> dict[str, dict[str, float]]:
     """EM segment end points on lines that match a truth line (3°, 0.15 m): distance to the nearest truth
     segment end point on that line, and line direction errors; separately for the corridor walls (truth
     kind ``wall``: the robot sees all of them) and the room walls (kind ``room``: seen only through open
     doorways, so their segments end where the view ends, not where the wall does). With ``beams``, also the
-    distance to the nearest end of the truth wall's *observed* parts (:func:`observed_ends`)."""
-    hits = beams.points[beams.hit] if beams is not None else None
+    distance to the nearest end of the truth wall's *observed* parts (:func:`observed_ends` of the hits
+    :func:`hits_by_truth_segment` gives that wall)."""
     segs = site.truth.segments
+    own_hits = hits_by_truth_segment(beams, segs) if beams is not None else None
     kinds = np.array(site.truth.segment_kinds)
     d = segs[:, 1] - segs[:, 0]
     tn = np.stack([-d[:, 1], d[:, 0]], 1) / np.linalg.norm(d, axis=1, keepdims=True)
@@ -190,8 +204,9 @@ def wall_accuracy(site: Site, result: ObjectMapResult, beams: BeamSet | None = N
             dirs.append(np.rad2deg(np.arccos(min(1.0, float(np.max(np.abs(c[same])))))))
             ends = segs[same].reshape(-1, 2)
             errs += [float(np.min(np.linalg.norm(ends - e, axis=1))) for e in w.endpoints().reshape(-1, 2)]
-            if hits is not None:
-                seen = np.concatenate([observed_ends(s, hits) for s in segs[same]]).reshape(-1, 2)
+            if own_hits is not None:
+                seen = np.concatenate([observed_ends(segs[k], own_hits[k])
+                                       for k in np.flatnonzero(same)]).reshape(-1, 2)
                 if seen.size:
                     seen_errs += [float(np.min(np.linalg.norm(seen - e, axis=1))) for e in w.endpoints().reshape(-1, 2)]
         e = np.array(errs)
