@@ -7,8 +7,8 @@ methods differ only in the map model)::
     1. sampling     poses by the odometry motion model; door angles d_k,t = d_k,t−1 + ε, ε ~ N(0, σ_d²·Δt)
     2. importance   per beam, ML association between the static likelihood field and each door leaf at the
                     particle's door estimate, the door term marginalized to first order (eq. 6); until the
-                    cloud converges, smoothed over each particle's pose region and tempered (:mod:`.smoothing`,
-                    as MCL); once
+                    cloud converges, the static model alone (as MCL; door angles not yet tied to a pose),
+                    smoothed over each particle's pose region and tempered (:mod:`.smoothing`); once
                     converged, beams that most of the weight explains by neither are skipped (Nav2's
                     do_beamskip, likelihood_field.skip_unexplained), as MCL does
     3. door update  one Douglas–Peucker polygon per scan, moved to every particle, associated to doors,
@@ -91,7 +91,11 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
     bandwidth = active_bandwidth(particles.pose, particles.weight, config)
     extra = None if bandwidth is None else endpoint_variance(bandwidth, beams.points_base)
     static = endpoint_distances(field, particles.pose, beams.points_base)
-    if n_doors:
+    # Eq. (6) only once the cloud has converged: a particle's door angles are then conditioned on its own
+    # (tracked) pose; while the cloud is global they are the 30° prior, and ML association turns every door's
+    # swept disc into a region that explains any stray beam, which pulls the cloud onto wrong
+    # poses near many doors (docs/results.md, "What does not meet issue #5 yet"); until then, MCL's static model.
+    if n_doors and bandwidth is None:
         dl = door_log_likelihood_at_poses(static, particles.pose, beams.points_base, doors, particles.door_mean,
                                           particles.door_var, config, beams.range_max_m, extra_var=extra)
         pz = dl.beam_likelihood

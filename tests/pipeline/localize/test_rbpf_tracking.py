@@ -20,6 +20,7 @@ from doorbatch.pipeline.localize.likelihood_field import (
     drop_beams,
 )
 from doorbatch.pipeline.localize.mcl import MclState, initial_particles, mcl_step
+from doorbatch.pipeline.localize.particles import ParticleSet
 from doorbatch.pipeline.localize.rbpf import rbpf_step
 from doorbatch.sim.motion import OdometryNoise, drift_poses
 
@@ -119,3 +120,34 @@ def test_beam_skipping_keeps_the_corrective_beams_of_a_wide_predicted_cloud() ->
                                                                    BeamCombination.PRODUCT)[:, 0], rtol=1e-6)
     support_amcl = beam_support_weights(pz, w, floor, BeamCombination.AMCL)
     assert np.all(support_amcl[:3, 4].sum() > w[:3].sum())
+
+
+def _step_with_door_mean(particles_pose: FloatArray, door_deg: float) -> FloatArray:
+    """Poses and weights after one forced RBPF update of the corridor scan at x = 6 m, every particle holding
+    each door at ``door_deg`` (std 30°)."""
+    world, static, doors = corridor()
+    field = build_distance_field(rasterize(static, (-1.0, 16.0), (0.0, 2.4), margin=RES * 4), 2.0)
+    truth = np.array([6.0, 1.5, 0.0])
+    config = LocalizeConfig(max_particles=len(particles_pose), min_particles=len(particles_pose))
+    rng = np.random.default_rng(0)
+    beams = scan_beams(world, truth, max_range=RANGE, noise_m=0.0, rng=rng)
+    r, a = scan_ranges(world, truth, max_range=RANGE)
+    hit = np.isfinite(r)
+    pts = np.stack([LASER_X + r[hit] * np.cos(a[hit]), r[hit] * np.sin(a[hit])], axis=1)
+    n, d = len(particles_pose), len(doors)
+    particles = ParticleSet(particles_pose, np.full(n, 1.0 / n), np.full((n, d), math.radians(door_deg)),
+                            np.full((n, d), math.radians(config.door_init_sigma_deg) ** 2))
+    state, _, _ = rbpf_step(MclState(particles), truth, 0.0, None, beams, pts, field, doors, config,
+                            np.random.default_rng(1), force=True)
+    return np.column_stack([state.particles.pose, state.particles.weight])  # resampled or not
+
+
+def test_door_term_waits_for_a_converged_cloud() -> None:
+    """While the cloud is global the door angles are only the prior, not tied to any pose: the weights are the
+    static model's and do not depend on them. Once converged, eq. (6) makes them matter (the leaves at 50°
+    explain beams that a closed-door estimate cannot)."""
+    rng = np.random.default_rng(2)
+    spread = np.stack([rng.uniform(0.0, 14.0, 400), rng.uniform(0.3, 2.1, 400), rng.uniform(-3.1, 3.1, 400)], axis=1)
+    np.testing.assert_array_equal(_step_with_door_mean(spread, 50.0), _step_with_door_mean(spread, 0.0))
+    tight = np.array([6.0, 1.5, 0.0]) + rng.normal(0.0, [0.03, 0.03, 0.01], (400, 3))
+    assert not np.allclose(_step_with_door_mean(tight, 50.0), _step_with_door_mean(tight, 0.0))
