@@ -331,7 +331,19 @@ def config_cmd(ctx: Context, dump: bool) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Console entry point: run the CLI, map errors to one line and an exit code."""
+    """Console entry point: run the CLI, map errors to one line and an exit code. The ``doorbatch`` logger's
+    level and handlers (set from ``-v/-q``) are restored afterwards, so that a library caller (or a test) that
+    runs a command keeps its own logging."""
+    logger = logging.getLogger("doorbatch")
+    saved = (logger.level, list(logger.handlers))
+    try:
+        return _main(argv)
+    finally:
+        logger.setLevel(saved[0])
+        logger.handlers[:] = saved[1]
+
+
+def _main(argv: list[str] | None) -> int:
     try:
         cli.main(args=argv, prog_name="doorbatch", standalone_mode=False)
     except DoorbatchError as err:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -49,7 +50,11 @@ def read_door_set(map_dir: Path) -> DoorSet:
     path = map_dir / "doors.parquet"
     if not path.exists():
         return DoorSet(np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0))
-    t = read_table("doors", path).to_pydict()
+    return door_set_of(read_table("doors", path).to_pydict())
+
+
+def door_set_of(t: dict[str, list[Any]]) -> DoorSet:
+    """doors.parquet columns (``to_pydict``) as a DoorSet."""
     return DoorSet(np.array([t["hinge_x"], t["hinge_y"]], dtype=np.float64).T.reshape(-1, 2),
                    np.asarray(t["length"], dtype=np.float64), np.asarray(t["closed_yaw"], dtype=np.float64),
                    np.asarray(t["angle_min"], dtype=np.float64), np.asarray(t["angle_max"], dtype=np.float64))

@@ -21,9 +21,9 @@ import numpy as np
 from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import InputDataError
 from doorbatch.io.manifest import Manifest
-from doorbatch.io.mapdir import read_door_set
+from doorbatch.io.mapdir import door_set_of, read_door_set
 from doorbatch.io.parquet import read_table
-from doorbatch.io.sim_truth import SimTruth, read_truth
+from doorbatch.io.sim_truth import SimTruth, output_paths, read_truth
 from doorbatch.io.tum import read_tum
 from doorbatch.pipeline.evaluate.report import DoorStateTable, MapTables, ReferenceTrajectory, RunTables
 
@@ -61,8 +61,6 @@ def read_reference(path: Path, config: DoorbatchConfig) -> ReferenceTrajectory:
 
 def _sibling(log_path: Path, kind: str) -> Path:
     """The simulator's ``truth`` (YAML) or ``trajectory`` (TUM) file of a log, named as the simulator does."""
-    from doorbatch.sim.simulate import output_paths
-
     return output_paths(log_path)[kind]
 
 
@@ -82,9 +80,9 @@ def _own_reference(log_path: Path | None, config: DoorbatchConfig) -> ReferenceT
     """The simulator's ``<stem>.truth.tum`` next to the log, else the log's reference pose topic, else None."""
     if log_path is None:
         return None
-    if _sibling(log_path, "trajectory").is_file():
-        tum = read_tum(_sibling(log_path, "trajectory"))
-        return ReferenceTrajectory(tum.stamp_ns, np.stack([tum.x, tum.y, tum.yaw], axis=1))
+    truth_tum = _sibling(log_path, "trajectory")
+    if truth_tum.is_file():
+        return read_reference(truth_tum, config)
     if not log_path.exists():
         return None
     try:
@@ -138,9 +136,11 @@ def read_map_dir(map_dir: Path, name: str | None = None) -> MapTables:
         candidates = [_sibling(p, "truth") for p in logs] + [p.parent / "map.truth.yaml" for p in logs[:1]]
         found = next((c for c in candidates if c.is_file()), None)
         truth = read_truth(found) if found is not None else None
-    sources = set(read_table("doors", map_dir / "doors.parquet").column("source").to_pylist()) if (
-        map_dir / "doors.parquet").is_file() else set()
-    return MapTables(name or map_dir.name, read_door_set(map_dir), truth, source="em" if "em" in sources else "grid")
+    if not (map_dir / "doors.parquet").is_file():
+        return MapTables(name or map_dir.name, read_door_set(map_dir), truth)
+    table = read_table("doors", map_dir / "doors.parquet").to_pydict()
+    return MapTables(name or map_dir.name, door_set_of(table), truth,
+                     source="em" if "em" in table["source"] else "grid")
 
 
 def params_json(params: dict[str, Any]) -> str:

@@ -42,6 +42,16 @@ import yaml
 from doorbatch.errors import InputDataError
 from doorbatch.io.atomic import atomic_write_text
 
+
+def output_paths(out: Path) -> dict[str, Path]:
+    """The files the simulator writes for a log at ``out``: log, truth, trajectory, map_closed, map_static
+    (here, not in the simulator, so that readers find them without importing it)."""
+    out = Path(out)
+    stem = out.name[: -len(out.suffix)] if out.suffix in (".mcap", ".bag") else out.name
+    folder = out.parent
+    return {"log": out, "truth": folder / f"{stem}.truth.yaml", "trajectory": folder / f"{stem}.truth.tum",
+            "map_closed": folder / f"{stem}.map_closed.yaml", "map_static": folder / f"{stem}.map_static.yaml"}
+
 FORMAT = "doorbatch-sim-truth/1"
 FloatArray = npt.NDArray[np.float64]
 Int64Array = npt.NDArray[np.int64]

@@ -30,7 +30,7 @@ from doorbatch.errors import UsageError
 from doorbatch.io import ros_messages as m
 from doorbatch.io.log_writer import LogFormat, LogWriter
 from doorbatch.io.map_server import write_map
-from doorbatch.io.sim_truth import SimTruth, TruthDoor, TruthPass, write_truth
+from doorbatch.io.sim_truth import SimTruth, TruthDoor, TruthPass, output_paths, write_truth
 from doorbatch.io.split import copy_window
 from doorbatch.io.tum import write_tum
 from doorbatch.sim.motion import OdometryNoise, PoseSamples, sample_trajectory, simulate_odometry
@@ -301,15 +301,6 @@ def _static_tf(sc: Scenario, stamp_ns: int, base: str) -> Iterator[SimMessage]:
 
 
 # --------------------------------------------------------------------------------------------- files
-
-
-def output_paths(out: Path) -> dict[str, Path]:
-    """The files written for a log at ``out``: log, truth, trajectory, map_closed, map_static."""
-    out = Path(out)
-    stem = out.name[: -len(out.suffix)] if out.suffix in (".mcap", ".bag") else out.name
-    folder = out.parent
-    return {"log": out, "truth": folder / f"{stem}.truth.yaml", "trajectory": folder / f"{stem}.truth.tum",
-            "map_closed": folder / f"{stem}.map_closed.yaml", "map_static": folder / f"{stem}.map_static.yaml"}
 
 
 def run_simulation(world_path: Path, out: Path, scenario: str | Path | None = None, seed: int = 0,

@@ -21,6 +21,7 @@ from doorbatch.errors import DoorbatchError
 from doorbatch.io.dataset import Dataset, Site
 from doorbatch.io.fingerprint_cache import FingerprintCache
 from doorbatch.io.manifest import utc_now_iso
+from doorbatch.io.sim_truth import output_paths
 from doorbatch.io.staged_dir import staged_dir
 from doorbatch.pipeline.batch.freshness import StepKey, recorded_key, stamp_manifest, step_key
 from doorbatch.pipeline.batch.plan import Step, StepKind, map_dir
@@ -75,14 +76,6 @@ def _existing(paths: Sequence[Path]) -> list[Path]:
     return [p for p in paths if p.exists()]
 
 
-def truth_beside(log: Path, kind: str) -> Path:
-    """The simulator's ``truth`` (YAML) or ``trajectory`` (TUM) file beside a log, where the evaluation's run
-    reader looks for them: ``doorbatch.sim.simulate.output_paths``'s naming (a test keeps the two equal),
-    without importing the simulator (half a second) into every up-to-date check."""
-    stem = log.name[: -len(log.suffix)] if log.suffix in (".mcap", ".bag") else log.name
-    return log.with_name(f"{stem}.truth.yaml" if kind == "truth" else f"{stem}.truth.tum")
-
-
 def _inputs(step: Step, job: BatchJob, usable: Sequence[Step]) -> tuple[list[Path], dict[str, object]]:
     """The files a step reads (in a fixed order) and its parameters."""
     out, run = job.out, job.config.run
@@ -97,11 +90,11 @@ def _inputs(step: Step, job: BatchJob, usable: Sequence[Step]) -> tuple[list[Pat
         files = _existing([out / map_dir(site.name) / f for f in MAP_FILES])
         # the truth each reader finds: the site's, else beside the mapping logs; beside each localization log
         files += [site.truth] if site.truth is not None else _existing(
-            [*(truth_beside(p, "truth") for p in site.mapping), site.mapping[0].parent / "map.truth.yaml"])
+            [*(output_paths(p)["truth"] for p in site.mapping), site.mapping[0].parent / "map.truth.yaml"])
         for u in usable:  # each run's reference: the truth TUM beside its log, else the log's reference topic
             assert u.log is not None
             files += _existing([out / u.out_dir / f for f in RUN_FILES])
-            files += _existing([truth_beside(u.log, "trajectory"), truth_beside(u.log, "truth"), u.log])
+            files += _existing([output_paths(u.log)["trajectory"], output_paths(u.log)["truth"], u.log])
         return files, {"runs": [u.out_dir for u in usable]}
     # the dataset report re-reads what each site evaluation read: their step keys stand for those inputs
     return [out / u.out_dir / "metrics.parquet" for u in usable], {

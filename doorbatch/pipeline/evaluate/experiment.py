@@ -32,6 +32,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from doorbatch.config import DoorbatchConfig, load_config
 from doorbatch.io.manifest import Manifest
+from doorbatch.io.sim_truth import output_paths
 from doorbatch.pipeline.evaluate.report import Evaluation
 
 log = logging.getLogger(__name__)
@@ -117,7 +118,7 @@ def run_point(point: SweepPoint, map_path: Path | None, run_dir: Path, config: D
         truth_localization_map,
     )
 
-    truth = point.log.parent / f"{point.log.name.split('.')[0]}.truth.yaml"
+    truth = output_paths(point.log)["truth"]
     if map_path is None:
         inputs = [point.log, truth]
         lmap = truth_localization_map(truth, config.localize)

@@ -119,14 +119,6 @@ def umeyama_se2(estimate_xy: npt.ArrayLike, reference_xy: npt.ArrayLike) -> Floa
     return np.array([t[0], t[1], math.atan2(rot[1, 0], rot[0, 0])])
 
 
-def align_se2(estimate: npt.ArrayLike, reference: npt.ArrayLike) -> FloatArray:
-    """The estimate moved by :func:`umeyama_se2` onto the reference (both (N, 3), associated)."""
-    est = np.asarray(estimate, dtype=np.float64).reshape(-1, 3)
-    ref = np.asarray(reference, dtype=np.float64).reshape(-1, 3)
-    transform = umeyama_se2(est[:, :2], ref[:, :2])
-    return compose(np.broadcast_to(transform, est.shape), est)
-
-
 def ape_translation(estimate: npt.ArrayLike, reference: npt.ArrayLike) -> FloatArray:
     """APE translation part: ‖p_est − p_ref‖ per pose (m)."""
     return position_errors(estimate, reference)
@@ -148,9 +140,9 @@ def rpe_pairs(poses: npt.ArrayLike, delta_m: float, all_pairs: bool = False,
     p = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
     dxy = np.diff(p[:, :2], axis=0)
     steps = np.sqrt(np.sum(dxy * dxy, axis=1))
+    path = np.concatenate([[0.0], np.cumsum(steps)])
     if all_pairs:
         # for each i, the later pose whose path distance from i is nearest delta (ties: the earliest)
-        path = np.concatenate([[0.0], np.cumsum(steps)])
         i = np.arange(p.shape[0] - 1)
         j = np.searchsorted(path, path[i] + delta_m)
         j_hi = np.minimum(j, p.shape[0] - 1)
@@ -162,7 +154,6 @@ def rpe_pairs(poses: npt.ArrayLike, delta_m: float, all_pairs: bool = False,
         keep = np.abs(path[best] - path[i] - delta_m) <= delta_m * rel_delta_tol
         first, second = i[keep], best[keep]
     else:
-        path = np.concatenate([[0.0], np.cumsum(steps)])
         ids = [0]
         while True:  # one step per pair: evo sums the steps since the last id in order (cumsum does too),
             start = ids[-1]  # over a window that the global path says reaches delta, doubled until it does

@@ -60,13 +60,3 @@ def test_a_failed_map_blocks_its_site_and_the_report_uses_the_other(monkeypatch:
     assert seen["evaluate:a"] == ["localize:a/l1/mcl"]  # evaluates the run that succeeded
     assert seen["report"] == ["evaluate:a"] and outcomes["report"].ok
     assert "localize:b/l1/mcl" not in seen
-
-
-@pytest.mark.parametrize("name", ["loc.mcap", "a.b.bag", "rosbag2_folder", "intel.log.gz"])
-def test_truth_files_are_named_as_the_simulator_names_them(name: str) -> None:
-    from doorbatch.pipeline.batch.steps import truth_beside
-    from doorbatch.sim.simulate import output_paths
-
-    log = Path("/data/logs") / name
-    assert truth_beside(log, "truth") == output_paths(log)["truth"]
-    assert truth_beside(log, "trajectory") == output_paths(log)["trajectory"]
