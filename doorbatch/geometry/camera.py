@@ -24,6 +24,7 @@ import numpy as np
 import numpy.typing as npt
 
 from doorbatch.errors import LogContentError
+from doorbatch.geometry.laser import beam_masks
 from doorbatch.geometry.tf_buffer import TfBuffer
 from doorbatch.records import CameraInfo, Scan
 
@@ -170,9 +171,7 @@ def scan_points_3d(scan: Scan) -> tuple[FloatArray, npt.NDArray[np.int64]]:
     A hit: finite and range_min ≤ r < range_max (DESIGN.md laser conventions); other beams are dropped.
     """
     r = scan.ranges.astype(np.float64)
-    with np.errstate(invalid="ignore"):
-        hit = np.isfinite(r) & (r >= scan.range_min) & (r < scan.range_max)
-    idx = np.flatnonzero(hit)
+    idx = np.flatnonzero(beam_masks(scan)[0])
     a = scan.angles[idx]
     pts = np.stack([r[idx] * np.cos(a), r[idx] * np.sin(a), np.zeros(idx.size)], axis=1)
     return pts, idx.astype(np.int64)

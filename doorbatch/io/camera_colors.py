@@ -53,6 +53,7 @@ def camera_beam_colors(path: Path, scans: Sequence[Scan], tf: TfBuffer, config: 
     colors = [np.zeros((s.ranges.shape[0], 3), dtype=np.uint8) for s in scans]
     valid = [np.zeros(s.ranges.shape[0], dtype=bool) for s in scans]
     info: CameraInfo | None = None
+    camera: PinholeCamera | None = None  # built once, from the first CameraInfo (the one used throughout)
     k = -1
     with open_log(path, config) as reader:
         for item in reader.messages([Role.CAMERA_INFO, Role.IMAGE]):
@@ -66,7 +67,7 @@ def camera_beam_colors(path: Path, scans: Sequence[Scan], tf: TfBuffer, config: 
             users = np.flatnonzero(choice == k)
             if users.size == 0 or info is None:
                 continue
-            camera = camera_from_info(info)
+            camera = camera or camera_from_info(info)
             pixels = rec.pixels if rec.pixels.ndim == 3 else np.repeat(rec.pixels[:, :, None], 3, axis=2)
             for i in users.tolist():
                 _scan_colors(scans[i], tf, camera, pixels, rec.frame_id or info.frame_id, colors[i], valid[i])

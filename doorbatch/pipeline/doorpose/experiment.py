@@ -114,7 +114,7 @@ def compare_fits(exp: DoorPoseExperiment, config: DoorbatchConfig) -> FitCompari
         if select_door_box(obs.detections, scene.camera.width, cfg.door_class, cfg.border_margin_px) is None:
             continue
         cam_to_base = scene.tf.lookup("base_link", CAMERA_FRAME, 0)
-        truth = np.array([0.0, 0.0, scene.true_yaw])
+        truth = np.array([*scene.true_center, scene.true_yaw])
         seed = int(rng.integers(2**31))
         for fit in LineFit:
             door = estimate_door(scene.camera, obs.detections, obs.points_cam, cfg, np.random.default_rng(seed), fit)

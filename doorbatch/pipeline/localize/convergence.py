@@ -26,13 +26,9 @@ import numpy as np
 import numpy.typing as npt
 
 from doorbatch.config import LocalizeConfig
+from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.pipeline.localize.likelihood_field import cloud_converged
 from doorbatch.pipeline.localize.particles import ParticleSet
-
-
-def is_tight(particles: ParticleSet, config: LocalizeConfig) -> bool:
-    """Weighted position std (each axis) ≤ ``converged_xy_std_m`` and yaw std ≤ ``converged_yaw_std_deg``."""
-    return cloud_converged(particles.weight, particles.pose, config)
 
 
 def is_multimodal(particles: ParticleSet, radius_m: float, yaw_rad: float, min_weight: float) -> bool:
@@ -41,7 +37,7 @@ def is_multimodal(particles: ParticleSet, radius_m: float, yaw_rad: float, min_w
     pose turned by 180° or shifted by a door spacing."""
     w, pose = particles.weight, particles.pose
     best = pose[int(np.argmax(w))]
-    dyaw = np.abs(np.arctan2(np.sin(pose[:, 2] - best[2]), np.cos(pose[:, 2] - best[2])))
+    dyaw = np.abs(wrap_angle(pose[:, 2] - best[2]))
     near = (np.hypot(pose[:, 0] - best[0], pose[:, 1] - best[1]) <= radius_m) & (dyaw <= yaw_rad)
     return float(w[~near].sum()) >= min_weight
 
@@ -74,7 +70,7 @@ class ConvergenceMonitor:
         hypothesis the scans went on to contradict was not a convergence); a new streak must then hold again."""
         o = np.asarray(odom, dtype=np.float64).reshape(3)
         step = 0.0 if self.last_odom is None else float(np.hypot(*(o[:2] - self.last_odom[:2])))
-        if not (is_tight(particles, config) and not multimodal(particles, config)):
+        if not (cloud_converged(particles.weight, particles.pose, config) and not multimodal(particles, config)):
             return ConvergenceMonitor(None, 0.0, o, None)
         if self.converged_ns is not None:
             return ConvergenceMonitor(self.since_ns, self.travel_m + step, o, self.converged_ns)

@@ -49,10 +49,6 @@ class BeamSet:
         return BeamSet(self.pass_index[keep], self.origin[keep], self.direction[keep], self.range_m[keep],
                        self.dmax[keep], self.hit[keep], self.color[keep], self.n_passes)
 
-    def with_points_moved(self, origin: FloatArray, direction: FloatArray) -> BeamSet:
-        """The same readings from other sensor poses (pose-noise experiments)."""
-        return BeamSet(self.pass_index, origin, direction, self.range_m, self.dmax, self.hit, self.color,
-                       self.n_passes)
 
 
 @dataclass(frozen=True)

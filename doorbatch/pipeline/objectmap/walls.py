@@ -10,7 +10,7 @@ import numpy as np
 import numpy.typing as npt
 
 from doorbatch.pipeline.objectmap.beams import BeamSet
-from doorbatch.pipeline.objectmap.model import WALL, ClassParams, ObjectMap, Wall
+from doorbatch.pipeline.objectmap.model import WALL, ClassParams, ObjectMap
 from doorbatch.pipeline.objectmap.sensor import FirstObjects, beam_logliks, cast_segments
 
 FloatArray = npt.NDArray[np.float64]
@@ -153,7 +153,3 @@ def wall_segments(beams: BeamSet, first: FirstObjects, obj_map: ObjectMap, j: in
     delta, kind = first_without(beams, first, cross.beam, obj_map, WALL, j)
     gain = crossing_gains(beams, cross.beam, cross.t, delta, kind, WALL, obj_map.classes, lam, sigma)
     return segment_dp(cross.s, gain, rho_length_per_m, start_cost)
-
-
-def wall_from_fit(normal: FloatArray, offset: float, segments: FloatArray) -> Wall:
-    return Wall(np.asarray(normal, dtype=np.float64), float(offset), np.asarray(segments, dtype=np.float64))

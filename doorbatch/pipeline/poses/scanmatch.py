@@ -340,13 +340,15 @@ def match_scan(submap: Submap, scan_xy: FloatArray, prior: FloatArray, prior_cov
     window: Window = search_window(prior_covariance, cfg)
     stride = -(-scan_xy.shape[0] // cfg.correlative_max_points)
     gaussian = GaussianPrior(prior, np.asarray(np.linalg.inv(prior_covariance), dtype=np.float64))
+    from_prior: PlicpResult | None = None  # ICP from the prediction does not depend on the window: run it once
     while True:
         (window_m, window_deg) = window
         coarse = correlative_match(submap.grid, scan_xy[::stride], prior, window_m=window_m, window_deg=window_deg,
                                    step_deg=cfg.correlative_step_deg)
         fine = _refine(submap, scan_xy, coarse.pose, gaussian, cfg)
         if _lattice_steps_apart(coarse.pose, prior, cfg) > 1.0:
-            from_prior = _refine(submap, scan_xy, prior, gaussian, cfg)
+            if from_prior is None:
+                from_prior = _refine(submap, scan_xy, prior, gaussian, cfg)
             sigma_m = min(fine.sigma_m, from_prior.sigma_m)  # one σ for both: the better fit's noise estimate
             fine = from_prior if map_cost(from_prior, sigma_m) < map_cost(fine, sigma_m) else fine
         if _accept(fine, prior, window_m, window_deg, cfg):
