@@ -97,7 +97,7 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
     # poses near many doors (docs/results.md, "What does not meet issue #5 yet"); until then, MCL's static model.
     if n_doors and bandwidth is None:
         dl = door_log_likelihood_at_poses(static, particles.pose, beams.points_base, doors, particles.door_mean,
-                                          particles.door_var, config, beams.range_max_m, extra_var=extra)
+                                          particles.door_var, config, beams.range_max_m)
         pz = dl.beam_likelihood
     elif extra is not None:
         pz = smoothed_beam_likelihood(static, extra, config.z_hit, config.z_rand, config.sigma_hit,
