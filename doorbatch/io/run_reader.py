@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import logging
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -92,10 +93,40 @@ def _own_reference(log_path: Path | None, config: DoorbatchConfig) -> ReferenceT
         return None
 
 
+_LogSidecars = dict[tuple[Path, bool], tuple[ReferenceTrajectory | None, SimTruth | None]]
+
+
+def _log_sidecars(log_path: Path | None, config: DoorbatchConfig, find_reference: bool,
+                  memo: _LogSidecars) -> tuple[ReferenceTrajectory | None, SimTruth | None]:
+    """The reference (with ``find_reference``) and the truth found beside a run's log, read once per log."""
+    if log_path is None:
+        return None, None
+    key = (log_path, find_reference)
+    if key not in memo:
+        truth_path = _sibling(log_path, "truth")
+        memo[key] = (_own_reference(log_path, config) if find_reference else None,
+                     read_truth(truth_path) if truth_path.is_file() else None)
+    return memo[key]
+
+
+def read_run_dirs(run_dirs: Sequence[Path], config: DoorbatchConfig, names: Sequence[str] | None = None,
+                  find_reference: bool = True) -> list[RunTables]:
+    """Run directories as :class:`RunTables` (see :func:`read_run_dir`); runs of the same log share one
+    read of its reference and truth (an experiment has tens of runs per log).
+
+    Raises:
+        InputDataError: a missing or malformed table or manifest (names the file).
+    """
+    memo: _LogSidecars = {}
+    labels = list(names) if names is not None else [None] * len(run_dirs)
+    return [read_run_dir(d, config, n, find_reference, memo=memo) for d, n in zip(run_dirs, labels, strict=True)]
+
+
 def read_run_dir(run_dir: Path, config: DoorbatchConfig, name: str | None = None,
-                 find_reference: bool = True) -> RunTables:
+                 find_reference: bool = True, *, memo: _LogSidecars | None = None) -> RunTables:
     """A run directory as :class:`RunTables`, with the reference and truth found next to its log (with
-    ``find_reference``: ``<stem>.truth.tum``, else the log's reference pose topic).
+    ``find_reference``: ``<stem>.truth.tum``, else the log's reference pose topic). ``memo`` shares those
+    reads between runs of the same log (:func:`read_run_dirs`).
 
     Raises:
         InputDataError: a missing or malformed table or manifest (names the file).
@@ -112,10 +143,7 @@ def read_run_dir(run_dir: Path, config: DoorbatchConfig, name: str | None = None
     log_path = inputs[0] if inputs else None
     maps = [p.parent for p in inputs[1:] if p.name == "map.yaml"]
     converged_after = extra.get("converged_after_s")
-    reference = _own_reference(log_path, config) if find_reference else None
-    truth = None
-    if log_path is not None and _sibling(log_path, "truth").is_file():
-        truth = read_truth(_sibling(log_path, "truth"))
+    reference, truth = _log_sidecars(log_path, config, find_reference, {} if memo is None else memo)
     params = extra.get("params")
     return RunTables(
         name=name or run_dir.name, log=str(table["log"][0]), method=str(table["method"][0]), stamps_ns=stamps,

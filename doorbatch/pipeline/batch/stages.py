@@ -61,10 +61,10 @@ def _site_tables(site: Site, out: Path, run_dirs: Sequence[str], config: Doorbat
                  prefix: str = "") -> tuple[list[RunTables], list[MapTables]]:
     """The site's runs (each with the reference and truth found beside its log) and its door map, scored
     against the dataset's truth of the site when it names one (else the truth found beside its logs)."""
-    from doorbatch.io.run_reader import read_map_dir, read_run_dir
+    from doorbatch.io.run_reader import read_map_dir, read_run_dirs
     from doorbatch.io.sim_truth import read_truth
 
-    tables = [read_run_dir(out / r, config, f"{prefix}{_run_name(r)}") for r in run_dirs]
+    tables = read_run_dirs([out / r for r in run_dirs], config, [f"{prefix}{_run_name(r)}" for r in run_dirs])
     door_map = read_map_dir(out / map_dir(site.name), f"{site.name}/map")
     if site.truth is not None:
         door_map = replace(door_map, truth=read_truth(site.truth))

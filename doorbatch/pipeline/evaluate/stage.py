@@ -18,7 +18,7 @@ from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import InputDataError
 from doorbatch.io.manifest import Manifest
 from doorbatch.io.report_writer import write_report
-from doorbatch.io.run_reader import is_map_dir, is_run_dir, read_map_dir, read_reference, read_run_dir
+from doorbatch.io.run_reader import is_map_dir, is_run_dir, read_map_dir, read_reference, read_run_dirs
 from doorbatch.io.sim_truth import read_truth
 from doorbatch.pipeline.evaluate.report import Evaluation, MapTables, RunTables, evaluate_runs
 
@@ -43,16 +43,15 @@ def evaluate_run_dirs(run_dirs: Sequence[Path], out_dir: Path, config: Doorbatch
               is_run_dir(d) or is_map_dir(d)]
     manifest = Manifest.start(config.as_dict(), [*inputs, *(p for p in (reference, truth) if p is not None)],
                               command="evaluate")
-    runs: list[RunTables] = []
-    maps: list[MapTables] = []
-    for d, name in zip(dirs, _names(dirs), strict=True):
-        if is_run_dir(d):
-            runs.append(read_run_dir(d, config, name, find_reference=reference is None))
-        elif is_map_dir(d):
-            maps.append(read_map_dir(d, name))
-        else:
+    for d in dirs:
+        if not (is_run_dir(d) or is_map_dir(d)):
             raise InputDataError("neither a run directory (trajectory.parquet) nor a map directory "
                                  "(map.yaml, doors.parquet)", path=d)
+    labelled = list(zip(dirs, _names(dirs), strict=True))
+    runs: list[RunTables] = read_run_dirs([d for d, _ in labelled if is_run_dir(d)], config,
+                                          [n for d, n in labelled if is_run_dir(d)],
+                                          find_reference=reference is None)
+    maps: list[MapTables] = [read_map_dir(d, n) for d, n in labelled if not is_run_dir(d)]
     ref = read_reference(reference, config) if reference is not None else None
     world = read_truth(truth) if truth is not None else None
     evaluation = evaluate_runs(runs, config, reference=ref, truth=world, maps=maps).with_title(title)

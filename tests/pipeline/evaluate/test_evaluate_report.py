@@ -281,6 +281,27 @@ def test_a_log_without_truth_files_gives_its_reference_topic(tmp_path: Path) -> 
     assert read_run_dir(tmp_path / "run", DoorbatchConfig(), find_reference=False).reference is None
 
 
+def test_runs_of_one_log_read_its_reference_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """An experiment has tens of runs per log: the log's reference (a whole log read) is read once for all."""
+    import doorbatch.io.run_reader as run_reader
+    from tests.conftest import sample_messages, write_messages
+
+    log = write_messages(tmp_path / "real.mcap", sample_messages(n_scans=20))
+    i = np.arange(20)
+    stamps = T0 + 100_000_000 * (i + 1)
+    truth = np.stack([0.1 * i + 1, 0.02 * i, 0.01 * i], axis=1)
+    for k, offset in enumerate((0.25, 0.5)):
+        _write_run(tmp_path / f"run{k}", log, stamps, truth + np.array([0.0, offset, 0.0]), "mcl", 0.0)
+    reads: list[Path] = []
+    real = run_reader.read_reference
+    monkeypatch.setattr(run_reader, "read_reference", lambda path, config: reads.append(path) or real(path, config))
+    runs = run_reader.read_run_dirs([tmp_path / "run0", tmp_path / "run1"], DoorbatchConfig(), ["a", "b"])
+    assert reads == [log]
+    ev = evaluate_runs(runs, DoorbatchConfig())
+    assert ev.value("a", "ape_trans_rmse") == pytest.approx(0.25, abs=1e-6)
+    assert ev.value("b", "ape_trans_rmse") == pytest.approx(0.5, abs=1e-6)
+
+
 def test_em_door_maps_count_the_doors_that_never_moved(tmp_path: Path) -> None:
     """An em map (paper 001) also reports doors that never moved: they are true detections, not false
     positives, and recall is given for moved and never-moved doors apart."""
