@@ -12,8 +12,8 @@ from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import LogContentError
 from doorbatch.geometry.tf_buffer import TfBuffer
 from doorbatch.io.reader import open_log
-from doorbatch.io.recording import PoseSeries, pose_series
-from doorbatch.records import CameraInfo, Detection, Detections, Image, Pose2D, Role, Scan, Transform
+from doorbatch.io.recording import PoseSeries, pose_series, read_transforms
+from doorbatch.records import CameraInfo, Detection, Detections, Image, Pose2D, Role, Scan
 
 ImageDetector = Callable[[Image], tuple[Detection, ...]]
 
@@ -41,7 +41,6 @@ def read_doorpose_inputs(path: Path, config: DoorbatchConfig, detector: ImageDet
         LogContentError: no scan, no camera_info, or no detections topic (and no detector).
         LogReadError: the log cannot be read.
     """
-    tf = TfBuffer(int(config.io.tf_extrapolation_limit_s * 1e9))
     box_role = Role.IMAGE if detector is not None else Role.DETECTIONS
     roles = [Role.SCAN, Role.ODOMETRY, Role.REFERENCE, Role.CAMERA_INFO, box_role]
     scans: list[Scan] = []
@@ -50,9 +49,7 @@ def read_doorpose_inputs(path: Path, config: DoorbatchConfig, detector: ImageDet
     boxes: list[Detections] = []
     info: CameraInfo | None = None
     with open_log(path, config) as reader:
-        for item in reader.messages([Role.TRANSFORMS]):
-            if isinstance(item.record, Transform):
-                tf.add(item.record)
+        tf = read_transforms(reader, config)
         for role, what in ((Role.SCAN, "a sensor_msgs/LaserScan topic"),
                            (Role.CAMERA_INFO, "a sensor_msgs/CameraInfo topic (the camera intrinsics)"),
                            (box_role, "an image topic for --detector" if detector is not None else

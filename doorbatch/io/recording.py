@@ -16,7 +16,7 @@ import numpy.typing as npt
 from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import LogContentError, TransformError
 from doorbatch.geometry.tf_buffer import TfBuffer
-from doorbatch.io.reader import open_log
+from doorbatch.io.reader import LogReader, open_log
 from doorbatch.records import BeamColors, Pose2D, Role, Scan, Transform
 
 FloatArray = npt.NDArray[np.float64]
@@ -106,6 +106,16 @@ def _planar_affine(tf: TfBuffer, base: str, frame: str, stamp_ns: int, assume_id
     return np.concatenate([mat[:2, :2], mat[:2, 3:4]], axis=1)
 
 
+def read_transforms(reader: LogReader, config: DoorbatchConfig) -> TfBuffer:
+    """Every transform of an open log (a pass over its TF topics only), buffered so that a lookup at any
+    stamp sees the transforms that arrive later in the log too."""
+    tf = TfBuffer(int(config.io.tf_extrapolation_limit_s * 1e9))
+    for item in reader.messages([Role.TRANSFORMS]):
+        if isinstance(item.record, Transform):
+            tf.add(item.record)
+    return tf
+
+
 def load_recording(path: Path, config: DoorbatchConfig | None = None, with_colors: bool = False) -> Recording:
     """Read the scans, odometry, reference poses (and beam colors) of a log into arrays.
 
@@ -117,16 +127,13 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
         LogReadError: the log cannot be read.
     """
     config = config or DoorbatchConfig()
-    tf = TfBuffer(int(config.io.tf_extrapolation_limit_s * 1e9))
     roles = [Role.SCAN, Role.ODOMETRY, Role.REFERENCE] + ([Role.COLORS] if with_colors else [])
     scans: list[Scan] = []
     odom: list[Pose2D] = []
     ref: list[Pose2D] = []
     colors: dict[int, BeamColors] = {}
     with open_log(path, config) as reader:
-        for item in reader.messages([Role.TRANSFORMS]):
-            if isinstance(item.record, Transform):
-                tf.add(item.record)
+        tf = read_transforms(reader, config)
         scan_topic = reader.roles.topic(Role.SCAN)
         if scan_topic is None:
             raise LogContentError("no sensor_msgs/LaserScan topic: doorbatch needs a 2D laser scan", path=path)
