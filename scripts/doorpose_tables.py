@@ -29,6 +29,7 @@ from doorbatch.pipeline.doorpose.experiment import (
     goal_updating_metrics,
     z_test_greater,
 )
+from doorbatch.pipeline.evaluate.report import metric_columns
 
 PAPER_TABLE_1 = {"naive": (0.3212, 0.1774), "lsq": (0.1167, 0.0667), "ransac": (0.0311, 0.0062)}
 PAPER_TABLE_2 = {"initial": (0.2492, 0.0948), "continuous": (0.0650, 0.0361)}
@@ -67,7 +68,7 @@ def main() -> None:
                          f"({'reject H0' if p < 0.05 else 'keep H0'} at 5 %)")
         lines.append(f"\nhandle side correct on {fits.handle_correct} / {fits.handle_checked} samples with the "
                      f"handle visible; {fits.draws} scenes drawn for {exp.samples} with a usable door box")
-        columns = fit_comparison_metrics(fits, args.experiment.stem, params)
+        rows = fit_comparison_metrics(fits, args.experiment.stem, params)
         summary = {k: float(np.mean(v[np.isfinite(v)])) for k, v in fits.errors.items()}
     else:
         upd = compare_goal_updating(exp, config)
@@ -78,11 +79,11 @@ def main() -> None:
         lines.append(f"\nreached the goal tolerance: initial {int(upd.reached['initial'].sum())}/{exp.samples}, "
                      f"continuous {int(upd.reached['continuous'].sum())}/{exp.samples}; "
                      f"{upd.draws} start poses drawn")
-        columns = goal_updating_metrics(upd, args.experiment.stem, params)
+        rows = goal_updating_metrics(upd, args.experiment.stem, params)
         summary = {k: float(v.mean()) for k, v in upd.errors.items()}
     lines.append(f"\n{time.perf_counter() - t0:.1f} s")
     if args.metrics is not None:
-        write_table("metrics", columns, args.metrics)
+        write_table("metrics", metric_columns(rows), args.metrics)
     print(json.dumps(summary) if args.json else "\n".join(lines))
 
 

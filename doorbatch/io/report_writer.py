@@ -24,25 +24,17 @@ import numpy as np
 
 from doorbatch.io.atomic import atomic_write_bytes, atomic_write_text
 from doorbatch.io.parquet import write_table
-from doorbatch.io.run_reader import params_json
 from doorbatch.pipeline.evaluate.report import (
     DOORPOSE_METRICS,
     MAP_METRICS,
     Evaluation,
     SummaryTable,
+    metric_columns,
     summary_table,
 )
 
 Plot = tuple[str, str, bytes]  # file name, caption, PNG bytes
 _COLORS = {"mcl": "tab:red", "rbpf": "tab:blue"}
-
-
-def metrics_columns(evaluation: Evaluation) -> dict[str, list[Any]]:
-    """metrics.parquet's columns."""
-    rows = evaluation.metrics
-    return {"run": [r.run for r in rows], "log": [r.log for r in rows], "method": [r.method for r in rows],
-            "metric": [r.metric for r in rows], "value": [float(r.value) for r in rows],
-            "unit": [r.unit for r in rows], "params": [params_json(r.params) for r in rows]}
 
 
 def _figure(draw: Callable[[Any], None], n_panels: int = 1, height: float = 3.2) -> bytes:
@@ -219,7 +211,7 @@ def write_report(evaluation: Evaluation, out_dir: Path) -> list[Path]:
         OSError: a file cannot be written.
     """
     out_dir.mkdir(parents=True, exist_ok=True)
-    write_table("metrics", metrics_columns(evaluation), out_dir / "metrics.parquet")
+    write_table("metrics", metric_columns(evaluation.metrics), out_dir / "metrics.parquet")
     plots = render_plots(evaluation)
     for name, _, png in plots:
         atomic_write_bytes(out_dir / name, png)

@@ -11,7 +11,6 @@ truth ``<stem>.truth.yaml`` of the sample layout (``map.truth.yaml`` for ``map_p
 
 from __future__ import annotations
 
-import json
 import logging
 from collections.abc import Sequence
 from pathlib import Path
@@ -170,7 +169,3 @@ def read_map_dir(map_dir: Path, name: str | None = None) -> MapTables:
     return MapTables(name or map_dir.name, door_set_of(table), truth,
                      source="em" if "em" in table["source"] else "grid")
 
-
-def params_json(params: dict[str, Any]) -> str:
-    """The params column's JSON (sorted keys, compact)."""
-    return json.dumps(params, sort_keys=True, separators=(",", ":"), default=str)

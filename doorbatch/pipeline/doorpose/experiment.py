@@ -16,7 +16,6 @@ Results turn into rows of DESIGN's metrics.parquet with :func:`fit_comparison_me
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -33,6 +32,7 @@ from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.pipeline.doorpose.approach import GoalUpdating, simulate_approach, summed_pose_error
 from doorbatch.pipeline.doorpose.fusion import estimate_door, select_door_box, to_planar
 from doorbatch.pipeline.doorpose.line_fit import LineFit
+from doorbatch.pipeline.evaluate.report import MetricRow
 from doorbatch.sim.door_scene import CAMERA_FRAME, PAPER_DETECTIONS, DoorSceneSpec, make_door_scene, observe
 from doorbatch.sim.motion import OdometryNoise
 from doorbatch.sim.scenario import OdometrySpec
@@ -185,20 +185,14 @@ def z_test_greater(a: npt.ArrayLike, b: npt.ArrayLike) -> tuple[float, float]:
 
 
 def _rows(run: str, log: str, method: str, metric: str, value: float, unit: str, params: dict[str, object]
-          ) -> dict[str, object]:
-    return {"run": run, "log": log, "method": method, "metric": metric, "value": float(value), "unit": unit,
-            "params": json.dumps(params, sort_keys=True)}
+          ) -> MetricRow:
+    return MetricRow(run, log, method, metric, float(value), unit, dict(params))
 
 
-def _columns(rows: list[dict[str, object]]) -> dict[str, list[object]]:
-    keys = ("run", "log", "method", "metric", "value", "unit", "params")
-    return {k: [r[k] for r in rows] for k in keys}
-
-
-def fit_comparison_metrics(result: FitComparison, run: str, params: dict[str, object]) -> dict[str, list[object]]:
-    """metrics.parquet columns: per fit the mean and std of the summed error, the count, failures, the
+def fit_comparison_metrics(result: FitComparison, run: str, params: dict[str, object]) -> list[MetricRow]:
+    """metrics.parquet rows: per fit the mean and std of the summed error, the count, failures, the
     z-test p-value against RANSAC; and the handle-side accuracy."""
-    rows: list[dict[str, object]] = []
+    rows: list[MetricRow] = []
     ransac = result.errors[LineFit.RANSAC.value]
     for fit, err in result.errors.items():
         ok = err[np.isfinite(err)]
@@ -212,14 +206,14 @@ def fit_comparison_metrics(result: FitComparison, run: str, params: dict[str, ob
                               z_test_greater(ransac[both], err[both])[1], "1", params))
     accuracy = result.handle_correct / result.handle_checked if result.handle_checked else math.nan
     rows.append(_rows(run, "simulated", "ransac", "handle_side_accuracy", accuracy, "1", params))
-    return _columns(rows)
+    return rows
 
 
 def goal_updating_metrics(result: GoalUpdatingComparison, run: str, params: dict[str, object]
-                          ) -> dict[str, list[object]]:
-    """metrics.parquet columns: per mode the mean and std of the final summed error, the count, the
+                          ) -> list[MetricRow]:
+    """metrics.parquet rows: per mode the mean and std of the final summed error, the count, the
     fraction that reached the goal tolerance, and the z-test p-value of initial > continuous."""
-    rows: list[dict[str, object]] = []
+    rows: list[MetricRow] = []
     for mode, err in result.errors.items():
         rows.append(_rows(run, "simulated", mode, "positioning_error_mean", err.mean(), "1", params))
         rows.append(_rows(run, "simulated", mode, "positioning_error_std", err.std(ddof=1), "1", params))
@@ -227,7 +221,7 @@ def goal_updating_metrics(result: GoalUpdatingComparison, run: str, params: dict
         rows.append(_rows(run, "simulated", mode, "reached_fraction", result.reached[mode].mean(), "1", params))
     p = z_test_greater(result.errors["continuous"], result.errors["initial"])[1]
     rows.append(_rows(run, "simulated", "initial", "z_test_p_vs_continuous", p, "1", params))
-    return _columns(rows)
+    return rows
 
 
 def load_experiment(path: Path, base: DoorbatchConfig) -> tuple[DoorPoseExperiment, DoorbatchConfig]:
@@ -246,8 +240,8 @@ def load_experiment(path: Path, base: DoorbatchConfig) -> tuple[DoorPoseExperime
 
 
 def experiment_metrics(exp: DoorPoseExperiment, config: DoorbatchConfig, run: str
-                       ) -> tuple[dict[str, list[object]], FitComparison | GoalUpdatingComparison]:
-    """Run an experiment (Table I or II) and its metrics.parquet columns."""
+                       ) -> tuple[list[MetricRow], FitComparison | GoalUpdatingComparison]:
+    """Run an experiment (Table I or II) and its metrics.parquet rows."""
     params: dict[str, object] = {"experiment": exp.experiment, "samples": exp.samples, "seed": exp.seed}
     if exp.experiment == "doorpose_fit_comparison":
         fits = compare_fits(exp, config)
@@ -258,8 +252,8 @@ def experiment_metrics(exp: DoorPoseExperiment, config: DoorbatchConfig, run: st
 
 def door_pose_metrics(estimated: npt.ArrayLike, truth: npt.ArrayLike, handle_sides: list[str],
                       true_handle_sides: list[str], run: str, log: str, method: str,
-                      params: dict[str, object] | None = None) -> dict[str, list[object]]:
-    """metrics.parquet columns of door poses against their truth, row by row (the caller matches them):
+                      params: dict[str, object] | None = None) -> list[MetricRow]:
+    """metrics.parquet rows of door poses against their truth, row by row (the caller matches them):
     ``estimated`` and ``truth`` are (N, 4) centre x, y, normal yaw, width. Metrics: the mean summed error
     |Δx| + |Δy| + |Δθ| (Table I's), mean centre distance, mean |Δyaw|, mean |Δwidth|, the handle-side
     accuracy over rows whose true side is not ``none``, and the count."""
@@ -281,4 +275,4 @@ def door_pose_metrics(estimated: npt.ArrayLike, truth: npt.ArrayLike, handle_sid
         _rows(run, log, method, "handle_side_accuracy", accuracy, "1", p),
         _rows(run, log, method, "door_poses", n, "count", p),
     ]
-    return _columns(rows)
+    return rows

@@ -221,13 +221,14 @@ def run_simulated_experiment(experiment_path: Path, out: Path, config: Doorbatch
     from doorbatch.io.manifest import Manifest
     from doorbatch.io.parquet import write_table
     from doorbatch.pipeline.doorpose.experiment import experiment_metrics, load_experiment
+    from doorbatch.pipeline.evaluate.report import metric_columns
 
     exp, config = load_experiment(experiment_path, config)
     manifest = Manifest.start(config.as_dict(), [experiment_path], command="doorpose --simulate-approach",
                               experiment=exp.experiment)
-    columns, result = experiment_metrics(exp, config, experiment_path.stem)
+    rows, result = experiment_metrics(exp, config, experiment_path.stem)
     out.mkdir(parents=True, exist_ok=True)
-    write_table("metrics", columns, out / "metrics.parquet")
+    write_table("metrics", metric_columns(rows), out / "metrics.parquet")
     means = {k: float(np.mean(v[np.isfinite(v)])) for k, v in result.errors.items()}
     manifest.extra.update({"mean_error": means})
     manifest.finish()

@@ -201,19 +201,11 @@ def run_doorpose_experiment(path: Path, out: Path, config: DoorbatchConfig) -> E
     Raises:
         ConfigError: the file is not a valid door pose experiment.
     """
-    import json
-
     from doorbatch.io.report_writer import write_report
     from doorbatch.pipeline.doorpose.experiment import experiment_metrics, load_experiment
-    from doorbatch.pipeline.evaluate.report import MetricRow
 
     exp, exp_config = load_experiment(path, config)
-    columns, _ = experiment_metrics(exp, exp_config, path.stem)
-    rows = [MetricRow(str(run), str(log), str(method), str(metric), float(str(value)), str(unit),
-                      json.loads(str(params)))
-            for run, log, method, metric, value, unit, params in zip(
-                columns["run"], columns["log"], columns["method"], columns["metric"], columns["value"],
-                columns["unit"], columns["params"], strict=True)]
+    rows, _ = experiment_metrics(exp, exp_config, path.stem)
     evaluation = Evaluation(rows, [], [], [], [], title=exp.description or exp.experiment)
     write_report(evaluation, out)
     return evaluation

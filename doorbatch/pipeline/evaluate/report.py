@@ -27,6 +27,7 @@ Per door map with a truth: ``door_precision``, ``door_recall``, ``door_hinge_err
 
 from __future__ import annotations
 
+import json
 import math
 from collections import defaultdict
 from collections.abc import Sequence
@@ -137,6 +138,18 @@ class MetricRow:
     value: float
     unit: str
     params: dict[str, Any] = field(default_factory=dict)
+
+
+def params_json(params: dict[str, Any]) -> str:
+    """The params column's JSON (sorted keys, compact)."""
+    return json.dumps(params, sort_keys=True, separators=(",", ":"), default=str)
+
+
+def metric_columns(rows: Sequence[MetricRow]) -> dict[str, list[Any]]:
+    """metrics.parquet's columns (DESIGN schema) of ``rows``."""
+    return {"run": [r.run for r in rows], "log": [r.log for r in rows], "method": [r.method for r in rows],
+            "metric": [r.metric for r in rows], "value": [float(r.value) for r in rows],
+            "unit": [r.unit for r in rows], "params": [params_json(r.params) for r in rows]}
 
 
 @dataclass(frozen=True)

@@ -20,6 +20,7 @@ from doorbatch.pipeline.doorpose.experiment import (
     odometry_noise,
     z_test_greater,
 )
+from doorbatch.pipeline.evaluate.report import metric_columns
 from doorbatch.sim.door_scene import DoorSceneSpec, make_door_scene
 from doorbatch.sim.motion import OdometryNoise
 
@@ -32,7 +33,7 @@ def test_ransac_beats_lsq_and_naive_near_obstacles_and_handle_sides_are_right() 
     assert mean["ransac"] < 0.1
     assert result.handle_checked >= 5
     assert result.handle_correct == result.handle_checked
-    table = build_table("metrics", fit_comparison_metrics(result, "t1", {"seed": 3}))
+    table = build_table("metrics", metric_columns(fit_comparison_metrics(result, "t1", {"seed": 3})))
     assert table.num_rows == 3 * 4 + 2 + 1
     assert set(table.column("method").to_pylist()) == {"naive", "lsq", "ransac"}
 
@@ -76,11 +77,11 @@ def test_odometry_drift_moves_the_initial_only_run_off_the_goal() -> None:
 def test_door_pose_metrics_against_truth() -> None:
     truth = np.array([[0.0, 0.0, -math.pi / 2, 0.9], [1.0, 2.0, math.pi, 0.8]])
     est = truth + np.array([[0.03, -0.04, 0.02, 0.01], [0.0, 0.0, -0.1, -0.02]])
-    cols = door_pose_metrics(est, truth, ["left", "right"], ["left", "left"], "r", "log", "ransac")
-    rows = dict(zip(cols["metric"], cols["value"], strict=True))
+    metrics = door_pose_metrics(est, truth, ["left", "right"], ["left", "left"], "r", "log", "ransac")
+    rows = {r.metric: r.value for r in metrics}
     assert rows["door_pose_error_mean"] == pytest.approx((0.03 + 0.04 + 0.02 + 0.1) / 2)
     assert rows["door_center_error_mean"] == pytest.approx(0.05 / 2)
     assert rows["door_yaw_error_mean"] == pytest.approx(0.06)
     assert rows["door_width_error_mean"] == pytest.approx(0.015)
     assert rows["handle_side_accuracy"] == pytest.approx(0.5)
-    assert build_table("metrics", cols).num_rows == 6
+    assert build_table("metrics", metric_columns(metrics)).num_rows == 6
