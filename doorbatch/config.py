@@ -601,11 +601,6 @@ def tree_hash(tree: Mapping[str, Any]) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-def default_config_yaml() -> str:
-    """The default tree as YAML (``doorbatch config --dump``, and ``configs/default.yaml``)."""
-    return yaml.safe_dump(DoorbatchConfig().as_dict(), sort_keys=False)
-
-
 def deep_merge(base: Mapping[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:
     """Merge ``over`` into a copy of ``base``; mappings merge key by key, anything else replaces."""
     merged = dict(base)

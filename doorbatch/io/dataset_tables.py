@@ -13,7 +13,6 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import pyarrow as pa
-import pyarrow.dataset as pads
 
 from doorbatch.io.parquet import read_table, schema_of, write_table
 
@@ -43,7 +42,3 @@ def write_site_partition(name: str, table: pa.Table, root: Path, site: str) -> P
     return path
 
 
-def read_partitioned(root: Path) -> pa.Table:
-    """Every site's part of a partitioned table as one table with a ``site`` string column."""
-    partitioning = pads.partitioning(pa.schema([(PARTITION_KEY, pa.string())]), flavor="hive")
-    return pads.dataset(root, format="parquet", partitioning=partitioning).to_table()
