@@ -45,6 +45,7 @@ from doorbatch.pipeline.localize.mcl import (
     predict,
     region_log_likelihood,
     resample_if_needed,
+    spread_cloud_config,
     tempered_weighting,
     update_thresholds_met,
     with_log_weights,
@@ -99,12 +100,14 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
     # (mcl.tempered_weighting); with ``global_door_term`` that likelihood is eq. (6) (door_region_log_likelihood),
     # else MCL's static model.
     if bandwidth is not None and len(beams.points_base):
-        def region(p: ParticleSet, h: Bandwidth) -> npt.NDArray[np.float64]:
-            if n_doors and config.global_door_term:
-                return door_region_log_likelihood(p, h, beams, field, doors, config, combination)
-            return region_log_likelihood(p, h, beams, field, config, combination)
+        spread = spread_cloud_config(config, state.global_start)
 
-        particles, log_avg, bandwidth = tempered_weighting(particles, region, config, rng)
+        def region(p: ParticleSet, h: Bandwidth) -> npt.NDArray[np.float64]:
+            if n_doors and spread.global_door_term:
+                return door_region_log_likelihood(p, h, beams, field, doors, spread, combination)
+            return region_log_likelihood(p, h, beams, field, spread, combination)
+
+        particles, log_avg, bandwidth = tempered_weighting(particles, region, spread, rng)
     else:
         static = endpoint_distances(field, particles.pose, beams.points_base)
         if n_doors:
@@ -127,7 +130,7 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
     neff = particles.neff()
     particles, recovery, n_random = resample_if_needed(particles, config, rng, recovery, free, bandwidth)
     diag = StepDiagnostics(True, n_random >= 0, neff, len(particles), fraction, max(n_random, 0), log_avg)
-    return MclState(particles, recovery, odom.copy()), diag, observed
+    return MclState(particles, recovery, odom.copy(), state.global_start), diag, observed
 
 
 def door_region_log_likelihood(particles: ParticleSet, bandwidth: Bandwidth, beams: BeamSet, field: DistanceField,

@@ -220,7 +220,7 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
                             "needs it as the motion input")
     odom, odom_ok = interpolate_poses(rec.odometry.stamps_ns, rec.odometry.poses, rec.scans.stamps_ns,
                                       int(config.mapping.max_pose_gap_s * 1e9))
-    state = MclState(_initial_particles(rec, lmap, init, method, lc, rng))
+    state = MclState(_initial_particles(rec, lmap, init, method, lc, rng), global_start=init == "global")
     free = lmap.free if (lc.recovery_alpha_fast > 0.0 or init == "global") else None
     combination = BeamCombination(lc.beam_combination)
     track = _Track()

@@ -242,7 +242,7 @@ def test_global_localization_in_a_long_corridor_keeps_the_hypotheses_along_it() 
         for seed in range(8):
             rng = np.random.default_rng(seed)
             odom = drift_poses(truth, DRIFT, rng)
-            state = MclState(global_particles(free, 1500, rng))
+            state = MclState(global_particles(free, 1500, rng), global_start=True)
             for k in range(truth.shape[0]):
                 beams = scan_beams(segments, truth[k], max_range=4.0, noise_m=0.01, rng=rng)
                 state, _ = mcl_step(state, odom[k], beams, field, config, rng, combination=BeamCombination.PRODUCT)

@@ -139,7 +139,7 @@ def _step_with_door_mean(particles_pose: FloatArray, door_deg: float, global_doo
     n, d = len(particles_pose), len(doors)
     particles = ParticleSet(particles_pose, np.full(n, 1.0 / n), np.full((n, d), math.radians(door_deg)),
                             np.full((n, d), math.radians(config.door_init_sigma_deg) ** 2))
-    state, _, _ = rbpf_step(MclState(particles), truth, 0.0, None, beams, pts, field, doors, config,
+    state, _, _ = rbpf_step(MclState(particles, global_start=True), truth, 0.0, None, beams, pts, field, doors, config,
                             np.random.default_rng(1), force=True)
     return np.column_stack([state.particles.pose, state.particles.weight])  # resampled or not
 
