@@ -11,6 +11,7 @@ this map can then settle on the truth within that window. Global localization on
 Usage::
 
     python scripts/localize_evidence.py LOG --map MAP.yaml|MAPDIR [--doors-closed] [--windows 5 10 20 30]
+        [--min-shift 0.3]
 
 ``--doors-closed`` (a map directory): the RBPF's model instead of the static one, every door of
 ``doors.parquet`` at its closed angle (the truth of a ``loc_closed`` log).
@@ -65,6 +66,7 @@ def main() -> None:
     ap.add_argument("--map", type=Path, required=True, help="map_server YAML or map directory")
     ap.add_argument("--doors-closed", action="store_true")
     ap.add_argument("--windows", nargs="+", type=float, default=[5.0, 10.0, 20.0, 30.0])
+    ap.add_argument("--min-shift", type=float, default=0.3, help="m; shifts at most this far count as the truth")
     args = ap.parse_args()
     config = load_config()
     lc = config.localize
@@ -85,7 +87,7 @@ def main() -> None:
     w = 0
     for i in np.flatnonzero(ok):
         while w < len(windows) and t[i] > windows[w]:
-            report(windows[w], total_shift, total_mirror)
+            report(windows[w], total_shift, total_mirror, args.min_shift)
             w += 1
         if w == len(windows):
             break
@@ -108,15 +110,15 @@ def main() -> None:
         beam_counts.append(len(beams))
         total_mirror += scan_log_likelihoods(mirrored, beams, field, doors, lc)
     for window in windows[w:]:
-        report(window, total_shift, total_mirror)
+        report(window, total_shift, total_mirror, args.min_shift)
     print(f"static model at the truth, {len(floor_beams)} updates: {np.mean(floor_beams):.1f} of "
           f"{np.mean(beam_counts):.0f} beams per update at "
           f"the per-beam floor (max {max(floor_beams)}), each capped at {cap:.2f} nats below a perfect fit")
 
 
-def report(window_s: float, total_shift: np.ndarray, total_mirror: np.ndarray) -> None:
+def report(window_s: float, total_shift: np.ndarray, total_mirror: np.ndarray, min_shift_m: float) -> None:
     truth = total_shift[np.argmin(np.abs(SHIFTS_M))]
-    away = np.abs(SHIFTS_M) > 0.3
+    away = np.abs(SHIFTS_M) > min_shift_m
     best_shift = int(np.argmax(np.where(away, total_shift, -np.inf)))
     best_mirror = int(np.argmax(total_mirror))
     print(f"first {window_s:g} s: truth {truth:.1f} nats; best shift {SHIFTS_M[best_shift]:+.2f} m: "
