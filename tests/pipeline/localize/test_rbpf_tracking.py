@@ -160,7 +160,7 @@ def test_global_start_draws_each_particles_door_angles_from_the_range() -> None:
     _, _, doors = corridor()
     doors = DoorSet(doors.hinge, doors.length, doors.closed_yaw, np.array([0.0, -1.0, 0.0, -1.5]),
                     np.array([1.5, 0.0, 0.5, 0.0]))
-    config = LocalizeConfig()
+    config = LocalizeConfig(door_global_init="sampled")
     mean, var = initial_door_states(doors, 20000, True, config, np.random.default_rng(4))
     assert np.all((mean >= doors.angle_min) & (mean <= doors.angle_max))
     width = doors.angle_max - doors.angle_min
