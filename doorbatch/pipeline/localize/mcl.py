@@ -8,8 +8,9 @@ One filter update, as nav2_amcl ``AmclNode::laserReceived`` composes it:
 2. ``predict``: the odometry motion model (:mod:`.motion_model`).
 3. ``weigh``: the likelihood-field endpoint model (:mod:`.likelihood_field`) over all particles × beams,
    combined with the prior weights and normalized in log space; the mean weight feeds the recovery averages.
-   Until the cloud has converged (global localization) the model is smoothed over each particle's region and
-   resampled copies are jittered by it (:mod:`.smoothing`; not in nav2_amcl).
+   Until the cloud has converged (global localization) the model is smoothed over each particle's region,
+   applied in tempered stages with resampling in between, and resampled copies are jittered by the region
+   (:mod:`.smoothing`, :func:`tempered_weighting`; not in nav2_amcl).
 4. ``resample_if_needed``: KLD-adaptive low-variance resampling with random-particle injection
    (:mod:`.resampling`) when Neff < ``resample_neff_ratio``·N (AMCL resamples every ``resample_interval``
    updates instead; ratio 1.0 resamples on every update), and whenever recovery asks for random particles
@@ -30,6 +31,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import NamedTuple
 
@@ -53,13 +55,13 @@ from doorbatch.pipeline.localize.likelihood_field import (
 )
 from doorbatch.pipeline.localize.motion_model import sample_motion_model_odometry
 from doorbatch.pipeline.localize.particles import ParticleSet
-from doorbatch.pipeline.localize.resampling import RecoveryState, kld_resample
+from doorbatch.pipeline.localize.resampling import RecoveryState, kld_resample, low_variance_resample
 from doorbatch.pipeline.localize.smoothing import (
     Bandwidth,
     active_bandwidth,
-    endpoint_variance,
     jitter,
-    smoothed_beam_likelihood,
+    particle_bandwidth,
+    region_beam_likelihood,
     tempering_exponent,
 )
 from doorbatch.records import Scan
@@ -82,11 +84,28 @@ class MclState:
         particles: the particle set.
         recovery: AMCL's w_slow / w_fast.
         odom_at_update: odometry pose (3,) at the last filter update; None before the first.
+        global_start: the run started from a uniform cloud (``--init global``); see :func:`spread_cloud_config`.
     """
 
     particles: ParticleSet
     recovery: RecoveryState = dataclasses.field(default_factory=RecoveryState)
     odom_at_update: FloatArray | None = None
+    global_start: bool = False
+
+
+def spread_cloud_config(config: LocalizeConfig, global_start: bool) -> LocalizeConfig:
+    """The settings that weigh a cloud that has not converged.
+
+    Global localization (``global_start``) uses them as configured. A tracked cloud that has spread (the
+    CARMEN logs' 1 m odometry steps) keeps one tempered stage, per-beam factors and, in the RBPF, eq. (6) only
+    once converged: measured on aces, ATE 0.14 m that way and 34 m with the pose volume factor, whose per-beam
+    peak term exp(−d_b²/(2(σ² + e_b))) lets each beam of a wide region pick its own offset, which a cluttered
+    map rewards (docs/results.md, "Global localization: keeping the hypotheses").
+    """
+    if global_start:
+        return config
+    return config.model_copy(update={"global_max_stages": 1, "global_smoothing_volume": "per_beam",
+                                     "global_door_term": False})
 
 
 @dataclass(frozen=True)
@@ -160,23 +179,67 @@ def apply_log_likelihood(particles: ParticleSet, log_likelihood: npt.ArrayLike) 
     return Weighting(log_w - log_total, log_total)
 
 
-def weigh(particles: ParticleSet, beams: BeamSet, field: DistanceField, config: LocalizeConfig,
-          combination: BeamCombination = BeamCombination.AMCL, bandwidth: Bandwidth | None = None) -> Weighting:
-    """Weigh the particles with a scan: normalized log-weights and the recovery's mean weight.
+def region_log_likelihood(particles: ParticleSet, bandwidth: Bandwidth, beams: BeamSet, field: DistanceField,
+                          config: LocalizeConfig, combination: BeamCombination) -> FloatArray:
+    """log p(z | region) (N,) of each particle's pose region (:func:`~.smoothing.region_beam_likelihood`)."""
+    dist = endpoint_distances(field, particles.pose, beams.points_base)
+    pz, log_region = region_beam_likelihood(field, particles.pose, beams.points_base, dist, bandwidth, config,
+                                            beams.range_max_m, combination)
+    out: FloatArray = combine_beams(pz, combination) + log_region
+    return out
 
-    With a ``bandwidth`` (global localization, :mod:`.smoothing`) each particle's beams are weighed with the
-    likelihood smoothed over its region. With ``do_beamskip`` the per-beam likelihoods are formed first and the
-    beams most particles cannot explain are left out (:func:`~.likelihood_field.beam_skip_mask`); otherwise the
-    fused chunked path runs.
+
+def tempered_weighting(particles: ParticleSet, log_likelihood: Callable[[ParticleSet, Bandwidth], FloatArray],
+                       config: LocalizeConfig, rng: np.random.Generator) -> tuple[ParticleSet, float, Bandwidth]:
+    """A scan applied in tempered stages with rejuvenation (adaptive SMC tempering, Jasra et al. 2011).
+
+    The scan's likelihood L goes in as L^β₁·L^β₂·… with Σβ_s = 1: each β_s is the largest that shrinks Neff at most
+    by ``global_min_neff_ratio`` (:func:`~.smoothing.tempering_exponent`); between stages the particles are
+    resampled (low variance, same count), moved by their kernels (:func:`~.smoothing.jitter`) and L is evaluated
+    afresh at the moved poses (with their new bandwidths). So a sharp scan refines the cloud step by step
+    instead of collapsing it, and none of its evidence is lost: with one stage the rest 1 − β₁ was dropped,
+    and a cue seen only briefly (a corridor's end wall in the first 2 s) never counted in full. After
+    ``global_max_stages`` stages what remains is left out.
+
+    Args:
+        particles: the weighted particles before the scan.
+        log_likelihood: log L (N,) of a particle set given its bandwidths.
+
+    Returns:
+        The particles with their final weights, log Ẑ = Σ_s log Σᵢ wᵢ·Lᵢ^β_s (the scan's mean likelihood, for
+        recovery), and the bandwidths of the final poses.
     """
-    if bandwidth is not None and len(beams.points_base):
-        dist = endpoint_distances(field, particles.pose, beams.points_base)
-        pz = smoothed_beam_likelihood(dist, endpoint_variance(bandwidth, beams.points_base), config.z_hit,
-                                      config.z_rand, config.sigma_hit, beams.range_max_m)
-        ll = combine_beams(pz, combination)
+    remaining = 1.0
+    log_z = 0.0
+    stage = 0
+    while True:
+        bandwidth = particle_bandwidth(particles.pose, config)
+        ll = log_likelihood(particles, bandwidth)
         with np.errstate(divide="ignore"):
-            ll = ll * tempering_exponent(np.log(particles.weight), ll, config.global_min_neff_ratio)
-    elif config.do_beamskip and len(beams.points_base):
+            log_prior = np.log(particles.weight)
+        beta = remaining * tempering_exponent(log_prior, remaining * ll, config.global_min_neff_ratio)
+        weighting = apply_log_likelihood(particles, beta * ll)
+        log_z += weighting.log_avg_weight
+        particles = with_log_weights(particles, weighting.log_weight)
+        remaining -= beta
+        stage += 1
+        if remaining <= 1e-9 or stage >= config.global_max_stages:
+            return particles, log_z, bandwidth
+        index = low_variance_resample(particles.weight, len(particles), rng)
+        moved = particles.take(index)
+        moved.pose = jitter(particles.pose[index], bandwidth, rng, index)
+        particles = moved
+
+
+def weigh(particles: ParticleSet, beams: BeamSet, field: DistanceField, config: LocalizeConfig,
+          combination: BeamCombination = BeamCombination.AMCL) -> Weighting:
+    """Weigh the particles of a converged cloud with a scan: normalized log-weights and the recovery's mean weight.
+
+    With ``do_beamskip`` the per-beam likelihoods are formed first and the beams most particles cannot explain
+    are left out (:func:`~.likelihood_field.beam_skip_mask`); otherwise the fused chunked path runs. (A cloud
+    that has not converged goes through :func:`tempered_weighting` instead.)
+    """
+    if config.do_beamskip and len(beams.points_base):
         dist = endpoint_distances(field, particles.pose, beams.points_base)
         pz = beam_likelihood(dist, config.z_hit, config.z_rand, config.sigma_hit, beams.range_max_m, out=dist)
         pz, _ = skip_unexplained(pz, particles.weight, particles.pose, config, beams.range_max_m, combination)
@@ -248,16 +311,22 @@ def mcl_step(state: MclState, odom_now: npt.ArrayLike, beams: BeamSet, field: Di
             return state, StepDiagnostics(False, False, particles.neff(), len(particles), 0.0, 0, math.nan)
         particles = predict(particles, state.odom_at_update, odom, config, rng)
     bandwidth = active_bandwidth(particles.pose, particles.weight, config)
-    weighting = weigh(particles, beams, field, config, combination, bandwidth)
-    particles = with_log_weights(particles, weighting.log_weight)
-    recovery = state.recovery.update(weighting.log_avg_weight, config.recovery_alpha_slow,
-                                     config.recovery_alpha_fast)
+    if bandwidth is not None and len(beams.points_base):
+        spread = spread_cloud_config(config, state.global_start)
+
+        def region(p: ParticleSet, h: Bandwidth) -> FloatArray:
+            return region_log_likelihood(p, h, beams, field, spread, combination)
+
+        particles, log_avg, bandwidth = tempered_weighting(particles, region, spread, rng)
+    else:
+        weighting = weigh(particles, beams, field, config, combination)
+        particles, log_avg = with_log_weights(particles, weighting.log_weight), weighting.log_avg_weight
+    recovery = state.recovery.update(log_avg, config.recovery_alpha_slow, config.recovery_alpha_fast)
     fraction = recovery.random_fraction() if free is not None else 0.0
     neff = particles.neff()
     particles, recovery, n_random = resample_if_needed(particles, config, rng, recovery, free, bandwidth)
-    diag = StepDiagnostics(True, n_random >= 0, neff, len(particles), fraction, max(n_random, 0),
-                           weighting.log_avg_weight)
-    return MclState(particles, recovery, odom.copy()), diag
+    diag = StepDiagnostics(True, n_random >= 0, neff, len(particles), fraction, max(n_random, 0), log_avg)
+    return MclState(particles, recovery, odom.copy(), state.global_start), diag
 
 
 def initial_particles(mean: npt.ArrayLike, config: LocalizeConfig, rng: np.random.Generator,

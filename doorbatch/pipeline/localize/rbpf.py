@@ -7,10 +7,10 @@ methods differ only in the map model)::
     1. sampling     poses by the odometry motion model; door angles d_k,t = d_k,t−1 + ε, ε ~ N(0, σ_d²·Δt)
     2. importance   per beam, ML association between the static likelihood field and each door leaf at the
                     particle's door estimate, the door term marginalized to first order (eq. 6); until the
-                    cloud converges, the static model alone (as MCL; door angles not yet tied to a pose),
-                    smoothed over each particle's pose region and tempered (:mod:`.smoothing`); once
-                    converged, beams that most of the weight explains by neither are skipped (Nav2's
-                    do_beamskip, likelihood_field.skip_unexplained), as MCL does
+                    cloud converges, the same smoothed over each particle's pose region and applied in
+                    tempered stages (:mod:`.smoothing`, mcl.tempered_weighting; ``global_door_term`` false:
+                    the static model alone, as MCL); once converged, beams that most of the weight explains
+                    by neither are skipped (Nav2's do_beamskip, likelihood_field.skip_unexplained), as MCL does
     3. door update  one Douglas–Peucker polygon per scan, moved to every particle, associated to doors,
                     Kalman update of the associated doors' angles
     4. resampling   low-variance (KLD-adaptive) when Neff is low
@@ -26,7 +26,7 @@ import numpy.typing as npt
 
 from doorbatch.config import LocalizeConfig
 from doorbatch.maps import DoorSet
-from doorbatch.pipeline.localize.door_likelihood import door_log_likelihood_at_poses
+from doorbatch.pipeline.localize.door_likelihood import STATIC, door_log_likelihood_at_poses
 from doorbatch.pipeline.localize.door_observation import predict_doors, update_doors
 from doorbatch.pipeline.localize.likelihood_field import (
     BeamCombination,
@@ -43,15 +43,21 @@ from doorbatch.pipeline.localize.mcl import (
     StepDiagnostics,
     apply_log_likelihood,
     predict,
+    region_log_likelihood,
     resample_if_needed,
+    spread_cloud_config,
+    tempered_weighting,
     update_thresholds_met,
     with_log_weights,
 )
+from doorbatch.pipeline.localize.particles import ParticleSet
 from doorbatch.pipeline.localize.smoothing import (
+    Bandwidth,
     active_bandwidth,
+    endpoint_jacobians,
     endpoint_variance,
-    smoothed_beam_likelihood,
-    tempering_exponent,
+    pose_volume_applies,
+    pose_volume_log_factor,
 )
 
 
@@ -89,29 +95,29 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
         particles = replace(particles, door_var=var)
 
     bandwidth = active_bandwidth(particles.pose, particles.weight, config)
-    extra = None if bandwidth is None else endpoint_variance(bandwidth, beams.points_base)
-    static = endpoint_distances(field, particles.pose, beams.points_base)
-    # Eq. (6) only once the cloud has converged: a particle's door angles are then conditioned on its own
-    # (tracked) pose; while the cloud is global they are the 30° prior, and ML association turns every door's
-    # swept disc into a region that explains any stray beam, which pulls the cloud onto wrong
-    # poses near many doors (docs/results.md, "What does not meet issue #5 yet"); until then, MCL's static model.
-    if n_doors and bandwidth is None:
-        dl = door_log_likelihood_at_poses(static, particles.pose, beams.points_base, doors, particles.door_mean,
-                                          particles.door_var, config, beams.range_max_m)
-        pz = dl.beam_likelihood
-    elif extra is not None:
-        pz = smoothed_beam_likelihood(static, extra, config.z_hit, config.z_rand, config.sigma_hit,
-                                      beams.range_max_m)
-    else:
-        pz = beam_likelihood(static, config.z_hit, config.z_rand, config.sigma_hit, beams.range_max_m)
     combination = BeamCombination(config.beam_combination)
-    pz, _ = skip_unexplained(pz, particles.weight, particles.pose, config, beams.range_max_m, combination)
-    loglik = combine_beams(pz, combination)
-    if bandwidth is not None:
-        with np.errstate(divide="ignore"):
-            loglik = loglik * tempering_exponent(np.log(particles.weight), loglik, config.global_min_neff_ratio)
-    weighting = apply_log_likelihood(particles, loglik)
-    particles = with_log_weights(particles, weighting.log_weight)
+    # While the cloud is global each particle is weighed with its pose region's likelihood, in tempered stages
+    # (mcl.tempered_weighting); with ``global_door_term`` that likelihood is eq. (6) (door_region_log_likelihood),
+    # else MCL's static model.
+    if bandwidth is not None and len(beams.points_base):
+        spread = spread_cloud_config(config, state.global_start)
+
+        def region(p: ParticleSet, h: Bandwidth) -> npt.NDArray[np.float64]:
+            if n_doors and spread.global_door_term:
+                return door_region_log_likelihood(p, h, beams, field, doors, spread, combination)
+            return region_log_likelihood(p, h, beams, field, spread, combination)
+
+        particles, log_avg, bandwidth = tempered_weighting(particles, region, spread, rng)
+    else:
+        static = endpoint_distances(field, particles.pose, beams.points_base)
+        if n_doors:
+            pz = door_log_likelihood_at_poses(static, particles.pose, beams.points_base, doors, particles.door_mean,
+                                              particles.door_var, config, beams.range_max_m).beam_likelihood
+        else:
+            pz = beam_likelihood(static, config.z_hit, config.z_rand, config.sigma_hit, beams.range_max_m)
+        pz, _ = skip_unexplained(pz, particles.weight, particles.pose, config, beams.range_max_m, combination)
+        weighting = apply_log_likelihood(particles, combine_beams(pz, combination))
+        particles, log_avg = with_log_weights(particles, weighting.log_weight), weighting.log_avg_weight
 
     observed = none
     if n_doors:
@@ -119,10 +125,37 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
         particles = replace(particles, door_mean=update.mean, door_var=update.var)
         observed = np.asarray(update.observed.any(axis=0), dtype=bool)
 
-    recovery = state.recovery.update(weighting.log_avg_weight, config.recovery_alpha_slow, config.recovery_alpha_fast)
+    recovery = state.recovery.update(log_avg, config.recovery_alpha_slow, config.recovery_alpha_fast)
     fraction = recovery.random_fraction() if free is not None else 0.0
     neff = particles.neff()
     particles, recovery, n_random = resample_if_needed(particles, config, rng, recovery, free, bandwidth)
-    diag = StepDiagnostics(True, n_random >= 0, neff, len(particles), fraction, max(n_random, 0),
-                           weighting.log_avg_weight)
-    return MclState(particles, recovery, odom.copy()), diag, observed
+    diag = StepDiagnostics(True, n_random >= 0, neff, len(particles), fraction, max(n_random, 0), log_avg)
+    return MclState(particles, recovery, odom.copy(), state.global_start), diag, observed
+
+
+def door_region_log_likelihood(particles: ParticleSet, bandwidth: Bandwidth, beams: BeamSet, field: DistanceField,
+                               doors: DoorSet, config: LocalizeConfig, combination: BeamCombination
+                               ) -> npt.NDArray[np.float64]:
+    """log p(z | region) (N,): eq. (6) with ML association, smoothed over each particle's pose region.
+
+    Every model's σ² of beam b grows by the region's e_b (:func:`~.smoothing.endpoint_variance`, the kernel's
+    ``extra_var``). With ``global_smoothing_volume`` "pose" the per-beam factor √(σ_hit²/(σ_hit² + e_b)) is taken
+    out again (the door's own factor √((σ_hit² + e_b)/σ_k²) stays) and the pose region's one volume factor
+    (:func:`~.smoothing.pose_volume_log_factor`) is added, from the beams the static map explains (a beam on a
+    door leaf is left out of the pose information: expert choice, its Jacobian is not at hand; this errs on the
+    side of a wider region).
+    """
+    extra = endpoint_variance(bandwidth, beams.points_base)
+    static = endpoint_distances(field, particles.pose, beams.points_base)
+    dl = door_log_likelihood_at_poses(static, particles.pose, beams.points_base, doors, particles.door_mean,
+                                      particles.door_var, config, beams.range_max_m, extra_var=extra)
+    if not pose_volume_applies(config, combination):
+        return combine_beams(dl.beam_likelihood, combination)
+    rand = np.float32(config.z_rand / beams.range_max_m)
+    hit = (dl.beam_likelihood - rand) * np.sqrt(1.0 + extra / np.float32(config.sigma_hit**2))
+    pz = hit + rand
+    weight = np.where(dl.association == STATIC, hit / pz, np.float32(0.0))
+    jac = endpoint_jacobians(field, particles.pose, beams.points_base)
+    out: npt.NDArray[np.float64] = combine_beams(pz, combination) + pose_volume_log_factor(
+        jac, weight, bandwidth, config.sigma_hit)
+    return out

@@ -28,7 +28,7 @@ from doorbatch.io.mapdir import read_door_set
 from doorbatch.io.recording import Recording, load_recording
 from doorbatch.maps import DoorSet, OccupancyMap
 from doorbatch.pipeline.localize.convergence import ConvergenceMonitor, multimodal
-from doorbatch.pipeline.localize.door_geometry import with_closed_in_range
+from doorbatch.pipeline.localize.door_geometry import subset_doors, with_closed_in_range
 from doorbatch.pipeline.localize.likelihood_field import (
     BeamCombination,
     DistanceField,
@@ -122,12 +122,28 @@ def _initial_particles(rec: Recording, lmap: LocalizationMap, init: str | tuple[
         else:
             mean = np.asarray(init, dtype=np.float64)
         particles = initial_particles(mean, config, rng)
-    n = len(particles)
     d = len(lmap.doors) if method == "rbpf" else 0
-    mid = (lmap.doors.angle_min + lmap.doors.angle_max) / 2 if d else np.zeros(0)
-    particles.door_mean = np.broadcast_to(mid, (n, d)).copy()
-    particles.door_var = np.full((n, d), math.radians(config.door_init_sigma_deg) ** 2)
+    doors = lmap.doors if d else subset_doors(lmap.doors, np.zeros(0, dtype=np.intp))
+    particles.door_mean, particles.door_var = initial_door_states(doors, len(particles), init == "global", config, rng)
     return particles
+
+
+def initial_door_states(doors: DoorSet, n: int, global_start: bool, config: LocalizeConfig,
+                        rng: np.random.Generator) -> tuple[FloatArray, FloatArray]:
+    """Per particle and door the initial angle mean and variance (n, D).
+
+    A tracked start: mid-range, std ``door_init_sigma_deg``. A global start with ``door_global_init`` "sampled":
+    the door prior is uniform over each door's range, which one Gaussian per particle cannot hold ("closed or
+    open"), so each particle's filter starts at an angle drawn uniformly from the range with std
+    ``door_global_init_sigma_deg`` (the particles' mixture is the uniform prior; expert choice, the paper gives
+    no global door prior).
+    """
+    d = len(doors)
+    if global_start and d and config.door_global_init == "sampled":
+        mean = rng.uniform(doors.angle_min, doors.angle_max, (n, d))
+        return mean, np.full((n, d), math.radians(config.door_global_init_sigma_deg) ** 2)
+    mid = (doors.angle_min + doors.angle_max) / 2
+    return np.broadcast_to(mid, (n, d)).copy(), np.full((n, d), math.radians(config.door_init_sigma_deg) ** 2)
 
 
 @dataclass
@@ -204,7 +220,7 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
                             "needs it as the motion input")
     odom, odom_ok = interpolate_poses(rec.odometry.stamps_ns, rec.odometry.poses, rec.scans.stamps_ns,
                                       int(config.mapping.max_pose_gap_s * 1e9))
-    state = MclState(_initial_particles(rec, lmap, init, method, lc, rng))
+    state = MclState(_initial_particles(rec, lmap, init, method, lc, rng), global_start=init == "global")
     free = lmap.free if (lc.recovery_alpha_fast > 0.0 or init == "global") else None
     combination = BeamCombination(lc.beam_combination)
     track = _Track()

@@ -21,6 +21,19 @@ Averaging AMCL's unnormalized hit Gaussian over it gives, exactly for a distance
 
 so pz = z_hit·σ/√(σ² + e)·exp(−d²/(2(σ² + e))) + z_rand / range_max. With e = 0 it is Nav2's term.
 
+One volume factor, not one per beam (``global_smoothing_volume`` "pose", the default with the product of the
+beams). The factor σ/√(σ² + e) is the share of a beam's offset range that fits; but all beams of a scan move
+with the *same* 3-D pose offset δ, so the average of their product is not the product of their averages.
+To second order (Laplace), with J_b = ∂d_b/∂pose and the scan's pose information A = Σ_b r_b·J_bᵀJ_b / σ²,
+
+    E_δ[Π_b exp(−(d_b + J_b·δ)² / (2σ²))] ≈ |I + H·A|^(−½) · (peak),   H = diag(h_xy², h_xy², h_θ²),
+
+one factor for the region (:func:`pose_volume_log_factor`), while the peak keeps the per-beam exponents
+exp(−d_b²/(2(σ² + e_b))). The per-beam factors instead count the region's size once per beam: at the true pose
+of the sample's loc_closed, first scan, a 0.21 m / 4.2° region (10,000 uniform particles) costs 60.9 nats that
+way and 5.8 in the Laplace form, a tracked cloud's 0.03 m / 0.5° 4.4 and 1.2 (scripts/localize_region_factor.py),
+so the cloud collapsed onto whichever part of a corridor happened to be dense (docs/results.md).
+
 The bandwidth. Each particle stands for the region its neighbours leave to it: with the distance r_k to its
 k-th nearest neighbour (k = 8) in (x, y, L·yaw), L = kld_bin_xy_m / kld_bin_yaw (the KLD bins' aspect,
 2.9 m/rad), a ball of volume (4/3)·π·r_k³ holds k particles, so a particle's cell has the side
@@ -35,9 +48,10 @@ it stood for; without it they would stay on one pose for ever (the motion noise 
 the bandwidth would shrink as they pile up in one bin, and a hypothesis 0.1 m and 2° from the truth would be
 rejected by the sharpening model before the robot moved far enough to see it.
 
-Tempering (:func:`tempering_exponent`). The per-beam smoothing still multiplies ~60 beams as if independent,
-and consecutive scans from nearly the same pose repeat each other; so each scan's likelihood is raised to the
-largest power β ≤ 1 that shrinks the effective sample size at most by ``global_min_neff_ratio``.
+Tempering (:func:`tempering_exponent`, :func:`doorbatch.pipeline.localize.mcl.tempered_weighting`). A scan's
+likelihood is applied in stages L^β₁·L^β₂·… (Σβ = 1), each β the largest that shrinks the effective sample
+size at most by ``global_min_neff_ratio``, with resampling and the kernel jitter between stages, so that a
+sharp scan refines the cloud instead of collapsing it (adaptive SMC tempering), up to ``global_max_stages``.
 
 All three apply only while the cloud has not converged (:func:`~.likelihood_field.cloud_converged`: weighted
 position std > ``converged_xy_std_m`` or yaw std > ``converged_yaw_std_deg``): during global localization, and
@@ -56,7 +70,12 @@ from scipy.spatial import cKDTree
 
 from doorbatch.config import LocalizeConfig
 from doorbatch.geometry.rotations import wrap_angle
-from doorbatch.pipeline.localize.likelihood_field import cloud_converged
+from doorbatch.pipeline.localize.likelihood_field import (
+    BeamCombination,
+    DistanceField,
+    cloud_converged,
+    endpoint_distances,
+)
 
 FloatArray = npt.NDArray[np.float64]
 Float32Array = npt.NDArray[np.float32]
@@ -178,3 +197,77 @@ def tempering_exponent(log_prior: npt.ArrayLike, log_likelihood: npt.ArrayLike, 
         else:
             hi = mid
     return lo
+
+
+def endpoint_jacobians(field: DistanceField, pose: npt.ArrayLike, points_base: npt.ArrayLike) -> Float32Array:
+    """J (N, B, 3): the derivative of each beam's field distance with respect to its particle's pose (x, y, θ).
+
+    ∂d/∂(x, y) is the field's gradient at the end point (central differences, one cell each way, by moving
+    the particle); ∂d/∂θ = ∇d · (−r_y, r_x), r = R(θ)·b the end point relative to the particle.
+    """
+    p = np.asarray(pose, dtype=np.float64).reshape(-1, 3)
+    b = np.asarray(points_base, dtype=np.float64).reshape(-1, 2)
+    eps = field.resolution_m
+    grad = np.empty((p.shape[0], b.shape[0], 2), dtype=np.float32)
+    for axis in (0, 1):
+        step = np.zeros(3)
+        step[axis] = eps
+        grad[..., axis] = endpoint_distances(field, p + step, b) - endpoint_distances(field, p - step, b)
+    grad /= np.float32(2.0 * eps)
+    c, s = np.cos(p[:, 2:3]), np.sin(p[:, 2:3])
+    rx = c * b[None, :, 0] - s * b[None, :, 1]
+    ry = s * b[None, :, 0] + c * b[None, :, 1]
+    jac = np.empty((p.shape[0], b.shape[0], 3), dtype=np.float32)
+    jac[..., :2] = grad
+    jac[..., 2] = grad[..., 1] * rx - grad[..., 0] * ry
+    return jac
+
+
+def pose_volume_log_factor(jac: npt.ArrayLike, hit_weight: npt.ArrayLike, bandwidth: Bandwidth,
+                           sigma_hit: float) -> FloatArray:
+    """−½·log det(I + H^½·A·H^½) (N,): the share of a particle's pose region that fits the scan (Laplace).
+
+    The scan likelihood near a pose is Gaussian in the pose offset δ with information A = Σ_b r_b·J_bᵀJ_b / σ_hit²
+    (J_b from :func:`endpoint_jacobians`, r_b the beam's probability of being a hit); averaged over the
+    particle's kernel δ ~ N(0, H), H = diag(h_xy², h_xy², h_θ²), its peak is scaled by |I + H·A|^(−½). This is the
+    one volume factor of the 3-D pose region; the per-beam factors σ/√(σ² + e_b) of
+    :func:`smoothed_beam_likelihood` count the same pose uncertainty once per beam (module docstring).
+    """
+    j = np.asarray(jac, dtype=np.float64)
+    r = np.asarray(hit_weight, dtype=np.float64)
+    info = np.einsum("nb,nbi,nbj->nij", r, j, j) / (sigma_hit * sigma_hit)
+    h = np.stack([bandwidth.xy_m, bandwidth.xy_m, bandwidth.yaw_rad], axis=1)
+    m = np.eye(3)[None] + h[:, :, None] * info * h[:, None, :]
+    _, logdet = np.linalg.slogdet(m)
+    out: FloatArray = -0.5 * logdet
+    return out
+
+
+def pose_volume_applies(config: LocalizeConfig, combination: BeamCombination) -> bool:
+    """Whether the region's size enters as one pose volume factor: ``global_smoothing_volume`` "pose" with the
+    product of the beams (Nav2's 1 + Σ pz³ is no product of beam likelihoods; there each beam keeps its factor)."""
+    return config.global_smoothing_volume == "pose" and combination is BeamCombination.PRODUCT
+
+
+def region_beam_likelihood(field: DistanceField, pose: npt.ArrayLike, points_base: npt.ArrayLike,
+                           dist: npt.ArrayLike, bandwidth: Bandwidth, config: LocalizeConfig, max_range: float,
+                           combination: BeamCombination) -> tuple[Float32Array, FloatArray]:
+    """Per-beam likelihoods (N, B) smoothed over each particle's region, and a log factor (N,) for the region.
+
+    ``global_smoothing_volume`` "pose": pz_b = z_hit·exp(−d_b²/(2(σ² + e_b))) + z_rand / max_range (the fit of
+    beam b within the region; e_b from :func:`endpoint_variance`) and :func:`pose_volume_log_factor`, so that
+    log p = Σ_b log pz_b + factor; with e = 0 (a point particle) pz is Nav2's term and the factor 0.
+    "per_beam", or the combination "amcl" (:func:`pose_volume_applies`): :func:`smoothed_beam_likelihood` (each
+    beam its own factor σ/√(σ² + e_b)) and factor 0.
+    """
+    extra = endpoint_variance(bandwidth, points_base)
+    n = np.asarray(dist).shape[0]
+    if not pose_volume_applies(config, combination):
+        return (smoothed_beam_likelihood(dist, extra, config.z_hit, config.z_rand, config.sigma_hit, max_range),
+                np.zeros(n))
+    d = np.asarray(dist, dtype=np.float32)
+    sigma2 = np.float32(config.sigma_hit * config.sigma_hit)
+    hit = np.exp(np.float32(-0.5) * d * d / (extra + sigma2)) * np.float32(config.z_hit)
+    pz: Float32Array = hit + np.float32(config.z_rand / max_range)
+    jac = endpoint_jacobians(field, pose, points_base)
+    return pz, pose_volume_log_factor(jac, hit / pz, bandwidth, config.sigma_hit)

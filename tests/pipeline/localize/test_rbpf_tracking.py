@@ -22,6 +22,7 @@ from doorbatch.pipeline.localize.likelihood_field import (
 from doorbatch.pipeline.localize.mcl import MclState, initial_particles, mcl_step
 from doorbatch.pipeline.localize.particles import ParticleSet
 from doorbatch.pipeline.localize.rbpf import rbpf_step
+from doorbatch.pipeline.localize.run import initial_door_states
 from doorbatch.sim.motion import OdometryNoise, drift_poses
 
 FloatArray = npt.NDArray[np.float64]
@@ -122,13 +123,14 @@ def test_beam_skipping_keeps_the_corrective_beams_of_a_wide_predicted_cloud() ->
     assert np.all(support_amcl[:3, 4].sum() > w[:3].sum())
 
 
-def _step_with_door_mean(particles_pose: FloatArray, door_deg: float) -> FloatArray:
+def _step_with_door_mean(particles_pose: FloatArray, door_deg: float, global_door_term: bool = True) -> FloatArray:
     """Poses and weights after one forced RBPF update of the corridor scan at x = 6 m, every particle holding
     each door at ``door_deg`` (std 30°)."""
     world, static, doors = corridor()
     field = build_distance_field(rasterize(static, (-1.0, 16.0), (0.0, 2.4), margin=RES * 4), 2.0)
     truth = np.array([6.0, 1.5, 0.0])
-    config = LocalizeConfig(max_particles=len(particles_pose), min_particles=len(particles_pose))
+    config = LocalizeConfig(max_particles=len(particles_pose), min_particles=len(particles_pose),
+                            global_door_term=global_door_term)
     rng = np.random.default_rng(0)
     beams = scan_beams(world, truth, max_range=RANGE, noise_m=0.0, rng=rng)
     r, a = scan_ranges(world, truth, max_range=RANGE)
@@ -137,17 +139,36 @@ def _step_with_door_mean(particles_pose: FloatArray, door_deg: float) -> FloatAr
     n, d = len(particles_pose), len(doors)
     particles = ParticleSet(particles_pose, np.full(n, 1.0 / n), np.full((n, d), math.radians(door_deg)),
                             np.full((n, d), math.radians(config.door_init_sigma_deg) ** 2))
-    state, _, _ = rbpf_step(MclState(particles), truth, 0.0, None, beams, pts, field, doors, config,
+    state, _, _ = rbpf_step(MclState(particles, global_start=True), truth, 0.0, None, beams, pts, field, doors, config,
                             np.random.default_rng(1), force=True)
     return np.column_stack([state.particles.pose, state.particles.weight])  # resampled or not
 
 
-def test_door_term_waits_for_a_converged_cloud() -> None:
-    """While the cloud is global the door angles are only the prior, not tied to any pose: the weights are the
-    static model's and do not depend on them. Once converged, eq. (6) makes them matter (the leaves at 50°
-    explain beams that a closed-door estimate cannot)."""
+def test_global_door_term_switch() -> None:
+    """With ``global_door_term`` off the weights of a global cloud are the static model's and do not depend on the
+    door angles; with it on (eq. (6) over each particle's region), and in a converged cloud either way, they
+    do (the leaves at 50° explain beams that a closed-door estimate cannot)."""
     rng = np.random.default_rng(2)
     spread = np.stack([rng.uniform(0.0, 14.0, 400), rng.uniform(0.3, 2.1, 400), rng.uniform(-3.1, 3.1, 400)], axis=1)
-    np.testing.assert_array_equal(_step_with_door_mean(spread, 50.0), _step_with_door_mean(spread, 0.0))
+    np.testing.assert_array_equal(_step_with_door_mean(spread, 50.0, False), _step_with_door_mean(spread, 0.0, False))
+    assert not np.allclose(_step_with_door_mean(spread, 50.0), _step_with_door_mean(spread, 0.0))
     tight = np.array([6.0, 1.5, 0.0]) + rng.normal(0.0, [0.03, 0.03, 0.01], (400, 3))
-    assert not np.allclose(_step_with_door_mean(tight, 50.0), _step_with_door_mean(tight, 0.0))
+    assert not np.allclose(_step_with_door_mean(tight, 50.0, False), _step_with_door_mean(tight, 0.0, False))
+
+
+def test_global_start_draws_each_particles_door_angles_from_the_range() -> None:
+    _, _, doors = corridor()
+    doors = DoorSet(doors.hinge, doors.length, doors.closed_yaw, np.array([0.0, -1.0, 0.0, -1.5]),
+                    np.array([1.5, 0.0, 0.5, 0.0]))
+    config = LocalizeConfig(door_global_init="sampled")
+    mean, var = initial_door_states(doors, 20000, True, config, np.random.default_rng(4))
+    assert np.all((mean >= doors.angle_min) & (mean <= doors.angle_max))
+    width = doors.angle_max - doors.angle_min
+    assert np.all(np.abs(mean.mean(axis=0) - (doors.angle_min + doors.angle_max) / 2) < 0.02 * width)
+    np.testing.assert_allclose(mean.std(axis=0), width / math.sqrt(12.0), rtol=0.03)  # uniform over the range
+    np.testing.assert_allclose(var, math.radians(config.door_global_init_sigma_deg) ** 2)
+    # a tracked start, or door_global_init mid_range: every particle mid-range with the wide prior
+    for global_start, cfg in ((False, config), (True, LocalizeConfig(door_global_init="mid_range"))):
+        m, v = initial_door_states(doors, 10, global_start, cfg, np.random.default_rng(4))
+        np.testing.assert_allclose(m, np.broadcast_to((doors.angle_min + doors.angle_max) / 2, (10, 4)))
+        np.testing.assert_allclose(v, math.radians(cfg.door_init_sigma_deg) ** 2)

@@ -13,6 +13,8 @@ from doorbatch.config import LocalizeConfig
 from doorbatch.maps import DoorSet
 from doorbatch.pipeline.localize.door_likelihood import door_log_likelihood_at_poses
 from doorbatch.pipeline.localize.likelihood_field import beam_likelihood
+from doorbatch.pipeline.localize.mcl import tempered_weighting
+from doorbatch.pipeline.localize.particles import ParticleSet
 from doorbatch.pipeline.localize.smoothing import (
     Bandwidth,
     active_bandwidth,
@@ -20,6 +22,7 @@ from doorbatch.pipeline.localize.smoothing import (
     endpoint_variance,
     jitter,
     particle_bandwidth,
+    pose_volume_log_factor,
     smoothed_beam_likelihood,
     tempering_exponent,
 )
@@ -138,3 +141,41 @@ def test_door_kernel_extra_variance_numba_agrees_with_numpy() -> None:
     assert np.array_equal(a.association, c.association)
     assert np.allclose(a.log_likelihood, c.log_likelihood, rtol=1e-5)
     assert (a.association >= 0).any()  # some beams do go to a door
+
+
+def test_pose_volume_factor_counts_a_shared_offset_once() -> None:
+    # B beams that all measure the same x offset δ ~ N(0, h²): the exact average of Π_b exp(−δ²/(2σ²)) is
+    # (1 + B·h²/σ²)^(−1/2); one factor per beam would give (1 + h²/σ²)^(−B/2), ~42 nats lower here.
+    sigma, h, b = 0.1, 0.2, 60
+    jac = np.zeros((1, b, 3))
+    jac[..., 0] = 1.0
+    got = pose_volume_log_factor(jac, np.ones((1, b)), Bandwidth(np.array([h]), np.array([0.0])), sigma)
+    assert got[0] == pytest.approx(-0.5 * math.log(1.0 + b * h * h / sigma**2), rel=1e-9)
+    delta = np.random.default_rng(0).normal(0.0, h, 400_000)
+    assert got[0] == pytest.approx(math.log(np.mean(np.exp(-b * delta**2 / (2 * sigma**2)))), abs=0.02)
+    # a direction the beams do not measure (yaw here) adds nothing
+    wide = pose_volume_log_factor(jac, np.ones((1, b)), Bandwidth(np.array([h]), np.array([1.0])), sigma)
+    assert wide[0] == pytest.approx(got[0], rel=1e-9)
+
+
+@pytest.mark.parametrize("stages", [1, 30])
+def test_tempered_stages_apply_the_whole_likelihood(stages: int) -> None:
+    # particles uniform on x ∈ [−5, 5], likelihood N(x; 0, s²): the posterior has variance s², the evidence
+    # Z = s·√(2π) / 10. One stage applies only the power β that keeps a quarter of Neff and drops the rest.
+    s = 0.3
+    rng = np.random.default_rng(5)
+    n = 4000
+    pose = np.column_stack([rng.uniform(-5, 5, n), np.zeros(n), np.zeros(n)])
+    particles = ParticleSet(pose, np.full(n, 1.0 / n), np.zeros((n, 0)), np.zeros((n, 0)))
+
+    def gaussian(p: ParticleSet, h: Bandwidth) -> np.ndarray:
+        return -0.5 * p.pose[:, 0] ** 2 / s**2
+
+    config = LocalizeConfig(global_max_stages=stages, global_min_neff_ratio=0.25)
+    out, log_z, _ = tempered_weighting(particles, gaussian, config, rng)
+    var = float(out.weight @ out.pose[:, 0] ** 2)
+    if stages == 1:
+        assert var > 2.0 * s**2
+    else:
+        assert var == pytest.approx(s**2, rel=0.25)
+        assert log_z == pytest.approx(math.log(s * math.sqrt(2 * math.pi) / 10.0), abs=0.15)
