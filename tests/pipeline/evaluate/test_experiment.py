@@ -91,7 +91,7 @@ def test_global_experiment_reports_success_against_particles(tmp_path: Path) -> 
     assert "global_success" in (out / "report.md").read_text()
 
 
-@pytest.mark.parametrize("name", ["tracking.yaml", "global.yaml", "global_reduced.yaml"])
+@pytest.mark.parametrize("name", ["tracking.yaml", "global.yaml", "global_reduced.yaml", "global_truth.yaml"])
 def test_shipped_experiment_files_are_valid(name: str) -> None:
     spec = read_experiment(REPO / "configs" / "experiments" / name)
     assert all(p.exists() for p in spec.logs) and len(sweep_points(spec)) >= 60
