@@ -27,9 +27,10 @@ from pathlib import Path
 import numpy as np
 
 from doorbatch.config import DoorbatchConfig
-from doorbatch.geometry.se2 import interpolate_poses, relative
+from doorbatch.geometry.se2 import compose, interpolate_poses, relative
 from doorbatch.io.recording import Recording, load_recording
 from doorbatch.pipeline.evaluate.trajectory_error import align_first_pose, ate_rmse, position_errors
+from doorbatch.pipeline.evaluate.trajectory_metrics import umeyama_se2
 from doorbatch.pipeline.poses import scan_match_trajectory
 from doorbatch.pipeline.poses.plicp import plicp, scan_line_reference
 from doorbatch.sim.motion import OdometryNoise, drift_poses
@@ -40,6 +41,12 @@ CARMEN = REPO.parent / "shared" / "datasets" / "carmen"
 # The default scenario's odometry model (configs/scenarios/default.yaml).
 NOISE = OdometryNoise(alpha1=0.02, alpha2=0.005, alpha3=0.02, alpha4=0.001, scale_error=0.015,
                       yaw_drift_rad_per_m=0.003)
+
+
+def ate_se2_m(estimate: np.ndarray, reference: np.ndarray) -> float:
+    """Standard ATE (Sturm et al. 2012, evo ``ape -a``): RMSE after the SE(2) Umeyama alignment of all positions."""
+    transform = umeyama_se2(estimate[:, :2], reference[:, :2])
+    return ate_rmse(compose(np.broadcast_to(transform, estimate.shape), estimate), reference)
 
 
 def _at_scans(rec: Recording, series: str) -> tuple[np.ndarray, np.ndarray]:
@@ -90,12 +97,16 @@ def _inputs(recs: list[Recording], drift_seed: int | None) -> tuple[np.ndarray, 
 
 def ate_over_seeds(name: str, recs: list[Recording], seeds: list[int], config: DoorbatchConfig) -> dict[str, object]:
     """Scan-matching ATE for each drift seed, with the median and the worst (how robust, not one draw)."""
-    ates = []
+    ates, ates_se2 = [], []
     for seed in seeds:
         ref, odom, scans = _inputs(recs, seed)
-        ates.append(ate_rmse(align_first_pose(scan_match_trajectory(scans, odom, config.scanmatch).poses, ref), ref))
+        est = align_first_pose(scan_match_trajectory(scans, odom, config.scanmatch).poses, ref)
+        ates.append(ate_rmse(est, ref))
+        ates_se2.append(ate_se2_m(est, ref))
     return {"log": name, "seeds": seeds, "ate_scanmatch_m": [round(a, 3) for a in ates],
-            "median_m": round(float(np.median(ates)), 3), "worst_m": round(max(ates), 3)}
+            "median_m": round(float(np.median(ates)), 3), "worst_m": round(max(ates), 3),
+            "ate_se2_m": [round(a, 3) for a in ates_se2], "median_se2_m": round(float(np.median(ates_se2)), 3),
+            "worst_se2_m": round(max(ates_se2), 3)}
 
 
 def evaluate(name: str, recs: list[Recording], drift_seed: int | None, config: DoorbatchConfig, every: int = 0
@@ -112,7 +123,8 @@ def evaluate(name: str, recs: list[Recording], drift_seed: int | None, config: D
     pair_m, pair_deg, turned = reference_consistency(scans, ref)
     return {
         "log": name, "scans": len(scans), "ate_odometry_m": round(ate_rmse(odom, ref), 4),
-        "ate_scanmatch_m": round(ate_rmse(est, ref), 4), "max_error_m": round(float(err[worst]), 3),
+        "ate_scanmatch_m": round(ate_rmse(est, ref), 4), "ate_se2_m": round(ate_se2_m(est, ref), 4),
+        "ate_odometry_se2_m": round(ate_se2_m(odom, ref), 4), "max_error_m": round(float(err[worst]), 3),
         "max_error_at_scan": worst, "max_error_at_xy": [round(float(v), 2) for v in ref[worst, :2]],
         "first_scan_over_0.2m": int(over[0]) if over.size else None, "fallbacks": int(matched.fallback.sum()),
         "scans_per_s": round(len(scans) / seconds, 1), "ref_pairwise_median_m": round(pair_m, 4),
@@ -133,20 +145,23 @@ def main() -> None:
                         help="CARMEN logs keep their own odometry (in corrected logs: the corrected poses)")
     parser.add_argument("--seeds", type=str, default="",
                         help="instead: ATE of the CARMEN logs over these drift seeds, e.g. 1-8 (median, worst)")
+    parser.add_argument("--logs", type=str, default="orebro,intel,aces", help="CARMEN logs to run, comma-separated")
+    parser.add_argument("--no-sample", action="store_true", help="skip the sample mapping run")
     args = parser.parse_args()
+    names = [n for n in args.logs.split(",") if n]
     config = DoorbatchConfig()
     if args.seeds:
         first, _, last = args.seeds.partition("-")
         seeds = list(range(int(first), int(last or first) + 1))
-        for name in ("orebro", "intel", "aces"):
+        for name in names:
             path = CARMEN / f"{name}-corrected.log.gz"
             if path.exists():
                 print(json.dumps(ate_over_seeds(name, [load_recording(path, config)], seeds, config)), flush=True)
         return
-    rows = [evaluate("sample mapping run (3 passes)",
-                     [load_recording(SAMPLE / f"map_pass{k}.mcap", config) for k in (1, 2, 3)], None, config,
-                     args.every)]
-    for name in ("orebro", "intel", "aces"):
+    rows = [] if args.no_sample else [
+        evaluate("sample mapping run (3 passes)",
+                 [load_recording(SAMPLE / f"map_pass{k}.mcap", config) for k in (1, 2, 3)], None, config, args.every)]
+    for name in names:
         path = CARMEN / f"{name}-corrected.log.gz"
         if path.exists():
             seed = None if args.no_drift else args.seed
