@@ -192,3 +192,18 @@ def test_a_scan_that_cannot_be_matched_is_no_keyframe_and_its_odometry_error_is_
     assert np.rad2deg(abs(wrap_angle(result.poses[30, 2] - truth[30, 2]))) > 15.0
     yaw_err = np.rad2deg(np.abs(wrap_angle(result.poses[31:, 2] - truth[31:, 2])))
     assert yaw_err.max() < 0.5 and np.abs(result.poses[31:, :2] - truth[31:, :2]).max() < 0.03
+
+
+def test_a_scan_that_mostly_sees_ground_not_in_the_submap_is_weak_and_still_placed() -> None:
+    """Scan 25 keeps 40 % of its corridor hits and gains as many again from a room the submap has never seen:
+    the match is accepted (its corridor part fixes the pose) but flagged weak; the run stays accurate."""
+    rng = np.random.default_rng(8)
+    truth = corridor_truth(40)
+    scans = [simulate_scan(corridor_segments(), pose, rng) for pose in truth]
+    odom = drifting_odometry(truth, rng)
+    own = scans[25][::5]
+    unseen = simulate_scan(room_segments(), np.array([4.0, 2.5, 0.0]), rng)[::2] + np.array([0.0, 6.0])
+    scans[25] = np.concatenate([own, unseen[: 2 * len(own)]])
+    result = scan_match_trajectory(scans, odom, ScanMatchConfig())
+    assert np.flatnonzero(result.weak).tolist() == [25] and not result.fallback.any()
+    assert ate_rmse_m(result.poses, truth) < 0.05
