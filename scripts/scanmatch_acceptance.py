@@ -17,7 +17,9 @@ error, the reference position and the running sum of the pairwise turns of every
 drifts; ``--no-drift``: the CARMEN logs keep their own odometry, in orebro exactly the corrected poses);
 ``--seeds 1-8`` instead gives each CARMEN log's scan-matching ATE for each of those drift seeds, its median and
 its worst (one seed's figure is one draw of the drift: a matcher that derails on another draw is not robust);
-``--geometry`` instead compares beam geometries against the corrected poses (see :func:`geometry_check`);
+``--steps`` instead lists, per log at ``--seed``, the scans where the matched trajectory turns most differently
+from the reference (where a run derails); ``--geometry`` instead compares beam geometries against the
+corrected poses (see :func:`geometry_check`);
 ``--logs orebro,intel`` picks the CARMEN logs, ``--no-sample`` skips the sample run.
 """
 
@@ -31,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from doorbatch.config import DoorbatchConfig
+from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.geometry.se2 import compose, interpolate_poses, relative
 from doorbatch.io.recording import Recording, load_recording
 from doorbatch.pipeline.evaluate.trajectory_error import align_first_pose, ate_rmse, position_errors
@@ -211,6 +214,28 @@ def evaluate(name: str, recs: list[Recording], drift_seed: int | None, config: D
     }
 
 
+def worst_steps(name: str, recs: list[Recording], drift_seed: int, config: DoorbatchConfig, count: int = 8
+                ) -> list[dict[str, object]]:
+    """The ``count`` scans whose step (from the previous scan) turns most differently from the reference's step,
+    with the odometry's step error there and the match's statistics: where a run derails."""
+    ref, odom, scans = _inputs(recs, drift_seed)
+    matched = scan_match_trajectory(scans, odom, config.scanmatch)
+    ref_step = relative(ref[:-1], ref[1:])
+    turn_err = np.degrees(wrap_angle(relative(matched.poses[:-1], matched.poses[1:])[:, 2] - ref_step[:, 2]))
+    odom_err = np.degrees(wrap_angle(relative(odom[:-1], odom[1:])[:, 2] - ref_step[:, 2]))
+    rows = []
+    for j in sorted(np.argsort(-np.abs(turn_err))[:count]):
+        k = int(j) + 1
+        rows.append({"log": name, "seed": drift_seed, "scan": k, "step_turn_error_deg": round(float(turn_err[j]), 2),
+                     "odometry_step_turn_error_deg": round(float(odom_err[j]), 1),
+                     "reference_move_m": round(float(np.hypot(*ref_step[j, :2])), 2),
+                     "reference_turn_deg": round(float(np.degrees(ref_step[j, 2])), 1),
+                     "inliers": int(matched.n_inliers[k]), "hits": len(scans[k]),
+                     "residual_cm": round(float(matched.residual_m[k]) * 100, 1), "weak": bool(matched.weak[k]),
+                     "fallback": bool(matched.fallback[k]), "keyframe": bool(matched.keyframe[k])})
+    return rows
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seed", type=int, default=7, help="drift seed for the CARMEN logs")
@@ -223,12 +248,21 @@ def main() -> None:
                         help="instead: ATE of the CARMEN logs over these drift seeds, e.g. 1-8 (median, worst)")
     parser.add_argument("--logs", type=str, default="orebro,intel,aces", help="CARMEN logs to run, comma-separated")
     parser.add_argument("--no-sample", action="store_true", help="skip the sample mapping run")
+    parser.add_argument("--steps", action="store_true",
+                        help="instead: for each CARMEN log at --seed, the 8 scans whose step turn is furthest off")
     parser.add_argument("--geometry", action="store_true",
                         help="instead: beam-geometry variants against the corrected poses (map sharpness, pairwise "
                              "turns) and orebro's corridor turns by PLICP and by an exhaustive correlative search")
     args = parser.parse_args()
     names = [n for n in args.logs.split(",") if n]
     config = DoorbatchConfig()
+    if args.steps:
+        for name in names:
+            path = CARMEN / f"{name}-corrected.log.gz"
+            if path.exists():
+                for row in worst_steps(name, [load_recording(path, config)], args.seed, config):
+                    print(json.dumps(row), flush=True)
+        return
     if args.geometry:
         for name in names:
             path = CARMEN / f"{name}-corrected.log.gz"
