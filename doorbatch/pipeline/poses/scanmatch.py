@@ -54,8 +54,11 @@ confirm that pose, so its uncertainty is carried on: the next scan's prediction 
 weakens its prior by as much as the odometry may have gone wrong across both steps. A trusted match carries
 nothing (the submap fixed the pose; its frame is the reference of the next match). The same holds for a
 ``weak`` match, accepted but with fewer than ``min_overlap_fraction`` of the scan's points on submap lines:
-the scan sees mostly new ground and a minority of its points picked the basin (residuals of 4–13 cm in both
-candidate basins where it went wrong on orebro), so its pose is kept but not trusted. A fallback scan is not
+the scan sees mostly new ground and a minority of its points picked the basin (4–14 cm residuals where it
+went wrong on the CARMEN logs), so its pose is kept but not trusted. Before that, a weak match is searched
+again in the wider windows like a rejected one: a wider basin that the scan overlaps well replaces it when its
+MAP cost is lower; a wider weak one does not (it is no better evidence than the basin next to the
+prediction). A fallback scan is not
 made a keyframe (its odometry error would enter the submap, and the next scans would match it), unless
 ``fallbacks_before_keyframe`` fell back in a row, so that matching resumes against fresh geometry.
 """
@@ -108,7 +111,7 @@ class ScanMatchResult:
         fallback: (S,) the match was rejected and the pose is the odometry prediction.
         degenerate: (S,) the scan left a direction unconstrained, which followed the odometry prediction.
         weak: (S,) the match was accepted but fewer than ``min_overlap_fraction`` of the scan's points found
-            a submap line: its pose kept the prediction's uncertainty (module docstring).
+            a submap line: its prediction's uncertainty was carried to the next scan (module docstring).
         keyframe: (S,) the scan was added to the submap.
     """
 
@@ -268,9 +271,9 @@ def propagated_covariance(previous_covariance: npt.ArrayLike, previous_pose: npt
                           cfg: ScanMatchConfig) -> FloatArray:
     """Covariance of the prediction x ⊕ u in the map frame: J Σ_x Jᵀ + G Cov(u) Gᵀ (first-order compounding).
 
-    Σ_x is the previous pose's covariance relative to the submap (a trusted match's MAP-PLICP covariance, or
-    the prediction's where the scan fell back or matched weakly, so that its error stays inside the next
-    window), J = ∂(x ⊕ u)/∂x = [[1, 0, −Δy], [0, 1, Δx], [0, 0, 1]] with (Δx, Δy) = R(θ)(u_x, u_y).
+    Σ_x is the uncertainty of the previous pose that no match to the submap took out: zero after a trusted
+    match, that scan's own prediction covariance after a fallback or a weak match (so that its error stays
+    inside the next window). J = ∂(x ⊕ u)/∂x = [[1, 0, −Δy], [0, 1, Δx], [0, 0, 1]] with (Δx, Δy) = R(θ)(u_x, u_y).
     """
     x = np.asarray(previous_pose, dtype=np.float64)
     shift = rotation_matrix(float(x[2])) @ np.asarray(increment, dtype=np.float64)[:2]
@@ -367,7 +370,7 @@ def add_keyframe(submap: Submap, scan_xy: FloatArray, pose: npt.ArrayLike, cfg: 
 def match_scan(submap: Submap, scan_xy: FloatArray, prior: FloatArray, prior_covariance: FloatArray,
                cfg: ScanMatchConfig) -> ScanMatch:
     """Correlative search around the prediction, MAP-PLICP from its best pose (and from the prediction), then
-    the acceptance test."""
+    the acceptance test; a rejected or weak match is searched again in wider windows (module docstring)."""
     rejected = ScanMatch(prior, prior_covariance, 0, math.nan, 0.0, True, False)
     if scan_xy.shape[0] < cfg.min_inliers or submap.lines.size < cfg.min_inliers:
         return rejected
@@ -375,7 +378,7 @@ def match_scan(submap: Submap, scan_xy: FloatArray, prior: FloatArray, prior_cov
     stride = -(-scan_xy.shape[0] // cfg.correlative_max_points)
     gaussian = GaussianPrior(prior, np.asarray(np.linalg.inv(prior_covariance), dtype=np.float64))
     from_prior: PlicpResult | None = None  # ICP from the prediction does not depend on the window: run it once
-    weak: tuple[PlicpResult, float] | None = None  # the best weak match so far, and its correlative score
+    weak: tuple[PlicpResult, float] | None = None  # the first (narrowest-window) weak match and its score
     min_inliers_trusted = cfg.min_overlap_fraction * cfg.trim_fraction * scan_xy.shape[0]
     while True:
         (window_m, window_deg) = window
