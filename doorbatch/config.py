@@ -145,6 +145,14 @@ class ScanMatchConfig(Section):
     # dimensionless Hessian eigenvalue flags the scan ``degenerate`` (a direction was left to the prior).
     min_inliers: int = Field(30, ge=3)
     min_degeneracy: float = Field(0.02, ge=0.0)
+    # A match is weak when fewer than this fraction of the scan's points found a submap line (the scan sees
+    # mostly new ground, so a minority of its points picks the basin): wider windows are searched for a basin
+    # the scan overlaps well, and if none wins, the prediction's uncertainty is carried into the next scan's
+    # prior and window, as after a fallback.
+    min_overlap_fraction: float = Field(0.5, ge=0.0, le=1.0)
+    # A fallback scan (no acceptable match) is not made a keyframe unless this many fell back in a row, so that
+    # the submap still grows into new ground.
+    fallbacks_before_keyframe: int = Field(2, ge=1)
 
     @model_validator(mode="after")
     def _check_windows(self) -> ScanMatchConfig:

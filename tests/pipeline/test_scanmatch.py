@@ -25,6 +25,7 @@ from doorbatch.pipeline.poses import ScanMatchConfig, scan_match_trajectory
 from doorbatch.pipeline.poses.scanmatch import (
     grown_window,
     prediction_covariance,
+    propagated_covariance,
     search_window,
     voxel_downsample,
 )
@@ -161,3 +162,48 @@ def test_scan_matched_sample_pass_follows_the_ground_truth_not_the_drifting_odom
     assert matched.source == "scanmatch" and ok.sum() > 400
     assert ate_rmse(align_first_pose(odom[ok], truth[ok]), truth[ok]) > 0.3
     assert ate_rmse(align_first_pose(matched.poses[ok], truth[ok]), truth[ok]) < 0.05
+
+
+def test_prediction_covariance_compounds_the_previous_pose_uncertainty() -> None:
+    """First-order x ⊕ u: a heading σ of the previous pose becomes a lateral σ of d·σ after a move of d."""
+    cfg = ScanMatchConfig()
+    sigma_yaw = np.deg2rad(5.0)
+    previous = np.diag([0.0, 0.0, sigma_yaw**2])
+    increment = np.array([2.0, 0.0, 0.0])
+    own = prediction_covariance(increment, np.pi / 2, cfg)
+    cov = propagated_covariance(previous, np.array([1.0, 1.0, np.pi / 2]), increment, cfg)
+    # Heading north, moved 2 m north: the heading error moves the pose along −x by 2 m per radian.
+    expected = own + sigma_yaw**2 * np.array([[4.0, 0.0, -2.0], [0.0, 0.0, 0.0], [-2.0, 0.0, 1.0]])
+    assert np.allclose(cov, expected)
+    assert np.allclose(propagated_covariance(np.zeros((3, 3)), np.zeros(3), increment, cfg),
+                       prediction_covariance(increment, 0.0, cfg))
+
+
+def test_a_scan_that_cannot_be_matched_is_no_keyframe_and_its_odometry_error_is_taken_out_by_the_next() -> None:
+    """A 20° wheel slip into a scan with too few points: the scan keeps the wrong prediction but does not enter
+    the submap, and the next scan, searched in the window of the carried uncertainty, finds the true pose."""
+    rng = np.random.default_rng(6)
+    truth = corridor_truth(50)
+    scans = [simulate_scan(corridor_segments(), pose, rng) for pose in truth]
+    odom = drifting_odometry(truth, rng, jumps={30: (0.2, 0.0, np.deg2rad(20.0))})
+    scans[30] = scans[30][:20]
+    result = scan_match_trajectory(scans, odom, ScanMatchConfig())
+    assert np.flatnonzero(result.fallback).tolist() == [30] and not result.keyframe[30]
+    assert np.rad2deg(abs(wrap_angle(result.poses[30, 2] - truth[30, 2]))) > 15.0
+    yaw_err = np.rad2deg(np.abs(wrap_angle(result.poses[31:, 2] - truth[31:, 2])))
+    assert yaw_err.max() < 0.5 and np.abs(result.poses[31:, :2] - truth[31:, :2]).max() < 0.03
+
+
+def test_a_scan_that_mostly_sees_ground_not_in_the_submap_is_weak_and_still_placed() -> None:
+    """Scan 25 keeps 40 % of its corridor hits and gains as many again from a room the submap has never seen:
+    the match is accepted (its corridor part fixes the pose) but flagged weak; the run stays accurate."""
+    rng = np.random.default_rng(8)
+    truth = corridor_truth(40)
+    scans = [simulate_scan(corridor_segments(), pose, rng) for pose in truth]
+    odom = drifting_odometry(truth, rng)
+    own = scans[25][::5]
+    unseen = simulate_scan(room_segments(), np.array([4.0, 2.5, 0.0]), rng)[::2] + np.array([0.0, 6.0])
+    scans[25] = np.concatenate([own, unseen[: 2 * len(own)]])
+    result = scan_match_trajectory(scans, odom, ScanMatchConfig())
+    assert np.flatnonzero(result.weak).tolist() == [25] and not result.fallback.any()
+    assert ate_rmse_m(result.poses, truth) < 0.05

@@ -48,9 +48,19 @@ was tried as well: it found more spurious optima on scans that overlap the subma
 1–8: median ATE 0.86 m against 0.60 m growing on failures only).
 
 A match is rejected when it has too few points or inliers, or the ICP leaves the search window; the scan
-then keeps the prediction (``fallback``, with the prediction's covariance; the number of fallbacks is logged as
-a warning) and still becomes a keyframe when it moved far enough, so that matching resumes against fresh
-geometry.
+then keeps the prediction (``fallback``; the number of fallbacks is logged as a warning). The submap did not
+confirm that pose, so its uncertainty is carried on: the next scan's prediction covariance compounds it
+(first order, J Σ_{k−1} Jᵀ + G Σ_k Gᵀ, :func:`propagated_covariance`), which widens that scan's window and
+weakens its prior by as much as the odometry may have gone wrong across both steps. A trusted match carries
+nothing (the submap fixed the pose; its frame is the reference of the next match). The same holds for a
+``weak`` match, accepted but with fewer than ``min_overlap_fraction`` of the scan's points on submap lines:
+the scan sees mostly new ground and a minority of its points picked the basin (4–14 cm residuals where it
+went wrong on the CARMEN logs), so its pose is kept but not trusted. Before that, a weak match is searched
+again in the wider windows like a rejected one: a wider basin that the scan overlaps well replaces it when its
+MAP cost is lower; a wider weak one does not (it is no better evidence than the basin next to the
+prediction). A fallback scan is not
+made a keyframe (its odometry error would enter the submap, and the next scans would match it), unless
+``fallbacks_before_keyframe`` fell back in a row, so that matching resumes against fresh geometry.
 """
 
 from __future__ import annotations
@@ -92,13 +102,16 @@ class ScanMatchResult:
 
     Attributes:
         poses: (S, 3) x, y, yaw in the map frame (= odom frame at scan 0).
-        covariances: (S, 3, 3) covariance of each pose given the previous one, map frame: the MAP-PLICP one,
-            the odometry prediction's where ``fallback``; zero for scan 0.
+        covariances: (S, 3, 3) covariance of each pose given the submap, map frame: the MAP-PLICP one, the
+            odometry prediction's (with the uncertainty carried from earlier untrusted scans) where
+            ``fallback``; zero for scan 0.
         n_inliers: (S,) PLICP inliers of the final iteration (0 where ICP did not run).
         residual_m: (S,) mean point-to-line residual (m); NaN where ICP did not run.
         score: (S,) correlative score of the coarse match (mean likelihood in [0, 1]).
         fallback: (S,) the match was rejected and the pose is the odometry prediction.
         degenerate: (S,) the scan left a direction unconstrained, which followed the odometry prediction.
+        weak: (S,) the match was accepted but fewer than ``min_overlap_fraction`` of the scan's points found
+            a submap line: its prediction's uncertainty was carried to the next scan (module docstring).
         keyframe: (S,) the scan was added to the submap.
     """
 
@@ -109,6 +122,7 @@ class ScanMatchResult:
     score: FloatArray
     fallback: BoolArray
     degenerate: BoolArray
+    weak: BoolArray
     keyframe: BoolArray
 
 
@@ -146,6 +160,7 @@ class ScanMatch:
     score: float
     fallback: bool
     degenerate: bool
+    weak: bool = False
 
 
 def scan_match_trajectory(
@@ -174,14 +189,20 @@ def scan_match_trajectory(
         return out
     out.poses[0], out.covariances[0], out.keyframe[0] = odom[0], 0.0, True
     submap = start_submap(hits[0], odom[0], cfg)
+    carried = np.zeros((3, 3))  # uncertainty of the previous pose that no match to the submap took out
+    fallback_run = 0  # fallback scans in a row, none of them a keyframe yet
     for k in range(1, odom.shape[0]):
         prior = compose(out.poses[k - 1], increments[k - 1])
-        cov = prediction_covariance(increments[k - 1], out.poses[k - 1, 2], cfg)
-        match = match_scan(submap, voxel_downsample(hits[k], cfg.scan_voxel_m), prior, cov, cfg)
+        cov = propagated_covariance(carried, out.poses[k - 1], increments[k - 1], cfg)
+        scan = voxel_downsample(hits[k], cfg.scan_voxel_m)
+        match = match_scan(submap, scan, prior, cov, cfg)
         _store(out, k, match)
-        if _is_keyframe(submap.last_keyframe_pose, match.pose, cfg):
+        carried = cov if match.fallback or match.weak else np.zeros((3, 3))
+        fallback_run = fallback_run + 1 if match.fallback else 0
+        if fallback_run in (0, cfg.fallbacks_before_keyframe) and _is_keyframe(submap.last_keyframe_pose, match.pose,
+                                                                                 cfg):
             submap = add_keyframe(submap, hits[k], match.pose, cfg)
-            out.keyframe[k] = True
+            out.keyframe[k], fallback_run = True, 0
     if out.fallback.any():
         log.warning("scan matching fell back to odometry on %d of %d scans", int(out.fallback.sum()), len(hits))
     return out
@@ -207,14 +228,14 @@ def _empty_result(n: int) -> ScanMatchResult:
     return ScanMatchResult(
         poses=np.zeros((n, 3)), covariances=np.full((n, 3, 3), np.nan), n_inliers=np.zeros(n, dtype=np.int64),
         residual_m=np.full(n, np.nan), score=np.zeros(n), fallback=np.zeros(n, dtype=bool),
-        degenerate=np.zeros(n, dtype=bool), keyframe=np.zeros(n, dtype=bool),
+        degenerate=np.zeros(n, dtype=bool), weak=np.zeros(n, dtype=bool), keyframe=np.zeros(n, dtype=bool),
     )
 
 
 def _store(out: ScanMatchResult, k: int, match: ScanMatch) -> None:
     out.poses[k], out.covariances[k], out.n_inliers[k] = match.pose, match.covariance, match.n_inliers
     out.residual_m[k], out.score[k], out.fallback[k] = match.residual_m, match.score, match.fallback
-    out.degenerate[k] = match.degenerate
+    out.degenerate[k], out.weak[k] = match.degenerate, match.weak
 
 
 def _is_keyframe(last: FloatArray, pose: FloatArray, cfg: ScanMatchConfig) -> bool:
@@ -243,6 +264,22 @@ def prediction_covariance(increment: npt.ArrayLike, yaw: float, cfg: ScanMatchCo
     g = np.eye(3)
     g[:2, :2] = rotation_matrix(yaw)
     cov: FloatArray = g @ increment_covariance(increment, cfg) @ g.T
+    return cov
+
+
+def propagated_covariance(previous_covariance: npt.ArrayLike, previous_pose: npt.ArrayLike, increment: npt.ArrayLike,
+                          cfg: ScanMatchConfig) -> FloatArray:
+    """Covariance of the prediction x ⊕ u in the map frame: J Σ_x Jᵀ + G Cov(u) Gᵀ (first-order compounding).
+
+    Σ_x is the uncertainty of the previous pose that no match to the submap took out: zero after a trusted
+    match, that scan's own prediction covariance after a fallback or a weak match (so that its error stays
+    inside the next window). J = ∂(x ⊕ u)/∂x = [[1, 0, −Δy], [0, 1, Δx], [0, 0, 1]] with (Δx, Δy) = R(θ)(u_x, u_y).
+    """
+    x = np.asarray(previous_pose, dtype=np.float64)
+    shift = rotation_matrix(float(x[2])) @ np.asarray(increment, dtype=np.float64)[:2]
+    jac = np.array([[1.0, 0.0, -shift[1]], [0.0, 1.0, shift[0]], [0.0, 0.0, 1.0]])
+    cov: FloatArray = jac @ np.asarray(previous_covariance, dtype=np.float64) @ jac.T + prediction_covariance(
+        increment, float(x[2]), cfg)
     return cov
 
 
@@ -333,7 +370,7 @@ def add_keyframe(submap: Submap, scan_xy: FloatArray, pose: npt.ArrayLike, cfg: 
 def match_scan(submap: Submap, scan_xy: FloatArray, prior: FloatArray, prior_covariance: FloatArray,
                cfg: ScanMatchConfig) -> ScanMatch:
     """Correlative search around the prediction, MAP-PLICP from its best pose (and from the prediction), then
-    the acceptance test."""
+    the acceptance test; a rejected or weak match is searched again in wider windows (module docstring)."""
     rejected = ScanMatch(prior, prior_covariance, 0, math.nan, 0.0, True, False)
     if scan_xy.shape[0] < cfg.min_inliers or submap.lines.size < cfg.min_inliers:
         return rejected
@@ -341,6 +378,8 @@ def match_scan(submap: Submap, scan_xy: FloatArray, prior: FloatArray, prior_cov
     stride = -(-scan_xy.shape[0] // cfg.correlative_max_points)
     gaussian = GaussianPrior(prior, np.asarray(np.linalg.inv(prior_covariance), dtype=np.float64))
     from_prior: PlicpResult | None = None  # ICP from the prediction does not depend on the window: run it once
+    weak: tuple[PlicpResult, float] | None = None  # the first (narrowest-window) weak match and its score
+    min_inliers_trusted = cfg.min_overlap_fraction * cfg.trim_fraction * scan_xy.shape[0]
     while True:
         (window_m, window_deg) = window
         coarse = correlative_match(submap.grid, scan_xy[::stride], prior, window_m=window_m, window_deg=window_deg,
@@ -352,9 +391,20 @@ def match_scan(submap: Submap, scan_xy: FloatArray, prior: FloatArray, prior_cov
             sigma_m = min(fine.sigma_m, from_prior.sigma_m)  # one σ for both: the better fit's noise estimate
             fine = from_prior if map_cost(from_prior, sigma_m) < map_cost(fine, sigma_m) else fine
         if _accept(fine, prior, window_m, window_deg, cfg):
-            return ScanMatch(fine.pose, fine.covariance, fine.n_inliers, fine.residual_m, coarse.score, False,
-                             fine.degeneracy < cfg.min_degeneracy)
-        wider = grown_window(window, cfg)  # no acceptable match in this window: search a wider one before giving up
+            trusted = fine.n_inliers >= min_inliers_trusted
+            if trusted and weak is not None:  # a wider basin the scan overlaps well: the lower MAP cost wins
+                sigma_m = min(fine.sigma_m, weak[0].sigma_m)  # one σ for both, as above
+                trusted = map_cost(fine, sigma_m) < map_cost(weak[0], sigma_m)
+            if trusted:
+                return ScanMatch(fine.pose, fine.covariance, fine.n_inliers, fine.residual_m, coarse.score, False,
+                                 fine.degeneracy < cfg.min_degeneracy)
+            if weak is None:  # the weak basin nearest the prediction; a wider weak one is no better evidence
+                weak = (fine, coarse.score)
+        wider = grown_window(window, cfg)  # no acceptable (or only a weak) match here: search a wider window
+        if wider is None and weak is not None:
+            fine, score = weak
+            return ScanMatch(fine.pose, fine.covariance, fine.n_inliers, fine.residual_m, score, False,
+                             fine.degeneracy < cfg.min_degeneracy, weak=True)
         if wider is None:
             return ScanMatch(prior, prior_covariance, fine.n_inliers, fine.residual_m, coarse.score, True, False)
         window = wider
