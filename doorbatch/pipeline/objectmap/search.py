@@ -426,6 +426,43 @@ def add_doors(beams: BeamSet, state: MapState, candidates: list[DoorCandidate], 
     return state, added
 
 
+def recut_all_walls(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> MapState:
+    """One sweep of eq. (9) over every wall in turn (lines kept), each given every other object: after each
+    wall the first objects of the rays crossing its line are recast, so every DP sees the current map and
+    the sweep never lowers the log posterior. Walls left without segments stay (empty) until the caller
+    drops them, so object indices hold."""
+    obj_map, first = state.obj_map, state.first
+    walls = list(obj_map.walls)
+    for j, wall in enumerate(walls):
+        segs, _ = wall_segments(beams, first, replace(obj_map, walls=walls), j, wall.normal, wall.offset,
+                                config.validity_prior, config.sigma_m, config.rho_length_per_m,
+                                2.0 * config.rho_static)
+        walls[j] = Wall(wall.normal, wall.offset, segs)
+        with np.errstate(divide="ignore", invalid="ignore"):  # rays meeting the line before their first object
+            t = (wall.offset - beams.origin @ wall.normal) / (beams.direction @ wall.normal)
+        changed = ((first.cls == WALL) & (first.obj == j)) | (np.isfinite(t) & (t > 0.0) & (t < first.delta))
+        first = _full_first(beams, replace(obj_map, walls=walls), np.flatnonzero(changed), first)
+    return evaluate(beams, replace(obj_map, walls=walls), config)
+
+
+def final_walls_all_beams(all_beams: BeamSet, obj_map: ObjectMap, config: ObjectMapConfig) -> ObjectMap:
+    """Walls once more over every scan and beam of the log, once the structure has converged: Hough
+    proposals that now pay for themselves (propose_walls), then sweeps of eq. (9) over all walls while the
+    log posterior rises (at most ``final_recut_sweeps``); walls left without segments are dropped.
+
+    Why: the search runs on every scan_stride-th scan and beam_stride-th beam, so a segment's evidence Σ Δ
+    is ~stride² smaller than the log's against the paper's ρL, ρS (set for the paper's full data): sparse
+    tails and short walls (e.g. a room's side wall seen through a doorway) were cut.
+    """
+    state = evaluate(all_beams, propose_walls(all_beams, obj_map, config), config)
+    for _ in range(config.final_recut_sweeps):
+        new = recut_all_walls(all_beams, state, config)
+        if new.log_posterior <= state.log_posterior:
+            break
+        state = new
+    return replace(state.obj_map, walls=[w for w in state.obj_map.walls if w.segments.shape[0]])
+
+
 def search_structure(beams: BeamSet, config: ObjectMapConfig, classes: ClassParams | None = None,
                      trace: EmTrace | None = None) -> MapState:
     """The whole stage: walls, EM, then rounds of door proposals and EM. ``classes`` given: they are

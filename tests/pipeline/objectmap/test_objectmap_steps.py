@@ -10,13 +10,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import quad
 
+from doorbatch.config import DoorbatchConfig
 from doorbatch.pipeline.objectmap.beams import BeamSet
 from doorbatch.pipeline.objectmap.colors import two_gaussian_mixture
 from doorbatch.pipeline.objectmap.doors import best_width, fit_hinge_angles
 from doorbatch.pipeline.objectmap.hough import hough_lines
 from doorbatch.pipeline.objectmap.model import DOOR, WALL, ClassParams, Door, ObjectMap, Wall
 from doorbatch.pipeline.objectmap.sensor import e_step, first_objects, range_loglik_valid
-from doorbatch.pipeline.objectmap.walls import fit_line, segment_dp
+from doorbatch.pipeline.objectmap.search import final_walls_all_beams
+from doorbatch.pipeline.objectmap.walls import fit_line, segment_dp, wall_segments
 
 
 def test_line_fit_recovers_an_exact_line_and_ignores_zero_weights() -> None:
@@ -142,3 +144,48 @@ def test_two_gaussian_mixture_separates_two_colours() -> None:
     door = int(np.argmin(mix.weights))
     np.testing.assert_allclose(mix.mean[door], [150, 110, 80], atol=5)
     assert (mix.labels[300:] == door).mean() > 0.95
+
+
+def _beams_to(origin: np.ndarray, ends: np.ndarray) -> BeamSet:
+    d = ends - origin
+    r = np.linalg.norm(d, axis=1)
+    n = r.size
+    return BeamSet(np.zeros(n, dtype=np.int64), np.tile(origin, (n, 1)), d / r[:, None], r, np.full(n, 20.0),
+                   np.ones(n, dtype=bool), np.full((n, 3), np.nan), 1)
+
+
+def test_a_sparse_tail_cut_on_every_4th_beam_is_drawn_from_all_beams() -> None:
+    """Eq. (9)'s length prior is per metre, the evidence per beam: 5 kept hits over 0.7 m (Σ Δ ≈ 5·5.9) do not
+    pay ρL·0.7 m = 49, the log's 20 do (final_walls_all_beams runs the DP over every beam)."""
+    config = DoorbatchConfig().em
+    wall = Wall(np.array([0.0, -1.0]), -2.0, np.array([[0.0, 3.0]]))  # y = 2, s = x
+    xs = np.concatenate([np.arange(0.0, 3.0, 0.005), np.linspace(3.035, 3.7, 20)])
+    all_beams = _beams_to(np.array([1.5, 0.0]), np.stack([xs, np.full_like(xs, 2.0)], 1))
+    kept = all_beams.subset(np.arange(0, len(all_beams), 4))
+    obj_map = ObjectMap([wall], [], ClassParams(0.9), 1)
+    segs_kept, _ = wall_segments(kept, first_objects(kept, obj_map), obj_map, 0, wall.normal, wall.offset,
+                                 config.validity_prior, config.sigma_m, config.rho_length_per_m,
+                                 2.0 * config.rho_static)
+    assert abs(segs_kept[-1, 1] - 3.0) < 0.05
+    final = final_walls_all_beams(all_beams, obj_map, config)
+    assert len(final.walls) == 1
+    np.testing.assert_allclose(final.walls[0].segments, [[0.0, 3.7]], atol=1e-6)
+
+
+def test_walls_meeting_at_a_corner_end_at_the_corner_after_the_sweeps() -> None:
+    """First-hit model at a corner: a hit on wall B just below the corner, while B's segment stops 6 cm short,
+    is explained by the first surface its ray meets in the map, wall A's overshoot 2σ further on. Sweeping
+    eq. (9) over the walls with the first objects kept current moves those hits to B (exact) and then cuts A's
+    overshoot, which no ray supports any more (to within σ: the ray aimed at B's last hit passes its end).
+    Before: 12 cm past the corner and 6 cm short of it."""
+    config = DoorbatchConfig().em
+    wall_a = Wall(np.array([0.0, -1.0]), -2.0, np.array([[0.0, 4.12]]))  # y = 2, s = x, 12 cm past the corner
+    wall_b = Wall(np.array([1.0, 0.0]), 4.0, np.array([[0.0, 1.94]]))  # x = 4, s = y, 6 cm short of it
+    origin = np.array([1.0, 1.0])
+    ends = np.concatenate([np.stack([np.arange(0.5, 4.0, 0.01), np.full(350, 2.0)], 1),
+                           np.stack([np.full(170, 4.0), np.arange(0.3, 2.0, 0.01)], 1)])
+    beams = _beams_to(origin, ends)
+    final = final_walls_all_beams(beams, ObjectMap([wall_a, wall_b], [], ClassParams(0.9), 1), config)
+    assert len(final.walls) == 2
+    assert abs(final.walls[0].segments[-1, 1] - 4.0) < config.sigma_m
+    assert abs(final.walls[1].segments[-1, 1] - 2.0) < config.sigma_m
