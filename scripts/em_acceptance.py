@@ -19,7 +19,8 @@ moved shows no hinge (its hinge end is a guess, as the paper says of Fig. 5b).
 
 Usage::
 
-    python scripts/em_acceptance.py [--work DIR] [--json] [--camera-only | --sample-only]
+    python scripts/em_acceptance.py [--work DIR] [--json] [--camera-only | --sample-only | --walls-only]
+                                    [--em KEY=VALUE ...]
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from doorbatch.config import DoorbatchConfig, ObjectMapConfig
 from doorbatch.io.recording import Recording, load_recording
@@ -128,7 +130,8 @@ def run(site: Site, em: ObjectMapConfig, classes: ClassParams | None = None, noi
                                                                rng.normal(0, np.deg2rad(noise[1]), p.poses.shape[0])]))
                   for p in passes]
     beams = collect_beams(site.recordings, passes, em)
-    return build_object_map(beams, em, classes), beams
+    all_beams = collect_beams(site.recordings, passes, em, every_beam=True) if em.final_recut_sweeps else None
+    return build_object_map(beams, em, classes, all_beams), beams
 
 
 def color_only(site: Site, beams: BeamSet) -> dict[str, int]:
@@ -186,7 +189,9 @@ def wall_accuracy(site: Site, result: ObjectMapResult, beams: BeamSet | None = N
     kind ``wall``: the robot sees all of them) and the room walls (kind ``room``: seen only through open
     doorways, so their segments end where the view ends, not where the wall does). With ``beams``, also the
     distance to the nearest end of the truth wall's *observed* parts (:func:`observed_ends` of the hits
-    :func:`hits_by_truth_segment` gives that wall)."""
+    :func:`hits_by_truth_segment` gives that wall), and how many truth walls with an observed part have an
+    EM line (``seen``, ``mapped``). Pass every scan and beam of the log (``collect_beams(..., every_beam=True)``):
+    what the laser saw does not depend on the EM's decimation."""
     segs = site.truth.segments
     own_hits = hits_by_truth_segment(beams, segs) if beams is not None else None
     kinds = np.array(site.truth.segment_kinds)
@@ -194,6 +199,7 @@ def wall_accuracy(site: Site, result: ObjectMapResult, beams: BeamSet | None = N
     tn = np.stack([-d[:, 1], d[:, 0]], 1) / np.linalg.norm(d, axis=1, keepdims=True)
     toff = np.sum(tn * segs[:, 0], axis=1)
     out: dict[str, dict[str, float]] = {}
+    mapped = np.zeros(segs.shape[0], dtype=bool)
     for kind in ("wall", "room"):
         errs, dirs, seen_errs = [], [], []
         for w in result.object_map.walls:
@@ -201,6 +207,7 @@ def wall_accuracy(site: Site, result: ObjectMapResult, beams: BeamSet | None = N
             same = (np.abs(c) > np.cos(np.deg2rad(3.0))) & (np.abs(toff * np.sign(c) - w.offset) < 0.15)
             if not same.any() or np.mean(kinds[same] == kind) < 0.5:
                 continue
+            mapped |= same
             dirs.append(np.rad2deg(np.arccos(min(1.0, float(np.max(np.abs(c[same])))))))
             ends = segs[same].reshape(-1, 2)
             errs += [float(np.min(np.linalg.norm(ends - e, axis=1))) for e in w.endpoints().reshape(-1, 2)]
@@ -218,6 +225,10 @@ def wall_accuracy(site: Site, result: ObjectMapResult, beams: BeamSet | None = N
                      "observed_within_0.10m": (float(np.mean(np.array(seen_errs) <= 0.10)) if seen_errs
                                                else float("nan")),
                      "observed_max_m": float(np.max(seen_errs)) if seen_errs else float("nan")}
+        if own_hits is not None:
+            seen = np.array([kinds[k] == kind and observed_ends(segs[k], own_hits[k]).size > 0
+                             for k in range(segs.shape[0])])
+            out[kind] |= {"seen": int(seen.sum()), "mapped": int((seen & mapped).sum())}
     out["all"] = {"em_walls": len(result.object_map.walls)}
     return out
 
@@ -232,8 +243,11 @@ def main() -> None:
                     help="only site A, range + colour: the wall table (end points against truth and observed parts)")
     ap.add_argument("--camera-only", action="store_true",
                     help="only site A with colours from a camera (scenario em_mapping_camera), range + colour")
+    ap.add_argument("--em", action="append", default=[], metavar="KEY=VALUE",
+                    help="override an em config field (YAML value), e.g. --em stride_weighted_prior=true")
     args = ap.parse_args()
-    config = DoorbatchConfig()
+    config = DoorbatchConfig.model_validate({"em": {k: yaml.safe_load(v) for k, v in
+                                                    (a.split("=", 1) for a in args.em)}})
     if args.sample_only:
         sample = site_from_folder("sample", ROOT / "datasets" / "sample" / "logs", config)
         rows = {"range_color": score(sample, detected_centres(run(sample, config.em)[0])),
@@ -244,8 +258,9 @@ def main() -> None:
     if args.walls_only:
         with tempfile.TemporaryDirectory() as tmp:
             site = load_site("em_corridor", 5, args.work or Path(tmp), config)
-            res, beams = run(site, config.em)
-            print(json.dumps(wall_accuracy(site, res, beams), indent=2))
+            res, _ = run(site, config.em)
+            all_beams = collect_beams(site.recordings, site.passes, config.em, every_beam=True)
+            print(json.dumps(wall_accuracy(site, res, all_beams), indent=2))
         return
     if args.camera_only:
         with tempfile.TemporaryDirectory() as tmp:
@@ -276,7 +291,7 @@ def main() -> None:
         out["transfer_b"] = {**score(b, detected_centres(transfer)),
                              "door_width_m": transfer.object_map.classes.door_width_m}
         out["b_learned_alone"] = score(b, detected_centres(alone))
-        out["walls_a"] = wall_accuracy(a, full, beams)
+        out["walls_a"] = wall_accuracy(a, full, collect_beams(a.recordings, a.passes, config.em, every_beam=True))
         out["classes_a"] = {"door_width_m": full.object_map.classes.door_width_m,
                             "wall_rgb": full.object_map.classes.color_mean[0].round(1).tolist(),
                             "door_rgb": full.object_map.classes.color_mean[1].round(1).tolist()}
@@ -304,15 +319,16 @@ def main() -> None:
         print(f"| {label} | {r['moved_found']}/{r['moved']} | {r['still_found']}/{r['still']} | "
               f"{r['false_positives']} |")
     print("\n| walls (site A) | lines | end points | within 0.10 m | median | max | max direction error | "
-          "within 0.10 m of the observed parts | max from the observed parts |")
-    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+          "within 0.10 m of the observed parts | max from the observed parts | truth walls seen / with an EM line |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     walls = out["walls_a"]
     assert isinstance(walls, dict)
     for kind, label in (("wall", "corridor walls"), ("room", "room walls (seen through doorways)")):
         r = walls[kind]
         print(f"| {label} | {r['walls']} | {r['endpoints']} | {100 * r['within_0.10m']:.0f} % | "
               f"{100 * r['median_m']:.1f} cm | {100 * r['max_m']:.1f} cm | {r['max_dir_deg']:.2f}° | "
-              f"{100 * r['observed_within_0.10m']:.0f} % | {100 * r['observed_max_m']:.1f} cm |")
+              f"{100 * r['observed_within_0.10m']:.0f} % | {100 * r['observed_max_m']:.1f} cm | "
+              f"{r['seen']} / {r['mapped']} |")
     print(f"classes (site A): {json.dumps(out['classes_a'])}")
     print(f"seconds: range+colour EM {full.seconds:.1f} ({full.n_beams} beams); all {out['total_seconds']:.0f}")
 
