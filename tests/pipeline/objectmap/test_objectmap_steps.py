@@ -14,10 +14,11 @@ from doorbatch.config import DoorbatchConfig
 from doorbatch.pipeline.objectmap.beams import BeamSet
 from doorbatch.pipeline.objectmap.colors import two_gaussian_mixture
 from doorbatch.pipeline.objectmap.doors import best_width, fit_hinge_angles
+from doorbatch.pipeline.objectmap.em import evaluate
 from doorbatch.pipeline.objectmap.hough import hough_lines
 from doorbatch.pipeline.objectmap.model import DOOR, WALL, ClassParams, Door, ObjectMap, Wall
+from doorbatch.pipeline.objectmap.search import final_walls_all_beams, terminate_doors
 from doorbatch.pipeline.objectmap.sensor import e_step, first_objects, range_loglik_valid
-from doorbatch.pipeline.objectmap.search import final_walls_all_beams
 from doorbatch.pipeline.objectmap.walls import fit_line, segment_dp, wall_segments
 
 
@@ -189,3 +190,25 @@ def test_walls_meeting_at_a_corner_end_at_the_corner_after_the_sweeps() -> None:
     assert len(final.walls) == 2
     assert abs(final.walls[0].segments[-1, 1] - 4.0) < config.sigma_m
     assert abs(final.walls[1].segments[-1, 1] - 2.0) < config.sigma_m
+
+
+def test_a_door_that_no_longer_pays_is_terminated_and_a_real_one_kept() -> None:
+    """Sec. VI's outer loop terminates objects: a leaf lying flush on a wall in both passes explains nothing
+    the wall does not, so the map without it scores higher by its prior (2ρS + 2ρD + ρL·w); a leaf seen at
+    two angles, alone explaining 90 hits in each pass, stays (a static segment would explain one pass only)."""
+    config = DoorbatchConfig().em
+    wall = Wall(np.array([0.0, -1.0]), -2.0, np.array([[0.85, 4.0]]))  # y = 2, s = x
+    real = Door(np.array([0.5, 1.0]), np.array([0.0, np.pi / 2]))  # leaf y = 1, then x = 0.5
+    flush = Door(np.array([2.5, 2.0]), np.array([0.0, 0.0]))  # on the wall, x ∈ [2.5, 3.4]
+    on_wall = np.stack([np.arange(0.85, 4.0, 0.01), np.full(315, 2.0)], 1)
+    leaf = np.arange(0.0, 0.9, 0.01)
+    passes = [_beams_to(np.array([2.0, 0.0]), np.concatenate([np.stack([0.5 + leaf, np.full(90, 1.0)], 1), on_wall])),
+              _beams_to(np.array([2.0, 0.0]), np.concatenate([np.stack([np.full(90, 0.5), 1.0 + leaf], 1), on_wall]))]
+    fields = ("origin", "direction", "range_m", "dmax", "hit", "color")
+    beams = BeamSet(np.repeat(np.arange(2), 405), *(np.concatenate([getattr(b, f) for b in passes]) for f in fields), 2)
+    state = evaluate(beams, ObjectMap([wall], [real, flush], ClassParams(0.9), 2), config)
+    after, terminated = terminate_doors(beams, state, config)
+    assert terminated == 1
+    assert len(after.obj_map.doors) == 1
+    np.testing.assert_allclose(after.obj_map.doors[0].hinge, real.hinge)
+    assert after.log_posterior > state.log_posterior
