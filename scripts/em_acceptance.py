@@ -42,7 +42,9 @@ from doorbatch.pipeline.gridmap.doors import cluster_points
 from doorbatch.pipeline.mapping import PassPoses, pass_poses
 from doorbatch.pipeline.objectmap.beams import BeamSet
 from doorbatch.pipeline.objectmap.colors import two_gaussian_mixture
+from doorbatch.pipeline.objectmap.em import evaluate
 from doorbatch.pipeline.objectmap.model import ClassParams
+from doorbatch.pipeline.objectmap.prior import log_prior
 from doorbatch.pipeline.objectmap.sensor import cast_segments
 from doorbatch.pipeline.objectmap.stage import ObjectMapResult, build_object_map, collect_beams
 from doorbatch.sim.simulate import run_simulation
@@ -152,6 +154,28 @@ def color_only(site: Site, beams: BeamSet) -> dict[str, int]:
     return score(site, np.array(centres).reshape(-1, 2))
 
 
+def false_positive_scores(site: Site, result: ObjectMapResult, beams: BeamSet, em: ObjectMapConfig
+                          ) -> list[dict[str, object]]:
+    """Each unmatched detection: where it is, and what it is worth to the log posterior (the map without it,
+    re-evaluated on the kept beams), with the log-likelihood part with and without the colour term."""
+    _, fp = match(detected_centres(result), site.truth_centres)
+    obj_map, out = result.object_map, []
+    for i in fp:
+        without = replace(obj_map, doors=obj_map.doors[:i] + obj_map.doors[i + 1:])
+        no_colour = replace(obj_map.classes, has_color=False)
+        dprior = log_prior(obj_map, em) - log_prior(without, em)
+        d_all = evaluate(beams, obj_map, em).log_posterior - evaluate(beams, without, em).log_posterior
+        d_range = (evaluate(beams, replace(obj_map, classes=no_colour), em).log_posterior
+                   - evaluate(beams, replace(without, classes=no_colour), em).log_posterior)
+        p = result.doors[i].preview
+        out.append({"hinge": [round(p.hinge_x, 2), round(p.hinge_y, 2)],
+                    "pass_yaws_deg": np.rad2deg(result.doors[i].pass_yaws).round(0).tolist(),
+                    "observed": result.doors[i].pass_observed.tolist(), "moved": p.moved,
+                    "d_log_posterior": round(d_all, 1), "d_loglik": round(d_all - dprior, 1),
+                    "d_loglik_range_only": round(d_range - dprior, 1), "d_log_prior": round(dprior, 1)})
+    return out
+
+
 def observed_ends(segment: np.ndarray, points: np.ndarray, near_m: float = 0.05, gap_m: float = 0.3,
                   min_points: int = 5) -> np.ndarray:
     """End points of the parts of a truth wall segment the laser actually hit: the hits within ``near_m`` of it,
@@ -250,9 +274,11 @@ def main() -> None:
                                                     (a.split("=", 1) for a in args.em)}})
     if args.sample_only:
         sample = site_from_folder("sample", ROOT / "datasets" / "sample" / "logs", config)
-        rows = {"range_color": score(sample, detected_centres(run(sample, config.em)[0])),
+        res, beams = run(sample, config.em)
+        rows = {"range_color": score(sample, detected_centres(res)),
                 "range_only": score(sample, detected_centres(
-                    run(sample, config.em.model_copy(update={"use_color": False}))[0]))}
+                    run(sample, config.em.model_copy(update={"use_color": False}))[0])),
+                "range_color_false_positives": false_positive_scores(sample, res, beams, config.em)}
         print(json.dumps(rows))
         return
     if args.walls_only:
