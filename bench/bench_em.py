@@ -18,7 +18,7 @@ from doorbatch.config import DoorbatchConfig
 from doorbatch.io.recording import load_recording
 from doorbatch.pipeline.mapping import pass_poses
 from doorbatch.pipeline.objectmap.em import EmTrace, run_em
-from doorbatch.pipeline.objectmap.stage import build_object_map, collect_beams
+from doorbatch.pipeline.objectmap.stage import build_object_map, collect_beams, final_step_beams
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -32,14 +32,15 @@ def main() -> None:
     recs = [load_recording(p, config, with_colors=True) for p in logs]
     passes = [pass_poses(r, "reference", config) for r in recs]
     beams = collect_beams(recs, passes, config.em)
-    all_beams = collect_beams(recs, passes, config.em, every_beam=True)
+    final_beams = final_step_beams(recs, passes, config.em)
     c0 = time.process_time()
     searched = build_object_map(beams, config.em.model_copy(update={"final_recut_sweeps": 0}))
     search_s = time.process_time() - c0
     c0 = time.process_time()
-    result = build_object_map(beams, config.em, all_beams=all_beams)
+    result = build_object_map(beams, config.em, final_beams=final_beams)
     stage_s = time.process_time() - c0
-    print(f"em stage, sample mapping passes ({len(logs)} passes, {result.n_beams} beams; {len(all_beams)} in the "
+    n_final = len(final_beams) if final_beams is not None else 0
+    print(f"em stage, sample mapping passes ({len(logs)} passes, {result.n_beams} beams; {n_final} in the "
           f"final wall step): {stage_s:.1f} s CPU; {len(result.object_map.walls)} walls, {len(result.doors)} doors, "
           f"{len(result.trace.seconds)} EM iterations; without the final wall step {search_s:.1f} s, "
           f"{len(searched.object_map.walls)} walls")

@@ -46,7 +46,7 @@ from doorbatch.pipeline.objectmap.em import evaluate
 from doorbatch.pipeline.objectmap.model import ClassParams
 from doorbatch.pipeline.objectmap.prior import log_prior
 from doorbatch.pipeline.objectmap.sensor import cast_segments
-from doorbatch.pipeline.objectmap.stage import ObjectMapResult, build_object_map, collect_beams
+from doorbatch.pipeline.objectmap.stage import ObjectMapResult, build_object_map, collect_beams, final_step_beams
 from doorbatch.sim.simulate import run_simulation
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -132,8 +132,7 @@ def run(site: Site, em: ObjectMapConfig, classes: ClassParams | None = None, noi
                                                                rng.normal(0, np.deg2rad(noise[1]), p.poses.shape[0])]))
                   for p in passes]
     beams = collect_beams(site.recordings, passes, em)
-    all_beams = collect_beams(site.recordings, passes, em, every_beam=True) if em.final_recut_sweeps else None
-    return build_object_map(beams, em, classes, all_beams), beams
+    return build_object_map(beams, em, classes, final_step_beams(site.recordings, passes, em)), beams
 
 
 def color_only(site: Site, beams: BeamSet) -> dict[str, int]:
@@ -214,7 +213,7 @@ def wall_accuracy(site: Site, result: ObjectMapResult, beams: BeamSet | None = N
     doorways, so their segments end where the view ends, not where the wall does). With ``beams``, also the
     distance to the nearest end of the truth wall's *observed* parts (:func:`observed_ends` of the hits
     :func:`hits_by_truth_segment` gives that wall), and how many truth walls with an observed part have an
-    EM line (``seen``, ``mapped``). Pass every scan and beam of the log (``collect_beams(..., every_beam=True)``):
+    EM line (``seen``, ``mapped``). Pass every scan and beam of the log (``collect_beams(..., strides=(1, 1))``):
     what the laser saw does not depend on the EM's decimation."""
     segs = site.truth.segments
     own_hits = hits_by_truth_segment(beams, segs) if beams is not None else None
@@ -285,7 +284,7 @@ def main() -> None:
         with tempfile.TemporaryDirectory() as tmp:
             site = load_site("em_corridor", 5, args.work or Path(tmp), config)
             res, _ = run(site, config.em)
-            all_beams = collect_beams(site.recordings, site.passes, config.em, every_beam=True)
+            all_beams = collect_beams(site.recordings, site.passes, config.em, (1, 1))
             print(json.dumps(wall_accuracy(site, res, all_beams), indent=2))
         return
     if args.camera_only:
@@ -317,7 +316,7 @@ def main() -> None:
         out["transfer_b"] = {**score(b, detected_centres(transfer)),
                              "door_width_m": transfer.object_map.classes.door_width_m}
         out["b_learned_alone"] = score(b, detected_centres(alone))
-        out["walls_a"] = wall_accuracy(a, full, collect_beams(a.recordings, a.passes, config.em, every_beam=True))
+        out["walls_a"] = wall_accuracy(a, full, collect_beams(a.recordings, a.passes, config.em, (1, 1)))
         out["classes_a"] = {"door_width_m": full.object_map.classes.door_width_m,
                             "wall_rgb": full.object_map.classes.color_mean[0].round(1).tolist(),
                             "door_rgb": full.object_map.classes.color_mean[1].round(1).tolist()}

@@ -3,7 +3,7 @@ and what the model calls doors.
 
 Each log's corrected poses are the reference; the log is cut into ``--passes`` passes of equal duration
 (doors may move between them: the robots revisit their corridors), every ``--scan-stride``-th scan (the
-final wall step of the stage runs over every scan and beam).
+final wall step of the stage runs over every scan and beam: ``em.final_scan_stride``, ``final_beam_stride``).
 The logs have no colour, so the EM is range only. Writes ``docs/img/em_carmen_<log>.png`` (laser end
 points white on grey, EM walls dark blue, doors red when they moved between passes, orange otherwise)
 and prints one row per log.
@@ -62,8 +62,8 @@ def main() -> None:
         passes = [[every_scan[i] for i in c] for c in np.array_split(np.arange(len(every_scan)), args.passes)]
         scans = [sc for p in passes for sc in p[::em.scan_stride]]
         beams = beams_from_scans([p[::em.scan_stride] for p in passes], em.max_range_m, em.beam_stride)
-        all_beams = beams_from_scans(passes, em.max_range_m) if em.final_recut_sweeps else None
-        result = build_object_map(beams, em, all_beams=all_beams)
+        final = beams_from_scans([p[::em.final_scan_stride] for p in passes], em.max_range_m, em.final_beam_stride)
+        result = build_object_map(beams, em, final_beams=final if em.final_recut_sweeps else None)
         walls = [w.endpoints() for w in result.object_map.walls if w.segments.size]
         image = render_preview(points_map(beams), [d.preview for d in result.doors],
                                walls=np.concatenate(walls) if walls else None)

@@ -42,7 +42,7 @@ def main() -> None:
     on_line = np.abs(np.abs(d / np.linalg.norm(d, axis=1, keepdims=True) @ normal)) < 1e-6
     on_line &= np.abs(segs[:, 0] @ normal - offset) < 0.05
     for name, beams in (("kept beams", kept), ("every scan and beam", collect_beams(site.recordings, site.passes, em,
-                                                                                    every_beam=True))):
+                                                                                    (1, 1)))):
         own = hits_by_truth_segment(beams, segs)
         first = first_objects(beams, result.object_map)
         found, cost = wall_segments(beams, first, result.object_map, -1, normal, offset, em.validity_prior, em.sigma_m,

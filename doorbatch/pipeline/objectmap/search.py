@@ -466,18 +466,19 @@ def recut_all_walls(beams: BeamSet, state: MapState, config: ObjectMapConfig) ->
     return evaluate(beams, replace(obj_map, walls=walls), config)
 
 
-def final_walls_all_beams(all_beams: BeamSet, obj_map: ObjectMap, config: ObjectMapConfig) -> ObjectMap:
-    """Walls once more over every scan and beam of the log, once the structure has converged: Hough
-    proposals that now pay for themselves (propose_walls), then sweeps of eq. (9) over all walls while the
-    log posterior rises (at most ``final_recut_sweeps``); walls left without segments are dropped.
+def final_walls(beams: BeamSet, obj_map: ObjectMap, config: ObjectMapConfig) -> ObjectMap:
+    """Walls once more over the final step's beams (by default every scan and beam of the log), once the
+    structure has converged: Hough proposals that now pay for themselves (propose_walls), then sweeps of
+    eq. (9) over all walls while the log posterior rises (at most ``final_recut_sweeps``); walls left
+    without segments are dropped.
 
     Why: the search runs on every scan_stride-th scan and beam_stride-th beam, so a segment's evidence Σ Δ
     is ~stride² smaller than the log's against the paper's ρL, ρS (set for the paper's full data): sparse
     tails and short walls (e.g. a room's side wall seen through a doorway) were cut.
     """
-    state = evaluate(all_beams, propose_walls(all_beams, obj_map, config), config)
+    state = evaluate(beams, propose_walls(beams, obj_map, config), config)
     for _ in range(config.final_recut_sweeps):
-        new = recut_all_walls(all_beams, state, config)
+        new = recut_all_walls(beams, state, config)
         if new.log_posterior <= state.log_posterior:
             break
         state = new

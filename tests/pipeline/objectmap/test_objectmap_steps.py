@@ -17,7 +17,7 @@ from doorbatch.pipeline.objectmap.doors import best_width, fit_hinge_angles
 from doorbatch.pipeline.objectmap.em import evaluate
 from doorbatch.pipeline.objectmap.hough import hough_lines
 from doorbatch.pipeline.objectmap.model import DOOR, WALL, ClassParams, Door, ObjectMap, Wall
-from doorbatch.pipeline.objectmap.search import final_walls_all_beams, terminate_doors
+from doorbatch.pipeline.objectmap.search import final_walls, terminate_doors
 from doorbatch.pipeline.objectmap.sensor import e_step, first_objects, range_loglik_valid
 from doorbatch.pipeline.objectmap.walls import fit_line, segment_dp, wall_segments
 
@@ -157,7 +157,7 @@ def _beams_to(origin: np.ndarray, ends: np.ndarray) -> BeamSet:
 
 def test_a_sparse_tail_cut_on_every_4th_beam_is_drawn_from_all_beams() -> None:
     """Eq. (9)'s length prior is per metre, the evidence per beam: 5 kept hits over 0.7 m (Σ Δ ≈ 5·5.9) do not
-    pay ρL·0.7 m = 49, the log's 20 do (final_walls_all_beams runs the DP over every beam)."""
+    pay ρL·0.7 m = 49, the log's 20 do (final_walls runs the DP over every beam by default)."""
     config = DoorbatchConfig().em
     wall = Wall(np.array([0.0, -1.0]), -2.0, np.array([[0.0, 3.0]]))  # y = 2, s = x
     xs = np.concatenate([np.arange(0.0, 3.0, 0.005), np.linspace(3.035, 3.7, 20)])
@@ -168,7 +168,7 @@ def test_a_sparse_tail_cut_on_every_4th_beam_is_drawn_from_all_beams() -> None:
                                  config.validity_prior, config.sigma_m, config.rho_length_per_m,
                                  2.0 * config.rho_static)
     assert abs(segs_kept[-1, 1] - 3.0) < 0.05
-    final = final_walls_all_beams(all_beams, obj_map, config)
+    final = final_walls(all_beams, obj_map, config)
     assert len(final.walls) == 1
     np.testing.assert_allclose(final.walls[0].segments, [[0.0, 3.7]], atol=1e-6)
 
@@ -186,7 +186,7 @@ def test_walls_meeting_at_a_corner_end_at_the_corner_after_the_sweeps() -> None:
     ends = np.concatenate([np.stack([np.arange(0.5, 4.0, 0.01), np.full(350, 2.0)], 1),
                            np.stack([np.full(170, 4.0), np.arange(0.3, 2.0, 0.01)], 1)])
     beams = _beams_to(origin, ends)
-    final = final_walls_all_beams(beams, ObjectMap([wall_a, wall_b], [], ClassParams(0.9), 1), config)
+    final = final_walls(beams, ObjectMap([wall_a, wall_b], [], ClassParams(0.9), 1), config)
     assert len(final.walls) == 2
     assert abs(final.walls[0].segments[-1, 1] - 4.0) < config.sigma_m
     assert abs(final.walls[1].segments[-1, 1] - 2.0) < config.sigma_m
