@@ -3,7 +3,8 @@ mapping passes, and the time of one EM iteration (E-step + M-step) as the number
 
 Run: ``taskset -c 0 python bench/bench_em.py [--strides 8,4,2,1]``. Reading the logs and the poses is
 not timed. Figures are CPU time of the process (the machine is shared; CPU time leaves out the waits).
-Row 1 is the stage with the default config (every 2nd scan, every 2nd beam); the other rows time
+Row 1 is the stage with the default config (every 2nd scan, every 2nd beam; then walls proposed and re-cut
+over every scan and beam), and beside it the stage without that final step; the other rows time
 ``run_em`` iterations on the stage's final map with the scan stride varied (beam stride 2).
 """
 
@@ -17,7 +18,7 @@ from doorbatch.config import DoorbatchConfig
 from doorbatch.io.recording import load_recording
 from doorbatch.pipeline.mapping import pass_poses
 from doorbatch.pipeline.objectmap.em import EmTrace, run_em
-from doorbatch.pipeline.objectmap.stage import build_object_map, collect_beams
+from doorbatch.pipeline.objectmap.stage import build_object_map, collect_beams, final_step_beams
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -31,12 +32,18 @@ def main() -> None:
     recs = [load_recording(p, config, with_colors=True) for p in logs]
     passes = [pass_poses(r, "reference", config) for r in recs]
     beams = collect_beams(recs, passes, config.em)
+    final_beams = final_step_beams(recs, passes, config.em)
     c0 = time.process_time()
-    result = build_object_map(beams, config.em)
+    searched = build_object_map(beams, config.em.model_copy(update={"final_recut_sweeps": 0}))
+    search_s = time.process_time() - c0
+    c0 = time.process_time()
+    result = build_object_map(beams, config.em, final_beams=final_beams)
     stage_s = time.process_time() - c0
-    print(f"em stage, sample mapping passes ({len(logs)} passes, {result.n_beams} beams): {stage_s:.1f} s CPU; "
-          f"{len(result.object_map.walls)} walls, {len(result.doors)} doors, "
-          f"{len(result.trace.seconds)} EM iterations")
+    n_final = len(final_beams) if final_beams is not None else 0
+    print(f"em stage, sample mapping passes ({len(logs)} passes, {result.n_beams} beams; {n_final} in the "
+          f"final wall step): {stage_s:.1f} s CPU; {len(result.object_map.walls)} walls, {len(result.doors)} doors, "
+          f"{len(result.trace.seconds)} EM iterations; without the final wall step {search_s:.1f} s, "
+          f"{len(searched.object_map.walls)} walls")
     print("| scans | beams | s per EM iteration (CPU) |")
     print("| --- | --- | --- |")
     for stride in (int(s) for s in args.strides.split(",")):

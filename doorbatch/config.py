@@ -465,6 +465,14 @@ class ObjectMapConfig(Section):
     # Decimation (the stage keeps every n-th scan and every n-th beam of it).
     scan_stride: int = Field(2, ge=1)
     beam_stride: int = Field(2, ge=1)
+    # Once the structure has converged: walls proposed and re-cut by eq. (9) over every final_scan_stride-th
+    # scan and final_beam_stride-th beam (default all: the paper's ρ are set for full data; ~81 bytes a beam)
+    # in at most this many sweeps over the walls; 0: off.
+    final_recut_sweeps: int = Field(3, ge=0)
+    final_scan_stride: int = Field(1, ge=1)
+    final_beam_stride: int = Field(1, ge=1)
+    # Divide ρG, ρS, ρD, ρL by scan_stride·beam_stride (each kept beam stands for that many of the log's).
+    stride_weighted_prior: bool = False
     use_color: bool = True  # false: range-only EM even when the log has colors
     color_var_floor: float = Field(4.0, gt=0.0)  # per-channel colour variance floor (RGB units²)
     em_iterations: int = Field(6, ge=1)

@@ -19,7 +19,8 @@ moved shows no hinge (its hinge end is a guess, as the paper says of Fig. 5b).
 
 Usage::
 
-    python scripts/em_acceptance.py [--work DIR] [--json] [--camera-only | --sample-only]
+    python scripts/em_acceptance.py [--work DIR] [--json] [--camera-only | --sample-only | --walls-only]
+                                    [--em KEY=VALUE ...]
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from doorbatch.config import DoorbatchConfig, ObjectMapConfig
 from doorbatch.io.recording import Recording, load_recording
@@ -40,9 +42,11 @@ from doorbatch.pipeline.gridmap.doors import cluster_points
 from doorbatch.pipeline.mapping import PassPoses, pass_poses
 from doorbatch.pipeline.objectmap.beams import BeamSet
 from doorbatch.pipeline.objectmap.colors import two_gaussian_mixture
+from doorbatch.pipeline.objectmap.em import evaluate
 from doorbatch.pipeline.objectmap.model import ClassParams
+from doorbatch.pipeline.objectmap.prior import log_prior
 from doorbatch.pipeline.objectmap.sensor import cast_segments
-from doorbatch.pipeline.objectmap.stage import ObjectMapResult, build_object_map, collect_beams
+from doorbatch.pipeline.objectmap.stage import ObjectMapResult, build_object_map, collect_beams, final_step_beams
 from doorbatch.sim.simulate import run_simulation
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -128,7 +132,7 @@ def run(site: Site, em: ObjectMapConfig, classes: ClassParams | None = None, noi
                                                                rng.normal(0, np.deg2rad(noise[1]), p.poses.shape[0])]))
                   for p in passes]
     beams = collect_beams(site.recordings, passes, em)
-    return build_object_map(beams, em, classes), beams
+    return build_object_map(beams, em, classes, final_step_beams(site.recordings, passes, em)), beams
 
 
 def color_only(site: Site, beams: BeamSet) -> dict[str, int]:
@@ -147,6 +151,28 @@ def color_only(site: Site, beams: BeamSet) -> dict[str, int]:
         if 0.5 <= extent <= 1.3:
             centres.append(q.mean(axis=0))
     return score(site, np.array(centres).reshape(-1, 2))
+
+
+def false_positive_scores(site: Site, result: ObjectMapResult, beams: BeamSet, em: ObjectMapConfig
+                          ) -> list[dict[str, object]]:
+    """Each unmatched detection: where it is, and what it is worth to the log posterior (the map without it,
+    re-evaluated on the kept beams), with the log-likelihood part with and without the colour term."""
+    _, fp = match(detected_centres(result), site.truth_centres)
+    obj_map, out = result.object_map, []
+    for i in fp:
+        without = replace(obj_map, doors=obj_map.doors[:i] + obj_map.doors[i + 1:])
+        no_colour = replace(obj_map.classes, has_color=False)
+        dprior = log_prior(obj_map, em) - log_prior(without, em)
+        d_all = evaluate(beams, obj_map, em).log_posterior - evaluate(beams, without, em).log_posterior
+        d_range = (evaluate(beams, replace(obj_map, classes=no_colour), em).log_posterior
+                   - evaluate(beams, replace(without, classes=no_colour), em).log_posterior)
+        p = result.doors[i].preview
+        out.append({"hinge": [round(p.hinge_x, 2), round(p.hinge_y, 2)],
+                    "pass_yaws_deg": np.rad2deg(result.doors[i].pass_yaws).round(0).tolist(),
+                    "observed": result.doors[i].pass_observed.tolist(), "moved": p.moved,
+                    "d_log_posterior": round(d_all, 1), "d_loglik": round(d_all - dprior, 1),
+                    "d_loglik_range_only": round(d_range - dprior, 1), "d_log_prior": round(dprior, 1)})
+    return out
 
 
 def observed_ends(segment: np.ndarray, points: np.ndarray, near_m: float = 0.05, gap_m: float = 0.3,
@@ -186,7 +212,9 @@ def wall_accuracy(site: Site, result: ObjectMapResult, beams: BeamSet | None = N
     kind ``wall``: the robot sees all of them) and the room walls (kind ``room``: seen only through open
     doorways, so their segments end where the view ends, not where the wall does). With ``beams``, also the
     distance to the nearest end of the truth wall's *observed* parts (:func:`observed_ends` of the hits
-    :func:`hits_by_truth_segment` gives that wall)."""
+    :func:`hits_by_truth_segment` gives that wall), and how many truth walls with an observed part have an
+    EM line (``seen``, ``mapped``). Pass every scan and beam of the log (``collect_beams(..., strides=(1, 1))``):
+    what the laser saw does not depend on the EM's decimation."""
     segs = site.truth.segments
     own_hits = hits_by_truth_segment(beams, segs) if beams is not None else None
     kinds = np.array(site.truth.segment_kinds)
@@ -194,6 +222,7 @@ def wall_accuracy(site: Site, result: ObjectMapResult, beams: BeamSet | None = N
     tn = np.stack([-d[:, 1], d[:, 0]], 1) / np.linalg.norm(d, axis=1, keepdims=True)
     toff = np.sum(tn * segs[:, 0], axis=1)
     out: dict[str, dict[str, float]] = {}
+    mapped = np.zeros(segs.shape[0], dtype=bool)
     for kind in ("wall", "room"):
         errs, dirs, seen_errs = [], [], []
         for w in result.object_map.walls:
@@ -201,6 +230,7 @@ def wall_accuracy(site: Site, result: ObjectMapResult, beams: BeamSet | None = N
             same = (np.abs(c) > np.cos(np.deg2rad(3.0))) & (np.abs(toff * np.sign(c) - w.offset) < 0.15)
             if not same.any() or np.mean(kinds[same] == kind) < 0.5:
                 continue
+            mapped |= same
             dirs.append(np.rad2deg(np.arccos(min(1.0, float(np.max(np.abs(c[same])))))))
             ends = segs[same].reshape(-1, 2)
             errs += [float(np.min(np.linalg.norm(ends - e, axis=1))) for e in w.endpoints().reshape(-1, 2)]
@@ -218,6 +248,10 @@ def wall_accuracy(site: Site, result: ObjectMapResult, beams: BeamSet | None = N
                      "observed_within_0.10m": (float(np.mean(np.array(seen_errs) <= 0.10)) if seen_errs
                                                else float("nan")),
                      "observed_max_m": float(np.max(seen_errs)) if seen_errs else float("nan")}
+        if own_hits is not None:
+            seen = np.array([kinds[k] == kind and observed_ends(segs[k], own_hits[k]).size > 0
+                             for k in range(segs.shape[0])])
+            out[kind] |= {"seen": int(seen.sum()), "mapped": int((seen & mapped).sum())}
     out["all"] = {"em_walls": len(result.object_map.walls)}
     return out
 
@@ -232,20 +266,26 @@ def main() -> None:
                     help="only site A, range + colour: the wall table (end points against truth and observed parts)")
     ap.add_argument("--camera-only", action="store_true",
                     help="only site A with colours from a camera (scenario em_mapping_camera), range + colour")
+    ap.add_argument("--em", action="append", default=[], metavar="KEY=VALUE",
+                    help="override an em config field (YAML value), e.g. --em stride_weighted_prior=true")
     args = ap.parse_args()
-    config = DoorbatchConfig()
+    config = DoorbatchConfig.model_validate({"em": {k: yaml.safe_load(v) for k, v in
+                                                    (a.split("=", 1) for a in args.em)}})
     if args.sample_only:
         sample = site_from_folder("sample", ROOT / "datasets" / "sample" / "logs", config)
-        rows = {"range_color": score(sample, detected_centres(run(sample, config.em)[0])),
+        res, beams = run(sample, config.em)
+        rows = {"range_color": score(sample, detected_centres(res)),
                 "range_only": score(sample, detected_centres(
-                    run(sample, config.em.model_copy(update={"use_color": False}))[0]))}
+                    run(sample, config.em.model_copy(update={"use_color": False}))[0])),
+                "range_color_false_positives": false_positive_scores(sample, res, beams, config.em)}
         print(json.dumps(rows))
         return
     if args.walls_only:
         with tempfile.TemporaryDirectory() as tmp:
             site = load_site("em_corridor", 5, args.work or Path(tmp), config)
-            res, beams = run(site, config.em)
-            print(json.dumps(wall_accuracy(site, res, beams), indent=2))
+            res, _ = run(site, config.em)
+            all_beams = collect_beams(site.recordings, site.passes, config.em, (1, 1))
+            print(json.dumps(wall_accuracy(site, res, all_beams), indent=2))
         return
     if args.camera_only:
         with tempfile.TemporaryDirectory() as tmp:
@@ -276,7 +316,7 @@ def main() -> None:
         out["transfer_b"] = {**score(b, detected_centres(transfer)),
                              "door_width_m": transfer.object_map.classes.door_width_m}
         out["b_learned_alone"] = score(b, detected_centres(alone))
-        out["walls_a"] = wall_accuracy(a, full, beams)
+        out["walls_a"] = wall_accuracy(a, full, collect_beams(a.recordings, a.passes, config.em, (1, 1)))
         out["classes_a"] = {"door_width_m": full.object_map.classes.door_width_m,
                             "wall_rgb": full.object_map.classes.color_mean[0].round(1).tolist(),
                             "door_rgb": full.object_map.classes.color_mean[1].round(1).tolist()}
@@ -304,15 +344,16 @@ def main() -> None:
         print(f"| {label} | {r['moved_found']}/{r['moved']} | {r['still_found']}/{r['still']} | "
               f"{r['false_positives']} |")
     print("\n| walls (site A) | lines | end points | within 0.10 m | median | max | max direction error | "
-          "within 0.10 m of the observed parts | max from the observed parts |")
-    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+          "within 0.10 m of the observed parts | max from the observed parts | truth walls seen / with an EM line |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     walls = out["walls_a"]
     assert isinstance(walls, dict)
     for kind, label in (("wall", "corridor walls"), ("room", "room walls (seen through doorways)")):
         r = walls[kind]
         print(f"| {label} | {r['walls']} | {r['endpoints']} | {100 * r['within_0.10m']:.0f} % | "
               f"{100 * r['median_m']:.1f} cm | {100 * r['max_m']:.1f} cm | {r['max_dir_deg']:.2f}° | "
-              f"{100 * r['observed_within_0.10m']:.0f} % | {100 * r['observed_max_m']:.1f} cm |")
+              f"{100 * r['observed_within_0.10m']:.0f} % | {100 * r['observed_max_m']:.1f} cm | "
+              f"{r['seen']} / {r['mapped']} |")
     print(f"classes (site A): {json.dumps(out['classes_a'])}")
     print(f"seconds: range+colour EM {full.seconds:.1f} ({full.n_beams} beams); all {out['total_seconds']:.0f}")
 

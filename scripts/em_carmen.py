@@ -2,7 +2,8 @@
 and what the model calls doors.
 
 Each log's corrected poses are the reference; the log is cut into ``--passes`` passes of equal duration
-(doors may move between them: the robots revisit their corridors), every ``--scan-stride``-th scan.
+(doors may move between them: the robots revisit their corridors), every ``--scan-stride``-th scan (the
+final wall step of the stage runs over every scan and beam: ``em.final_scan_stride``, ``final_beam_stride``).
 The logs have no colour, so the EM is range only. Writes ``docs/img/em_carmen_<log>.png`` (laser end
 points white on grey, EM walls dark blue, doors red when they moved between passes, orange otherwise)
 and prints one row per log.
@@ -57,10 +58,12 @@ def main() -> None:
     for path in sorted(CARMEN.glob("*.log*")):
         rec = load_recording(path, config)
         poses = pass_poses(rec, "reference", config)
-        scans = pass_scans(rec, poses, em.scan_stride, False)
-        cuts = np.array_split(np.arange(len(scans)), args.passes)
-        beams = beams_from_scans([[scans[i] for i in c] for c in cuts], em.max_range_m, em.beam_stride)
-        result = build_object_map(beams, em)
+        every_scan = pass_scans(rec, poses, 1, False)
+        passes = [[every_scan[i] for i in c] for c in np.array_split(np.arange(len(every_scan)), args.passes)]
+        scans = [sc for p in passes for sc in p[::em.scan_stride]]
+        beams = beams_from_scans([p[::em.scan_stride] for p in passes], em.max_range_m, em.beam_stride)
+        final = beams_from_scans([p[::em.final_scan_stride] for p in passes], em.max_range_m, em.final_beam_stride)
+        result = build_object_map(beams, em, final_beams=final if em.final_recut_sweeps else None)
         walls = [w.endpoints() for w in result.object_map.walls if w.segments.size]
         image = render_preview(points_map(beams), [d.preview for d in result.doors],
                                walls=np.concatenate(walls) if walls else None)

@@ -8,7 +8,7 @@ Outline::
     repeat: door candidates from motion (wall pieces crossed by rays of some pass; leaf-like segments of
             one pass crossed by rays of another) and colour (wall runs better explained by the door colour)
             each: per-pass angles by a pseudo-E-step search → hinge/angles (eq. 10) → walls re-cut (eq. 9)
-            → kept if the log posterior rises;  EM
+            → kept if the log posterior rises;  EM;  doors that no longer pay terminated
 """
 
 from __future__ import annotations
@@ -375,20 +375,41 @@ def try_door(beams: BeamSet, state: MapState, c: DoorCandidate, config: ObjectMa
     first_mid = _full_first(beams, new_map, idx, empty)
     new_map, extra = _walls_behind(beams, new_map, idx, first_mid, config)
     idx = np.union1d(idx, extra)
-    sub = beams.subset(idx)
-    first_new = _full_first(sub, new_map, np.arange(idx.size), FirstObjects(
-        np.full(idx.size, np.inf), np.full(idx.size, -1, dtype=np.int64), np.full(idx.size, -1, dtype=np.int64)))
-    _, ll_new = e_step(sub, first_new, new_map.classes, config.validity_prior, config.sigma_m)
-    gain = float(ll_new.sum() - state.loglik[idx].sum()) + log_prior(new_map, config) - log_prior(obj_map, config)
+    before = float(state.loglik[idx].sum()) + log_prior(obj_map, config)
+    gain = _local_log_posterior(beams, idx, new_map, config) - before
     # Sec. VI: the door is adopted only if it scores higher than the map without it, "i.e. when the segment
     # is static": the same leaf (first pass's direction) as a wall of its own
-    static = _as_static_segment(new_map, len(new_map.doors) - 1)
-    first_static = _full_first(sub, static, np.arange(idx.size), FirstObjects(
-        np.full(idx.size, np.inf), np.full(idx.size, -1, dtype=np.int64), np.full(idx.size, -1, dtype=np.int64)))
-    _, ll_static = e_step(sub, first_static, static.classes, config.validity_prior, config.sigma_m)
-    gain_static = float(ll_static.sum() - state.loglik[idx].sum()) + log_prior(static, config) - log_prior(
-        obj_map, config)
+    gain_static = _local_log_posterior(beams, idx, _as_static_segment(new_map, len(new_map.doors) - 1), config) - before
     return min(gain, gain - gain_static), new_map
+
+
+def _local_log_posterior(beams: BeamSet, idx: IntArray, obj_map: ObjectMap, config: ObjectMapConfig) -> float:
+    """Σ over beams ``idx`` of the marginal log-likelihood under ``obj_map``, plus log p(M): the part of the
+    log posterior that a change confined to those beams' rays can move."""
+    sub = beams.subset(idx)
+    first = _full_first(sub, obj_map, np.arange(idx.size), FirstObjects(
+        np.full(idx.size, np.inf), np.full(idx.size, -1, dtype=np.int64), np.full(idx.size, -1, dtype=np.int64)))
+    _, ll = e_step(sub, first, obj_map.classes, config.validity_prior, config.sigma_m)
+    return float(ll.sum()) + log_prior(obj_map, config)
+
+
+def terminate_doors(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> tuple[MapState, int]:
+    """The other half of Sec. VI's outer loop ("new objects are introduced, and others are terminated"):
+    each door, as EM left it, against the map without it and with its leaf as a static wall segment (the
+    alternative the paper adopts a door against); the best of the three is kept. A door adopted early can
+    stop paying once later doors and walls explain its rays."""
+    terminated = 0
+    for i in reversed(range(len(state.obj_map.doors))):
+        obj_map = state.obj_map
+        idx = np.flatnonzero(rays_near(beams, obj_map.doors[i].hinge,
+                                       obj_map.door_width(i) + config.door_ray_margin_m))
+        current = float(state.loglik[idx].sum()) + log_prior(obj_map, config)
+        options = [replace(obj_map, doors=obj_map.doors[:i] + obj_map.doors[i + 1:]), _as_static_segment(obj_map, i)]
+        scores = [_local_log_posterior(beams, idx, m, config) for m in options]
+        if max(scores) > current:
+            state = evaluate(beams, options[int(np.argmax(scores))], config)
+            terminated += 1
+    return state, terminated
 
 
 def _as_static_segment(obj_map: ObjectMap, i: int) -> ObjectMap:
@@ -426,6 +447,44 @@ def add_doors(beams: BeamSet, state: MapState, candidates: list[DoorCandidate], 
     return state, added
 
 
+def recut_all_walls(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> MapState:
+    """One sweep of eq. (9) over every wall in turn (lines kept), each given every other object: after each
+    wall the first objects of the rays crossing its line are recast, so every DP sees the current map and
+    the sweep never lowers the log posterior. Walls left without segments stay (empty) until the caller
+    drops them, so object indices hold."""
+    obj_map, first = state.obj_map, state.first
+    walls = list(obj_map.walls)
+    for j, wall in enumerate(walls):
+        segs, _ = wall_segments(beams, first, replace(obj_map, walls=walls), j, wall.normal, wall.offset,
+                                config.validity_prior, config.sigma_m, config.rho_length_per_m,
+                                2.0 * config.rho_static)
+        walls[j] = Wall(wall.normal, wall.offset, segs)
+        with np.errstate(divide="ignore", invalid="ignore"):  # rays meeting the line before their first object
+            t = (wall.offset - beams.origin @ wall.normal) / (beams.direction @ wall.normal)
+        changed = ((first.cls == WALL) & (first.obj == j)) | (np.isfinite(t) & (t > 0.0) & (t < first.delta))
+        first = _full_first(beams, replace(obj_map, walls=walls), np.flatnonzero(changed), first)
+    return evaluate(beams, replace(obj_map, walls=walls), config)
+
+
+def final_walls(beams: BeamSet, obj_map: ObjectMap, config: ObjectMapConfig) -> ObjectMap:
+    """Walls once more over the final step's beams (by default every scan and beam of the log), once the
+    structure has converged: Hough proposals that now pay for themselves (propose_walls), then sweeps of
+    eq. (9) over all walls while the log posterior rises (at most ``final_recut_sweeps``); walls left
+    without segments are dropped.
+
+    Why: the search runs on every scan_stride-th scan and beam_stride-th beam, so a segment's evidence Σ Δ
+    is ~stride² smaller than the log's against the paper's ρL, ρS (set for the paper's full data): sparse
+    tails and short walls (e.g. a room's side wall seen through a doorway) were cut.
+    """
+    state = evaluate(beams, propose_walls(beams, obj_map, config), config)
+    for _ in range(config.final_recut_sweeps):
+        new = recut_all_walls(beams, state, config)
+        if new.log_posterior <= state.log_posterior:
+            break
+        state = new
+    return replace(state.obj_map, walls=[w for w in state.obj_map.walls if w.segments.shape[0]])
+
+
 def search_structure(beams: BeamSet, config: ObjectMapConfig, classes: ClassParams | None = None,
                      trace: EmTrace | None = None) -> MapState:
     """The whole stage: walls, EM, then rounds of door proposals and EM. ``classes`` given: they are
@@ -445,4 +504,5 @@ def search_structure(beams: BeamSet, config: ObjectMapConfig, classes: ClassPara
         if not added:
             break
         state = run_em(beams, state.obj_map, config, learn, trace=trace)
+        state, _ = terminate_doors(beams, state, config)
     return state

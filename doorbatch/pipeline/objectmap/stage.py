@@ -20,9 +20,9 @@ from doorbatch.io.preview import PreviewDoor
 from doorbatch.io.recording import Recording
 from doorbatch.pipeline.mapping import PassPoses
 from doorbatch.pipeline.objectmap.beams import BeamSet, ScanBeams, beams_from_scans
-from doorbatch.pipeline.objectmap.em import EmTrace, MapState
+from doorbatch.pipeline.objectmap.em import EmTrace, MapState, evaluate
 from doorbatch.pipeline.objectmap.model import DOOR, ClassParams, ObjectMap
-from doorbatch.pipeline.objectmap.search import search_structure
+from doorbatch.pipeline.objectmap.search import final_walls, search_structure
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -46,10 +46,21 @@ def pass_scans(rec: Recording, poses: PassPoses, scan_stride: int, with_color: b
     return out
 
 
-def collect_beams(recordings: Sequence[Recording], passes: Sequence[PassPoses], config: ObjectMapConfig) -> BeamSet:
-    """All passes' kept beams in the map frame."""
-    scans = [pass_scans(r, p, config.scan_stride, config.use_color) for r, p in zip(recordings, passes, strict=True)]
-    return beams_from_scans(scans, config.max_range_m, config.beam_stride)
+def collect_beams(recordings: Sequence[Recording], passes: Sequence[PassPoses], config: ObjectMapConfig,
+                  strides: tuple[int, int] | None = None) -> BeamSet:
+    """All passes' kept beams in the map frame: every n-th scan and beam by ``strides`` (scan, beam), by
+    default the search's (scan_stride, beam_stride); (1, 1): every scan and beam."""
+    scan_stride, beam_stride = strides or (config.scan_stride, config.beam_stride)
+    scans = [pass_scans(r, p, scan_stride, config.use_color) for r, p in zip(recordings, passes, strict=True)]
+    return beams_from_scans(scans, config.max_range_m, beam_stride)
+
+
+def final_step_beams(recordings: Sequence[Recording], passes: Sequence[PassPoses], config: ObjectMapConfig
+                     ) -> BeamSet | None:
+    """The beams of the final wall step (final_scan_stride, final_beam_stride); None when it is off."""
+    if not config.final_recut_sweeps:
+        return None
+    return collect_beams(recordings, passes, config, (config.final_scan_stride, config.final_beam_stride))
 
 
 @dataclass(frozen=True)
@@ -109,11 +120,27 @@ def describe_doors(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> 
     return out
 
 
-def build_object_map(beams: BeamSet, config: ObjectMapConfig, classes: ClassParams | None = None) -> ObjectMapResult:
-    """The em stage on beams (see :func:`collect_beams`); ``classes`` given: applied without relearning."""
+def stride_weighted(config: ObjectMapConfig) -> ObjectMapConfig:
+    """The prior's constants divided by scan_stride·beam_stride: the same balance as multiplying the data
+    term by it (each kept beam stands for that many beams of the log)."""
+    k = float(config.scan_stride * config.beam_stride)
+    return config.model_copy(update={"rho_global": config.rho_global / k, "rho_static": config.rho_static / k,
+                                     "rho_dynamic": config.rho_dynamic / k,
+                                     "rho_length_per_m": config.rho_length_per_m / k})
+
+
+def build_object_map(beams: BeamSet, config: ObjectMapConfig, classes: ClassParams | None = None,
+                     final_beams: BeamSet | None = None) -> ObjectMapResult:
+    """The em stage on beams (see :func:`collect_beams`); ``classes`` given: applied without relearning.
+    ``final_beams`` (:func:`final_step_beams`) given and ``config.final_recut_sweeps`` > 0: the converged
+    walls are proposed and re-cut once more over them (:func:`final_walls`)."""
     t0 = time.perf_counter()
     trace = EmTrace()
+    if config.stride_weighted_prior:
+        config = stride_weighted(config)
     state = search_structure(beams, config, classes, trace)
+    if final_beams is not None and config.final_recut_sweeps > 0:
+        state = evaluate(beams, final_walls(final_beams, state.obj_map, config), config)
     return ObjectMapResult(state.obj_map, describe_doors(beams, state, config), state.log_posterior, len(beams),
                            trace, time.perf_counter() - t0)
 
@@ -121,4 +148,5 @@ def build_object_map(beams: BeamSet, config: ObjectMapConfig, classes: ClassPara
 def em_stage(recordings: Sequence[Recording], passes: Sequence[PassPoses], config: DoorbatchConfig,
              classes: ClassParams | None = None) -> ObjectMapResult:
     """The em stage of ``doorbatch map`` on loaded recordings and their poses."""
-    return build_object_map(collect_beams(recordings, passes, config.em), config.em, classes)
+    return build_object_map(collect_beams(recordings, passes, config.em), config.em, classes,
+                            final_step_beams(recordings, passes, config.em))

@@ -122,7 +122,7 @@ def first_without(beams: BeamSet, first: FirstObjects, idx: IntArray, obj_map: O
         b = idx[sel]
         rng, hit = cast_segments(beams.origin[b], beams.direction[b], segs[keep], None)
         delta[sel] = rng
-        kind[sel] = np.where(hit >= 0, seg_cls[keep][np.maximum(hit, 0)], -1)
+        kind[sel] = np.where(hit >= 0, seg_cls[keep][np.maximum(hit, 0)], -1) if keep.any() else -1
     return delta, kind
 
 

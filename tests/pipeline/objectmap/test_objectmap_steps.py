@@ -10,13 +10,16 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import quad
 
+from doorbatch.config import DoorbatchConfig
 from doorbatch.pipeline.objectmap.beams import BeamSet
 from doorbatch.pipeline.objectmap.colors import two_gaussian_mixture
 from doorbatch.pipeline.objectmap.doors import best_width, fit_hinge_angles
+from doorbatch.pipeline.objectmap.em import evaluate
 from doorbatch.pipeline.objectmap.hough import hough_lines
 from doorbatch.pipeline.objectmap.model import DOOR, WALL, ClassParams, Door, ObjectMap, Wall
+from doorbatch.pipeline.objectmap.search import final_walls, terminate_doors
 from doorbatch.pipeline.objectmap.sensor import e_step, first_objects, range_loglik_valid
-from doorbatch.pipeline.objectmap.walls import fit_line, segment_dp
+from doorbatch.pipeline.objectmap.walls import fit_line, segment_dp, wall_segments
 
 
 def test_line_fit_recovers_an_exact_line_and_ignores_zero_weights() -> None:
@@ -142,3 +145,70 @@ def test_two_gaussian_mixture_separates_two_colours() -> None:
     door = int(np.argmin(mix.weights))
     np.testing.assert_allclose(mix.mean[door], [150, 110, 80], atol=5)
     assert (mix.labels[300:] == door).mean() > 0.95
+
+
+def _beams_to(origin: np.ndarray, ends: np.ndarray) -> BeamSet:
+    d = ends - origin
+    r = np.linalg.norm(d, axis=1)
+    n = r.size
+    return BeamSet(np.zeros(n, dtype=np.int64), np.tile(origin, (n, 1)), d / r[:, None], r, np.full(n, 20.0),
+                   np.ones(n, dtype=bool), np.full((n, 3), np.nan), 1)
+
+
+def test_a_sparse_tail_cut_on_every_4th_beam_is_drawn_from_all_beams() -> None:
+    """Eq. (9)'s length prior is per metre, the evidence per beam: 5 kept hits over 0.7 m (Σ Δ ≈ 5·5.9) do not
+    pay ρL·0.7 m = 49, the log's 20 do (final_walls runs the DP over every beam by default)."""
+    config = DoorbatchConfig().em
+    wall = Wall(np.array([0.0, -1.0]), -2.0, np.array([[0.0, 3.0]]))  # y = 2, s = x
+    xs = np.concatenate([np.arange(0.0, 3.0, 0.005), np.linspace(3.035, 3.7, 20)])
+    all_beams = _beams_to(np.array([1.5, 0.0]), np.stack([xs, np.full_like(xs, 2.0)], 1))
+    kept = all_beams.subset(np.arange(0, len(all_beams), 4))
+    obj_map = ObjectMap([wall], [], ClassParams(0.9), 1)
+    segs_kept, _ = wall_segments(kept, first_objects(kept, obj_map), obj_map, 0, wall.normal, wall.offset,
+                                 config.validity_prior, config.sigma_m, config.rho_length_per_m,
+                                 2.0 * config.rho_static)
+    assert abs(segs_kept[-1, 1] - 3.0) < 0.05
+    final = final_walls(all_beams, obj_map, config)
+    assert len(final.walls) == 1
+    np.testing.assert_allclose(final.walls[0].segments, [[0.0, 3.7]], atol=1e-6)
+
+
+def test_walls_meeting_at_a_corner_end_at_the_corner_after_the_sweeps() -> None:
+    """First-hit model at a corner: a hit on wall B just below the corner, while B's segment stops 6 cm short,
+    is explained by the first surface its ray meets in the map, wall A's overshoot 2σ further on. Sweeping
+    eq. (9) over the walls with the first objects kept current moves those hits to B (exact) and then cuts A's
+    overshoot, which no ray supports any more (to within σ: the ray aimed at B's last hit passes its end).
+    Before: 12 cm past the corner and 6 cm short of it."""
+    config = DoorbatchConfig().em
+    wall_a = Wall(np.array([0.0, -1.0]), -2.0, np.array([[0.0, 4.12]]))  # y = 2, s = x, 12 cm past the corner
+    wall_b = Wall(np.array([1.0, 0.0]), 4.0, np.array([[0.0, 1.94]]))  # x = 4, s = y, 6 cm short of it
+    origin = np.array([1.0, 1.0])
+    ends = np.concatenate([np.stack([np.arange(0.5, 4.0, 0.01), np.full(350, 2.0)], 1),
+                           np.stack([np.full(170, 4.0), np.arange(0.3, 2.0, 0.01)], 1)])
+    beams = _beams_to(origin, ends)
+    final = final_walls(beams, ObjectMap([wall_a, wall_b], [], ClassParams(0.9), 1), config)
+    assert len(final.walls) == 2
+    assert abs(final.walls[0].segments[-1, 1] - 4.0) < config.sigma_m
+    assert abs(final.walls[1].segments[-1, 1] - 2.0) < config.sigma_m
+
+
+def test_a_door_that_no_longer_pays_is_terminated_and_a_real_one_kept() -> None:
+    """Sec. VI's outer loop terminates objects: a leaf lying flush on a wall in both passes explains nothing
+    the wall does not, so the map without it scores higher by its prior (2ρS + 2ρD + ρL·w); a leaf seen at
+    two angles, alone explaining 90 hits in each pass, stays (a static segment would explain one pass only)."""
+    config = DoorbatchConfig().em
+    wall = Wall(np.array([0.0, -1.0]), -2.0, np.array([[0.85, 4.0]]))  # y = 2, s = x
+    real = Door(np.array([0.5, 1.0]), np.array([0.0, np.pi / 2]))  # leaf y = 1, then x = 0.5
+    flush = Door(np.array([2.5, 2.0]), np.array([0.0, 0.0]))  # on the wall, x ∈ [2.5, 3.4]
+    on_wall = np.stack([np.arange(0.85, 4.0, 0.01), np.full(315, 2.0)], 1)
+    leaf = np.arange(0.0, 0.9, 0.01)
+    passes = [_beams_to(np.array([2.0, 0.0]), np.concatenate([np.stack([0.5 + leaf, np.full(90, 1.0)], 1), on_wall])),
+              _beams_to(np.array([2.0, 0.0]), np.concatenate([np.stack([np.full(90, 0.5), 1.0 + leaf], 1), on_wall]))]
+    fields = ("origin", "direction", "range_m", "dmax", "hit", "color")
+    beams = BeamSet(np.repeat(np.arange(2), 405), *(np.concatenate([getattr(b, f) for b in passes]) for f in fields), 2)
+    state = evaluate(beams, ObjectMap([wall], [real, flush], ClassParams(0.9), 2), config)
+    after, terminated = terminate_doors(beams, state, config)
+    assert terminated == 1
+    assert len(after.obj_map.doors) == 1
+    np.testing.assert_allclose(after.obj_map.doors[0].hinge, real.hinge)
+    assert after.log_posterior > state.log_posterior
