@@ -15,8 +15,8 @@ methods differ only in the map model)::
                     likelihood_field.skip_unexplained), as MCL does
     3. door update  one Douglas–Peucker polygon per scan, moved to every particle, associated to doors,
                     Kalman update of the associated doors' angles; while global with the door term, each
-                    particle's doors still at their prior are also conditioned on the beams their leaves
-                    explain (:func:`condition_unobserved_doors`)
+                    particle's other doors are also conditioned on the beams their leaves explain
+                    (:func:`condition_doors_on_beams`)
     4. resampling   low-variance (KLD-adaptive) when Neff is low
 """
 
@@ -135,7 +135,7 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
         observed = np.asarray(update.observed.any(axis=0), dtype=bool)
         if bandwidth is not None and len(beams.points_base) and spread_cloud_config(config,
                                                                                      state.global_start).global_door_term:
-            mean, var = condition_unobserved_doors(particles, beams, field, doors, config)
+            mean, var = condition_doors_on_beams(particles, beams, field, doors, config, skip=update.observed)
             particles = replace(particles, door_mean=mean, door_var=var)
 
     recovery = state.recovery.update(log_avg, config.recovery_alpha_slow, config.recovery_alpha_fast)
@@ -200,37 +200,43 @@ def door_update_log_factor(prior: ParticleSet, update: DoorUpdate, doors: DoorSe
     posterior mean a⁺ (variance P⁺) counts it once: p(z | x) = p(z | x, a⁺)·p(a⁺)·√(2π·P⁺). So the beams are
     weighed under the updated doors and each door the update observed adds log p(a⁺) + ½·log(2π·P⁺):
     for a door still at its prior (:func:`unobserved_door_variance`) the uniform density 1/Δ over its range
-    (the measured angle is inside it by the association's gate), else the Gaussian prior N(a⁺; μ, P), i.e.
+    (the measured angle is inside it by the association's gate; the term is at most 0), else the Gaussian prior
+    N(a⁺; μ, P), i.e.
     −½·(a⁺ − μ)²/P + ½·log(P⁺/P). A door not observed adds nothing (a⁺ = μ, P⁺ = P).
     """
     mu, var = prior.door_mean, prior.door_var
     width = np.asarray(doors.angle_max, dtype=np.float64) - np.asarray(doors.angle_min, dtype=np.float64)
     post_var = np.maximum(update.var, 1e-12)
-    uniform = -np.log(width) + 0.5 * np.log(2 * math.pi * post_var)
+    # capped at 0: a range narrower than the measurement (√(2π·P⁺) > Δ, e.g. a never-moved door's) is no wider a
+    # prior than the posterior, so the observation costs nothing (the density 1/Δ would otherwise reward it)
+    uniform = np.minimum(-np.log(width) + 0.5 * np.log(2 * math.pi * post_var), 0.0)
     gaussian = -0.5 * (update.mean - mu) ** 2 / var + 0.5 * np.log(post_var / var)
     term = np.where(var >= unobserved_door_variance(doors, config), uniform, gaussian)
     out: npt.NDArray[np.float64] = np.where(update.observed, term, 0.0).sum(axis=1)
     return out
 
 
-def condition_unobserved_doors(particles: ParticleSet, beams: BeamSet, field: DistanceField, doors: DoorSet,
-                               config: LocalizeConfig) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-    """Each particle's still unobserved doors conditioned on the beams that its leaf explains (global phase).
+def condition_doors_on_beams(particles: ParticleSet, beams: BeamSet, field: DistanceField, doors: DoorSet,
+                             config: LocalizeConfig, skip: npt.NDArray[np.bool_] | None = None
+                             ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Each particle's doors conditioned on the beams that their leaves explain (global phase, door term on).
 
-    Under the uniform prior a beam explained by door k (:mod:`.door_likelihood`) says where the leaf is: its
-    end point at distance r from the hinge, in direction φ, puts the angle at φ with variance σ_hit²/c (c = r²
-    on the leaf's disc, r·L beyond it; the same quadratic that the uniform marginal integrates). Without this,
-    a door the Douglas–Peucker update cannot see (a closed leaf 10 m down a corridor is a few sparse points) is
-    marginalized afresh at every scan and its beams pay the whole range's spread again and again, which the
-    joint likelihood p(z_1..t | x) does not (expert choice; the paper's door update uses the polygon only).
-    The beams of a door are combined by information (product of Gaussians) with the particle's prior.
+    A beam explained by door k (:mod:`.door_likelihood`: under the uniform prior while the door is unobserved,
+    eq. (6) after) says where the leaf is: its end point at distance r from the hinge, in direction φ, puts the
+    angle at φ with variance σ_hit²/c (c = r² on the leaf's disc, r·L beyond it; the quadratic that the uniform
+    marginal integrates). Without this, a door the Douglas–Peucker update cannot see (a closed leaf 10 m down
+    a corridor is a few sparse points) is marginalized afresh at every scan and its beams pay the prior's
+    spread again and again, which the joint likelihood p(z_1..t | x) does not (expert choice; the paper's
+    door update uses the polygon only). The beams were weighed under the prior (FastSLAM's order), so this is
+    the matching posterior; the beams of a door are combined with the prior by information (product of
+    Gaussians). Doors in ``skip`` (N, D) (the polygon's update of this scan observed them) are left alone.
 
     Returns:
-        (N, D) means and variances; doors below :func:`unobserved_door_variance` are unchanged.
+        (N, D) means and variances.
     """
     thr = unobserved_door_variance(doors, config)
     mean, var = particles.door_mean.copy(), particles.door_var.copy()
-    unobserved = var >= thr
+    unobserved = np.ones_like(var, dtype=bool) if skip is None else ~skip
     if not unobserved.any():
         return mean, var
     static = endpoint_distances(field, particles.pose, beams.points_base)

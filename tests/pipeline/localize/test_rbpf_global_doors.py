@@ -15,7 +15,7 @@ from doorbatch.pipeline.localize.door_observation import DoorUpdate, kalman_upda
 from doorbatch.pipeline.localize.likelihood_field import build_distance_field
 from doorbatch.pipeline.localize.particles import ParticleSet
 from doorbatch.pipeline.localize.rbpf import (
-    condition_unobserved_doors,
+    condition_doors_on_beams,
     door_update_log_factor,
     unobserved_door_variance,
 )
@@ -61,7 +61,8 @@ def test_beams_on_a_closed_leaf_condition_the_unobserved_door_to_closed() -> Non
     """A wall y = 0 with doorways [x, x + 0.8] whose leaves are closed; the robot at (4.5, 1.2) sees the leaves of
     doors 0 and 1 with a 4 m laser, not door 2 (5.3 m away). Every particle starts each door mid-range with the
     prior's variance: doors 0 and 1 must come out closed (the beams put the angle at ~0) and certain enough to
-    leave the uniform model; door 2, and a door a particle has already observed, are left as they were."""
+    leave the uniform model; door 2 (no beam reaches it) and a door the polygon observed in this scan (``skip``)
+    are left as they were."""
     config = LocalizeConfig()
     gaps = [(x, x + LEAF) for x in HINGES_X]
     wall = [(-1.0, 3.0), (3.8, 6.0), (6.8, 9.0), (9.8, 12.0)]
@@ -77,11 +78,23 @@ def test_beams_on_a_closed_leaf_condition_the_unobserved_door_to_closed() -> Non
     thr = unobserved_door_variance(DOORS, config)
     mean = np.full((n, 3), math.pi / 4)
     var = np.full((n, 3), math.radians(config.door_init_sigma_deg) ** 2)
-    var[3, 1] = 0.01  # particle 3 has observed door 1 already (eq. (6) then, no conditioning)
+    skip = np.zeros((n, 3), dtype=bool)
+    skip[3, 1] = True  # particle 3's polygon update observed door 1 in this scan
     particles = ParticleSet(np.tile(truth, (n, 1)), np.full(n, 1.0 / n), mean, var)
-    new_mean, new_var = condition_unobserved_doors(particles, beams, field, DOORS, config)
+    new_mean, new_var = condition_doors_on_beams(particles, beams, field, DOORS, config, skip=skip)
     assert np.all(np.abs(new_mean[:3, :2]) < math.radians(5.0))
     assert np.all(new_var[:3, :2] < thr[:2])
     np.testing.assert_array_equal(new_mean[:, 2], mean[:, 2])
     np.testing.assert_array_equal(new_var[:, 2], var[:, 2])
     assert new_mean[3, 1] == mean[3, 1] and new_var[3, 1] == var[3, 1]
+
+
+def test_observing_a_door_with_a_range_narrower_than_the_measurement_earns_nothing() -> None:
+    """A never-moved door (range 0.1°) is as certain before the observation as after: the factor is 0, never the
+    density 1/Δ ≈ 570 per rad that would reward every particle that sees it (the built map has such doors)."""
+    config = LocalizeConfig()
+    narrow = DoorSet(np.array([[0.0, 0.0]]), np.array([0.9]), np.zeros(1), np.zeros(1), np.radians([0.1]))
+    prior = ParticleSet(np.zeros((2, 3)), np.full(2, 0.5), np.zeros((2, 1)), np.full((2, 1), 0.27))
+    meas_var = math.radians(config.door_angle_sigma_deg) ** 2
+    update = DoorUpdate(np.zeros((2, 1)), np.full((2, 1), meas_var), np.array([[True], [False]]))
+    np.testing.assert_array_equal(door_update_log_factor(prior, update, narrow, config), [0.0, 0.0])
