@@ -22,6 +22,19 @@ per-beam p are returned too, for Nav2's log(1 + Σ p³) combination). A door who
 leaf is at least ``laser_likelihood_max_dist`` away from the end point (the static field's cap) is not a
 candidate for that beam.
 
+A door the particle has not observed yet (its variance at least ``unobserved_var``, the door prior's) is
+weighed under its prior, uniform over the opening range [lo, hi] (width Δ), instead of a linearization at its
+mean: the endpoint density averaged over the angle, g_k = (σ_hit/σ)·(1/Δ)∫ exp(−d_k(a)²/(2σ²)) da. With r the end
+point's distance from the hinge and φ its direction (relative to closed_yaw), d_k(a)² ≈ d_min² + c·(a − φ)²,
+d_min = max(r − L, 0), c = r² on the leaf's disc (r ≤ L, d = r·|sin(a − φ)|) and c = r·L beyond it, so
+
+    g_k = (σ_hit/σ)·exp(−d_min²/(2σ²))·A,   A = √(π/2)·σ/(√c·Δ)·[erf(√c(hi − φ)/(√2σ)) − erf(√c(lo − φ)/(√2σ))]
+
+(A ≤ 1, the fraction of the range whose leaf passes the end point). This is eq. (6)'s marginalization done
+over the prior the particle actually has (expert choice: with a prior std of tens of degrees the first-order
+expansion around a mean that is wrong by most of the range is poor, and one closed leaf far away costs the
+true pose the beam floor every scan until the door update has seen it).
+
 The hinge is counted once. Mapping keeps the hinge cells occupied in the static grid, and the hinge is
 also an end point of the leaf, so a beam ending at a hinge is close to both models. A product of both
 factors, or a sum over them, would use that beam twice (and reward particles near hinges twice);
@@ -119,7 +132,8 @@ def door_log_likelihood(static_dist: npt.ArrayLike, points: npt.ArrayLike, doors
 def door_log_likelihood_at_poses(static_dist: npt.ArrayLike, pose: npt.ArrayLike, points_base: npt.ArrayLike,
                                  doors: DoorSet, door_mean: npt.ArrayLike, door_var: npt.ArrayLike,
                                  config: LocalizeConfig, range_max_m: float, backend: Backend = "auto",
-                                 extra_var: npt.ArrayLike | None = None) -> DoorLikelihood:
+                                 extra_var: npt.ArrayLike | None = None,
+                                 unobserved_var: npt.ArrayLike | None = None) -> DoorLikelihood:
     """:func:`door_log_likelihood` with the end points given as poses (N, 3) and base_link points (B, 2).
 
     The numba kernel moves the points itself, particle by particle, so no (N, B, 2) array is made (saves
@@ -129,6 +143,9 @@ def door_log_likelihood_at_poses(static_dist: npt.ArrayLike, pose: npt.ArrayLike
     ``extra_var`` (N, B): a variance (m²) added to every model's σ² for that beam of that particle (global
     localization's smoothing over the particle's pose region, :mod:`.smoothing`): σ₀² = σ_hit² + e and
     σ_k² = σ_hit² + e + J_k²·P_k, each density keeping its factor σ_hit / σ.
+
+    ``unobserved_var`` (D,): a door whose variance for a particle is at least this is weighed under the uniform
+    prior over its range (module docstring); None (or +inf): eq. (6) for every door.
 
     Raises:
         ValueError: As :func:`door_log_likelihood`.
@@ -142,15 +159,18 @@ def door_log_likelihood_at_poses(static_dist: npt.ArrayLike, pose: npt.ArrayLike
     if extra is not None and extra.shape != dist.shape:
         raise ValueError(f"extra_var {extra.shape} must be (N, B) = {dist.shape}")
     return _door_log_likelihood(dist, None, poses, base, doors, door_mean, door_var, config, range_max_m, backend,
-                                extra)
+                                extra, unobserved_var)
 
 
 def _door_log_likelihood(dist: npt.NDArray[np.float32], pts: FloatArray | None, poses: FloatArray | None,
                          base: FloatArray | None, doors: DoorSet, door_mean: npt.ArrayLike, door_var: npt.ArrayLike,
                          config: LocalizeConfig, range_max_m: float, backend: Backend,
-                         extra: npt.NDArray[np.float32] | None = None) -> DoorLikelihood:
+                         extra: npt.NDArray[np.float32] | None = None,
+                         unobserved_var: npt.ArrayLike | None = None) -> DoorLikelihood:
     """Checks, then the kernel or the reference, then the beam likelihoods."""
     model = _model(config, range_max_m)
+    uni = np.full(len(doors), np.inf) if unobserved_var is None else np.ascontiguousarray(
+        np.broadcast_to(np.asarray(unobserved_var, dtype=np.float64), (len(doors),)))
     mean = np.ascontiguousarray(door_mean, dtype=np.float64)
     var = np.ascontiguousarray(door_var, dtype=np.float64)
     n_doors = len(doors)
@@ -171,14 +191,16 @@ def _door_log_likelihood(dist: npt.NDArray[np.float32], pts: FloatArray | None, 
                np.ascontiguousarray(doors.hinge, dtype=np.float64).reshape(-1, 2),
                np.ascontiguousarray(doors.length, dtype=np.float64),
                np.ascontiguousarray(doors.closed_yaw, dtype=np.float64), mean, var, model.sigma2, model.max_dist,
-               np.zeros((0, 0), dtype=np.float32) if extra is None else extra, extra is not None, score, assoc)
+               np.zeros((0, 0), dtype=np.float32) if extra is None else extra, extra is not None,
+               uni, np.ascontiguousarray(doors.angle_min, dtype=np.float64),
+               np.ascontiguousarray(doors.angle_max, dtype=np.float64), score, assoc)
     else:
         if pts is None:
             assert poses is not None and base is not None
             c, s = np.cos(poses[:, 2, None]), np.sin(poses[:, 2, None])
             pts = np.stack([poses[:, 0, None] + c * base[:, 0] - s * base[:, 1],
                             poses[:, 1, None] + s * base[:, 0] + c * base[:, 1]], axis=-1)
-        score, assoc = _numpy_scores(dist, pts, doors, mean, var, model, extra)
+        score, assoc = _numpy_scores(dist, pts, doors, mean, var, model, extra, uni)
     loglik, pz = _likelihoods(score, model)
     return DoorLikelihood(loglik, assoc, pz)
 
@@ -198,7 +220,7 @@ def _likelihoods(score: npt.NDArray[np.float32], model: _Model) -> tuple[FloatAr
 
 
 def _numpy_scores(dist: npt.NDArray[np.float32], pts: FloatArray, doors: DoorSet, mean: FloatArray, var: FloatArray,
-                  model: _Model, extra: npt.NDArray[np.float32] | None = None
+                  model: _Model, extra: npt.NDArray[np.float32] | None = None, uni: FloatArray | None = None
                   ) -> tuple[npt.NDArray[np.float32], Int16Array]:
     """NumPy reference: score −2·log(g/z_hit) of the chosen model and the association, per particle chunk."""
     n, b = dist.shape
@@ -218,6 +240,11 @@ def _numpy_scores(dist: npt.NDArray[np.float32], pts: FloatArray, doors: DoorSet
             sig2 = s0[sl, :, None] + j_k**2 * var[sl][:, None, active]
             s_k = d_k**2 / sig2 + np.log(sig2 / model.sigma2)
             s_k = np.where((d_k < model.max_dist) & valid[sl, :, None], s_k, np.inf)
+            if uni is not None and np.isfinite(uni[active]).any():
+                s_u = _uniform_scores(np.where(valid[sl, :, None], pts[sl], 0.0)[:, :, None, :], sub,
+                                      s0[sl, :, None], model)
+                s_u = np.where(valid[sl, :, None], s_u, np.inf)
+                s_k = np.where((var[sl][:, None, active] >= uni[active]), s_u, s_k)
             best = np.argmin(s_k, axis=2)
             s_best = np.take_along_axis(s_k, best[:, :, None], axis=2)[:, :, 0]
             wins = s_best < score[sl]
@@ -226,9 +253,36 @@ def _numpy_scores(dist: npt.NDArray[np.float32], pts: FloatArray, doors: DoorSet
     return score.astype(np.float32), assoc
 
 
+def _uniform_scores(pts: FloatArray, doors: DoorSet, s0: FloatArray, model: _Model) -> FloatArray:
+    """Score −2·log(g_k) of each door under the uniform prior over its range (module docstring), (..., D).
+
+    ``pts`` (..., 1, 2) end points, ``s0`` (..., 1) each beam's σ² (σ_hit² + e); inf where the leaf cannot come
+    within the distance cap.
+    """
+    vx = pts[..., 0] - doors.hinge[:, 0]
+    vy = pts[..., 1] - doors.hinge[:, 1]
+    r = np.hypot(vx, vy)
+    lo, hi, ln = doors.angle_min, doors.angle_max, doors.length
+    mid = (lo + hi) / 2
+    phi = mid + np.mod(np.arctan2(vy, vx) - doors.closed_yaw - mid + np.pi, 2 * np.pi) - np.pi
+    dmin2 = np.maximum(r - ln, 0.0) ** 2
+    sq = np.sqrt(np.where(r <= ln, r * r, r * ln) / s0)  # √c / σ
+    width = hi - lo
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u_hi, u_lo = (hi - phi) * sq / np.sqrt(2), (lo - phi) * sq / np.sqrt(2)
+        frac = np.sqrt(np.pi / 2) / (sq * width) * (_erf(u_hi) - _erf(u_lo))
+        frac = np.where(sq * width < 1e-9, 1.0, frac)
+        score = dmin2 / s0 + np.log(s0 / model.sigma2) - 2 * np.log(frac)
+    return np.where((dmin2 < model.max_dist**2) & (frac > 0), score, np.inf)
+
+
+_erf = np.vectorize(math.erf, otypes=[np.float64])
+
+
 def _score_kernel(dist: npt.NDArray[np.float32], pts: FloatArray, poses: FloatArray, base: FloatArray,
                   from_pose: bool, hinge: FloatArray, length: FloatArray, closed_yaw: FloatArray, mean: FloatArray,
                   var: FloatArray, sigma2: float, max_dist: float, extra: npt.NDArray[np.float32], has_extra: bool,
+                  uni: FloatArray, lo: FloatArray, hi: FloatArray,
                   score: npt.NDArray[np.float32], assoc: Int16Array) -> None:  # pragma: no cover - numba
     """Numba kernel: per particle, its end points (from ``pts``, or ``poses`` ⊕ ``base``), the doors in reach of
     their bounding box, and per beam the model with the lowest score (static on ties; doors in index order).
@@ -238,7 +292,8 @@ def _score_kernel(dist: npt.NDArray[np.float32], pts: FloatArray, poses: FloatAr
     beams in a branch-free loop (vectorizable); only the flagged pairs get the distance, and the logarithm
     only if d_k²/σ_k² alone does not already lose. With ``has_extra`` every model's σ² of beam m also gets
     ``extra[i, m]`` (the bound above stays valid: it only grows σ₀², and the log term it adds to the static
-    score is at most the door's).
+    score is at most the door's). A door with ``var[i, k] ≥ uni[k]`` takes the uniform-prior score instead (module
+    docstring); the same bound holds for it (d_min ≥ |p − h| − L, and −2·log A ≥ 0).
     """
     n, b = dist.shape
     n_doors = length.shape[0]
@@ -297,6 +352,38 @@ def _score_kernel(dist: npt.NDArray[np.float32], pts: FloatArray, poses: FloatAr
                 near[m] = vx * vx + vy * vy < reach * reach
                 any_near |= near[m]
             if not any_near:
+                continue
+            if pv >= uni[k]:  # unobserved: the uniform prior over [lo, hi]
+                mid = 0.5 * (lo[k] + hi[k])
+                width = hi[k] - lo[k]
+                for m in range(b):
+                    if not near[m]:
+                        continue
+                    vx = px[m] - hx
+                    vy = py[m] - hy
+                    r = math.sqrt(vx * vx + vy * vy)
+                    dm = max(r - ln, 0.0)
+                    d2 = dm * dm
+                    if d2 >= max_d2:
+                        continue
+                    ratio = d2 / s0[m]
+                    if ratio >= best[m]:
+                        continue
+                    phi = math.atan2(vy, vx) - closed_yaw[k] - mid
+                    phi = mid + (phi + math.pi) % (2.0 * math.pi) - math.pi
+                    sq = math.sqrt((r * r if r <= ln else r * ln) / s0[m])
+                    if sq * width < 1e-9:
+                        frac = 1.0
+                    else:
+                        u_hi = (hi[k] - phi) * sq / math.sqrt(2.0)
+                        u_lo = (lo[k] - phi) * sq / math.sqrt(2.0)
+                        frac = math.sqrt(math.pi / 2.0) / (sq * width) * (math.erf(u_hi) - math.erf(u_lo))
+                    if frac <= 0.0:
+                        continue
+                    cand = ratio + math.log(s0[m] / sigma2) - 2.0 * math.log(frac)
+                    if cand < best[m]:
+                        best[m] = cand
+                        best_k[m] = k
                 continue
             for m in range(b):
                 if not near[m]:

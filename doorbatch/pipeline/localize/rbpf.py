@@ -9,10 +9,14 @@ methods differ only in the map model)::
                     particle's door estimate, the door term marginalized to first order (eq. 6); until the
                     cloud converges, the same smoothed over each particle's pose region and applied in
                     tempered stages (:mod:`.smoothing`, mcl.tempered_weighting; ``global_door_term`` false:
-                    the static model alone, as MCL); once converged, beams that most of the weight explains
-                    by neither are skipped (Nav2's do_beamskip, likelihood_field.skip_unexplained), as MCL does
+                    the static model alone, as MCL; true: each particle's door update of this scan first and
+                    the beams under its result, :func:`door_update_log_factor`); once converged, beams that
+                    most of the weight explains by neither are skipped (Nav2's do_beamskip,
+                    likelihood_field.skip_unexplained), as MCL does
     3. door update  one Douglas–Peucker polygon per scan, moved to every particle, associated to doors,
-                    Kalman update of the associated doors' angles
+                    Kalman update of the associated doors' angles; while global with the door term, each
+                    particle's other doors are also conditioned on the beams their leaves explain
+                    (:func:`condition_doors_on_beams`)
     4. resampling   low-variance (KLD-adaptive) when Neff is low
 """
 
@@ -25,9 +29,10 @@ import numpy as np
 import numpy.typing as npt
 
 from doorbatch.config import LocalizeConfig
+from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.maps import DoorSet
 from doorbatch.pipeline.localize.door_likelihood import STATIC, door_log_likelihood_at_poses
-from doorbatch.pipeline.localize.door_observation import predict_doors, update_doors
+from doorbatch.pipeline.localize.door_observation import DoorUpdate, predict_doors, update_doors
 from doorbatch.pipeline.localize.likelihood_field import (
     BeamCombination,
     BeamSet,
@@ -104,7 +109,11 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
 
         def region(p: ParticleSet, h: Bandwidth) -> npt.NDArray[np.float64]:
             if n_doors and spread.global_door_term:
-                return door_region_log_likelihood(p, h, beams, field, doors, spread, combination)
+                # the door update first, then the beams under the updated doors (door_update_log_factor)
+                update = update_doors(scan_points_base, p, doors, spread)
+                posterior = replace(p, door_mean=update.mean, door_var=update.var)
+                return (door_region_log_likelihood(posterior, h, beams, field, doors, spread, combination)
+                        + door_update_log_factor(p, update, doors, spread))
             return region_log_likelihood(p, h, beams, field, spread, combination)
 
         particles, log_avg, bandwidth = tempered_weighting(particles, region, spread, rng)
@@ -124,6 +133,10 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
         update = update_doors(scan_points_base, particles, doors, config)
         particles = replace(particles, door_mean=update.mean, door_var=update.var)
         observed = np.asarray(update.observed.any(axis=0), dtype=bool)
+        if bandwidth is not None and len(beams.points_base) and spread_cloud_config(config,
+                                                                                     state.global_start).global_door_term:
+            mean, var = condition_doors_on_beams(particles, beams, field, doors, config, skip=update.observed)
+            particles = replace(particles, door_mean=mean, door_var=var)
 
     recovery = state.recovery.update(log_avg, config.recovery_alpha_slow, config.recovery_alpha_fast)
     fraction = recovery.random_fraction() if free is not None else 0.0
@@ -143,12 +156,14 @@ def door_region_log_likelihood(particles: ParticleSet, bandwidth: Bandwidth, bea
     out again (the door's own factor √((σ_hit² + e_b)/σ_k²) stays) and the pose region's one volume factor
     (:func:`~.smoothing.pose_volume_log_factor`) is added, from the beams the static map explains (a beam on a
     door leaf is left out of the pose information: expert choice, its Jacobian is not at hand; this errs on the
-    side of a wider region).
+    side of a wider region). A door the particle has not observed (:func:`unobserved_door_variance`) is weighed
+    under its uniform prior over the opening range, not linearized at its mean (:mod:`.door_likelihood`).
     """
     extra = endpoint_variance(bandwidth, beams.points_base)
     static = endpoint_distances(field, particles.pose, beams.points_base)
     dl = door_log_likelihood_at_poses(static, particles.pose, beams.points_base, doors, particles.door_mean,
-                                      particles.door_var, config, beams.range_max_m, extra_var=extra)
+                                      particles.door_var, config, beams.range_max_m, extra_var=extra,
+                                      unobserved_var=unobserved_door_variance(doors, config))
     if not pose_volume_applies(config, combination):
         return combine_beams(dl.beam_likelihood, combination)
     rand = np.float32(config.z_rand / beams.range_max_m)
@@ -159,3 +174,95 @@ def door_region_log_likelihood(particles: ParticleSet, bandwidth: Bandwidth, bea
     out: npt.NDArray[np.float64] = combine_beams(pz, combination) + pose_volume_log_factor(
         jac, weight, bandwidth, config.sigma_hit)
     return out
+
+
+def unobserved_door_variance(doors: DoorSet, config: LocalizeConfig) -> npt.NDArray[np.float64]:
+    """(D,) the variance from which on a particle's door counts as not yet observed: the uniform prior's over
+    the door's range, Δ²/12 (the Gaussian that moment-matches it), or the start / cap variance
+    ``door_init_sigma_deg``² when that is smaller (the random walk never lets a door exceed it).
+
+    A tracked or mid-range start is at or above it until the door update has seen the door; a door unseen for
+    long returns to it through the random walk (its angle is then as unknown as at the start).
+    """
+    width = np.asarray(doors.angle_max, dtype=np.float64) - np.asarray(doors.angle_min, dtype=np.float64)
+    out: npt.NDArray[np.float64] = np.minimum(width**2 / 12.0, math.radians(config.door_init_sigma_deg) ** 2)
+    return out
+
+
+def door_update_log_factor(prior: ParticleSet, update: DoorUpdate, doors: DoorSet, config: LocalizeConfig
+                           ) -> npt.NDArray[np.float64]:
+    """(N,) the log-factor that turns the beams' likelihood under the door posterior into the marginal one.
+
+    The importance weight is p(z | x) = ∫ p(z | x, a) p(a) da over the door angles a. Weighing the beams at the
+    prior (FastSLAM's order, eq. (6)) marginalizes every beam on a leaf separately, so K beams on one leaf pay
+    the prior's spread K times; while the pose is global each particle's prior is the whole opening range and
+    the true pose pays for every closed leaf it has not yet observed. The Laplace identity at the door update's
+    posterior mean a⁺ (variance P⁺) counts it once: p(z | x) = p(z | x, a⁺)·p(a⁺)·√(2π·P⁺). So the beams are
+    weighed under the updated doors and each door the update observed adds log p(a⁺) + ½·log(2π·P⁺):
+    for a door still at its prior (:func:`unobserved_door_variance`) the uniform density 1/Δ over its range
+    (the measured angle is inside it by the association's gate; the term is at most 0), else the Gaussian prior
+    N(a⁺; μ, P), i.e.
+    −½·(a⁺ − μ)²/P + ½·log(P⁺/P). A door not observed adds nothing (a⁺ = μ, P⁺ = P).
+    """
+    mu, var = prior.door_mean, prior.door_var
+    width = np.asarray(doors.angle_max, dtype=np.float64) - np.asarray(doors.angle_min, dtype=np.float64)
+    post_var = np.maximum(update.var, 1e-12)
+    # capped at 0: a range narrower than the measurement (√(2π·P⁺) > Δ, e.g. a never-moved door's) is no wider a
+    # prior than the posterior, so the observation costs nothing (the density 1/Δ would otherwise reward it)
+    uniform = np.minimum(-np.log(width) + 0.5 * np.log(2 * math.pi * post_var), 0.0)
+    gaussian = -0.5 * (update.mean - mu) ** 2 / var + 0.5 * np.log(post_var / var)
+    term = np.where(var >= unobserved_door_variance(doors, config), uniform, gaussian)
+    out: npt.NDArray[np.float64] = np.where(update.observed, term, 0.0).sum(axis=1)
+    return out
+
+
+def condition_doors_on_beams(particles: ParticleSet, beams: BeamSet, field: DistanceField, doors: DoorSet,
+                             config: LocalizeConfig, skip: npt.NDArray[np.bool_] | None = None
+                             ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Each particle's doors conditioned on the beams that their leaves explain (global phase, door term on).
+
+    A beam explained by door k (:mod:`.door_likelihood`: under the uniform prior while the door is unobserved,
+    eq. (6) after) says where the leaf is: its end point at distance r from the hinge, in direction φ, puts the
+    angle at φ with variance σ_hit²/c (c = r² on the leaf's disc, r·L beyond it; the quadratic that the uniform
+    marginal integrates). Without this, a door the Douglas–Peucker update cannot see (a closed leaf 10 m down
+    a corridor is a few sparse points) is marginalized afresh at every scan and its beams pay the prior's
+    spread again and again, which the joint likelihood p(z_1..t | x) does not (expert choice; the paper's
+    door update uses the polygon only). The beams were weighed under the prior (FastSLAM's order), so this is
+    the matching posterior; the beams of a door are combined with the prior by information (product of
+    Gaussians). Doors in ``skip`` (N, D) (the polygon's update of this scan observed them) are left alone.
+
+    Returns:
+        (N, D) means and variances.
+    """
+    thr = unobserved_door_variance(doors, config)
+    mean, var = particles.door_mean.copy(), particles.door_var.copy()
+    unobserved = np.ones_like(var, dtype=bool) if skip is None else ~skip
+    if not unobserved.any():
+        return mean, var
+    static = endpoint_distances(field, particles.pose, beams.points_base)
+    dl = door_log_likelihood_at_poses(static, particles.pose, beams.points_base, doors, mean, var, config,
+                                      beams.range_max_m, unobserved_var=thr)
+    i, b = np.nonzero(dl.association >= 0)
+    k = dl.association[i, b].astype(np.intp)
+    keep = unobserved[i, k]
+    i, b, k = i[keep], b[keep], k[keep]
+    if not i.size:
+        return mean, var
+    pose = particles.pose[i]
+    c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+    bx, by = beams.points_base[b, 0], beams.points_base[b, 1]
+    vx = pose[:, 0] + c * bx - s * by - doors.hinge[k, 0]
+    vy = pose[:, 1] + s * bx + c * by - doors.hinge[k, 1]
+    r = np.hypot(vx, vy)
+    length = doors.length[k]
+    mid = (doors.angle_min[k] + doors.angle_max[k]) / 2
+    phi = mid + wrap_angle(np.arctan2(vy, vx) - doors.closed_yaw[k] - mid)
+    info = np.where(r <= length, r * r, r * length) / config.sigma_hit**2
+    n, d = mean.shape
+    flat = i * d + k
+    info_sum = np.bincount(flat, weights=info, minlength=n * d).reshape(n, d)
+    phi_sum = np.bincount(flat, weights=info * phi, minlength=n * d).reshape(n, d)
+    hit = info_sum > 0
+    post_var = np.where(hit, 1.0 / (1.0 / var + info_sum), var)
+    mean = np.where(hit, post_var * (mean / var + phi_sum), mean)
+    return mean, post_var

@@ -194,3 +194,55 @@ def test_at_poses_equals_the_end_point_form(backend: str) -> None:
     np.testing.assert_allclose(res.log_likelihood, ref.log_likelihood, rtol=1e-9)
     with pytest.raises(ValueError, match="static_dist"):
         door_log_likelihood_at_poses(static[:, :5], pose, base, doors, mean, var, CONFIG, RANGE_MAX)
+
+
+def _uniform_prior_pz(point: FloatArray, n_angles: int = 20001) -> float:
+    """Quadrature of the endpoint model averaged over the door angle, uniform over DOOR's range."""
+    a = np.linspace(float(DOOR.angle_min[0]), float(DOOR.angle_max[0]), n_angles)
+    tip = DOOR.length[0] * np.stack([np.cos(a), np.sin(a)], axis=1)
+    t = np.clip(tip @ point / DOOR.length[0] ** 2, 0.0, 1.0)
+    d = np.hypot(*(point - t[:, None] * tip).T)
+    return float(CONFIG.z_hit * np.exp(-d**2 / (2 * SIGMA**2)).mean() + RAND)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_unobserved_door_is_weighed_under_its_uniform_prior_not_linearized_at_its_mean(backend: str) -> None:
+    # End points on the closed leaf (the range's edge), inside the swept quarter disc, and just beyond the tip;
+    # the particle's door mean is mid-range (45°) with the uniform's variance: eq. (6) around 45° would put the
+    # closed leaf's beams 4-5 σ away, the uniform prior gives each the fraction of the range that explains it.
+    points = np.array([[0.5, 0.0], [0.4 * math.cos(1.0), 0.4 * math.sin(1.0)], [0.0, 1.0]])
+    pts = points[None]
+    mean = np.array([[math.pi / 4]])
+    var = np.array([[(math.pi / 2) ** 2 / 12]])
+    dist = wall_distance(pts)
+    res = door_log_likelihood_at_poses(dist, np.zeros((1, 3)), points, DOOR, mean, var, CONFIG, RANGE_MAX,
+                                       backend=backend, unobserved_var=var[0])
+    np.testing.assert_array_equal(res.association[0], [0, 0, 0])
+    want = [_uniform_prior_pz(p) for p in points]
+    # the quadratic expansion of d(a) around its minimum: within a few percent of the exact average
+    np.testing.assert_allclose(res.beam_likelihood[0], want, rtol=0.05)
+    old = door_log_likelihood_at_poses(dist, np.zeros((1, 3)), points, DOOR, mean, var, CONFIG, RANGE_MAX,
+                                       backend=backend)
+    assert old.beam_likelihood[0, 0] < 0.75 * want[0]  # the linearization at 45° undervalues the closed leaf (0.58x)
+    # a door below the threshold (observed) keeps eq. (6)
+    kept = door_log_likelihood_at_poses(dist, np.zeros((1, 3)), points, DOOR, mean, var, CONFIG, RANGE_MAX,
+                                        backend=backend, unobserved_var=2 * var[0])
+    np.testing.assert_array_equal(kept.beam_likelihood, old.beam_likelihood)
+
+
+def test_uniform_prior_backends_agree() -> None:
+    if not numba_available():
+        pytest.skip("no numba")
+    rng = np.random.default_rng(3)
+    pose = np.column_stack([rng.uniform(-0.5, 0.5, (50, 2)), rng.uniform(-0.3, 0.3, 50)])
+    base = rng.uniform(-1.5, 1.5, (40, 2))
+    c, s = np.cos(pose[:, 2, None]), np.sin(pose[:, 2, None])
+    pts = np.stack([pose[:, 0, None] + c * base[:, 0] - s * base[:, 1],
+                    pose[:, 1, None] + s * base[:, 0] + c * base[:, 1]], axis=-1)
+    dist = wall_distance(pts)
+    mean = rng.uniform(0.0, math.pi / 2, (50, 1))
+    var = np.where(rng.random((50, 1)) < 0.5, 0.3, 0.01)
+    out = [door_log_likelihood_at_poses(dist, pose, base, DOOR, mean, var, CONFIG, RANGE_MAX, backend=b,
+                                        unobserved_var=np.array([0.2])) for b in ("numpy", "numba")]
+    np.testing.assert_array_equal(out[0].association, out[1].association)
+    np.testing.assert_allclose(out[0].log_likelihood, out[1].log_likelihood, rtol=1e-4, atol=1e-4)
