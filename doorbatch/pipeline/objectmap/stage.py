@@ -21,10 +21,11 @@ from doorbatch.io.recording import Recording
 from doorbatch.pipeline.mapping import PassPoses
 from doorbatch.pipeline.objectmap.beams import BeamSet, ScanBeams, beams_from_scans
 from doorbatch.pipeline.objectmap.em import EmTrace, MapState, evaluate
-from doorbatch.pipeline.objectmap.model import DOOR, ClassParams, ObjectMap
+from doorbatch.pipeline.objectmap.model import DOOR, ClassParams, ObjectMap, Wall
 from doorbatch.pipeline.objectmap.search import final_walls, search_structure
 
 FloatArray = npt.NDArray[np.float64]
+BoolArray = npt.NDArray[np.bool_]
 
 
 def pass_scans(rec: Recording, poses: PassPoses, scan_stride: int, with_color: bool) -> list[ScanBeams]:
@@ -85,20 +86,41 @@ class ObjectMapResult:
     seconds: float
 
 
-def closed_yaw(obj_map: ObjectMap, i: int, max_distance_m: float) -> float:
-    """The closed direction of door i: the direction of the nearest wall line through its hinge (of the
-    two, the one closest to its per-pass directions); the first pass's direction without such a wall."""
+def _covered_fraction(wall: Wall, s0: float, s1: float) -> float:
+    """The fraction of the interval [s0, s1] along the wall's line that its segments cover."""
+    if not wall.segments.size or s1 <= s0:
+        return 0.0
+    overlap = np.clip(np.minimum(wall.segments[:, 1], s1) - np.maximum(wall.segments[:, 0], s0), 0.0, None)
+    return float(overlap.sum() / (s1 - s0))
+
+
+def closed_yaw(obj_map: ObjectMap, i: int, max_distance_m: float, observed: BoolArray | None = None) -> float:
+    """The closed direction of door i: along the nearest wall line through its hinge, towards the doorway.
+
+    Of the line's two directions from the hinge, a closed leaf lies across the gap its segments leave (the
+    leaf's span, less a tenth of the width at each end, less than half covered); where exactly one side is such
+    a gap, that side. Otherwise (both or neither) the direction closest to the leaf's directions in the passes
+    it was seen in (``observed``; all passes when none): a door that never moved stands at one angle that is
+    as far from either side, and an unseen pass's direction is only the search's guess. Without a wall line
+    near the hinge: the first observed pass's direction.
+    """
     door = obj_map.doors[i]
+    yaws = door.yaws[observed] if observed is not None and observed.any() else door.yaws
     best, best_d = None, max_distance_m
     for w in obj_map.walls:
         dist = abs(float(door.hinge @ w.normal) - w.offset)
         if dist <= best_d:
             best, best_d = w, dist
     if best is None:
-        return float(door.yaws[0])
+        return float(yaws[0])
     base = float(np.arctan2(best.tangent[1], best.tangent[0]))
     options = np.array([base, base + np.pi])
-    cost = [np.min(np.abs(wrap_angle(door.yaws - o))) for o in options]
+    s_hinge, width = float(door.hinge @ best.tangent), obj_map.door_width(i)
+    gap = np.array([_covered_fraction(best, s_hinge + 0.1 * width, s_hinge + 0.9 * width) < 0.5,
+                    _covered_fraction(best, s_hinge - 0.9 * width, s_hinge - 0.1 * width) < 0.5])
+    if gap.sum() == 1:  # the doorway: a door closes into its frame, whatever angles it was seen at
+        return float(wrap_angle(options[int(np.argmax(gap))]))
+    cost = [np.min(np.abs(wrap_angle(yaws - o))) for o in options]
     return float(wrap_angle(options[int(np.argmin(cost))]))
 
 
@@ -110,7 +132,7 @@ def describe_doors(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> 
         mine = (state.first.cls == DOOR) & (state.first.obj == i) & beams.hit & (state.e > 0.5)
         counts = np.bincount(beams.pass_index[mine], minlength=obj_map.n_passes)
         observed = counts >= config.min_leaf_support
-        closed = closed_yaw(obj_map, i, config.wall_hinge_distance_m)
+        closed = closed_yaw(obj_map, i, config.wall_hinge_distance_m, observed)
         rel = wrap_angle(door.yaws - closed)
         seen = rel[observed] if observed.any() else rel
         lo, hi = float(np.min(seen)), float(np.max(seen))

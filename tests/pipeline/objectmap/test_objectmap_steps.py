@@ -212,3 +212,25 @@ def test_a_door_that_no_longer_pays_is_terminated_and_a_real_one_kept() -> None:
     assert len(after.obj_map.doors) == 1
     np.testing.assert_allclose(after.obj_map.doors[0].hinge, real.hinge)
     assert after.log_posterior > state.log_posterior
+
+
+def test_a_door_closes_towards_its_doorway_whatever_angles_it_was_seen_at() -> None:
+    """Wall y = 0 with a 0.9 m doorway east (or west) of a hinge at the origin. A door that never moved,
+    standing open at +90° (as far from east as from west), closes into the doorway; a moved door whose one
+    unseen pass still holds the search's guess (180°) closes where its seen passes were, here where the
+    line's segments give no side away."""
+    from doorbatch.pipeline.objectmap.stage import closed_yaw
+
+    def door_map(segments: list[tuple[float, float]], yaws_deg: list[float]) -> ObjectMap:
+        wall = Wall(np.array([0.0, 1.0]), 0.0, np.array(segments, dtype=float))  # tangent (−1, 0): s = −x
+        return ObjectMap([wall], [Door(np.zeros(2), np.deg2rad(np.array(yaws_deg)))], ClassParams(0.9), 3)
+
+    east_gap = [(-5.0, -0.9), (0.0, 5.0)]  # s = −x: wall for x ≤ 0 and x ≥ 0.9
+    west_gap = [(-5.0, 0.0), (0.9, 5.0)]
+    assert abs(closed_yaw(door_map(east_gap, [90.0] * 3), 0, 0.1)) < 1e-9
+    assert abs(abs(closed_yaw(door_map(west_gap, [90.0] * 3), 0, 0.1)) - np.pi) < 1e-9
+    no_gap_info = [(-5.0, 5.0)]
+    seen = np.array([True, True, False])
+    moved = door_map(no_gap_info, [-90.0, -10.0, 180.0])
+    assert abs(closed_yaw(moved, 0, 0.1, seen)) < 1e-9
+    assert abs(abs(closed_yaw(moved, 0, 0.1)) - np.pi) < 1e-9  # counting the unseen pass's guess: the old defect
