@@ -44,7 +44,7 @@ from doorbatch.pipeline.localize.likelihood_field import (
     skip_unexplained,
 )
 from doorbatch.pipeline.localize.particles import ParticleSet
-from doorbatch.pipeline.localize.run import _laser_to_base_4x4, load_localization_map
+from doorbatch.pipeline.localize.run import laser_to_base_4x4, load_localization_map
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -186,7 +186,7 @@ def main() -> None:
             continue
         scan = rec.scans.scan(i)
         beams = select_beams(scan.ranges, scan.angles, scan.range_min, scan.range_max,
-                             _laser_to_base_4x4(rec.scans.laser_to_base[i]), lc.max_beams, lc.laser_min_range,
+                             laser_to_base_4x4(rec.scans.laser_to_base[i]), lc.max_beams, lc.laser_min_range,
                              lc.laser_max_range)
         pose = ref[0] + rng.normal(0.0, 1.0, (n, 3)) * [args.xy_std_m, args.xy_std_m, np.radians(args.yaw_std_deg)]
         pose[0] = ref[0]

@@ -42,7 +42,7 @@ from doorbatch.pipeline.localize.likelihood_field import (
     field_log_likelihood,
 )
 from doorbatch.pipeline.localize.mcl import beams_from_scan
-from doorbatch.pipeline.localize.run import _laser_to_base_4x4
+from doorbatch.pipeline.localize.run import laser_to_base_4x4
 
 SHIFTS_M = np.arange(-30.0, 38.0, 0.05)
 CENTERS_M = np.arange(0.0, 80.0, 0.05)
@@ -95,7 +95,7 @@ def main() -> None:
                 and abs(ref[i, 2] - ref[last, 2]) < lc.update_min_a:
             continue
         last = int(i)
-        beams = beams_from_scan(rec.scans.scan(int(i)), _laser_to_base_4x4(rec.scans.laser_to_base[i]), lc)
+        beams = beams_from_scan(rec.scans.scan(int(i)), laser_to_base_4x4(rec.scans.laser_to_base[i]), lc)
         p = ref[i]
         shifted = np.tile(p, (SHIFTS_M.size, 1))
         shifted[:, 0] += SHIFTS_M

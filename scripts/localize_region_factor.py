@@ -23,7 +23,7 @@ from doorbatch.geometry.se2 import interpolate_poses
 from doorbatch.io.recording import load_recording
 from doorbatch.pipeline.localize.likelihood_field import beam_likelihood, endpoint_distances
 from doorbatch.pipeline.localize.mcl import beams_from_scan
-from doorbatch.pipeline.localize.run import _laser_to_base_4x4, load_localization_map
+from doorbatch.pipeline.localize.run import laser_to_base_4x4, load_localization_map
 from doorbatch.pipeline.localize.smoothing import (
     Bandwidth,
     endpoint_jacobians,
@@ -47,7 +47,7 @@ def main() -> None:
         ap.error(f"{args.log} has no reference pose")
     stamp = rec.scans.stamps_ns[args.scan:args.scan + 1]
     pose, _ = interpolate_poses(rec.reference.stamps_ns, rec.reference.poses, stamp)
-    beams = beams_from_scan(rec.scans.scan(args.scan), _laser_to_base_4x4(rec.scans.laser_to_base[args.scan]), lc)
+    beams = beams_from_scan(rec.scans.scan(args.scan), laser_to_base_4x4(rec.scans.laser_to_base[args.scan]), lc)
     dist = endpoint_distances(lmap.field, pose, beams.points_base)
     pz = beam_likelihood(dist, lc.z_hit, lc.z_rand, lc.sigma_hit, beams.range_max_m)
     hit_weight = (pz - lc.z_rand / beams.range_max_m) / pz

@@ -99,7 +99,9 @@ def parse_init(text: str) -> str | tuple[float, float, float]:
     raise UsageError(f"--init {text!r}: expected reference, global or X,Y,YAW")
 
 
-def _laser_to_base_4x4(affine: FloatArray) -> FloatArray:
+def laser_to_base_4x4(affine: FloatArray) -> FloatArray:
+    """A scan's planar laser→base affine (2 × 3, ``ScanSet.laser_to_base``) as the 4 × 4 transform the beam
+    model takes; z flipped where the 2 × 2 part is a reflection (an upside-down laser)."""
     mat = np.eye(4)
     mat[:2, :2] = affine[:, :2]
     mat[:2, 3] = affine[:, 2]
@@ -235,7 +237,7 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
             continue
         scan = rec.scans.scan(i)
         beams = select_beams(scan.ranges, scan.angles, scan.range_min, scan.range_max,
-                             _laser_to_base_4x4(rec.scans.laser_to_base[i]), lc.max_beams, lc.laser_min_range,
+                             laser_to_base_4x4(rec.scans.laser_to_base[i]), lc.max_beams, lc.laser_min_range,
                              lc.laser_max_range)
         stamp_s = scan.stamp_ns / 1e9
         first = state.odom_at_update is None
