@@ -478,17 +478,20 @@ def _recut_sweeps(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> M
 
 def reacquire_occluded(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> ObjectMap:
     """Every wall gains the segments eq. (9) finds on its line when the rays are allowed to see through
-    other objects (paper 001 Sec. VI's pseudo-E-step; ``wall_segments(see_through=True)``), its own kept.
+    the objects they passed through (paper 001 Sec. VI's pseudo-E-step; ``wall_segments(see_through_band_m)``,
+    the band the pseudo-E-step's: pseudo_e_sigmas·σ), its own segments kept.
 
     Why: a wall drawn across a doorway and a room wall behind it are a local optimum of the per-wall DP. The
     rays through the doorway end on nothing mapped, so they cost the bridge nothing (Δ ≈ 0; a gap of width w
     is bridged whenever ρL·w < 2ρS, w < 1 m); and the room wall's hits behind the bridge are occluded, so no
     segment of it pays. Re-acquiring the hidden segments lets the next sweep see both at once."""
     obj_map = state.obj_map
+    band = config.pseudo_e_sigmas * config.sigma_m
     walls = []
     for j, wall in enumerate(obj_map.walls):
         segs, _ = wall_segments(beams, state.first, obj_map, j, wall.normal, wall.offset, config.validity_prior,
-                                config.sigma_m, config.rho_length_per_m, 2.0 * config.rho_static, see_through=True)
+                                config.sigma_m, config.rho_length_per_m, 2.0 * config.rho_static,
+                                see_through_band_m=band)
         both = np.concatenate([wall.segments.reshape(-1, 2), segs])
         walls.append(Wall(wall.normal, wall.offset, _merge(both)))
     return replace(obj_map, walls=walls)

@@ -164,20 +164,22 @@ def crossing_gains(beams: BeamSet, idx: IntArray, t_obj: FloatArray, delta_other
 
 def wall_segments(beams: BeamSet, first: FirstObjects, obj_map: ObjectMap, j: int, normal: FloatArray,
                   offset: float, lam: float, sigma: float, rho_length_per_m: float, start_cost: float,
-                  see_through: bool = False) -> tuple[FloatArray, float]:
+                  see_through_band_m: float | None = None) -> tuple[FloatArray, float]:
     """The segments of wall ``j`` (or a new wall, j = −1) on the line (normal, offset) by the DP, given
     every other object; and the DP's optimal cost (log-posterior change against no segment).
 
-    ``see_through``: paper 001 Sec. VI's pseudo-E-step, "temporarily allowing for the detection of objects
-    that are occluded": a ray that another object stops before the line is scored as if that object were
-    absent (δ⁻ = the first object behind the line, δ⁺ = t). The cost is then not the log-posterior change;
-    the caller must re-cut with occlusion and compare log posteriors."""
+    ``see_through_band_m`` given: paper 001 Sec. VI's pseudo-E-step, "temporarily allowing for the detection
+    of objects that are occluded": a ray that another object stops before the line is scored as if that
+    object were absent (δ⁻ = the first object behind the line, δ⁺ = t) where its measured end lies more than
+    the band behind that object (the ray went through it; a ray ending on it detected it, not what is
+    behind). The cost is then not the log-posterior change; the caller must re-cut with occlusion and
+    compare log posteriors."""
     cross = line_crossings(beams, normal, offset, sigma)
     if cross.beam.size == 0:
         return np.zeros((0, 2)), 0.0
     delta, kind = first_without(beams, first, cross.beam, obj_map, WALL, j)
-    if see_through:
-        hidden = np.flatnonzero(delta < cross.t)
+    if see_through_band_m is not None:
+        hidden = np.flatnonzero((delta < cross.t) & (beams.range_m[cross.beam] > delta + see_through_band_m))
         delta[hidden], kind[hidden] = first_beyond(beams, cross.beam[hidden], cross.t[hidden], obj_map, WALL, j)
     gain = crossing_gains(beams, cross.beam, cross.t, delta, kind, WALL, obj_map.classes, lam, sigma)
     return segment_dp(cross.s, gain, rho_length_per_m, start_cost)
