@@ -487,14 +487,17 @@ def reacquire_occluded(beams: BeamSet, state: MapState, config: ObjectMapConfig)
     segment of it pays. Re-acquiring the hidden segments lets the next sweep see both at once."""
     obj_map = state.obj_map
     band = config.pseudo_e_sigmas * config.sigma_m
-    walls = []
+    same: list[Wall] = []
+    grown: list[Wall] = []
     for j, wall in enumerate(obj_map.walls):
         segs, _ = wall_segments(beams, state.first, obj_map, j, wall.normal, wall.offset, config.validity_prior,
                                 config.sigma_m, config.rho_length_per_m, 2.0 * config.rho_static,
                                 see_through_band_m=band)
-        both = np.concatenate([wall.segments.reshape(-1, 2), segs])
-        walls.append(Wall(wall.normal, wall.offset, _merge(both)))
-    return replace(obj_map, walls=walls)
+        merged = _merge(np.concatenate([wall.segments.reshape(-1, 2), segs]))
+        unchanged = merged.shape == wall.segments.shape and np.allclose(merged, wall.segments)
+        (same if unchanged else grown).append(Wall(wall.normal, wall.offset, merged))
+    # grown walls last: the sweep re-cuts their occluders first, while it can still see what lies behind them
+    return replace(obj_map, walls=same + grown)
 
 
 def final_walls(beams: BeamSet, obj_map: ObjectMap, config: ObjectMapConfig) -> ObjectMap:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import itertools
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import quad
@@ -244,13 +245,15 @@ def test_a_door_closes_towards_its_doorway_whatever_angles_it_was_seen_at() -> N
     assert abs(abs(closed_yaw(moved, 0, 0.1)) - np.pi) < 1e-9  # counting the unseen pass's guess: the old defect
 
 
-def test_a_wall_bridged_across_a_doorway_is_cut_once_the_room_wall_behind_is_reacquired() -> None:
+@pytest.mark.parametrize("room_first", [False, True])
+def test_a_wall_bridged_across_a_doorway_is_cut_once_the_room_wall_behind_is_reacquired(room_first: bool) -> None:
     """A corridor wall y = 0 with a 0.9 m doorway x ∈ (3.0, 3.9) and a room wall y = −3 behind it, seen from
     the corridor (y = 1). Start from the local optimum: the corridor wall drawn across the doorway, the room
     wall's line with no segment. Per wall, eq. (9) keeps it: the rays through the doorway end on nothing
     mapped (Δ ≈ 0), so the bridge costs ρL·0.9 = 63 < 2ρS = 70, and the room wall's hits are occluded by it.
     The pseudo-E-step (Sec. VI) sees the room wall through the bridge; the sweep that follows then cuts the
-    doorway (its rays now cost ≈ 6 nats each) and keeps the room wall. Before: one segment [0, 6], no room wall."""
+    doorway (its rays now cost ≈ 6 nats each) and keeps the room wall, whichever wall comes first in the map.
+    Before: one segment [0, 6], no room wall."""
     config = DoorbatchConfig().em
     truth = np.array([[[0.0, 0.0], [3.0, 0.0]], [[3.9, 0.0], [6.0, 0.0]], [[-1.0, -3.0], [7.0, -3.0]]])
     angles = np.deg2rad(np.arange(-175.0, -5.0, 1.0))
@@ -261,7 +264,8 @@ def test_a_wall_bridged_across_a_doorway_is_cut_once_the_room_wall_behind_is_rea
     beams = _beams_to_each(origins[ok], origins[ok] + rng[ok, None] * directions[ok])
     bridged = Wall(np.array([0.0, -1.0]), 0.0, np.array([[0.0, 6.0]]))  # y = 0, s = x
     room = Wall(np.array([0.0, -1.0]), 3.0, np.zeros((0, 2)))  # y = −3, s = x
-    final = final_walls(beams, ObjectMap([bridged, room], [], ClassParams(0.9), 1), config)
+    walls = [room, bridged] if room_first else [bridged, room]
+    final = final_walls(beams, ObjectMap(walls, [], ClassParams(0.9), 1), config)
     corridor = [w for w in final.walls if abs(w.offset) < 0.1]
     behind = [w for w in final.walls if abs(w.offset - 3.0) < 0.1]
     assert len(corridor) == 1 and len(behind) == 1
