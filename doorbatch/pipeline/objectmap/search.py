@@ -466,22 +466,56 @@ def recut_all_walls(beams: BeamSet, state: MapState, config: ObjectMapConfig) ->
     return evaluate(beams, replace(obj_map, walls=walls), config)
 
 
-def final_walls(beams: BeamSet, obj_map: ObjectMap, config: ObjectMapConfig) -> ObjectMap:
-    """Walls once more over the final step's beams (by default every scan and beam of the log), once the
-    structure has converged: Hough proposals that now pay for themselves (propose_walls), then sweeps of
-    eq. (9) over all walls while the log posterior rises (at most ``final_recut_sweeps``); walls left
-    without segments are dropped.
-
-    Why: the search runs on every scan_stride-th scan and beam_stride-th beam, so a segment's evidence Σ Δ
-    is ~stride² smaller than the log's against the paper's ρL, ρS (set for the paper's full data): sparse
-    tails and short walls (e.g. a room's side wall seen through a doorway) were cut.
-    """
-    state = evaluate(beams, propose_walls(beams, obj_map, config), config)
+def _recut_sweeps(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> MapState:
+    """Sweeps of eq. (9) over all walls while the log posterior rises (at most ``final_recut_sweeps``)."""
     for _ in range(config.final_recut_sweeps):
         new = recut_all_walls(beams, state, config)
         if new.log_posterior <= state.log_posterior:
             break
         state = new
+    return state
+
+
+def reacquire_occluded(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> ObjectMap:
+    """Every wall gains the segments eq. (9) finds on its line when the rays are allowed to see through
+    the objects they passed through (paper 001 Sec. VI's pseudo-E-step; ``wall_segments(see_through_band_m)``,
+    the band the pseudo-E-step's: pseudo_e_sigmas·σ), its own segments kept.
+
+    Why: a wall drawn across a doorway and a room wall behind it are a local optimum of the per-wall DP. The
+    rays through the doorway end on nothing mapped, so they cost the bridge nothing (Δ ≈ 0; a gap of width w
+    is bridged whenever ρL·w < 2ρS, w < 1 m); and the room wall's hits behind the bridge are occluded, so no
+    segment of it pays. Re-acquiring the hidden segments lets the next sweep see both at once."""
+    obj_map = state.obj_map
+    band = config.pseudo_e_sigmas * config.sigma_m
+    same: list[Wall] = []
+    grown: list[Wall] = []
+    for j, wall in enumerate(obj_map.walls):
+        segs, _ = wall_segments(beams, state.first, obj_map, j, wall.normal, wall.offset, config.validity_prior,
+                                config.sigma_m, config.rho_length_per_m, 2.0 * config.rho_static,
+                                see_through_band_m=band)
+        merged = _merge(np.concatenate([wall.segments.reshape(-1, 2), segs]))
+        unchanged = merged.shape == wall.segments.shape and np.allclose(merged, wall.segments)
+        (same if unchanged else grown).append(Wall(wall.normal, wall.offset, merged))
+    # grown walls last: the sweep re-cuts their occluders first, while it can still see what lies behind them
+    return replace(obj_map, walls=same + grown)
+
+
+def final_walls(beams: BeamSet, obj_map: ObjectMap, config: ObjectMapConfig) -> ObjectMap:
+    """Walls once more over the final step's beams (by default every scan and beam of the log), once the
+    structure has converged: Hough proposals that now pay for themselves (propose_walls), then sweeps of
+    eq. (9) over all walls while the log posterior rises (at most ``final_recut_sweeps``); then the
+    occluded segments re-acquired (reacquire_occluded) and swept again, kept only if the log posterior
+    (occlusion modelled) ends higher; walls left without segments are dropped.
+
+    Why: the search runs on every scan_stride-th scan and beam_stride-th beam, so a segment's evidence Σ Δ
+    is ~stride² smaller than the log's against the paper's ρL, ρS (set for the paper's full data): sparse
+    tails and short walls (e.g. a room's side wall seen through a doorway) were cut.
+    """
+    state = _recut_sweeps(beams, evaluate(beams, propose_walls(beams, obj_map, config), config), config)
+    if config.final_recut_sweeps:
+        trial = _recut_sweeps(beams, evaluate(beams, reacquire_occluded(beams, state, config), config), config)
+        if trial.log_posterior > state.log_posterior:
+            state = trial
     return replace(state.obj_map, walls=[w for w in state.obj_map.walls if w.segments.shape[0]])
 
 

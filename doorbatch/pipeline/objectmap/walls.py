@@ -126,6 +126,26 @@ def first_without(beams: BeamSet, first: FirstObjects, idx: IntArray, obj_map: O
     return delta, kind
 
 
+def first_beyond(beams: BeamSet, idx: IntArray, t: FloatArray, obj_map: ObjectMap, cls: int, obj: int
+                 ) -> tuple[FloatArray, IntArray]:
+    """δ and class of the first object along beams ``idx`` beyond distance ``t`` on each ray (objects nearer
+    than t ignored; object (cls, obj) left out): what the ray would meet behind a line it crosses at t."""
+    delta = np.full(idx.shape[0], np.inf)
+    kind = np.full(idx.shape[0], -1, dtype=np.int64)
+    for p in range(beams.n_passes):
+        sel = np.flatnonzero(beams.pass_index[idx] == p)
+        segs, seg_cls, seg_obj = obj_map.segments(p)
+        keep = ~((seg_cls == cls) & (seg_obj == obj))
+        if sel.size == 0 or not keep.any():
+            continue
+        b = idx[sel]
+        rng, hit = cast_segments(beams.origin[b] + t[sel, None] * beams.direction[b], beams.direction[b],
+                                 segs[keep], None)
+        delta[sel] = t[sel] + rng
+        kind[sel] = np.where(hit >= 0, seg_cls[keep][np.maximum(hit, 0)], -1)
+    return delta, kind
+
+
 def crossing_gains(beams: BeamSet, idx: IntArray, t_obj: FloatArray, delta_other: FloatArray,
                    cls_other: IntArray, obj_cls: int, classes: ClassParams, lam: float, sigma: float) -> FloatArray:
     """Δ_k of eq. (9): the log-likelihood change of beam k when an object of class ``obj_cls`` is present
@@ -143,13 +163,23 @@ def crossing_gains(beams: BeamSet, idx: IntArray, t_obj: FloatArray, delta_other
 
 
 def wall_segments(beams: BeamSet, first: FirstObjects, obj_map: ObjectMap, j: int, normal: FloatArray,
-                  offset: float, lam: float, sigma: float, rho_length_per_m: float, start_cost: float
-                  ) -> tuple[FloatArray, float]:
+                  offset: float, lam: float, sigma: float, rho_length_per_m: float, start_cost: float,
+                  see_through_band_m: float | None = None) -> tuple[FloatArray, float]:
     """The segments of wall ``j`` (or a new wall, j = −1) on the line (normal, offset) by the DP, given
-    every other object; and the DP's optimal cost (log-posterior change against no segment)."""
+    every other object; and the DP's optimal cost (log-posterior change against no segment).
+
+    ``see_through_band_m`` given: paper 001 Sec. VI's pseudo-E-step, "temporarily allowing for the detection
+    of objects that are occluded": a ray that another object stops before the line is scored as if that
+    object were absent (δ⁻ = the first object behind the line, δ⁺ = t) where its measured end lies more than
+    the band behind that object (the ray went through it; a ray ending on it detected it, not what is
+    behind). The cost is then not the log-posterior change; the caller must re-cut with occlusion and
+    compare log posteriors."""
     cross = line_crossings(beams, normal, offset, sigma)
     if cross.beam.size == 0:
         return np.zeros((0, 2)), 0.0
     delta, kind = first_without(beams, first, cross.beam, obj_map, WALL, j)
+    if see_through_band_m is not None:
+        hidden = np.flatnonzero((delta < cross.t) & (beams.range_m[cross.beam] > delta + see_through_band_m))
+        delta[hidden], kind[hidden] = first_beyond(beams, cross.beam[hidden], cross.t[hidden], obj_map, WALL, j)
     gain = crossing_gains(beams, cross.beam, cross.t, delta, kind, WALL, obj_map.classes, lam, sigma)
     return segment_dp(cross.s, gain, rho_length_per_m, start_cost)
