@@ -321,11 +321,19 @@ def mcl_step(state: MclState, odom_now: npt.ArrayLike, beams: BeamSet, field: Di
     else:
         weighting = weigh(particles, beams, field, config, combination)
         particles, log_avg = with_log_weights(particles, weighting.log_weight), weighting.log_avg_weight
-    recovery = state.recovery.update(log_avg, config.recovery_alpha_slow, config.recovery_alpha_fast)
+    return finish_step(state, particles, log_avg, odom, config, rng, free, bandwidth)
+
+
+def finish_step(state: MclState, particles: ParticleSet, log_avg_weight: float, odom: FloatArray,
+                config: LocalizeConfig, rng: np.random.Generator, free: FreeCells | None,
+                bandwidth: Bandwidth | None) -> tuple[MclState, StepDiagnostics]:
+    """The end of an update that MCL and the RBPF share once the particles are weighed: the recovery averages
+    (from the scan's mean weight), resampling with random-particle injection, the new state and diagnostics."""
+    recovery = state.recovery.update(log_avg_weight, config.recovery_alpha_slow, config.recovery_alpha_fast)
     fraction = recovery.random_fraction() if free is not None else 0.0
     neff = particles.neff()
     particles, recovery, n_random = resample_if_needed(particles, config, rng, recovery, free, bandwidth)
-    diag = StepDiagnostics(True, n_random >= 0, neff, len(particles), fraction, max(n_random, 0), log_avg)
+    diag = StepDiagnostics(True, n_random >= 0, neff, len(particles), fraction, max(n_random, 0), log_avg_weight)
     return MclState(particles, recovery, odom.copy(), state.global_start), diag
 
 

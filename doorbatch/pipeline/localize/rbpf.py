@@ -47,9 +47,9 @@ from doorbatch.pipeline.localize.mcl import (
     MclState,
     StepDiagnostics,
     apply_log_likelihood,
+    finish_step,
     predict,
     region_log_likelihood,
-    resample_if_needed,
     spread_cloud_config,
     tempered_weighting,
     update_thresholds_met,
@@ -104,8 +104,9 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
     # While the cloud is global each particle is weighed with its pose region's likelihood, in tempered stages
     # (mcl.tempered_weighting); with ``global_door_term`` that likelihood is eq. (6) (door_region_log_likelihood),
     # else MCL's static model.
-    if bandwidth is not None and len(beams.points_base):
-        spread = spread_cloud_config(config, state.global_start)
+    global_phase = bandwidth is not None and len(beams.points_base) > 0
+    spread = spread_cloud_config(config, state.global_start) if global_phase else config
+    if global_phase:
 
         def region(p: ParticleSet, h: Bandwidth) -> npt.NDArray[np.float64]:
             if n_doors and spread.global_door_term:
@@ -133,17 +134,12 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
         update = update_doors(scan_points_base, particles, doors, config)
         particles = replace(particles, door_mean=update.mean, door_var=update.var)
         observed = np.asarray(update.observed.any(axis=0), dtype=bool)
-        if bandwidth is not None and len(beams.points_base) and spread_cloud_config(config,
-                                                                                     state.global_start).global_door_term:
+        if global_phase and spread.global_door_term:
             mean, var = condition_doors_on_beams(particles, beams, field, doors, config, skip=update.observed)
             particles = replace(particles, door_mean=mean, door_var=var)
 
-    recovery = state.recovery.update(log_avg, config.recovery_alpha_slow, config.recovery_alpha_fast)
-    fraction = recovery.random_fraction() if free is not None else 0.0
-    neff = particles.neff()
-    particles, recovery, n_random = resample_if_needed(particles, config, rng, recovery, free, bandwidth)
-    diag = StepDiagnostics(True, n_random >= 0, neff, len(particles), fraction, max(n_random, 0), log_avg)
-    return MclState(particles, recovery, odom.copy(), state.global_start), diag, observed
+    new_state, diag = finish_step(state, particles, log_avg, odom, config, rng, free, bandwidth)
+    return new_state, diag, observed
 
 
 def door_region_log_likelihood(particles: ParticleSet, bandwidth: Bandwidth, beams: BeamSet, field: DistanceField,
