@@ -32,6 +32,7 @@ from doorbatch.pipeline.objectmap.walls import (
     first_without,
     fit_line,
     line_crossings,
+    ray_line_distances,
     segment_dp,
     wall_segments,
 )
@@ -268,8 +269,7 @@ def recut_window(beams: BeamSet, obj_map: ObjectMap, j: int, lo: float, hi: floa
     cross = line_crossings(beams, w.normal, w.offset, config.sigma_m)
     inside = (cross.s >= lo) & (cross.s <= hi)
     idx = cross.beam[inside]
-    empty = FirstObjects(np.full(len(beams), np.inf), np.full(len(beams), -1, dtype=np.int64),
-                         np.full(len(beams), -1, dtype=np.int64))
+    empty = FirstObjects.none(len(beams))
     local = _full_first(beams, obj_map, idx, empty)
     delta, kind = first_without(beams, local, idx, obj_map, WALL, j)
     gain = crossing_gains(beams, idx, cross.t[inside], delta, kind, WALL, obj_map.classes,
@@ -349,8 +349,7 @@ def _walls_behind(beams: BeamSet, obj_map: ObjectMap, idx: IntArray, first: Firs
         normal, offset = fit_line(pts[sel], np.exp(-0.5 * (r[sel] / config.sigma_m) ** 2) + 1e-12)
         current = replace(obj_map, walls=walls)
         cross = line_crossings(beams, normal, offset, config.sigma_m)
-        empty = FirstObjects(np.full(len(beams), np.inf), np.full(len(beams), -1, dtype=np.int64),
-                             np.full(len(beams), -1, dtype=np.int64))
+        empty = FirstObjects.none(len(beams))
         local = _full_first(beams, current, cross.beam, empty)
         segs, cost = wall_segments(beams, local, current, -1, normal, offset, config.validity_prior,
                                    config.sigma_m, config.rho_length_per_m, 2.0 * config.rho_static)
@@ -370,8 +369,7 @@ def try_door(beams: BeamSet, state: MapState, c: DoorCandidate, config: ObjectMa
     with_door = replace(obj_map, doors=[*obj_map.doors, door])
     new_map, changed = _recut_walls(beams, with_door, door.hinge, width + config.door_wall_margin_m, config)
     idx = _affected(beams, door, width, changed, new_map, config.sigma_m, config.door_ray_margin_m)
-    empty = FirstObjects(np.full(len(beams), np.inf), np.full(len(beams), -1, dtype=np.int64),
-                         np.full(len(beams), -1, dtype=np.int64))
+    empty = FirstObjects.none(len(beams))
     first_mid = _full_first(beams, new_map, idx, empty)
     new_map, extra = _walls_behind(beams, new_map, idx, first_mid, config)
     idx = np.union1d(idx, extra)
@@ -387,8 +385,7 @@ def _local_log_posterior(beams: BeamSet, idx: IntArray, obj_map: ObjectMap, conf
     """Σ over beams ``idx`` of the marginal log-likelihood under ``obj_map``, plus log p(M): the part of the
     log posterior that a change confined to those beams' rays can move."""
     sub = beams.subset(idx)
-    first = _full_first(sub, obj_map, np.arange(idx.size), FirstObjects(
-        np.full(idx.size, np.inf), np.full(idx.size, -1, dtype=np.int64), np.full(idx.size, -1, dtype=np.int64)))
+    first = _full_first(sub, obj_map, np.arange(idx.size), FirstObjects.none(idx.size))
     _, ll = e_step(sub, first, obj_map.classes, config.validity_prior, config.sigma_m)
     return float(ll.sum()) + log_prior(obj_map, config)
 
@@ -459,8 +456,7 @@ def recut_all_walls(beams: BeamSet, state: MapState, config: ObjectMapConfig) ->
                                 config.validity_prior, config.sigma_m, config.rho_length_per_m,
                                 2.0 * config.rho_static)
         walls[j] = Wall(wall.normal, wall.offset, segs)
-        with np.errstate(divide="ignore", invalid="ignore"):  # rays meeting the line before their first object
-            t = (wall.offset - beams.origin @ wall.normal) / (beams.direction @ wall.normal)
+        t = ray_line_distances(beams, wall.normal, wall.offset)  # rays meeting the line before their first object
         changed = ((first.cls == WALL) & (first.obj == j)) | (np.isfinite(t) & (t > 0.0) & (t < first.delta))
         first = _full_first(beams, replace(obj_map, walls=walls), np.flatnonzero(changed), first)
     return evaluate(beams, replace(obj_map, walls=walls), config)

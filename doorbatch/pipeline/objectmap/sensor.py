@@ -39,6 +39,11 @@ class FirstObjects:
     cls: IntArray
     obj: IntArray
 
+    @staticmethod
+    def none(n: int) -> FirstObjects:
+        """n beams that meet no object (yet)."""
+        return FirstObjects(np.full(n, np.inf), np.full(n, -1, dtype=np.int64), np.full(n, -1, dtype=np.int64))
+
 
 def cast_segments(origin: FloatArray, direction: FloatArray, segments: FloatArray,
                   buffers: RayBuffers | None = None) -> tuple[FloatArray, IntArray]:

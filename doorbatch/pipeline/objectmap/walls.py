@@ -95,11 +95,17 @@ class LineCrossings:
     s: FloatArray
 
 
+def ray_line_distances(beams: BeamSet, normal: FloatArray, offset: float) -> FloatArray:
+    """t (B,): how far along each ray it meets the line n·p = β ((β − n·o)/(n·d); ±inf or nan when parallel,
+    negative behind the origin)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t: FloatArray = (offset - beams.origin @ normal) / (beams.direction @ normal)
+    return t
+
+
 def line_crossings(beams: BeamSet, normal: FloatArray, offset: float, sigma: float) -> LineCrossings:
     """R_W: beams whose ray meets the line n·p = β before its measured end (+5σ) and within dmax."""
-    denom = beams.direction @ normal
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = (offset - beams.origin @ normal) / denom
+    t = ray_line_distances(beams, normal, offset)
     ok = np.isfinite(t) & (t > 0.0) & (t <= np.minimum(beams.range_m + 5.0 * sigma, beams.dmax))
     idx = np.flatnonzero(ok)
     tangent = np.array([-normal[1], normal[0]])
@@ -112,17 +118,8 @@ def first_without(beams: BeamSet, first: FirstObjects, idx: IntArray, obj_map: O
     """δ and class of the first object along beams ``idx`` when object (cls, obj) is left out."""
     delta = first.delta[idx].copy()
     kind = first.cls[idx].copy()
-    redo = (kind == cls) & (first.obj[idx] == obj)
-    for t in range(beams.n_passes):
-        sel = np.flatnonzero(redo & (beams.pass_index[idx] == t))
-        if sel.size == 0:
-            continue
-        segs, seg_cls, seg_obj = obj_map.segments(t)
-        keep = ~((seg_cls == cls) & (seg_obj == obj))
-        b = idx[sel]
-        rng, hit = cast_segments(beams.origin[b], beams.direction[b], segs[keep], None)
-        delta[sel] = rng
-        kind[sel] = np.where(hit >= 0, seg_cls[keep][np.maximum(hit, 0)], -1) if keep.any() else -1
+    redo = np.flatnonzero((kind == cls) & (first.obj[idx] == obj))
+    delta[redo], kind[redo] = first_beyond(beams, idx[redo], np.zeros(redo.size), obj_map, cls, obj)
     return delta, kind
 
 
