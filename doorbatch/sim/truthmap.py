@@ -44,7 +44,9 @@ def truth_maps(world: World, start_xy: tuple[float, float], resolution_m: float 
     closed_leaves = door_leaf_segments(world.doors, np.zeros(world.doors.count))
     open_leaves = door_leaf_segments(world.doors, world.doors.max_angle_rad)
     every = np.concatenate([world.segments, closed_leaves, open_leaves]).reshape(-1, 2)
-    lo = np.floor((every.min(axis=0) - margin_m) / resolution_m) * resolution_m
+    # cell centres on multiples of the resolution: a wall on a round coordinate lies on a row of cell
+    # centres, not on a cell border (where floor() put it half a cell, 2.5 cm, to one side)
+    lo = (np.floor((every.min(axis=0) - margin_m) / resolution_m) - 0.5) * resolution_m
     hi = every.max(axis=0) + margin_m
     width, height = (math.ceil(v) for v in (hi - lo) / resolution_m)
     walls = _rasterize(world.segments, (height, width), lo, resolution_m)

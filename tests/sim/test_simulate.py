@@ -18,6 +18,7 @@ from doorbatch.records import BeamColors, Detections, Pose2D, Role, Scan, Transf
 from doorbatch.sim.scenario import configs_dir, load_scenario, resolve_scenario
 from doorbatch.sim.simulate import SimulationSummary, output_paths, random_streams, run_simulation, simulate
 from doorbatch.sim.timeline import plan_scenario
+from doorbatch.sim.truthmap import truth_maps
 from doorbatch.sim.world import door_leaf_segments
 
 MOVING_DOOR = {"changes": [{"door": "d02", "at_s": 1.0, "to_state": "open", "duration_s": 1.0}]}
@@ -168,6 +169,18 @@ def test_truth_maps_draw_doors_closed_or_leave_them_out(runs: dict[str, Simulati
     assert np.all(static.occupancy[corridor[:, 0], corridor[:, 1]] == 0)
     outside = static.world_to_cell(np.array([[20.0, 4.8]]))
     assert static.occupancy[outside[0, 0], outside[0, 1]] == -1
+
+
+def test_truth_map_walls_lie_on_cell_centres() -> None:
+    """The office's walls run along y = ±1.1 and x = 0: each must fill the row/column of cells whose centres
+    lie on it, not a neighbour half a cell (2.5 cm) to one side, or every filter scored on the truth map
+    carries that offset."""
+    world = office()
+    _, static = truth_maps(world, (1.0, 0.0), resolution_m=0.05)
+    for xy, axis in (((18.3, 1.1), 1), ((18.3, -1.1), 1), ((0.0, 0.3), 0)):
+        ij = static.world_to_cell(np.array([xy]))
+        assert static.occupancy[ij[0, 0], ij[0, 1]] == 100
+        assert static.cell_to_world(ij)[0, axis] == pytest.approx(xy[axis], abs=1e-9)
 
 
 def test_simulate_yields_messages_in_log_time_order() -> None:
