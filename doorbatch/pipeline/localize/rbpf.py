@@ -12,11 +12,12 @@ methods differ only in the map model)::
                     the static model alone, as MCL; true: each particle's door update of this scan first and
                     the beams under its result, :func:`door_update_log_factor`); once converged, beams that
                     most of the weight explains by neither are skipped (Nav2's do_beamskip,
-                    likelihood_field.skip_unexplained), as MCL does
+                    likelihood_field.skip_unexplained), as MCL does; with ``tracking_door_prior`` a door the
+                    particle has not observed is weighed under its prior over the range, as while global
     3. door update  one Douglas–Peucker polygon per scan, moved to every particle, associated to doors,
-                    Kalman update of the associated doors' angles; while global with the door term, each
-                    particle's other doors are also conditioned on the beams their leaves explain
-                    (:func:`condition_doors_on_beams`)
+                    Kalman update of the associated doors' angles; while global with the door term, and in
+                    tracking with ``tracking_door_prior``, each particle's other doors are also conditioned on
+                    the beams their leaves explain (:func:`condition_doors_on_beams`)
     4. resampling   low-variance (KLD-adaptive) when Neff is low
 """
 
@@ -121,8 +122,10 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
     else:
         static = endpoint_distances(field, particles.pose, beams.points_base)
         if n_doors:
+            unobserved = unobserved_door_variance(doors, config) if config.tracking_door_prior else None
             pz = door_log_likelihood_at_poses(static, particles.pose, beams.points_base, doors, particles.door_mean,
-                                              particles.door_var, config, beams.range_max_m).beam_likelihood
+                                              particles.door_var, config, beams.range_max_m,
+                                              unobserved_var=unobserved).beam_likelihood
         else:
             pz = beam_likelihood(static, config.z_hit, config.z_rand, config.sigma_hit, beams.range_max_m)
         pz, _ = skip_unexplained(pz, particles.weight, particles.pose, config, beams.range_max_m, combination)
@@ -134,7 +137,7 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
         update = update_doors(scan_points_base, particles, doors, config)
         particles = replace(particles, door_mean=update.mean, door_var=update.var)
         observed = np.asarray(update.observed.any(axis=0), dtype=bool)
-        if global_phase and spread.global_door_term:
+        if spread.global_door_term if global_phase else config.tracking_door_prior:
             mean, var = condition_doors_on_beams(particles, beams, field, doors, config, skip=update.observed)
             particles = replace(particles, door_mean=mean, door_var=var)
 
