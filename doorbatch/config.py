@@ -384,6 +384,13 @@ class LocalizeConfig(Section):
     # alone. Off: measured at 10,000 particles, seeds 0-9, it changed no closed-door run and partial doors by one
     # seed each way (truth map 90 -> 100 %, em map 100 -> 90 %; docs/results.md, global localization).
     global_door_term: bool = False
+    # ... and the door-angle prior it weighs a door under until the door is observed: closed (a Gaussian of
+    # std global_door_closed_sigma_deg at the map's closed direction) with probability global_door_closed_prob,
+    # else uniform over the opening range (pipeline/localize/door_prior.py). 0.5: two states, no preference
+    # (doors.parquet records no per-pass door states to learn it from); 0 is the uniform prior of branch loc5.
+    global_door_closed_prob: float = Field(0.5, ge=0.0, le=1.0)
+    # 2 deg: the em/grid maps' closed_yaw error (RBPF door errors 0.4-1.7 deg when tracking) plus a latch's play.
+    global_door_closed_sigma_deg: float = Field(2.0, gt=0.0)
     converged_xy_std_m: float = Field(0.3, gt=0.0)
     converged_yaw_std_deg: float = Field(10.0, gt=0.0)
     # ... and only once the cloud has also been unimodal (below) for converged_hold_s while the robot moved
