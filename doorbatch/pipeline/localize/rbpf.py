@@ -111,11 +111,7 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
 
         def region(p: ParticleSet, h: Bandwidth) -> npt.NDArray[np.float64]:
             if n_doors and spread.global_door_term:
-                # the door update first, then the beams under the updated doors (door_update_log_factor)
-                update = global_door_update(scan_points_base, p, doors, spread)
-                posterior = replace(p, door_mean=update.mean, door_var=update.var)
-                return (door_region_log_likelihood(posterior, h, beams, field, doors, spread, combination)
-                        + door_update_log_factor(p, update, doors, spread))
+                return global_door_log_likelihood(p, h, beams, scan_points_base, field, doors, spread, combination)
             return region_log_likelihood(p, h, beams, field, spread, combination)
 
         particles, log_avg, bandwidth = tempered_weighting(particles, region, spread, rng)
@@ -144,6 +140,20 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
 
     new_state, diag = finish_step(state, particles, log_avg, odom, config, rng, free, bandwidth)
     return new_state, diag, observed
+
+
+def global_door_log_likelihood(particles: ParticleSet, bandwidth: Bandwidth, beams: BeamSet,
+                               scan_points_base: npt.ArrayLike, field: DistanceField, doors: DoorSet,
+                               config: LocalizeConfig, combination: BeamCombination) -> npt.NDArray[np.float64]:
+    """log p(z | region) (N,) of a global cloud with the door term (``global_door_term``): the door update of this
+    scan first, under the doors' prior (:func:`global_door_update`), then the beams under the updated doors
+    (:func:`door_region_log_likelihood`) plus the update's evidence factor (:func:`door_update_log_factor`)."""
+    update = global_door_update(scan_points_base, particles, doors, config)
+    posterior = replace(particles, door_mean=update.mean, door_var=update.var)
+    out: npt.NDArray[np.float64] = (door_region_log_likelihood(posterior, bandwidth, beams, field, doors, config,
+                                                               combination)
+                                    + door_update_log_factor(particles, update, doors, config))
+    return out
 
 
 def door_region_log_likelihood(particles: ParticleSet, bandwidth: Bandwidth, beams: BeamSet, field: DistanceField,

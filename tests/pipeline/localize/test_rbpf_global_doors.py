@@ -8,18 +8,20 @@ import math
 import numpy as np
 import numpy.typing as npt
 import pytest
-from mcl_sim import RES, polyline, rasterize, scan_beams
+from mcl_sim import LASER_X, RES, polyline, rasterize, scan_beams, scan_ranges
 
 from doorbatch.config import LocalizeConfig
 from doorbatch.maps import DoorSet
 from doorbatch.pipeline.localize.door_observation import DoorUpdate, kalman_update
 from doorbatch.pipeline.localize.door_prior import UNIFORM, DoorPrior, log_evidence, posterior, unobserved_door_variance
-from doorbatch.pipeline.localize.likelihood_field import build_distance_field
+from doorbatch.pipeline.localize.likelihood_field import BeamCombination, build_distance_field
 from doorbatch.pipeline.localize.particles import ParticleSet
 from doorbatch.pipeline.localize.rbpf import (
     condition_doors_on_beams,
     door_update_log_factor,
+    global_door_log_likelihood,
 )
+from doorbatch.pipeline.localize.smoothing import Bandwidth
 
 FloatArray = npt.NDArray[np.float64]
 HINGES_X = (3.0, 6.0, 9.0)
@@ -156,3 +158,35 @@ def test_observing_a_door_with_a_range_narrower_than_the_measurement_earns_nothi
         assert factor[1] == 0.0 and factor[0] <= 0.0
         if abs(z) < math.radians(0.1):
             assert factor[0] > -0.2
+
+
+def test_a_pose_that_sees_closed_doors_pays_about_the_closed_prior_not_the_uniform_price() -> None:
+    """A 31 m corridor with doorways at x = 3, 6, 9 on the wall y = 0, all leaves closed (flush with the wall);
+    the static map has the doorways open. From (6.4, 1.2) the 4 m laser sees the three closed leaves; from
+    (20.4, 1.2) it sees plain walls, and the same scan fits both poses perfectly. Weighed as the global RBPF
+    weighs a particle (door update under the prior, beams under the result, evidence factor), the pose among
+    the doors must pay at most −log p_c per closed door with the closed/open mixture, and clearly more with the
+    uniform prior (the loc5 diagnosis: ~2.3 nats per door observed closed, so that in an all-closed corridor
+    the poses that see fewer doorways win)."""
+    walls = np.concatenate([polyline((-1.0, 0.0), (3.0, 0.0)), polyline((3.8, 0.0), (6.0, 0.0)),
+                            polyline((6.8, 0.0), (9.0, 0.0)), polyline((9.8, 0.0), (30.0, 0.0)),
+                            polyline((-1.0, 2.4), (30.0, 2.4))])
+    leaves = np.array([[[x, 0.0], [x + LEAF, 0.0]] for x in HINGES_X])
+    world = np.concatenate([walls, leaves])
+    field = build_distance_field(rasterize(walls, (-1.0, 30.0), (0.0, 2.4), margin=RES * 4), 2.0)
+    among_doors, plain = np.array([6.4, 1.2, 0.0]), np.array([20.4, 1.2, 0.0])
+    beams = scan_beams(world, among_doors, max_beams=60, max_range=4.0)
+    r, a = scan_ranges(world, among_doors, max_range=4.0)
+    hit = np.isfinite(r)
+    points = np.stack([LASER_X + r[hit] * np.cos(a[hit]), r[hit] * np.sin(a[hit])], axis=1)
+    cost = {}
+    for closed_prob in (0.5, 0.0):
+        config = LocalizeConfig(global_door_term=True, global_door_closed_prob=closed_prob)
+        prior = ParticleSet(np.stack([among_doors, plain]), np.full(2, 0.5), np.full((2, 3), math.pi / 4),
+                            np.tile(unobserved_door_variance(DOORS, config), (2, 1)))
+        region = Bandwidth(np.full(2, 0.02), np.full(2, math.radians(0.5)))
+        loglik = global_door_log_likelihood(prior, region, beams, points, field, DOORS, config,
+                                            BeamCombination.PRODUCT)
+        cost[closed_prob] = loglik[1] - loglik[0]
+    assert 0.0 < cost[0.5] < len(HINGES_X) * math.log(2.0)
+    assert cost[0.0] > cost[0.5] + 2.0
