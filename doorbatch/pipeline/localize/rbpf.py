@@ -10,7 +10,8 @@ methods differ only in the map model)::
                     cloud converges, the same smoothed over each particle's pose region and applied in
                     tempered stages (:mod:`.smoothing`, mcl.tempered_weighting; ``global_door_term`` false:
                     the static model alone, as MCL; true: each particle's door update of this scan first and
-                    the beams under its result, :func:`door_update_log_factor`); once converged, beams that
+                    the beams under its result, :func:`door_update_log_factor`, a door not yet observed under
+                    the closed/open prior of :mod:`.door_prior`); once converged, beams that
                     most of the weight explains by neither are skipped (Nav2's do_beamskip,
                     likelihood_field.skip_unexplained), as MCL does
     3. door update  one Douglas–Peucker polygon per scan, moved to every particle, associated to doors,
