@@ -30,7 +30,10 @@ d_min = max(r − L, 0), c = r² on the leaf's disc (r ≤ L, d = r·|sin(a − 
 
     g_k = (σ_hit/σ)·exp(−d_min²/(2σ²))·A,   A = √(π/2)·σ/(√c·Δ)·[erf(√c(hi − φ)/(√2σ)) − erf(√c(lo − φ)/(√2σ))]
 
-(A ≤ 1, the fraction of the range whose leaf passes the end point). This is eq. (6)'s marginalization done
+(A ≤ 1, the fraction of the range whose leaf passes the end point). Under the global phase's mixture prior
+(:mod:`.door_prior`: closed, N(0, σ_c²), with probability p_c, else uniform) the same quadratic integrates the
+closed component in closed form too, A_c = √(σ²/(σ² + c·σ_c²))·exp(−c·φ²/(2(σ² + c·σ_c²))), and A becomes
+p_c·A_c + (1 − p_c)·A (p_c = 0: the uniform prior). This is eq. (6)'s marginalization done
 over the prior the particle actually has (expert choice: with a prior std of tens of degrees the first-order
 expansion around a mean that is wrong by most of the range is poor, and one closed leaf far away costs the
 true pose the beam floor every scan until the door update has seen it).
@@ -66,6 +69,7 @@ from doorbatch.pipeline.localize.door_geometry import (
     point_to_leaf_distance,
     subset_doors,
 )
+from doorbatch.pipeline.localize.door_prior import UNIFORM, DoorPrior
 
 FloatArray = npt.NDArray[np.float64]
 Int16Array = npt.NDArray[np.int16]
@@ -133,7 +137,8 @@ def door_log_likelihood_at_poses(static_dist: npt.ArrayLike, pose: npt.ArrayLike
                                  doors: DoorSet, door_mean: npt.ArrayLike, door_var: npt.ArrayLike,
                                  config: LocalizeConfig, range_max_m: float, backend: Backend = "auto",
                                  extra_var: npt.ArrayLike | None = None,
-                                 unobserved_var: npt.ArrayLike | None = None) -> DoorLikelihood:
+                                 unobserved_var: npt.ArrayLike | None = None,
+                                 prior: DoorPrior = UNIFORM) -> DoorLikelihood:
     """:func:`door_log_likelihood` with the end points given as poses (N, 3) and base_link points (B, 2).
 
     The numba kernel moves the points itself, particle by particle, so no (N, B, 2) array is made (saves
@@ -145,7 +150,8 @@ def door_log_likelihood_at_poses(static_dist: npt.ArrayLike, pose: npt.ArrayLike
     σ_k² = σ_hit² + e + J_k²·P_k, each density keeping its factor σ_hit / σ.
 
     ``unobserved_var`` (D,): a door whose variance for a particle is at least this is weighed under the uniform
-    prior over its range (module docstring); None (or +inf): eq. (6) for every door.
+    prior over its range (module docstring); None (or +inf): eq. (6) for every door. ``prior``: that prior, the
+    uniform one or the closed/open mixture of :mod:`.door_prior`.
 
     Raises:
         ValueError: As :func:`door_log_likelihood`.
@@ -159,14 +165,14 @@ def door_log_likelihood_at_poses(static_dist: npt.ArrayLike, pose: npt.ArrayLike
     if extra is not None and extra.shape != dist.shape:
         raise ValueError(f"extra_var {extra.shape} must be (N, B) = {dist.shape}")
     return _door_log_likelihood(dist, None, poses, base, doors, door_mean, door_var, config, range_max_m, backend,
-                                extra, unobserved_var)
+                                extra, unobserved_var, prior)
 
 
 def _door_log_likelihood(dist: npt.NDArray[np.float32], pts: FloatArray | None, poses: FloatArray | None,
                          base: FloatArray | None, doors: DoorSet, door_mean: npt.ArrayLike, door_var: npt.ArrayLike,
                          config: LocalizeConfig, range_max_m: float, backend: Backend,
                          extra: npt.NDArray[np.float32] | None = None,
-                         unobserved_var: npt.ArrayLike | None = None) -> DoorLikelihood:
+                         unobserved_var: npt.ArrayLike | None = None, prior: DoorPrior = UNIFORM) -> DoorLikelihood:
     """Checks, then the kernel or the reference, then the beam likelihoods."""
     model = _model(config, range_max_m)
     uni = np.full(len(doors), np.inf) if unobserved_var is None else np.ascontiguousarray(
@@ -193,14 +199,15 @@ def _door_log_likelihood(dist: npt.NDArray[np.float32], pts: FloatArray | None, 
                np.ascontiguousarray(doors.closed_yaw, dtype=np.float64), mean, var, model.sigma2, model.max_dist,
                np.zeros((0, 0), dtype=np.float32) if extra is None else extra, extra is not None,
                uni, np.ascontiguousarray(doors.angle_min, dtype=np.float64),
-               np.ascontiguousarray(doors.angle_max, dtype=np.float64), score, assoc)
+               np.ascontiguousarray(doors.angle_max, dtype=np.float64), prior.closed_prob, prior.closed_var,
+               score, assoc)
     else:
         if pts is None:
             assert poses is not None and base is not None
             c, s = np.cos(poses[:, 2, None]), np.sin(poses[:, 2, None])
             pts = np.stack([poses[:, 0, None] + c * base[:, 0] - s * base[:, 1],
                             poses[:, 1, None] + s * base[:, 0] + c * base[:, 1]], axis=-1)
-        score, assoc = _numpy_scores(dist, pts, doors, mean, var, model, extra, uni)
+        score, assoc = _numpy_scores(dist, pts, doors, mean, var, model, extra, uni, prior)
     loglik, pz = _likelihoods(score, model)
     return DoorLikelihood(loglik, assoc, pz)
 
@@ -220,8 +227,8 @@ def _likelihoods(score: npt.NDArray[np.float32], model: _Model) -> tuple[FloatAr
 
 
 def _numpy_scores(dist: npt.NDArray[np.float32], pts: FloatArray, doors: DoorSet, mean: FloatArray, var: FloatArray,
-                  model: _Model, extra: npt.NDArray[np.float32] | None = None, uni: FloatArray | None = None
-                  ) -> tuple[npt.NDArray[np.float32], Int16Array]:
+                  model: _Model, extra: npt.NDArray[np.float32] | None = None, uni: FloatArray | None = None,
+                  prior: DoorPrior = UNIFORM) -> tuple[npt.NDArray[np.float32], Int16Array]:
     """NumPy reference: score −2·log(g/z_hit) of the chosen model and the association, per particle chunk."""
     n, b = dist.shape
     valid = np.isfinite(dist) & np.isfinite(pts).all(axis=2)
@@ -242,7 +249,7 @@ def _numpy_scores(dist: npt.NDArray[np.float32], pts: FloatArray, doors: DoorSet
             s_k = np.where((d_k < model.max_dist) & valid[sl, :, None], s_k, np.inf)
             if uni is not None and np.isfinite(uni[active]).any():
                 s_u = _uniform_scores(np.where(valid[sl, :, None], pts[sl], 0.0)[:, :, None, :], sub,
-                                      s0[sl, :, None], model)
+                                      s0[sl, :, None], model, prior)
                 s_u = np.where(valid[sl, :, None], s_u, np.inf)
                 s_k = np.where((var[sl][:, None, active] >= uni[active]), s_u, s_k)
             best = np.argmin(s_k, axis=2)
@@ -253,8 +260,10 @@ def _numpy_scores(dist: npt.NDArray[np.float32], pts: FloatArray, doors: DoorSet
     return score.astype(np.float32), assoc
 
 
-def _uniform_scores(pts: FloatArray, doors: DoorSet, s0: FloatArray, model: _Model) -> FloatArray:
-    """Score −2·log(g_k) of each door under the uniform prior over its range (module docstring), (..., D).
+def _uniform_scores(pts: FloatArray, doors: DoorSet, s0: FloatArray, model: _Model, prior: DoorPrior = UNIFORM
+                    ) -> FloatArray:
+    """Score −2·log(g_k) of each door under its prior over the range (module docstring: uniform, or the closed /
+    open mixture), (..., D).
 
     ``pts`` (..., 1, 2) end points, ``s0`` (..., 1) each beam's σ² (σ_hit² + e); inf where the leaf cannot come
     within the distance cap.
@@ -272,6 +281,10 @@ def _uniform_scores(pts: FloatArray, doors: DoorSet, s0: FloatArray, model: _Mod
         u_hi, u_lo = (hi - phi) * sq / np.sqrt(2), (lo - phi) * sq / np.sqrt(2)
         frac = np.sqrt(np.pi / 2) / (sq * width) * (_erf(u_hi) - _erf(u_lo))
         frac = np.where(sq * width < 1e-9, 1.0, frac)
+        if prior.closed_prob > 0.0:
+            den = 1.0 + sq**2 * prior.closed_var  # (σ² + c·σ_c²)/σ²
+            closed = np.exp(-0.5 * sq**2 * phi**2 / den) / np.sqrt(den)
+            frac = prior.closed_prob * closed + (1.0 - prior.closed_prob) * frac
         score = dmin2 / s0 + np.log(s0 / model.sigma2) - 2 * np.log(frac)
     return np.where((dmin2 < model.max_dist**2) & (frac > 0), score, np.inf)
 
@@ -282,7 +295,7 @@ _erf = np.vectorize(math.erf, otypes=[np.float64])
 def _score_kernel(dist: npt.NDArray[np.float32], pts: FloatArray, poses: FloatArray, base: FloatArray,
                   from_pose: bool, hinge: FloatArray, length: FloatArray, closed_yaw: FloatArray, mean: FloatArray,
                   var: FloatArray, sigma2: float, max_dist: float, extra: npt.NDArray[np.float32], has_extra: bool,
-                  uni: FloatArray, lo: FloatArray, hi: FloatArray,
+                  uni: FloatArray, lo: FloatArray, hi: FloatArray, closed_prob: float, closed_var: float,
                   score: npt.NDArray[np.float32], assoc: Int16Array) -> None:  # pragma: no cover - numba
     """Numba kernel: per particle, its end points (from ``pts``, or ``poses`` ⊕ ``base``), the doors in reach of
     their bounding box, and per beam the model with the lowest score (static on ties; doors in index order).
@@ -292,8 +305,9 @@ def _score_kernel(dist: npt.NDArray[np.float32], pts: FloatArray, poses: FloatAr
     beams in a branch-free loop (vectorizable); only the flagged pairs get the distance, and the logarithm
     only if d_k²/σ_k² alone does not already lose. With ``has_extra`` every model's σ² of beam m also gets
     ``extra[i, m]`` (the bound above stays valid: it only grows σ₀², and the log term it adds to the static
-    score is at most the door's). A door with ``var[i, k] ≥ uni[k]`` takes the uniform-prior score instead (module
-    docstring); the same bound holds for it (d_min ≥ |p − h| − L, and −2·log A ≥ 0).
+    score is at most the door's). A door with ``var[i, k] ≥ uni[k]`` takes the prior's score instead (module docstring:
+    uniform, or the mixture with ``closed_prob`` > 0); the same bound holds for it (d_min ≥ |p − h| − L, and
+    −2·log A ≥ 0: A ≤ 1 for either component).
     """
     n, b = dist.shape
     n_doors = length.shape[0]
@@ -378,6 +392,10 @@ def _score_kernel(dist: npt.NDArray[np.float32], pts: FloatArray, poses: FloatAr
                         u_hi = (hi[k] - phi) * sq / math.sqrt(2.0)
                         u_lo = (lo[k] - phi) * sq / math.sqrt(2.0)
                         frac = math.sqrt(math.pi / 2.0) / (sq * width) * (math.erf(u_hi) - math.erf(u_lo))
+                    if closed_prob > 0.0:
+                        den = 1.0 + sq * sq * closed_var
+                        frac = (closed_prob * math.exp(-0.5 * sq * sq * phi * phi / den) / math.sqrt(den)
+                                + (1.0 - closed_prob) * frac)
                     if frac <= 0.0:
                         continue
                     cand = ratio + math.log(s0[m] / sigma2) - 2.0 * math.log(frac)

@@ -50,11 +50,13 @@ PAIR_CHUNK_ELEMENTS = 1 << 19  # (particle, pair) elements per chunk in associat
 
 
 class DoorUpdate(NamedTuple):
-    """New door means and variances (N, D), and which doors each particle observed (N, D)."""
+    """New door means and variances (N, D), which doors each particle observed (N, D), and the measured angles
+    (N, D; rad, 0 where not observed)."""
 
     mean: FloatArray
     var: FloatArray
     observed: BoolArray
+    angle: FloatArray
 
 
 # --------------------------------------------------------------------------------------------- polygon
@@ -556,7 +558,7 @@ def update_doors(points_base: npt.ArrayLike, particles: ParticleSet, doors: Door
         backend: ``numba``, ``numpy`` or ``auto`` for the polygon and the association.
 
     Returns:
-        :class:`DoorUpdate` with the new (N, D) means and variances and the observed mask.
+        :class:`DoorUpdate` with the new (N, D) means and variances, the observed mask and the measured angles.
     """
     gap = config.dp_max_gap_m if max_gap_m is None else max_gap_m
     margin = math.radians(config.door_angle_margin_deg) if angle_margin_rad is None else angle_margin_rad
@@ -565,4 +567,4 @@ def update_doors(points_base: npt.ArrayLike, particles: ParticleSet, doors: Door
                                      angle_margin_rad=margin, backend=backend)
     meas_var = math.radians(config.door_angle_sigma_deg) ** 2
     mean, var = kalman_update(particles.door_mean, particles.door_var, angle, mask, meas_var)
-    return DoorUpdate(mean, var, mask)
+    return DoorUpdate(mean, var, mask, angle)

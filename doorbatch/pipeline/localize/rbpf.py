@@ -10,7 +10,8 @@ methods differ only in the map model)::
                     cloud converges, the same smoothed over each particle's pose region and applied in
                     tempered stages (:mod:`.smoothing`, mcl.tempered_weighting; ``global_door_term`` false:
                     the static model alone, as MCL; true: each particle's door update of this scan first and
-                    the beams under its result, :func:`door_update_log_factor`); once converged, beams that
+                    the beams under its result, :func:`door_update_log_factor`, a door not yet observed under
+                    the closed/open prior of :mod:`.door_prior`); once converged, beams that
                     most of the weight explains by neither are skipped (Nav2's do_beamskip,
                     likelihood_field.skip_unexplained), as MCL does; with ``tracking_door_prior`` a door the
                     particle has not observed is weighed under its prior over the range, as while global
@@ -34,6 +35,7 @@ from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.maps import DoorSet
 from doorbatch.pipeline.localize.door_likelihood import STATIC, door_log_likelihood_at_poses
 from doorbatch.pipeline.localize.door_observation import DoorUpdate, predict_doors, update_doors
+from doorbatch.pipeline.localize.door_prior import DoorPrior, log_evidence, posterior, unobserved_door_variance
 from doorbatch.pipeline.localize.likelihood_field import (
     BeamCombination,
     BeamSet,
@@ -111,11 +113,7 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
 
         def region(p: ParticleSet, h: Bandwidth) -> npt.NDArray[np.float64]:
             if n_doors and spread.global_door_term:
-                # the door update first, then the beams under the updated doors (door_update_log_factor)
-                update = update_doors(scan_points_base, p, doors, spread)
-                posterior = replace(p, door_mean=update.mean, door_var=update.var)
-                return (door_region_log_likelihood(posterior, h, beams, field, doors, spread, combination)
-                        + door_update_log_factor(p, update, doors, spread))
+                return global_door_log_likelihood(p, h, beams, scan_points_base, field, doors, spread, combination)
             return region_log_likelihood(p, h, beams, field, spread, combination)
 
         particles, log_avg, bandwidth = tempered_weighting(particles, region, spread, rng)
@@ -125,7 +123,8 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
             unobserved = unobserved_door_variance(doors, config) if config.tracking_door_prior else None
             pz = door_log_likelihood_at_poses(static, particles.pose, beams.points_base, doors, particles.door_mean,
                                               particles.door_var, config, beams.range_max_m,
-                                              unobserved_var=unobserved).beam_likelihood
+                                              unobserved_var=unobserved,
+                                              prior=DoorPrior.from_config(config)).beam_likelihood
         else:
             pz = beam_likelihood(static, config.z_hit, config.z_rand, config.sigma_hit, beams.range_max_m)
         pz, _ = skip_unexplained(pz, particles.weight, particles.pose, config, beams.range_max_m, combination)
@@ -134,7 +133,10 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
 
     observed = none
     if n_doors:
-        update = update_doors(scan_points_base, particles, doors, config)
+        if global_phase and spread.global_door_term:
+            update = global_door_update(scan_points_base, particles, doors, config)
+        else:
+            update = update_doors(scan_points_base, particles, doors, config)
         particles = replace(particles, door_mean=update.mean, door_var=update.var)
         observed = np.asarray(update.observed.any(axis=0), dtype=bool)
         if spread.global_door_term if global_phase else config.tracking_door_prior:
@@ -143,6 +145,20 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
 
     new_state, diag = finish_step(state, particles, log_avg, odom, config, rng, free, bandwidth)
     return new_state, diag, observed
+
+
+def global_door_log_likelihood(particles: ParticleSet, bandwidth: Bandwidth, beams: BeamSet,
+                               scan_points_base: npt.ArrayLike, field: DistanceField, doors: DoorSet,
+                               config: LocalizeConfig, combination: BeamCombination) -> npt.NDArray[np.float64]:
+    """log p(z | region) (N,) of a global cloud with the door term (``global_door_term``): the door update of this
+    scan first, under the doors' prior (:func:`global_door_update`), then the beams under the updated doors
+    (:func:`door_region_log_likelihood`) plus the update's evidence factor (:func:`door_update_log_factor`)."""
+    update = global_door_update(scan_points_base, particles, doors, config)
+    posterior = replace(particles, door_mean=update.mean, door_var=update.var)
+    out: npt.NDArray[np.float64] = (door_region_log_likelihood(posterior, bandwidth, beams, field, doors, config,
+                                                               combination)
+                                    + door_update_log_factor(particles, update, doors, config))
+    return out
 
 
 def door_region_log_likelihood(particles: ParticleSet, bandwidth: Bandwidth, beams: BeamSet, field: DistanceField,
@@ -155,14 +171,16 @@ def door_region_log_likelihood(particles: ParticleSet, bandwidth: Bandwidth, bea
     out again (the door's own factor √((σ_hit² + e_b)/σ_k²) stays) and the pose region's one volume factor
     (:func:`~.smoothing.pose_volume_log_factor`) is added, from the beams the static map explains (a beam on a
     door leaf is left out of the pose information: expert choice, its Jacobian is not at hand; this errs on the
-    side of a wider region). A door the particle has not observed (:func:`unobserved_door_variance`) is weighed
-    under its uniform prior over the opening range, not linearized at its mean (:mod:`.door_likelihood`).
+    side of a wider region). A door the particle has not observed (:func:`~.door_prior.unobserved_door_variance`)
+    is weighed under its prior (:mod:`.door_prior`: closed or uniformly open), not linearized at its mean
+    (:mod:`.door_likelihood`).
     """
     extra = endpoint_variance(bandwidth, beams.points_base)
     static = endpoint_distances(field, particles.pose, beams.points_base)
     dl = door_log_likelihood_at_poses(static, particles.pose, beams.points_base, doors, particles.door_mean,
                                       particles.door_var, config, beams.range_max_m, extra_var=extra,
-                                      unobserved_var=unobserved_door_variance(doors, config))
+                                      unobserved_var=unobserved_door_variance(doors, config),
+                                      prior=DoorPrior.from_config(config))
     if not pose_volume_applies(config, combination):
         return combine_beams(dl.beam_likelihood, combination)
     rand = np.float32(config.z_rand / beams.range_max_m)
@@ -175,17 +193,22 @@ def door_region_log_likelihood(particles: ParticleSet, bandwidth: Bandwidth, bea
     return out
 
 
-def unobserved_door_variance(doors: DoorSet, config: LocalizeConfig) -> npt.NDArray[np.float64]:
-    """(D,) the variance from which on a particle's door counts as not yet observed: the uniform prior's over
-    the door's range, Δ²/12 (the Gaussian that moment-matches it), or the start / cap variance
-    ``door_init_sigma_deg``² when that is smaller (the random walk never lets a door exceed it).
-
-    A tracked or mid-range start is at or above it until the door update has seen the door; a door unseen for
-    long returns to it through the random walk (its angle is then as unknown as at the start).
-    """
-    width = np.asarray(doors.angle_max, dtype=np.float64) - np.asarray(doors.angle_min, dtype=np.float64)
-    out: npt.NDArray[np.float64] = np.minimum(width**2 / 12.0, math.radians(config.door_init_sigma_deg) ** 2)
-    return out
+def global_door_update(points_base: npt.ArrayLike, particles: ParticleSet, doors: DoorSet, config: LocalizeConfig
+                       ) -> DoorUpdate:
+    """The polygon's door update (:func:`~.door_observation.update_doors`) with each door a particle has not yet
+    observed updated under the global phase's prior (:mod:`.door_prior`: closed or uniformly open; the posterior
+    component picked by its evidence and moment-matched into the particle's Gaussian) instead of under the
+    particle's mid-range Gaussian; doors already observed keep their Kalman update."""
+    update = update_doors(points_base, particles, doors, config)
+    at_prior = update.observed & (particles.door_var >= unobserved_door_variance(doors, config))
+    if not at_prior.any():
+        return update
+    i, k = np.nonzero(at_prior)
+    meas_var = math.radians(config.door_angle_sigma_deg) ** 2
+    mean, var = update.mean.copy(), update.var.copy()
+    mean[i, k], var[i, k] = posterior(update.angle[i, k], meas_var, doors.angle_min[k], doors.angle_max[k],
+                                      DoorPrior.from_config(config))
+    return update._replace(mean=mean, var=var)
 
 
 def door_update_log_factor(prior: ParticleSet, update: DoorUpdate, doors: DoorSet, config: LocalizeConfig
@@ -195,23 +218,30 @@ def door_update_log_factor(prior: ParticleSet, update: DoorUpdate, doors: DoorSe
     The importance weight is p(z | x) = ∫ p(z | x, a) p(a) da over the door angles a. Weighing the beams at the
     prior (FastSLAM's order, eq. (6)) marginalizes every beam on a leaf separately, so K beams on one leaf pay
     the prior's spread K times; while the pose is global each particle's prior is the whole opening range and
-    the true pose pays for every closed leaf it has not yet observed. The Laplace identity at the door update's
-    posterior mean a⁺ (variance P⁺) counts it once: p(z | x) = p(z | x, a⁺)·p(a⁺)·√(2π·P⁺). So the beams are
-    weighed under the updated doors and each door the update observed adds log p(a⁺) + ½·log(2π·P⁺):
-    for a door still at its prior (:func:`unobserved_door_variance`) the uniform density 1/Δ over its range
-    (the measured angle is inside it by the association's gate; the term is at most 0), else the Gaussian prior
-    N(a⁺; μ, P), i.e.
-    −½·(a⁺ − μ)²/P + ½·log(P⁺/P). A door not observed adds nothing (a⁺ = μ, P⁺ = P).
+    the true pose pays for every closed leaf it has not yet observed. Counted once instead: the beams are
+    weighed under the updated doors (a⁺, P⁺), which stand in for the measurement's likelihood at the posterior
+    mean N(z; a⁺, R), and each door the update observed adds log p(z) − log N(z; a⁺, R), p(z) the measurement's
+    evidence under the door's prior. For a door at a Gaussian prior N(μ, P) that is the Laplace identity,
+    exact here: log N(a⁺; μ, P) + ½·log(2π·P⁺) = −½·(a⁺ − μ)²/P + ½·log(P⁺/P). For a door still at its prior
+    (:func:`~.door_prior.unobserved_door_variance`) p(z) is the closed/open mixture's evidence
+    (:func:`~.door_prior.log_evidence`; a⁺ its moment-matched posterior mean, :func:`global_door_update`); p(z)
+    is at most N(z; z, R), and for ranges of 0.1° to 100° and measurements within the association's ±10° gate
+    the factor stays ≤ −0.08 nats, so a door whose range is narrower than the measurement (the built map's
+    never-moved doors) earns nothing. A door not observed adds nothing (a⁺ = μ, P⁺ = P).
     """
     mu, var = prior.door_mean, prior.door_var
-    width = np.asarray(doors.angle_max, dtype=np.float64) - np.asarray(doors.angle_min, dtype=np.float64)
     post_var = np.maximum(update.var, 1e-12)
-    # capped at 0: a range narrower than the measurement (√(2π·P⁺) > Δ, e.g. a never-moved door's) is no wider a
-    # prior than the posterior, so the observation costs nothing (the density 1/Δ would otherwise reward it)
-    uniform = np.minimum(-np.log(width) + 0.5 * np.log(2 * math.pi * post_var), 0.0)
+    meas_var = math.radians(config.door_angle_sigma_deg) ** 2
     gaussian = -0.5 * (update.mean - mu) ** 2 / var + 0.5 * np.log(post_var / var)
-    term = np.where(var >= unobserved_door_variance(doors, config), uniform, gaussian)
-    out: npt.NDArray[np.float64] = np.where(update.observed, term, 0.0).sum(axis=1)
+    at_prior = update.observed & (var >= unobserved_door_variance(doors, config))
+    term = np.where(update.observed, gaussian, 0.0)
+    if at_prior.any():
+        i, k = np.nonzero(at_prior)
+        z = update.angle[i, k]
+        evidence = log_evidence(z, meas_var, doors.angle_min[k], doors.angle_max[k], DoorPrior.from_config(config))
+        at_post = -0.5 * (z - update.mean[i, k]) ** 2 / meas_var - 0.5 * math.log(2 * math.pi * meas_var)
+        term[i, k] = evidence - at_post
+    out: npt.NDArray[np.float64] = term.sum(axis=1)
     return out
 
 
@@ -220,15 +250,18 @@ def condition_doors_on_beams(particles: ParticleSet, beams: BeamSet, field: Dist
                              ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """Each particle's doors conditioned on the beams that their leaves explain (global phase, door term on).
 
-    A beam explained by door k (:mod:`.door_likelihood`: under the uniform prior while the door is unobserved,
+    A beam explained by door k (:mod:`.door_likelihood`: under the door prior while the door is unobserved,
     eq. (6) after) says where the leaf is: its end point at distance r from the hinge, in direction φ, puts the
-    angle at φ with variance σ_hit²/c (c = r² on the leaf's disc, r·L beyond it; the quadratic that the uniform
+    angle at φ with variance σ_hit²/c (c = r² on the leaf's disc, r·L beyond it; the quadratic that the prior's
     marginal integrates). Without this, a door the Douglas–Peucker update cannot see (a closed leaf 10 m down
     a corridor is a few sparse points) is marginalized afresh at every scan and its beams pay the prior's
     spread again and again, which the joint likelihood p(z_1..t | x) does not (expert choice; the paper's
     door update uses the polygon only). The beams were weighed under the prior (FastSLAM's order), so this is
-    the matching posterior; the beams of a door are combined with the prior by information (product of
-    Gaussians). Doors in ``skip`` (N, D) (the polygon's update of this scan observed them) are left alone.
+    the matching posterior. The beams of a door combine by information into one measurement z = Σ c_b·φ_b / Σ c_b
+    with variance σ_hit²/Σ c_b; a door still at its prior (:func:`~.door_prior.unobserved_door_variance`) takes
+    it under the closed/open mixture (:func:`~.door_prior.posterior`, moment-matched), a door already observed
+    under its Gaussian (product of Gaussians). Doors in ``skip`` (N, D) (the polygon's update of this scan
+    observed them) are left alone.
 
     Returns:
         (N, D) means and variances.
@@ -239,8 +272,9 @@ def condition_doors_on_beams(particles: ParticleSet, beams: BeamSet, field: Dist
     if not unobserved.any():
         return mean, var
     static = endpoint_distances(field, particles.pose, beams.points_base)
+    prior = DoorPrior.from_config(config)
     dl = door_log_likelihood_at_poses(static, particles.pose, beams.points_base, doors, mean, var, config,
-                                      beams.range_max_m, unobserved_var=thr)
+                                      beams.range_max_m, unobserved_var=thr, prior=prior)
     i, b = np.nonzero(dl.association >= 0)
     k = dl.association[i, b].astype(np.intp)
     keep = unobserved[i, k]
@@ -263,5 +297,10 @@ def condition_doors_on_beams(particles: ParticleSet, beams: BeamSet, field: Dist
     phi_sum = np.bincount(flat, weights=info * phi, minlength=n * d).reshape(n, d)
     hit = info_sum > 0
     post_var = np.where(hit, 1.0 / (1.0 / var + info_sum), var)
-    mean = np.where(hit, post_var * (mean / var + phi_sum), mean)
-    return mean, post_var
+    post_mean = np.where(hit, post_var * (mean / var + phi_sum), mean)
+    at_prior = hit & (var >= thr)
+    if at_prior.any():
+        i, k = np.nonzero(at_prior)
+        post_mean[i, k], post_var[i, k] = posterior(phi_sum[i, k] / info_sum[i, k], 1.0 / info_sum[i, k],
+                                                    doors.angle_min[k], doors.angle_max[k], prior)
+    return post_mean, post_var

@@ -15,6 +15,7 @@ from doorbatch.pipeline.localize.door_likelihood import (
     door_log_likelihood_at_poses,
     numba_available,
 )
+from doorbatch.pipeline.localize.door_prior import DoorPrior
 
 FloatArray = npt.NDArray[np.float64]
 CONFIG = LocalizeConfig(z_hit=0.95, z_rand=0.05)  # a sharp mixture: the ranking margins below are in nats
@@ -244,5 +245,60 @@ def test_uniform_prior_backends_agree() -> None:
     var = np.where(rng.random((50, 1)) < 0.5, 0.3, 0.01)
     out = [door_log_likelihood_at_poses(dist, pose, base, DOOR, mean, var, CONFIG, RANGE_MAX, backend=b,
                                         unobserved_var=np.array([0.2])) for b in ("numpy", "numba")]
+    np.testing.assert_array_equal(out[0].association, out[1].association)
+    np.testing.assert_allclose(out[0].log_likelihood, out[1].log_likelihood, rtol=1e-4, atol=1e-4)
+
+
+def _leaf_pz(point: FloatArray, angles: FloatArray) -> FloatArray:
+    """The endpoint model's hit density exp(−d²/2σ²) of the leaf at each angle (DOOR's geometry)."""
+    tip = DOOR.length[0] * np.stack([np.cos(angles), np.sin(angles)], axis=1)
+    t = np.clip(tip @ point / DOOR.length[0] ** 2, 0.0, 1.0)
+    d = np.hypot(*(point - t[:, None] * tip).T)
+    return np.asarray(np.exp(-d**2 / (2 * SIGMA**2)), dtype=np.float64)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_unobserved_door_under_the_closed_open_mixture_matches_its_quadrature(backend: str) -> None:
+    # The global phase's prior (door_prior.py): closed N(0, σ_c²) with p_c, else uniform over [0, 90°]. End points
+    # on the closed leaf, on a leaf 3° open, on one 57° open, and beyond the tip: each beam's closed-form density
+    # must be the quadrature of the endpoint model over the mixture within a few percent (the quadratic expansion
+    # of d(a) is the only approximation), and the closed leaf must gain against the uniform prior.
+    prior = DoorPrior(0.5, math.radians(2.0) ** 2)
+    points = np.array([[0.5, 0.0], [0.6 * math.cos(0.05), 0.6 * math.sin(0.05)],
+                       [0.4 * math.cos(1.0), 0.4 * math.sin(1.0)], [0.0, 1.0]])
+    mean = np.array([[math.pi / 4]])
+    var = np.array([[(math.pi / 2) ** 2 / 12]])
+    dist = wall_distance(points[None])
+    res = door_log_likelihood_at_poses(dist, np.zeros((1, 3)), points, DOOR, mean, var, CONFIG, RANGE_MAX,
+                                       backend=backend, unobserved_var=var[0], prior=prior)
+    np.testing.assert_array_equal(res.association[0], [0, 0, 0, 0])
+    sc = math.sqrt(prior.closed_var)
+    a_closed = np.linspace(-8 * sc, 8 * sc, 4001)
+    w_closed = np.exp(-0.5 * a_closed**2 / prior.closed_var)
+    w_closed /= w_closed.sum()
+    want = [CONFIG.z_hit * (prior.closed_prob * float(w_closed @ _leaf_pz(p, a_closed))
+                            + (1 - prior.closed_prob) * (_uniform_prior_pz(p) - RAND) / CONFIG.z_hit) + RAND
+            for p in points]
+    np.testing.assert_allclose(res.beam_likelihood[0], want, rtol=0.05)
+    uniform = door_log_likelihood_at_poses(dist, np.zeros((1, 3)), points, DOOR, mean, var, CONFIG, RANGE_MAX,
+                                           backend=backend, unobserved_var=var[0])
+    assert res.beam_likelihood[0, 0] > 2.0 * uniform.beam_likelihood[0, 0]
+
+
+def test_mixture_prior_backends_agree() -> None:
+    if not numba_available():
+        pytest.skip("no numba")
+    rng = np.random.default_rng(4)
+    pose = np.column_stack([rng.uniform(-0.5, 0.5, (50, 2)), rng.uniform(-0.3, 0.3, 50)])
+    base = rng.uniform(-1.5, 1.5, (40, 2))
+    c, s = np.cos(pose[:, 2, None]), np.sin(pose[:, 2, None])
+    pts = np.stack([pose[:, 0, None] + c * base[:, 0] - s * base[:, 1],
+                    pose[:, 1, None] + s * base[:, 0] + c * base[:, 1]], axis=-1)
+    dist = wall_distance(pts)
+    mean = rng.uniform(0.0, math.pi / 2, (50, 1))
+    var = np.where(rng.random((50, 1)) < 0.5, 0.3, 0.01)
+    prior = DoorPrior(0.3, math.radians(3.0) ** 2)
+    out = [door_log_likelihood_at_poses(dist, pose, base, DOOR, mean, var, CONFIG, RANGE_MAX, backend=b,
+                                        unobserved_var=np.array([0.2]), prior=prior) for b in ("numpy", "numba")]
     np.testing.assert_array_equal(out[0].association, out[1].association)
     np.testing.assert_allclose(out[0].log_likelihood, out[1].log_likelihood, rtol=1e-4, atol=1e-4)

@@ -124,9 +124,10 @@ def test_beam_skipping_keeps_the_corrective_beams_of_a_wide_predicted_cloud() ->
 
 
 def _step_with_door_mean(particles_pose: FloatArray, door_deg: float, global_door_term: bool = True,
-                         door_std_deg: float | None = None) -> FloatArray:
+                         door_std_deg: float = 10.0) -> FloatArray:
     """Poses and weights after one forced RBPF update of the corridor scan at x = 6 m, every particle holding
-    each door at ``door_deg`` (std ``door_std_deg``, default the start's 30°)."""
+    each door at ``door_deg`` (std ``door_std_deg``: 10° is an observed door, as a sampled global start's; 30° is
+    at the prior, door_prior.unobserved_door_variance)."""
     world, static, doors = corridor()
     field = build_distance_field(rasterize(static, (-1.0, 16.0), (0.0, 2.4), margin=RES * 4), 2.0)
     truth = np.array([6.0, 1.5, 0.0])
@@ -139,7 +140,7 @@ def _step_with_door_mean(particles_pose: FloatArray, door_deg: float, global_doo
     pts = np.stack([LASER_X + r[hit] * np.cos(a[hit]), r[hit] * np.sin(a[hit])], axis=1)
     n, d = len(particles_pose), len(doors)
     particles = ParticleSet(particles_pose, np.full(n, 1.0 / n), np.full((n, d), math.radians(door_deg)),
-                            np.full((n, d), math.radians(door_std_deg or config.door_init_sigma_deg) ** 2))
+                            np.full((n, d), math.radians(door_std_deg) ** 2))
     state, _, _ = rbpf_step(MclState(particles, global_start=True), truth, 0.0, None, beams, pts, field, doors, config,
                             np.random.default_rng(1), force=True)
     return np.column_stack([state.particles.pose, state.particles.weight])  # resampled or not
@@ -148,15 +149,19 @@ def _step_with_door_mean(particles_pose: FloatArray, door_deg: float, global_doo
 def test_global_door_term_switch() -> None:
     """With ``global_door_term`` off the weights of a global cloud are the static model's and do not depend on the
     door angles; with it on (eq. (6) over each particle's region), and in a converged cloud either way, they
-    do (the leaves at 50° explain beams that a closed-door estimate cannot) once the doors have been observed
-    (std 5°; a door still at its start's 30° is weighed under its prior over the range, ``tracking_door_prior``)."""
+    do (the leaves at 50° explain beams that a closed-door estimate cannot). A door still at its prior variance is
+    weighed and updated under the prior (door_prior.py; in tracking too, ``tracking_door_prior``), so its mean,
+    which then says nothing, does not matter."""
     rng = np.random.default_rng(2)
     spread = np.stack([rng.uniform(0.0, 14.0, 400), rng.uniform(0.3, 2.1, 400), rng.uniform(-3.1, 3.1, 400)], axis=1)
     np.testing.assert_array_equal(_step_with_door_mean(spread, 50.0, False), _step_with_door_mean(spread, 0.0, False))
     assert not np.allclose(_step_with_door_mean(spread, 50.0), _step_with_door_mean(spread, 0.0))
+    np.testing.assert_array_equal(_step_with_door_mean(spread, 50.0, door_std_deg=30.0),
+                                  _step_with_door_mean(spread, 0.0, door_std_deg=30.0))
     tight = np.array([6.0, 1.5, 0.0]) + rng.normal(0.0, [0.03, 0.03, 0.01], (400, 3))
-    assert not np.allclose(_step_with_door_mean(tight, 50.0, False, 5.0), _step_with_door_mean(tight, 0.0, False, 5.0))
-    np.testing.assert_array_equal(_step_with_door_mean(tight, 50.0, False), _step_with_door_mean(tight, 0.0, False))
+    assert not np.allclose(_step_with_door_mean(tight, 50.0, False), _step_with_door_mean(tight, 0.0, False))
+    np.testing.assert_array_equal(_step_with_door_mean(tight, 50.0, False, 30.0),
+                                  _step_with_door_mean(tight, 0.0, False, 30.0))
 
 
 def test_global_start_draws_each_particles_door_angles_from_the_range() -> None:
