@@ -3,8 +3,7 @@
 While the pose is global (``global_door_term``), and in tracking (``tracking_door_prior``), a particle's door
 that no observation has reached yet is weighed under a prior over its angle a (relative to closed_yaw, range
 [lo, hi] of width Δ, which holds the closed angle 0: ``door_geometry.with_closed_in_range``), not under the
-particle's one Gaussian. Doors are mostly either shut or
-standing open at some angle, so the prior is the mixture
+particle's one Gaussian. Doors are mostly either shut or standing open at some angle, so the prior is the mixture
 
     p(a) = p_c·N(a; 0, σ_c²) + (1 − p_c)·U(a; lo, hi)
 
