@@ -384,19 +384,20 @@ class LocalizeConfig(Section):
     # alone. Off: measured at 10,000 particles, seeds 0-9, it changed no closed-door run and partial doors by one
     # seed each way (truth map 90 -> 100 %, em map 100 -> 90 %; docs/results.md, global localization).
     global_door_term: bool = False
-    # The door-angle prior a door is weighed under until the particle observes it (global door term, and
-    # tracking with tracking_door_prior): closed (a Gaussian of
-    # std door_prior_closed_sigma_deg at the map's closed direction) with probability door_prior_closed_prob,
+    # ... and the door-angle prior it weighs a door under until the door is observed: closed (a Gaussian of
+    # std global_door_closed_sigma_deg at the map's closed direction) with probability global_door_closed_prob,
     # else uniform over the opening range (pipeline/localize/door_prior.py). 0.5: two states, no preference
     # (doors.parquet records no per-pass door states to learn it from); 0 is the uniform prior of branch loc5.
-    door_prior_closed_prob: float = Field(0.5, ge=0.0, le=1.0)
+    global_door_closed_prob: float = Field(0.5, ge=0.0, le=1.0)
     # 2 deg: the em/grid maps' closed_yaw error (RBPF door errors 0.4-1.7 deg when tracking) plus a latch's play.
-    door_prior_closed_sigma_deg: float = Field(2.0, gt=0.0)
+    global_door_closed_sigma_deg: float = Field(2.0, gt=0.0)
     # Tracking (and a converged cloud): a door a particle has not observed (variance at its prior's) is weighed
-    # under the door prior above and conditioned on the beams its leaf explains, as while global
+    # under the uniform prior over its range and conditioned on the beams its leaf explains, as while global
     # with the door term; false: eq. (6) linearized at the mean for every door (the paper's letter). Linearized
     # at a mid-range mean, a closed leaf's beams pull every particle towards the hinge, scan after scan: on the
     # sample's closed log the RBPF trailed the truth by 0.05-0.13 m along the corridor (docs/results.md).
+    # Uniform, not the global phase's closed/open mixture: with the mixture, tracking on the sample was worse in
+    # 5 of 6 closed/open runs (closed 0.038-0.081 m against 0.039-0.056 m; docs/results.md).
     tracking_door_prior: bool = True
     converged_xy_std_m: float = Field(0.3, gt=0.0)
     converged_yaw_std_deg: float = Field(10.0, gt=0.0)

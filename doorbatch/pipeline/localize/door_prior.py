@@ -1,14 +1,15 @@
-"""The RBPF's door-angle prior for a door a particle has not observed: closed or somewhere open.
+"""The door-angle prior of the RBPF's global phase: a door is closed or somewhere open.
 
-While the pose is global (``global_door_term``), and in tracking (``tracking_door_prior``), a particle's door
-that no observation has reached yet is weighed under a prior over its angle a (relative to closed_yaw, range
-[lo, hi] of width Δ, which holds the closed angle 0: ``door_geometry.with_closed_in_range``), not under the
-particle's one Gaussian. Doors are mostly either shut or standing open at some angle, so the prior is the mixture
+While the pose is global (``global_door_term``), a particle's door that no observation has reached yet is
+weighed under a prior over its angle a (relative to closed_yaw, range [lo, hi] of width Δ, which holds the
+closed angle 0: ``door_geometry.with_closed_in_range``), not under the particle's one Gaussian. Doors are mostly
+either shut or standing open at some angle, so the prior is the mixture
 
     p(a) = p_c·N(a; 0, σ_c²) + (1 − p_c)·U(a; lo, hi)
 
-(``door_prior_closed_prob`` p_c, ``door_prior_closed_sigma_deg`` σ_c: the closed leaf's spread about the map's
-closed direction). p_c = 0 is the uniform prior of branch loc5. The paper gives no prior for the global phase.
+(``global_door_closed_prob`` p_c, ``global_door_closed_sigma_deg`` σ_c: the closed leaf's spread about the map's
+closed direction). p_c = 0 is the uniform prior of branch loc5, which tracking uses (``tracking_door_prior``). The
+paper gives no prior for the global phase.
 
 For a linear-Gaussian angle measurement z ~ N(a, R) (the Douglas–Peucker leaf, or the beams on a leaf combined:
 ``rbpf.condition_doors_on_beams``) both the evidence and the posterior are in closed form:
@@ -48,8 +49,8 @@ class DoorPrior:
 
     @classmethod
     def from_config(cls, config: LocalizeConfig) -> DoorPrior:
-        """``door_prior_closed_prob`` and ``door_prior_closed_sigma_deg``² (in rad²)."""
-        return cls(config.door_prior_closed_prob, math.radians(config.door_prior_closed_sigma_deg) ** 2)
+        """``global_door_closed_prob`` and ``global_door_closed_sigma_deg``² (in rad²)."""
+        return cls(config.global_door_closed_prob, math.radians(config.global_door_closed_sigma_deg) ** 2)
 
 
 UNIFORM = DoorPrior(0.0, 0.0)

@@ -66,7 +66,7 @@ def test_door_update_factor_of_a_door_at_its_prior_is_the_mixture_evidence() -> 
     """A door still at its prior (closed with p_c, else uniform over [0, 90°]) measured at z ~ N(a, R): the
     factor plus the measurement's likelihood at the posterior mean must be the exact evidence of z under the
     mixture, whether z says closed, ajar, open or a little outside the range; with p_c = 0 the uniform's."""
-    config = LocalizeConfig(door_prior_closed_prob=0.5, door_prior_closed_sigma_deg=2.0)
+    config = LocalizeConfig(global_door_closed_prob=0.5, global_door_closed_sigma_deg=2.0)
     prior = DoorPrior.from_config(config)
     meas_var = math.radians(config.door_angle_sigma_deg) ** 2
     z = np.radians([[0.0, 2.0, -4.0], [8.0, 45.0, 95.0]])
@@ -74,7 +74,7 @@ def test_door_update_factor_of_a_door_at_its_prior_is_the_mixture_evidence() -> 
     flat = ParticleSet(np.zeros((2, 3)), np.full(2, 0.5), np.full((2, 3), math.pi / 4),
                        np.full((2, 3), unobserved_door_variance(DOORS, config)))
     for p in (prior, UNIFORM):
-        cfg = config.model_copy(update={"door_prior_closed_prob": p.closed_prob})
+        cfg = config.model_copy(update={"global_door_closed_prob": p.closed_prob})
         mean, var = posterior(z, meas_var, 0.0, math.pi / 2, p)
         factor = door_update_log_factor(flat, DoorUpdate(mean, var, observed, z), DOORS, cfg)
         at_post = np.where(observed, _log_normal(z, mean, np.full_like(z, meas_var)), 0.0).sum(axis=1)
@@ -84,7 +84,7 @@ def test_door_update_factor_of_a_door_at_its_prior_is_the_mixture_evidence() -> 
     # observing a door closed costs about log 2 under the mixture (−0.83 nats), ~2 nats more under the uniform
     only_closed = np.array([[True, False, False]] * 2)
     cost = [door_update_log_factor(flat, DoorUpdate(*posterior(z, meas_var, 0.0, math.pi / 2, p), only_closed, z),
-                                   DOORS, config.model_copy(update={"door_prior_closed_prob": p.closed_prob}))[0]
+                                   DOORS, config.model_copy(update={"global_door_closed_prob": p.closed_prob}))[0]
             for p in (prior, UNIFORM)]
     assert -1.0 < cost[0] < -0.5 and cost[1] < cost[0] - 1.5
 
@@ -134,10 +134,15 @@ def test_beams_on_a_closed_leaf_condition_the_unobserved_door_to_closed() -> Non
     skip = np.zeros((n, 3), dtype=bool)
     skip[3, 1] = True  # particle 3's polygon update observed door 1 in this scan
     particles = ParticleSet(np.tile(truth, (n, 1)), np.full(n, 1.0 / n), mean, var)
-    new_mean, new_var = condition_doors_on_beams(particles, beams, field, DOORS, config, skip=skip)
+    new_mean, new_var = condition_doors_on_beams(particles, beams, field, DOORS, config, DoorPrior.from_config(config),
+                                                 skip=skip)
     assert np.all(np.abs(new_mean[:3, :2]) < math.radians(5.0))
     assert np.all(new_var[:3, :2] < thr[:2])
     np.testing.assert_array_equal(new_mean[:, 2], mean[:, 2])
+    # tracking (no prior: each door's own Gaussian) puts the closed leaves near closed as well
+    own_mean, own_var = condition_doors_on_beams(particles, beams, field, DOORS, config, skip=skip)
+    assert np.all(np.abs(own_mean[:3, :2]) < math.radians(5.0))
+    assert np.all(own_var[:3, :2] < thr[:2])
     np.testing.assert_array_equal(new_var[:, 2], var[:, 2])
     assert new_mean[3, 1] == mean[3, 1] and new_var[3, 1] == var[3, 1]
 
@@ -181,7 +186,7 @@ def test_a_pose_that_sees_closed_doors_pays_about_the_closed_prior_not_the_unifo
     points = np.stack([LASER_X + r[hit] * np.cos(a[hit]), r[hit] * np.sin(a[hit])], axis=1)
     cost = {}
     for closed_prob in (0.5, 0.0):
-        config = LocalizeConfig(global_door_term=True, door_prior_closed_prob=closed_prob)
+        config = LocalizeConfig(global_door_term=True, global_door_closed_prob=closed_prob)
         prior = ParticleSet(np.stack([among_doors, plain]), np.full(2, 0.5), np.full((2, 3), math.pi / 4),
                             np.tile(unobserved_door_variance(DOORS, config), (2, 1)))
         region = Bandwidth(np.full(2, 0.02), np.full(2, math.radians(0.5)))
