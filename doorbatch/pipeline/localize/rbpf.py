@@ -303,7 +303,11 @@ def condition_doors_on_beams(particles: ParticleSet, beams: BeamSet, field: Dist
     length = doors.length[k]
     mid = (doors.angle_min[k] + doors.angle_max[k]) / 2
     phi = mid + wrap_angle(np.arctan2(vy, vx) - doors.closed_yaw[k] - mid)
-    info = np.where(r <= length, r * r, r * length) / config.sigma_hit**2
+    # only end points inside the sector the leaf can sweep (the door update's gate: the range ± the margin) say
+    # where the leaf is; one beside the hinge on the far side would put the angle outside the range
+    margin = math.radians(config.door_angle_margin_deg)
+    inside = (phi >= doors.angle_min[k] - margin) & (phi <= doors.angle_max[k] + margin)
+    info = np.where(inside, np.where(r <= length, r * r, r * length), 0.0) / config.sigma_hit**2
     n, d = mean.shape
     flat = i * d + k
     info_sum = np.bincount(flat, weights=info, minlength=n * d).reshape(n, d)

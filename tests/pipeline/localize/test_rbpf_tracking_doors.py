@@ -11,10 +11,12 @@ from mcl_sim import LASER_X, RES, polyline, rasterize, scan_beams, scan_ranges
 
 from doorbatch.config import LocalizeConfig
 from doorbatch.maps import DoorSet
-from doorbatch.pipeline.localize.likelihood_field import build_distance_field
+from doorbatch.pipeline.localize.door_likelihood import door_log_likelihood_at_poses
+from doorbatch.pipeline.localize.door_prior import unobserved_door_variance
+from doorbatch.pipeline.localize.likelihood_field import build_distance_field, endpoint_distances
 from doorbatch.pipeline.localize.mcl import MclState
 from doorbatch.pipeline.localize.particles import ParticleSet
-from doorbatch.pipeline.localize.rbpf import rbpf_step
+from doorbatch.pipeline.localize.rbpf import condition_doors_on_beams, rbpf_step
 
 FloatArray = npt.NDArray[np.float64]
 HINGES_X = (3.0, 6.0, 9.0, 12.0)
@@ -69,3 +71,29 @@ def test_tracking_conditions_a_door_the_polygon_missed_on_the_beams_its_leaf_exp
     assert abs(mean[1]) < 15.0 and std[1] < 20.0
     _, mean_off, std_off = _tracked_step(False)
     assert abs(mean_off[1] + 45.0) < 1e-6 and abs(std_off[1] - 30.0) < 1e-6
+
+
+def test_end_points_outside_the_sector_a_leaf_can_sweep_do_not_move_its_door() -> None:
+    """A door at (3, 0) (closed along +x, range 0…90° into y > 0, observed: 45° ± 5°) in a doorway the static map
+    leaves open up to x = 3.8 m, and clutter the map lacks just behind the hinge (x 2.5–2.9 m, on the wall's
+    line): the door's leaf is the nearest model to those end points, but they lie 180° from the closed
+    direction, beyond the range and its margin, so they cannot be on the leaf. Combined into the door's angle
+    they would drag it towards 180° (found on a simulated log: a door open 100° estimated at −170°)."""
+    static = np.concatenate([polyline((3.8, 0.0), (8.0, 0.0)), polyline((-1.0, 2.4), (8.0, 2.4))])
+    clutter = polyline((2.5, 0.0), (2.9, 0.0))
+    doors = DoorSet(np.array([[3.0, 0.0]]), np.array([LEAF]), np.zeros(1), np.zeros(1), np.array([math.pi / 2]))
+    field = build_distance_field(rasterize(static, (-1.0, 8.0), (0.0, 2.4), margin=RES * 4), 2.0)
+    truth = np.array([2.7, 0.6, -math.pi / 2])  # facing the clutter from 0.6 m
+    beams = scan_beams(np.concatenate([static, clutter]), truth, max_beams=180, max_range=1.5,
+                       rng=np.random.default_rng(0))
+    config = LocalizeConfig()
+    n = 4
+    particles = ParticleSet(np.tile(truth, (n, 1)), np.full(n, 1.0 / n), np.full((n, 1), math.radians(45.0)),
+                            np.full((n, 1), math.radians(5.0) ** 2))
+    dl = door_log_likelihood_at_poses(endpoint_distances(field, particles.pose, beams.points_base), particles.pose,
+                                      beams.points_base, doors, particles.door_mean, particles.door_var, config,
+                                      beams.range_max_m, unobserved_var=unobserved_door_variance(doors, config))
+    assert (dl.association[0] == 0).sum() >= 3  # the clutter's end points are the door's best explanation
+    mean, var = condition_doors_on_beams(particles, beams, field, doors, config)
+    np.testing.assert_array_equal(mean, particles.door_mean)
+    np.testing.assert_array_equal(var, particles.door_var)
