@@ -115,6 +115,7 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
     # else MCL's static model.
     global_phase = bandwidth is not None and len(beams.points_base) > 0
     spread = spread_cloud_config(config, state.global_start) if global_phase else config
+    association = None  # the tracked weighting's beam association, which the beam conditioning reuses
     if global_phase:
 
         def region(p: ParticleSet, h: Bandwidth) -> npt.NDArray[np.float64]:
@@ -127,9 +128,10 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
         static = endpoint_distances(field, particles.pose, beams.points_base)
         if n_doors:
             unobserved = unobserved_door_variance(doors, config) if config.tracking_door_prior else None
-            pz = door_log_likelihood_at_poses(static, particles.pose, beams.points_base, doors, particles.door_mean,
+            dl = door_log_likelihood_at_poses(static, particles.pose, beams.points_base, doors, particles.door_mean,
                                               particles.door_var, config, beams.range_max_m,
-                                              unobserved_var=unobserved).beam_likelihood
+                                              unobserved_var=unobserved)
+            pz, association = dl.beam_likelihood, dl.association
         else:
             pz = beam_likelihood(static, config.z_hit, config.z_rand, config.sigma_hit, beams.range_max_m)
         pz, _ = skip_unexplained(pz, particles.weight, particles.pose, config, beams.range_max_m, combination)
@@ -147,7 +149,7 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
         if spread.global_door_term if global_phase else config.tracking_door_prior:
             prior = DoorPrior.from_config(config) if global_phase else None
             mean, var = condition_doors_on_beams(particles, beams, field, doors, config, prior,
-                                                 skip=update.observed)
+                                                 skip=update.observed, association=association)
             particles = replace(particles, door_mean=mean, door_var=var)
 
     new_state, diag = finish_step(state, particles, log_avg, odom, config, rng, free, bandwidth)
@@ -254,7 +256,8 @@ def door_update_log_factor(prior: ParticleSet, update: DoorUpdate, doors: DoorSe
 
 def condition_doors_on_beams(particles: ParticleSet, beams: BeamSet, field: DistanceField, doors: DoorSet,
                              config: LocalizeConfig, prior: DoorPrior | None = None,
-                             skip: npt.NDArray[np.bool_] | None = None
+                             skip: npt.NDArray[np.bool_] | None = None,
+                             association: npt.NDArray[np.int16] | None = None
                              ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """Each particle's doors conditioned on the beams that their leaves explain (global phase with the door term;
     tracking with ``tracking_door_prior``).
@@ -274,7 +277,8 @@ def condition_doors_on_beams(particles: ParticleSet, beams: BeamSet, field: Dist
     a Gaussian truncated at the closed end of the range, would put a closed door's mean a fraction of the
     measurement's std open, and the linearized model would then draw its leaf there (measured: closed-log
     tracking 0.060-0.068 m against 0.039-0.056 m). Doors in ``skip`` (N, D) (the polygon's update of this scan
-    observed them) are left alone.
+    observed them) are left alone. ``association`` (N, B): the beams' association from this scan's weighting,
+    whose doors outside ``skip`` are unchanged since (tracking; saves a second door likelihood).
 
     Returns:
         (N, D) means and variances.
@@ -284,12 +288,13 @@ def condition_doors_on_beams(particles: ParticleSet, beams: BeamSet, field: Dist
     unobserved = np.ones_like(var, dtype=bool) if skip is None else ~skip
     if not unobserved.any():
         return mean, var
-    static = endpoint_distances(field, particles.pose, beams.points_base)
-    dl = door_log_likelihood_at_poses(static, particles.pose, beams.points_base, doors, mean, var, config,
-                                      beams.range_max_m, unobserved_var=thr,
-                                      prior=UNIFORM if prior is None else prior)
-    i, b = np.nonzero(dl.association >= 0)
-    k = dl.association[i, b].astype(np.intp)
+    if association is None:
+        static = endpoint_distances(field, particles.pose, beams.points_base)
+        association = door_log_likelihood_at_poses(static, particles.pose, beams.points_base, doors, mean, var,
+                                                   config, beams.range_max_m, unobserved_var=thr,
+                                                   prior=UNIFORM if prior is None else prior).association
+    i, b = np.nonzero(association >= 0)
+    k = association[i, b].astype(np.intp)
     keep = unobserved[i, k]
     i, b, k = i[keep], b[keep], k[keep]
     if not i.size:
