@@ -51,6 +51,7 @@ class KeyframeGraph:
     robust: list[bool] = field(default_factory=list)
     uncertainty: FloatArray = field(default_factory=lambda: np.zeros((3, 3)))
     last_search_path_m: float = -math.inf  # path length at the last loop search
+    last_closure_path_m: float = -math.inf  # path length at the last accepted loop closure
 
     @property
     def n_loops(self) -> int:
@@ -102,6 +103,7 @@ class KeyframeGraph:
         for items in (self.first, self.second, self.measurement, self.covariance, self.robust):
             items.pop()
 
-    def closed(self) -> None:
-        """An accepted loop closure: the newest keyframe is fixed against the old map again."""
+    def closed(self, path_m: float) -> None:
+        """An accepted loop closure at path length ``path_m``: the newest keyframe is fixed against the old map."""
         self.uncertainty = np.zeros((3, 3))
+        self.last_closure_path_m = path_m

@@ -217,7 +217,7 @@ def scan_match_trajectory(
         fallback_run = fallback_run + 1 if match.fallback else 0
         if fallback_run in (0, cfg.fallbacks_before_keyframe) and _is_keyframe(submap.last_keyframe_pose, match.pose,
                                                                                  cfg):
-            submap = add_keyframe(submap, hits[k], match.pose, cfg)
+            submap = add_keyframe(submap, hits[k], match.pose, cfg, old=_old_keyframes_usable(submap, graph, cfg))
             out.keyframe[k], fallback_run = True, 0
             if cfg.loop_closure:  # weak and fallback keyframes: the odometry's wider covariance (module docstring)
                 graph.add_sequential(match.pose, cov if match.fallback or match.weak else match.covariance, cfg)
@@ -275,11 +275,19 @@ def close_loop(submap: Submap, graph: KeyframeGraph, cfg: ScanMatchConfig) -> Su
     graph.add_loop(anchor, match.pose, match.covariance, cfg)
     solution = graph.optimize(cfg)
     if solution.active[-1]:
-        graph.closed()
+        graph.closed(newest.path_m)
     else:
         graph.drop_last_edge()
     moved = tuple(kf.moved(pose) for kf, pose in zip(keyframes, solution.poses, strict=True))
-    return _build_submap(moved, cfg)
+    return _build_submap(moved, cfg, old=_old_keyframes_usable(submap, graph, cfg))
+
+
+def _old_keyframes_usable(submap: Submap, graph: KeyframeGraph, cfg: ScanMatchConfig) -> bool:
+    """Whether the front end may match keyframes passed long ago: always without loop closure; with it, within
+    ``loop_min_travel_m`` of path after an accepted closure (the optimized graph made the old keyframes near the
+    robot consistent with its pose), and not otherwise (a match would move the pose onto the old map without
+    the pose graph knowing, and the drift would stay in the past poses)."""
+    return not cfg.loop_closure or submap.keyframes[-1].path_m - graph.last_closure_path_m < cfg.loop_min_travel_m
 
 
 def _check_inputs(scans_xy: Sequence[npt.ArrayLike], odometry_poses: npt.ArrayLike) -> FloatArray:
@@ -418,19 +426,19 @@ def _merged_samples(keyframes: Sequence[Keyframe], centre: FloatArray, reach_m: 
     return pts, nrm
 
 
-def _build_submap(keyframes: tuple[Keyframe, ...], cfg: ScanMatchConfig) -> Submap:
+def _build_submap(keyframes: tuple[Keyframe, ...], cfg: ScanMatchConfig, *, old: bool = True) -> Submap:
     """KD-tree and likelihood grid over the local keyframes' samples, one per voxel (the oldest keyframe's wins).
 
     The local keyframes are those within ``submap_radius_m`` of the newest plus the last ``submap_keyframes``;
-    with loop closure, only those passed less than ``loop_min_travel_m`` of path ago among the former (older
-    ones are the loop closure's: matched here, they would pull the newest pose onto the old map without
-    telling the pose graph). Only samples the next scans can reach are kept: those within the newest
-    keyframe's reach (its farthest sample) plus the largest search window of its pose, per axis.
+    unless ``old``, only those passed less than ``loop_min_travel_m`` of path ago among the former (older ones
+    are the loop closure's, :func:`_old_keyframes_usable`). Only samples the next scans can reach are kept:
+    those within the newest keyframe's reach (its farthest sample) plus the largest search window of its pose,
+    per axis.
     """
     newest = keyframes[-1]
     poses = np.stack([kf.pose for kf in keyframes])
     near = np.hypot(*(poses[:, :2] - newest.pose[:2]).T) <= cfg.submap_radius_m
-    if cfg.loop_closure:
+    if not old:
         near &= newest.path_m - np.array([kf.path_m for kf in keyframes]) < cfg.loop_min_travel_m
     near[-cfg.submap_keyframes :] = True
     local = [keyframes[i] for i in np.flatnonzero(near)]
@@ -455,11 +463,12 @@ def start_submap(scan_xy: FloatArray, pose: npt.ArrayLike, cfg: ScanMatchConfig)
     return _build_submap((_keyframe(scan_xy, pose, 0.0, cfg),), cfg)
 
 
-def add_keyframe(submap: Submap, scan_xy: FloatArray, pose: npt.ArrayLike, cfg: ScanMatchConfig) -> Submap:
+def add_keyframe(submap: Submap, scan_xy: FloatArray, pose: npt.ArrayLike, cfg: ScanMatchConfig, *,
+                 old: bool = True) -> Submap:
     """The submap with the scan at ``pose`` added, its local part re-selected around that pose."""
     last = submap.keyframes[-1]
     path_m = last.path_m + float(np.hypot(*(np.asarray(pose, dtype=np.float64)[:2] - last.pose[:2])))
-    return _build_submap((*submap.keyframes, _keyframe(scan_xy, pose, path_m, cfg)), cfg)
+    return _build_submap((*submap.keyframes, _keyframe(scan_xy, pose, path_m, cfg)), cfg, old=old)
 
 
 def match_scan(submap: Submap, scan_xy: FloatArray, prior: FloatArray, prior_covariance: FloatArray,
