@@ -9,9 +9,14 @@ accepted closure (first-order compounding of the sequential edges' covariances):
 1. Candidates: keyframes passed at least ``loop_min_travel_m`` of path ago and not among the last
    ``submap_keyframes`` (those are the front end's own submap), whose poses lie within
    r = ``loop_search_radius_m`` + ``loop_search_sigmas`` · √λ_max(Σ_xy) of x_k.
-2. Their line samples near x_k form the loop submap; the exhaustive branch-and-bound correlative search looks
-   ``loop_search_sigmas`` standard deviations of Σ around x_k on every axis (clipped to the loop window limits),
-   and PLICP without a prior refines its optimum (the loop constraint must not lean on the drifted estimate).
+2. Of those, the ones from one pass: within ``submap_keyframes`` keyframe indices of the candidate nearest
+   x_k (Karto matches against one chain of old scans at a time: keyframes of different passes are only as
+   consistent with each other as the graph has made them, and a submap merged from two passes that disagree
+   by a few centimetres and degrees gives a loop edge biased by that disagreement, measured against the
+   reference on intel). Their line samples near x_k form the loop submap; the exhaustive branch-and-bound
+   correlative search looks ``loop_search_sigmas`` standard deviations of Σ around x_k on every axis (clipped
+   to the loop window limits), and PLICP without a prior refines its optimum (the loop constraint must not
+   lean on the drifted estimate).
 3. Accepted only when strong (one false loop is worse than none): correlative score ≥ ``loop_min_score``;
    at least ``loop_min_overlap_fraction`` of the (trimmed) scan points matched old lines; PLICP's Hessian not
    degenerate (a corridor seen along its axis fixes no position along it) and its optimum within a lattice
@@ -74,6 +79,15 @@ def loop_candidates(keyframe_poses: npt.ArrayLike, path_m: npt.ArrayLike, estima
     near = np.hypot(*(poses[:, :2] - np.asarray(estimate, dtype=np.float64)[:2]).T) <= search_radius_m(
         uncertainty, cfg)
     out: IntArray = np.flatnonzero(old & near).astype(np.int64)
+    return out
+
+
+def one_pass(candidates: IntArray, keyframe_poses: npt.ArrayLike, estimate: npt.ArrayLike, span: int) -> IntArray:
+    """The candidates within ``span`` keyframe indices of the one nearest ``estimate`` (module docstring, step 2)."""
+    poses = np.asarray(keyframe_poses, dtype=np.float64).reshape(-1, 3)
+    x = np.asarray(estimate, dtype=np.float64)
+    nearest = candidates[int(np.argmin(np.hypot(*(poses[candidates, :2] - x[:2]).T)))]
+    out: IntArray = candidates[np.abs(candidates - nearest) <= span]
     return out
 
 

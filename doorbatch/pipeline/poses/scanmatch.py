@@ -79,7 +79,7 @@ from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.geometry.se2 import compose, relative, rotation_matrix
 from doorbatch.pipeline.poses.correlative import LikelihoodGrid, build_likelihood_grid, correlative_match
 from doorbatch.pipeline.poses.keyframe_graph import KeyframeGraph
-from doorbatch.pipeline.poses.loop_closure import loop_candidates, match_loop
+from doorbatch.pipeline.poses.loop_closure import loop_candidates, match_loop, one_pass
 from doorbatch.pipeline.poses.plicp import (
     GaussianPrior,
     LineReference,
@@ -265,6 +265,7 @@ def close_loop(submap: Submap, graph: KeyframeGraph, cfg: ScanMatchConfig) -> Su
     candidates = loop_candidates(poses, [kf.path_m for kf in keyframes], newest.pose, graph.uncertainty, cfg)
     if candidates.size == 0 or newest.path_m - graph.last_search_path_m < cfg.loop_attempt_spacing_m:
         return submap
+    candidates = one_pass(candidates, poses, newest.pose, cfg.submap_keyframes)
     graph.last_search_path_m = newest.path_m
     reach = _reach_m(newest) + cfg.loop_window_max_m
     pts, nrm = _merged_samples([keyframes[i] for i in candidates], newest.pose, reach, cfg)
