@@ -15,7 +15,7 @@ from scanmatch_sim import (
 
 from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.pipeline.poses import ScanMatchConfig, scan_match_trajectory
-from doorbatch.pipeline.poses.loop_closure import loop_candidates, match_loop
+from doorbatch.pipeline.poses.loop_closure import loop_candidates, match_loop, one_pass
 from doorbatch.pipeline.poses.plicp import placed, scan_lines
 from doorbatch.pipeline.poses.scanmatch import voxel_downsample
 
@@ -69,6 +69,17 @@ def test_loop_candidates_are_old_near_keyframes_within_the_accumulated_uncertain
     assert wide.tolist() == [0]
     wider = loop_candidates(poses, path, estimate, np.diag([1.5**2, 0.1, 0.0]), cfg)
     assert wider.tolist() == [0, 1]
+
+
+def test_the_loop_submap_comes_from_one_pass() -> None:
+    """Keyframes 0–4 and 40–44 pass the same place; the estimate is nearest keyframe 42: only its pass is used."""
+    poses = np.zeros((50, 3))
+    poses[:, 0] = 100.0
+    poses[0:5, 0] = np.arange(5.0)
+    poses[40:45, 0] = np.arange(5.0) + 0.1
+    candidates = np.r_[np.arange(0, 5), np.arange(40, 45)]
+    assert one_pass(candidates, poses, np.array([2.09, 0.0, 0.0]), span=10).tolist() == [40, 41, 42, 43, 44]
+    assert one_pass(candidates, poses, np.array([1.9, 0.0, 0.0]), span=50).tolist() == candidates.tolist()
 
 
 def test_a_log_that_returns_to_its_start_closes_the_loop_and_takes_out_the_drift() -> None:
