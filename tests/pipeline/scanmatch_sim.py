@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import numpy.typing as npt
 
@@ -103,7 +105,7 @@ def ring_truth(step_m: float = 0.2, extra_m: float = 4.0) -> FloatArray:
     at the corners in 22.5° steps, then ``extra_m`` along the south side again."""
     corners = [(0.0, 0.0), (16.0, 0.0), (16.0, 8.0), (0.0, 8.0), (0.0, 0.0), (extra_m, 0.0)]
     poses: list[tuple[float, float, float]] = []
-    for (x0, y0), (x1, y1) in zip(corners[:-1], corners[1:], strict=True):
+    for (x0, y0), (x1, y1) in itertools.pairwise(corners):
         yaw = float(np.arctan2(y1 - y0, x1 - x0))
         if poses:  # turn in place from the previous heading
             start = poses[-1][2]

@@ -56,7 +56,8 @@ def _position_error(poses: np.ndarray, truth: np.ndarray) -> float:
 
 def test_loop_closure_puts_a_known_heading_error_back_where_the_uncertainty_is() -> None:
     """A 6° heading error in the step after the first corner, on the edge the front end marked uncertain
-    (a fallback to the odometry: σ_yaw = 20°): closing the loop takes the whole error out of that edge and restores the truth."""
+    (a fallback to the odometry: σ_yaw = 20°): closing the loop takes the whole error out of that edge and
+    restores the truth."""
     truth = _square()
     steps, dead_reckoned = _chain(truth, corner=4, error_rad=np.deg2rad(6.0))
     information = _information(len(steps))
