@@ -205,7 +205,7 @@ def evaluate(name: str, recs: list[Recording], drift_seed: int | None, config: D
         "ate_odometry_se2_m": round(ate_se2_m(odom, ref), 4), "max_error_m": round(float(err[worst]), 3),
         "max_error_at_scan": worst, "max_error_at_xy": [round(float(v), 2) for v in ref[worst, :2]],
         "first_scan_over_0.2m": int(over[0]) if over.size else None, "fallbacks": int(matched.fallback.sum()),
-        "weak": int(matched.weak.sum()),
+        "weak": int(matched.weak.sum()), "loop_keyframes": int(matched.loop_closure.sum()),
         "scans_per_s": round(len(scans) / seconds, 1), "ref_pairwise_median_m": round(pair_m, 4),
         "ref_pairwise_median_deg": round(pair_deg, 3),
         **({"errors_every": [[k, round(float(err[k]), 2), round(float(ref[k, 0]), 1), round(float(ref[k, 1]), 1),
