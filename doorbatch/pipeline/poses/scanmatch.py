@@ -61,6 +61,13 @@ MAP cost is lower; a wider weak one does not (it is no better evidence than the 
 prediction). A fallback scan is not
 made a keyframe (its odometry error would enter the submap, and the next scans would match it), unless
 ``fallbacks_before_keyframe`` fell back in a row, so that matching resumes against fresh geometry.
+
+Loop closure (``loop_closure``, :func:`close_loop`): the keyframes are the nodes of a pose graph
+(:mod:`.keyframe_graph`); each new keyframe adds a sequential edge (the match's relative pose, with its
+MAP-PLICP covariance, or the carried prediction covariance for a weak or fallback keyframe) and is searched
+against old keyframes near its estimate (:mod:`.loop_closure`); an accepted loop edge triggers the sparse
+optimization (:mod:`.pose_graph`), after which the submap is rebuilt from the optimized poses. The graph is
+optimized once more at the end, and every scan is placed relative to the keyframe it was matched after.
 """
 
 from __future__ import annotations
