@@ -156,7 +156,8 @@ class ScanMatchConfig(Section):
     # Loop closure (module pipeline/poses/loop_closure): a pose graph over the keyframes. Keyframes passed less
     # than loop_min_travel_m of path ago (and the last submap_keyframes) are the front end's local submap; older
     # ones are loop candidates instead, when within loop_search_radius_m + loop_search_sigmas × the position σ
-    # accumulated since the last closure.
+    # accumulated since the last closure (the front end matches them too only within loop_min_travel_m of path
+    # after an accepted closure).
     loop_closure: bool = True
     loop_min_travel_m: float = Field(10.0, gt=0.0)
     # A loop search at most once per this much path (successive keyframes add little; each search is wide).
@@ -193,6 +194,8 @@ class ScanMatchConfig(Section):
             raise ValueError("correlative_window_min_m must not exceed correlative_window_max_m")
         if self.correlative_window_min_deg > self.correlative_window_max_deg:
             raise ValueError("correlative_window_min_deg must not exceed correlative_window_max_deg")
+        if self.loop_window_min_m > self.loop_window_max_m or self.loop_window_min_deg > self.loop_window_max_deg:
+            raise ValueError("loop_window_min_m / _deg must not exceed loop_window_max_m / _deg")
         return self
 
 
