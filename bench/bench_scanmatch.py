@@ -5,8 +5,8 @@ laser (0.1 m between scans), with drifting odometry (3 % scale error, 0.6°/m ya
 Ray casting uses ``doorbatch.sim.raycast``; only ``scan_match_trajectory`` is timed (best of the repeats), by the
 wall clock and by the process's CPU time (the latter is what a shared machine does not distort).
 
-Run: ``taskset -c 0 python bench/bench_scanmatch.py [--scans N] [--repeats R]`` (one core, as in
-docs/benchmarks.md).
+Run: ``taskset -c 0 python bench/bench_scanmatch.py [--scans N] [--repeats R] [--no-loop-closure]`` (one core, as
+in docs/benchmarks.md; loop closure is on by default, as in the config; the corridor's way back is where it closes).
 """
 
 from __future__ import annotations
@@ -83,12 +83,14 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--scans", type=int, default=600)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--no-loop-closure", action="store_true",
+                        help="the front end alone (scanmatch.loop_closure off)")
     args = parser.parse_args()
     rng = np.random.default_rng(0)
     truth = trajectory(args.scans)
     scans = scans_from(corridor(rng), truth, rng)
     odom = odometry(truth, rng)
-    config = ScanMatchConfig()
+    config = ScanMatchConfig(loop_closure=not args.no_loop_closure)
     best, best_cpu, result = 0.0, 0.0, None
     for _ in range(args.repeats):
         start, start_cpu = time.perf_counter(), time.process_time()
@@ -101,7 +103,8 @@ def main() -> None:
     print(f"machine: {platform.processor() or platform.machine()}, python {platform.python_version()}")
     print(f"scan_match_trajectory: {best:.0f} scans/s wall, {best_cpu:.0f} scans per CPU-second ({len(scans)} scans, "
           f"{np.mean([len(s) for s in scans]):.0f}"
-          f" points/scan, {int(result.keyframe.sum())} keyframes, {int(result.fallback.sum())} fallbacks)")
+          f" points/scan, {int(result.keyframe.sum())} keyframes, {int(result.fallback.sum())} fallbacks, "
+          f"loop closure {'off' if args.no_loop_closure else 'on'}: {int(result.loop_closure.sum())} loop keyframes)")
     print(f"ATE RMSE: odometry {np.sqrt(np.mean(raw**2)):.3f} m, scan matching {np.sqrt(np.mean(err**2)):.3f} m")
 
 

@@ -153,6 +153,40 @@ class ScanMatchConfig(Section):
     # A fallback scan (no acceptable match) is not made a keyframe unless this many fell back in a row, so that
     # the submap still grows into new ground.
     fallbacks_before_keyframe: int = Field(2, ge=1)
+    # Loop closure (module pipeline/poses/loop_closure): a pose graph over the keyframes. Keyframes passed less
+    # than loop_min_travel_m of path ago (and the last submap_keyframes) are the front end's local submap; older
+    # ones are loop candidates instead, when within loop_search_radius_m + loop_search_sigmas × the position σ
+    # accumulated since the last closure (the front end matches them too only within loop_min_travel_m of path
+    # after an accepted closure).
+    loop_closure: bool = True
+    loop_min_travel_m: float = Field(10.0, gt=0.0)
+    # A loop search at most once per this much path (successive keyframes add little; each search is wide).
+    loop_attempt_spacing_m: float = Field(1.0, ge=0.0)
+    loop_search_radius_m: float = Field(8.0, gt=0.0)
+    loop_search_sigmas: float = Field(3.0, gt=0.0)
+    # Correlative window of a loop search: loop_search_sigmas × the accumulated σ per axis, clipped to these.
+    loop_window_min_m: float = Field(0.5, gt=0.0)
+    loop_window_max_m: float = Field(3.0, gt=0.0)
+    loop_window_min_deg: float = Field(5.0, gt=0.0)
+    loop_window_max_deg: float = Field(20.0, gt=0.0, le=180.0)
+    # A loop match is accepted only when strong: correlative score (mean likelihood) at least loop_min_score,
+    # at least loop_min_overlap_fraction of the scan's points on old lines (of the trimmed ones), PLICP
+    # without prior not degenerate, and a unique basin: the best lattice pose outside ±loop_ambiguity_radius_m /
+    # ±loop_ambiguity_deg scores at most loop_max_ambiguity × the best.
+    loop_min_score: float = Field(0.5, ge=0.0, le=1.0)
+    loop_min_overlap_fraction: float = Field(0.7, ge=0.0, le=1.0)
+    loop_max_ambiguity: float = Field(0.85, gt=0.0, le=1.0)
+    loop_ambiguity_radius_m: float = Field(0.5, gt=0.0)
+    loop_ambiguity_deg: float = Field(5.0, gt=0.0)
+    # Edge covariances get these standard deviations added: PLICP's covariance counts the range noise only, not
+    # the correlated model error of the line samples and voxels (Censi 2007: ICP covariances are optimistic).
+    graph_min_std_m: float = Field(0.02, gt=0.0)
+    graph_min_std_deg: float = Field(0.5, gt=0.0)
+    # Huber threshold on a loop edge's Mahalanobis distance; loop edges beyond the χ² gate (3 dof, 99.9 %) at
+    # the optimum are switched off.
+    graph_huber_sigmas: float = Field(3.0, gt=0.0)
+    graph_outlier_chi2: float = Field(16.27, gt=0.0)
+    graph_max_iterations: int = Field(50, ge=1)
 
     @model_validator(mode="after")
     def _check_windows(self) -> ScanMatchConfig:
@@ -160,6 +194,8 @@ class ScanMatchConfig(Section):
             raise ValueError("correlative_window_min_m must not exceed correlative_window_max_m")
         if self.correlative_window_min_deg > self.correlative_window_max_deg:
             raise ValueError("correlative_window_min_deg must not exceed correlative_window_max_deg")
+        if self.loop_window_min_m > self.loop_window_max_m or self.loop_window_min_deg > self.loop_window_max_deg:
+            raise ValueError("loop_window_min_m / _deg must not exceed loop_window_max_m / _deg")
         return self
 
 

@@ -20,7 +20,8 @@ its worst (one seed's figure is one draw of the drift: a matcher that derails on
 ``--steps`` instead lists, per log at ``--seed``, the scans where the matched trajectory turns most differently
 from the reference (where a run derails); ``--geometry`` instead compares beam geometries against the
 corrected poses (see :func:`geometry_check`);
-``--logs orebro,intel`` picks the CARMEN logs, ``--no-sample`` skips the sample run.
+``--logs orebro,intel`` picks the CARMEN logs, ``--no-sample`` skips the sample run; ``--set key=value`` overrides
+the configuration (e.g. ``--set scanmatch.loop_closure=false``: the front end alone).
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from doorbatch.config import DoorbatchConfig
+from doorbatch.config import DoorbatchConfig, load_config
 from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.geometry.se2 import compose, interpolate_poses, relative
 from doorbatch.io.recording import Recording, load_recording
@@ -205,7 +206,7 @@ def evaluate(name: str, recs: list[Recording], drift_seed: int | None, config: D
         "ate_odometry_se2_m": round(ate_se2_m(odom, ref), 4), "max_error_m": round(float(err[worst]), 3),
         "max_error_at_scan": worst, "max_error_at_xy": [round(float(v), 2) for v in ref[worst, :2]],
         "first_scan_over_0.2m": int(over[0]) if over.size else None, "fallbacks": int(matched.fallback.sum()),
-        "weak": int(matched.weak.sum()),
+        "weak": int(matched.weak.sum()), "loop_keyframes": int(matched.loop_closure.sum()),
         "scans_per_s": round(len(scans) / seconds, 1), "ref_pairwise_median_m": round(pair_m, 4),
         "ref_pairwise_median_deg": round(pair_deg, 3),
         **({"errors_every": [[k, round(float(err[k]), 2), round(float(ref[k, 0]), 1), round(float(ref[k, 1]), 1),
@@ -248,6 +249,8 @@ def main() -> None:
                         help="instead: ATE of the CARMEN logs over these drift seeds, e.g. 1-8 (median, worst)")
     parser.add_argument("--logs", type=str, default="orebro,intel,aces", help="CARMEN logs to run, comma-separated")
     parser.add_argument("--no-sample", action="store_true", help="skip the sample mapping run")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="config override as for doorbatch --set, e.g. scanmatch.loop_closure=false")
     parser.add_argument("--steps", action="store_true",
                         help="instead: for each CARMEN log at --seed, the 8 scans whose step turn is furthest off")
     parser.add_argument("--geometry", action="store_true",
@@ -255,7 +258,7 @@ def main() -> None:
                              "turns) and orebro's corridor turns by PLICP and by an exhaustive correlative search")
     args = parser.parse_args()
     names = [n for n in args.logs.split(",") if n]
-    config = DoorbatchConfig()
+    config = load_config(overrides=args.set)
     if args.steps:
         for name in names:
             path = CARMEN / f"{name}-corrected.log.gz"

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import numpy.typing as npt
 
@@ -85,3 +87,33 @@ def drifting_odometry(truth: FloatArray, rng: np.random.Generator, *, scale: flo
 def ate_rmse_m(estimate: FloatArray, truth: FloatArray) -> float:
     """Translation RMSE with no alignment (both trajectories start at the same pose)."""
     return float(np.sqrt(np.mean(np.sum((estimate[:, :2] - truth[:, :2]) ** 2, axis=1))))
+
+
+def ring_segments() -> FloatArray:
+    """A 2 m wide corridor around an 18 m × 10 m block (outer walls 18 × 10 m, inner block 14 × 6 m), its
+    south side plain and straight, the other three sides and the corners with irregular niches (asymmetric)."""
+    outer = polyline([(-1, -1), (17, -1), (17, 2), (17.5, 2), (17.5, 3.5), (17, 3.5), (17, 9), (12, 9), (12, 9.6),
+                      (10.8, 9.6), (10.8, 9), (5, 9), (5, 9.4), (4.2, 9.4), (4.2, 9), (-1, 9), (-1, 6), (-1.6, 6),
+                      (-1.6, 4.9), (-1, 4.9), (-1, -1)])
+    inner = polyline([(1, 1), (15, 1), (15, 5.5), (14.6, 5.5), (14.6, 6.2), (15, 6.2), (15, 7), (8, 7),
+                      (8, 6.5), (7.2, 6.5), (7.2, 7), (1, 7), (1, 3.2), (1.5, 3.2), (1.5, 2.4), (1, 2.4), (1, 1)])
+    return np.concatenate([outer, inner])
+
+
+def ring_truth(step_m: float = 0.2, extra_m: float = 4.0) -> FloatArray:
+    """Poses once around the ring's centre line (0, 0) → (16, 0) → (16, 8) → (0, 8) → (0, 0), turning in place
+    at the corners in 22.5° steps, then ``extra_m`` along the south side again."""
+    corners = [(0.0, 0.0), (16.0, 0.0), (16.0, 8.0), (0.0, 8.0), (0.0, 0.0), (extra_m, 0.0)]
+    poses: list[tuple[float, float, float]] = []
+    for (x0, y0), (x1, y1) in itertools.pairwise(corners):
+        yaw = float(np.arctan2(y1 - y0, x1 - x0))
+        if poses:  # turn in place from the previous heading
+            start = poses[-1][2]
+            turn = float(np.angle(np.exp(1j * (yaw - start))))
+            poses += [(x0, y0, start + turn * k / 4) for k in range(1, 4)]
+        n = round(np.hypot(x1 - x0, y1 - y0) / step_m)
+        poses += [(x0 + (x1 - x0) * k / n, y0 + (y1 - y0) * k / n, yaw) for k in range(n)]
+    poses.append((corners[-1][0], corners[-1][1], 0.0))
+    out = np.asarray(poses)
+    out[:, 2] = np.angle(np.exp(1j * out[:, 2]))
+    return out

@@ -113,6 +113,8 @@ def test_config_is_frozen_and_rejects_unknown_keys() -> None:
         ScanMatchConfig(trim_fraction=1.5)
     with pytest.raises(ValidationError, match="correlative_window_min_m must not exceed"):
         ScanMatchConfig(correlative_window_min_m=3.0)
+    with pytest.raises(ValidationError, match="loop_window_min_m"):
+        ScanMatchConfig(loop_window_min_deg=30.0)
     config = ScanMatchConfig()
     with pytest.raises(ValidationError):
         config.keyframe_min_d_m = 1.0  # type: ignore[misc]

@@ -25,6 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from doorbatch.geometry.rotations import wrap_angle
+
 FloatArray = npt.NDArray[np.float64]
 Float32Array = npt.NDArray[np.float32]
 IntArray = npt.NDArray[np.int64]
@@ -165,7 +167,7 @@ def _fine_offsets(corner_x: IntArray, corner_y: IntArray, nx: int, ny: int, r: i
 
 def correlative_match(
     grid: LikelihoodGrid, scan_xy: npt.ArrayLike, prior: npt.ArrayLike, *, window_m: float | tuple[float, float] = 0.5,
-    window_deg: float = 15.0, step_deg: float = 1.0,
+    window_deg: float = 15.0, step_deg: float = 1.0, exclude: Exclusion | None = None,
 ) -> CorrelativeResult:
     """Exhaustive search of (x, y, yaw) within ±window around ``prior`` for the best-scoring scan pose.
 
@@ -177,6 +179,8 @@ def correlative_match(
             frame; the x/y step is the grid resolution.
         window_deg: Half-width of the yaw window (deg).
         step_deg: Yaw step (deg).
+        exclude: When given, the best pose outside this box of the lattice (the runner-up to an optimum: how
+            unique its basin is); the prior no longer wins ties, and the score is −1 when the box covers all.
 
     Returns:
         The best pose on the search lattice and its score (mean likelihood; 0 without points).
@@ -198,15 +202,41 @@ def correlative_match(
     cx, cy = (a.ravel() for a in np.meshgrid(_coarse_shifts(nx, r), _coarse_shifts(ny, r)))
     bounds = _scores(grid.bound, cells, np.broadcast_to(cx, (len(yaws), cx.size)),
                      np.broadcast_to(cy, (len(yaws), cy.size))).ravel()
-    yaw_i, sx, sy, score = _expand(grid, cells, bounds, cx, cy, nx, ny)
+    box = None if exclude is None else _excluded_box(exclude, prior_arr, grid.resolution_m, step_deg)
+    yaw_i, sx, sy, score = _expand(grid, cells, bounds, cx, cy, nx, ny, box)
     pose = np.array([prior_arr[0] + sx * grid.resolution_m, prior_arr[1] + sy * grid.resolution_m, yaws[yaw_i]])
     return CorrelativeResult(pose, score)
 
 
+@dataclass(frozen=True, slots=True)
+class Exclusion:
+    """A box of the search lattice left out: |Δx|, |Δy| ≤ radius_m and |Δyaw| ≤ radius_deg around ``pose``."""
+
+    pose: FloatArray
+    radius_m: float
+    radius_deg: float
+
+
+def _excluded_box(exclude: Exclusion, prior: FloatArray, resolution_m: float, step_deg: float
+                  ) -> tuple[IntArray, IntArray]:
+    """(centre, half-width) of the excluded box in lattice units (yaw index offset from the window's centre,
+    x shift, y shift)."""
+    d = exclude.pose - prior
+    centre = np.array([round(math.degrees(float(wrap_angle(d[2]))) / step_deg), round(d[0] / resolution_m),
+                       round(d[1] / resolution_m)], dtype=np.int64)
+    half = np.array([math.floor(exclude.radius_deg / step_deg + 1e-9), math.floor(exclude.radius_m / resolution_m
+                                                                                   + 1e-9)], dtype=np.int64)
+    return centre, np.array([half[0], half[1], half[1]], dtype=np.int64)
+
+
 def _expand(
-    grid: LikelihoodGrid, cells: IntArray, bounds: FloatArray, cx: IntArray, cy: IntArray, nx: int, ny: int
+    grid: LikelihoodGrid, cells: IntArray, bounds: FloatArray, cx: IntArray, cy: IntArray, nx: int, ny: int,
+    box: tuple[IntArray, IntArray] | None = None,
 ) -> tuple[int, int, int, float]:
     """Best-bound-first expansion of coarse candidates into their fine shifts (branch and bound).
+
+    Fine candidates inside ``box`` ((centre, half-width) in (yaw index from the centre, x, y) lattice units)
+    score −1, so the search returns the best pose outside it.
 
     Returns:
         (yaw index, x shift, y shift, score) of the best fine candidate.
@@ -216,7 +246,7 @@ def _expand(
     centre = cells.shape[0] // 2  # the prior's yaw; the prior wins ties (no information: stay put)
     zero = np.zeros((1, 1), dtype=np.int64)
     best: tuple[int, int, int, float] = (centre, 0, 0, float(_scores(grid.values, cells[centre : centre + 1],
-                                                                      zero, zero)[0, 0]))
+                                                                      zero, zero)[0, 0]) if box is None else -1.0)
     for start in range(0, order.size, EXPAND_BATCH):
         batch = order[start : start + EXPAND_BATCH]
         if bounds[batch[0]] <= best[3]:
@@ -224,6 +254,10 @@ def _expand(
         yaw_i, coarse_i = np.divmod(batch, n_coarse)
         fx, fy = _fine_offsets(cx[coarse_i], cy[coarse_i], nx, ny, grid.coarse_cells)
         scores = _scores(grid.values, cells[yaw_i], fx, fy)
+        if box is not None:
+            inside = ((np.abs(yaw_i - centre - box[0][0]) <= box[1][0])[:, None]
+                      & (np.abs(fx - box[0][1]) <= box[1][1]) & (np.abs(fy - box[0][2]) <= box[1][2]))
+            scores[inside] = -1.0
         b, k = np.unravel_index(int(np.argmax(scores)), scores.shape)
         if scores[b, k] > best[3]:
             best = (int(yaw_i[b]), int(fx[b, k]), int(fy[b, k]), float(scores[b, k]))

@@ -49,6 +49,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial import cKDTree
 
+from doorbatch.config import ScanMatchConfig
 from doorbatch.geometry.rotations import wrap_angle
 
 FloatArray = npt.NDArray[np.float64]
@@ -365,6 +366,16 @@ def plicp(
             converged = True  # statistics from the last linearization: the final step is negligible
             break
     return _result(lin, pose, prior, scales, iterations, converged)
+
+
+def plicp_configured(reference: LineReference, scan_xy: FloatArray, start: FloatArray, prior: GaussianPrior | None,
+                     cfg: ScanMatchConfig) -> PlicpResult:
+    """:func:`plicp` with the ``scanmatch`` section's iteration, gate, trimming, robust and σ-floor settings."""
+    return plicp(reference, scan_xy, start, prior=prior, max_iterations=cfg.icp_max_iterations,
+                 max_correspondence_m=cfg.max_correspondence_m, trim_fraction=cfg.trim_fraction,
+                 robust_scale_m=cfg.robust_scale_m,
+                 min_step_m=cfg.icp_min_step_m, min_step_rad=math.radians(cfg.icp_min_step_deg),
+                 sigma_min_m=math.sqrt(2.0) * cfg.range_sigma_m)
 
 
 @dataclass(frozen=True, slots=True)

@@ -61,6 +61,13 @@ MAP cost is lower; a wider weak one does not (it is no better evidence than the 
 prediction). A fallback scan is not
 made a keyframe (its odometry error would enter the submap, and the next scans would match it), unless
 ``fallbacks_before_keyframe`` fell back in a row, so that matching resumes against fresh geometry.
+
+Loop closure (``loop_closure``, :func:`close_loop`): the keyframes are the nodes of a pose graph
+(:mod:`.keyframe_graph`); each new keyframe adds a sequential edge (the match's relative pose, with its
+MAP-PLICP covariance, or the carried prediction covariance for a weak or fallback keyframe) and is searched
+against old keyframes near its estimate (:mod:`.loop_closure`); an accepted loop edge triggers the sparse
+optimization (:mod:`.pose_graph`), after which the submap is rebuilt from the optimized poses. The graph is
+optimized once more at the end, and every scan is placed relative to the keyframe it was matched after.
 """
 
 from __future__ import annotations
@@ -78,14 +85,17 @@ from doorbatch.geometry.odometry import odometry_increments
 from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.geometry.se2 import compose, relative, rotation_matrix
 from doorbatch.pipeline.poses.correlative import LikelihoodGrid, build_likelihood_grid, correlative_match
+from doorbatch.pipeline.poses.keyframe_graph import KeyframeGraph
+from doorbatch.pipeline.poses.loop_closure import loop_candidates, match_loop, one_pass
 from doorbatch.pipeline.poses.plicp import (
     GaussianPrior,
     LineReference,
     PlicpResult,
+    ScanLines,
     line_reference,
     map_cost,
     placed,
-    plicp,
+    plicp_configured,
     scan_lines,
 )
 
@@ -113,6 +123,7 @@ class ScanMatchResult:
         weak: (S,) the match was accepted but fewer than ``min_overlap_fraction`` of the scan's points found
             a submap line: its prediction's uncertainty was carried to the next scan (module docstring).
         keyframe: (S,) the scan was added to the submap.
+        loop_closure: (S,) the scan is a keyframe with a loop edge that the final pose graph kept.
     """
 
     poses: FloatArray
@@ -124,15 +135,25 @@ class ScanMatchResult:
     degenerate: BoolArray
     weak: BoolArray
     keyframe: BoolArray
+    loop_closure: BoolArray
 
 
 @dataclass(frozen=True, slots=True)
 class Keyframe:
-    """A keyframe's pose and its line samples with unit normals in the map frame."""
+    """A keyframe's pose, its line samples with unit normals in its own frame, and its downsampled scan."""
 
     pose: FloatArray  # (3,)
-    points: FloatArray  # (M, 2)
-    normals: FloatArray  # (M, 2)
+    lines: ScanLines  # line samples and normals in the scan's own frame
+    scan: FloatArray  # (N, 2) the downsampled scan, its own frame (matched for loop closures)
+    path_m: float  # path length travelled from the first keyframe to this one
+
+    def in_map(self) -> ScanLines:
+        """The line samples and normals in the map frame."""
+        return placed(self.lines, self.pose)
+
+    def moved(self, pose: npt.ArrayLike) -> Keyframe:
+        """The keyframe at another pose (after a pose-graph optimization)."""
+        return Keyframe(np.asarray(pose, dtype=np.float64), self.lines, self.scan, self.path_m)
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -189,6 +210,8 @@ def scan_match_trajectory(
         return out
     out.poses[0], out.covariances[0], out.keyframe[0] = odom[0], 0.0, True
     submap = start_submap(hits[0], odom[0], cfg)
+    graph = KeyframeGraph([odom[0].copy()])
+    placement = _Placement.start(odom.shape[0])
     carried = np.zeros((3, 3))  # uncertainty of the previous pose that no match to the submap took out
     fallback_run = 0  # fallback scans in a row, none of them a keyframe yet
     for k in range(1, odom.shape[0]):
@@ -201,11 +224,78 @@ def scan_match_trajectory(
         fallback_run = fallback_run + 1 if match.fallback else 0
         if fallback_run in (0, cfg.fallbacks_before_keyframe) and _is_keyframe(submap.last_keyframe_pose, match.pose,
                                                                                  cfg):
-            submap = add_keyframe(submap, hits[k], match.pose, cfg)
+            submap = add_keyframe(submap, hits[k], match.pose, cfg, old=_old_keyframes_usable(submap, graph, cfg))
             out.keyframe[k], fallback_run = True, 0
+            if cfg.loop_closure:  # weak and fallback keyframes: the odometry's wider covariance (module docstring)
+                graph.add_sequential(match.pose, cov if match.fallback or match.weak else match.covariance, cfg)
+                submap = close_loop(submap, graph, cfg)
+                out.poses[k] = submap.last_keyframe_pose
+        placement.place(k, len(submap.keyframes) - 1, submap.last_keyframe_pose, out.poses[k])
+    if graph.n_loops:
+        _finish_graph(out, graph, placement, cfg)
     if out.fallback.any():
         log.warning("scan matching fell back to odometry on %d of %d scans", int(out.fallback.sum()), len(hits))
     return out
+
+
+@dataclass(frozen=True, slots=True)
+class _Placement:
+    """Each scan's keyframe (the newest when it was matched) and its pose in that keyframe's frame."""
+
+    keyframe: IntArray  # (S,)
+    offset: FloatArray  # (S, 3)
+
+    @classmethod
+    def start(cls, n: int) -> _Placement:
+        return cls(np.zeros(n, dtype=np.int64), np.zeros((n, 3)))
+
+    def place(self, k: int, keyframe: int, keyframe_pose: FloatArray, pose: FloatArray) -> None:
+        self.keyframe[k], self.offset[k] = keyframe, relative(keyframe_pose, pose)
+
+
+def _finish_graph(out: ScanMatchResult, graph: KeyframeGraph, placement: _Placement, cfg: ScanMatchConfig) -> None:
+    """The final optimization; every scan placed relative to its optimized keyframe."""
+    solution = graph.optimize(cfg)
+    out.poses[:] = compose(solution.poses[placement.keyframe], placement.offset)
+    kept = solution.active & graph.edges().robust
+    keyframe_scans = np.flatnonzero(out.keyframe)
+    out.loop_closure[keyframe_scans[graph.edges().second[kept]]] = True
+    log.info("loop closure: %d loop edges kept of %d", int(kept.sum()), graph.n_loops)
+
+
+def close_loop(submap: Submap, graph: KeyframeGraph, cfg: ScanMatchConfig) -> Submap:
+    """Search a loop closure for the newest keyframe (:mod:`.loop_closure`); when one is accepted, add its edge,
+    optimize the pose graph and return the submap rebuilt from the optimized keyframe poses."""
+    keyframes = submap.keyframes
+    newest = keyframes[-1]
+    poses = np.stack(graph.poses[:-1])
+    candidates = loop_candidates(poses, [kf.path_m for kf in keyframes], newest.pose, graph.uncertainty, cfg)
+    if candidates.size == 0 or newest.path_m - graph.last_search_path_m < cfg.loop_attempt_spacing_m:
+        return submap
+    candidates = one_pass(candidates, poses, newest.pose, cfg.submap_keyframes)
+    graph.last_search_path_m = newest.path_m
+    reach = _reach_m(newest) + cfg.loop_window_max_m
+    pts, nrm = _merged_samples([keyframes[i] for i in candidates], newest.pose, reach, cfg)
+    match = match_loop(pts, nrm, newest.scan, newest.pose, graph.uncertainty, cfg)
+    if match is None:
+        return submap
+    anchor = int(candidates[np.argmin(np.hypot(*(poses[candidates, :2] - match.pose[:2]).T))])
+    graph.add_loop(anchor, match.pose, match.covariance, cfg)
+    solution = graph.optimize(cfg)
+    if solution.active[-1]:
+        graph.closed(newest.path_m)
+    else:
+        graph.drop_last_edge()
+    moved = tuple(kf.moved(pose) for kf, pose in zip(keyframes, solution.poses, strict=True))
+    return _build_submap(moved, cfg, old=_old_keyframes_usable(submap, graph, cfg))
+
+
+def _old_keyframes_usable(submap: Submap, graph: KeyframeGraph, cfg: ScanMatchConfig) -> bool:
+    """Whether the front end may match keyframes passed long ago: always without loop closure; with it, within
+    ``loop_min_travel_m`` of path after an accepted closure (the optimized graph made the old keyframes near the
+    robot consistent with its pose), and not otherwise (a match would move the pose onto the old map without
+    the pose graph knowing, and the drift would stay in the past poses)."""
+    return not cfg.loop_closure or submap.keyframes[-1].path_m - graph.last_closure_path_m < cfg.loop_min_travel_m
 
 
 def _check_inputs(scans_xy: Sequence[npt.ArrayLike], odometry_poses: npt.ArrayLike) -> FloatArray:
@@ -229,6 +319,7 @@ def _empty_result(n: int) -> ScanMatchResult:
         poses=np.zeros((n, 3)), covariances=np.full((n, 3, 3), np.nan), n_inliers=np.zeros(n, dtype=np.int64),
         residual_m=np.full(n, np.nan), score=np.zeros(n), fallback=np.zeros(n, dtype=bool),
         degenerate=np.zeros(n, dtype=bool), weak=np.zeros(n, dtype=bool), keyframe=np.zeros(n, dtype=bool),
+        loop_closure=np.zeros(n, dtype=bool),
     )
 
 
@@ -322,49 +413,70 @@ def _voxel_groups(points: FloatArray, voxel_m: float) -> tuple[IntArray, IntArra
     return first, inverse, counts
 
 
-def _build_submap(keyframes: tuple[Keyframe, ...], cfg: ScanMatchConfig) -> Submap:
+def _reach_m(keyframe: Keyframe) -> float:
+    """How far the keyframe's farthest sample lies from its pose on either map axis (m; 0 without samples)."""
+    points = keyframe.in_map().points
+    return float(np.abs(points - keyframe.pose[:2]).max()) if points.shape[0] else 0.0
+
+
+def _merged_samples(keyframes: Sequence[Keyframe], centre: FloatArray, reach_m: float, cfg: ScanMatchConfig
+                    ) -> tuple[FloatArray, FloatArray]:
+    """The keyframes' samples and normals within ±reach_m of ``centre`` per axis, one per voxel (the first
+    keyframe's in the given order wins)."""
+    lines = [kf.in_map() for kf in keyframes]
+    pts = np.concatenate([ln.points for ln in lines], axis=0)
+    nrm = np.concatenate([ln.normals for ln in lines], axis=0)
+    inside = np.all(np.abs(pts - centre[:2]) <= reach_m, axis=1)
+    pts, nrm = pts[inside], nrm[inside]
+    if pts.shape[0]:
+        first = _voxel_groups(pts, cfg.submap_voxel_m)[0]
+        pts, nrm = pts[first], nrm[first]
+    return pts, nrm
+
+
+def _build_submap(keyframes: tuple[Keyframe, ...], cfg: ScanMatchConfig, *, old: bool = True) -> Submap:
     """KD-tree and likelihood grid over the local keyframes' samples, one per voxel (the oldest keyframe's wins).
 
-    Only samples the next scans can reach are kept: those within the newest keyframe's reach (its farthest
-    sample) plus the largest search window of its pose, per axis.
+    The local keyframes are those within ``submap_radius_m`` of the newest plus the last ``submap_keyframes``;
+    unless ``old``, only those passed less than ``loop_min_travel_m`` of path ago among the former (older ones
+    are the loop closure's, :func:`_old_keyframes_usable`). Only samples the next scans can reach are kept:
+    those within the newest keyframe's reach (its farthest sample) plus the largest search window of its pose,
+    per axis.
     """
     newest = keyframes[-1]
     poses = np.stack([kf.pose for kf in keyframes])
     near = np.hypot(*(poses[:, :2] - newest.pose[:2]).T) <= cfg.submap_radius_m
+    if not old:
+        near &= newest.path_m - np.array([kf.path_m for kf in keyframes]) < cfg.loop_min_travel_m
     near[-cfg.submap_keyframes :] = True
     local = [keyframes[i] for i in np.flatnonzero(near)]
-    pts = np.concatenate([kf.points for kf in local], axis=0)
-    nrm = np.concatenate([kf.normals for kf in local], axis=0)
-    if newest.points.shape[0]:
-        reach = float(np.abs(newest.points - newest.pose[:2]).max()) + cfg.correlative_window_max_m
-        inside = np.all(np.abs(pts - newest.pose[:2]) <= reach, axis=1)
-        pts, nrm = pts[inside], nrm[inside]
-    if pts.shape[0]:
-        first = _voxel_groups(pts, cfg.submap_voxel_m)[0]
-        pts, nrm = pts[first], nrm[first]
+    reach = _reach_m(newest) + cfg.correlative_window_max_m if newest.lines.points.shape[0] else math.inf
+    pts, nrm = _merged_samples(local, newest.pose, reach, cfg)
     grid = build_likelihood_grid(pts, resolution_m=cfg.grid_resolution_m, sigma_m=cfg.grid_sigma_m,
                                  window_m=cfg.correlative_window_max_m, coarse_cells=cfg.coarse_cells)
     return Submap(keyframes, line_reference(pts, nrm), grid)
 
 
-def _keyframe(scan_xy: FloatArray, pose: npt.ArrayLike, cfg: ScanMatchConfig) -> Keyframe:
+def _keyframe(scan_xy: FloatArray, pose: npt.ArrayLike, path_m: float, cfg: ScanMatchConfig) -> Keyframe:
     """The scan's line samples and normals moved into the map frame at ``pose``."""
     p = np.asarray(pose, dtype=np.float64)
     lines = scan_lines(scan_xy, spacing_m=cfg.submap_voxel_m, max_incidence_deg=cfg.line_max_incidence_deg,
                        range_sigma_m=cfg.range_sigma_m, normal_radius_m=cfg.normal_radius_m,
                        max_missing_beams=cfg.line_max_missing_beams)
-    lines = placed(lines, p)
-    return Keyframe(p, lines.points, lines.normals)
+    return Keyframe(p, lines, voxel_downsample(scan_xy, cfg.scan_voxel_m), path_m)
 
 
 def start_submap(scan_xy: FloatArray, pose: npt.ArrayLike, cfg: ScanMatchConfig) -> Submap:
     """A submap holding one keyframe: the scan (hits in beam order) at ``pose``."""
-    return _build_submap((_keyframe(scan_xy, pose, cfg),), cfg)
+    return _build_submap((_keyframe(scan_xy, pose, 0.0, cfg),), cfg)
 
 
-def add_keyframe(submap: Submap, scan_xy: FloatArray, pose: npt.ArrayLike, cfg: ScanMatchConfig) -> Submap:
+def add_keyframe(submap: Submap, scan_xy: FloatArray, pose: npt.ArrayLike, cfg: ScanMatchConfig, *,
+                 old: bool = True) -> Submap:
     """The submap with the scan at ``pose`` added, its local part re-selected around that pose."""
-    return _build_submap((*submap.keyframes, _keyframe(scan_xy, pose, cfg)), cfg)
+    last = submap.keyframes[-1]
+    path_m = last.path_m + float(np.hypot(*(np.asarray(pose, dtype=np.float64)[:2] - last.pose[:2])))
+    return _build_submap((*submap.keyframes, _keyframe(scan_xy, pose, path_m, cfg)), cfg, old=old)
 
 
 def match_scan(submap: Submap, scan_xy: FloatArray, prior: FloatArray, prior_covariance: FloatArray,
@@ -413,11 +525,7 @@ def match_scan(submap: Submap, scan_xy: FloatArray, prior: FloatArray, prior_cov
 def _refine(submap: Submap, scan_xy: FloatArray, start: FloatArray, prior: GaussianPrior,
             cfg: ScanMatchConfig) -> PlicpResult:
     """MAP-PLICP of the scan against the submap's lines from ``start``."""
-    return plicp(submap.lines, scan_xy, start, prior=prior, max_iterations=cfg.icp_max_iterations,
-                 max_correspondence_m=cfg.max_correspondence_m, trim_fraction=cfg.trim_fraction,
-                 robust_scale_m=cfg.robust_scale_m,
-                 min_step_m=cfg.icp_min_step_m, min_step_rad=math.radians(cfg.icp_min_step_deg),
-                 sigma_min_m=math.sqrt(2.0) * cfg.range_sigma_m)
+    return plicp_configured(submap.lines, scan_xy, start, prior, cfg)
 
 
 def _lattice_steps_apart(a: FloatArray, b: FloatArray, cfg: ScanMatchConfig) -> float:
