@@ -427,13 +427,13 @@ class LocalizeConfig(Section):
     global_door_closed_prob: float = Field(0.5, ge=0.0, le=1.0)
     # 2 deg: the em/grid maps' closed_yaw error (RBPF door errors 0.4-1.7 deg when tracking) plus a latch's play.
     global_door_closed_sigma_deg: float = Field(2.0, gt=0.0)
-    # Tracking (and a converged cloud): a door a particle has not observed (variance at its prior's) is weighed
-    # under the uniform prior over its range and conditioned on the beams its leaf explains, as while global
-    # with the door term; false: eq. (6) linearized at the mean for every door (the paper's letter). Linearized
-    # at a mid-range mean, a closed leaf's beams pull every particle towards the hinge, scan after scan: on the
-    # sample's closed log the RBPF trailed the truth by 0.05-0.13 m along the corridor (docs/results.md).
-    # Uniform, not the global phase's closed/open mixture: with the mixture, tracking on the sample was worse in
-    # 5 of 6 closed/open runs (closed 0.038-0.081 m against 0.039-0.056 m; docs/results.md).
+    # Tracking (and a converged cloud): a door a particle has not observed (variance at its prior's) is weighed under
+    # the uniform prior over its range, and every door the scan's polygon did not observe is conditioned on the beams
+    # its leaf explains, as while global with the door term; false: eq. (6) linearized at the mean for every door (the
+    # paper's letter). Linearized at a mid-range mean, a closed leaf's beams pull every particle towards the hinge, scan
+    # after scan: on the sample's closed log the RBPF trailed the truth by 0.05-0.13 m along the corridor
+    # (docs/results.md). Uniform, not the global phase's closed/open mixture: with the mixture, tracking on the sample
+    # was worse in 5 of 6 closed/open runs (closed 0.038-0.081 m against 0.039-0.056 m; docs/results.md).
     tracking_door_prior: bool = True
     converged_xy_std_m: float = Field(0.3, gt=0.0)
     converged_yaw_std_deg: float = Field(10.0, gt=0.0)
@@ -451,10 +451,11 @@ class LocalizeConfig(Section):
     # rad/√s); the initial door angle std, which also caps the variance of a door left unobserved.
     door_sigma_rad_per_sqrt_s: float = Field(0.1, ge=0.0)
     door_init_sigma_deg: float = Field(30.0, gt=0.0)
-    # Doors of a global start (--init global): "sampled" draws each particle's angle uniformly from the door's
-    # range with std door_global_init_sigma_deg (the particles' mixture is the uniform prior; meant for
-    # global_door_term); "mid_range": mid-range with door_init_sigma_deg, as a tracked start. mid_range: with the
-    # door term off, sampled lost 3 of 10 partial-door runs at 1,000 particles (docs/results.md).
+    # Doors of a global start (--init global): "sampled" draws each particle's angle uniformly from the door's range
+    # with std door_global_init_sigma_deg (the particles' mixture is the uniform prior; meant for global_door_term,
+    # whose closed/open prior then never applies: each start is below the prior variance); "mid_range": mid-range with
+    # door_init_sigma_deg, as a tracked start. mid_range: with the door term off, sampled lost 3 of 10 partial-door runs
+    # at 1,000 particles (docs/results.md).
     door_global_init: Literal["sampled", "mid_range"] = "mid_range"
     door_global_init_sigma_deg: float = Field(10.0, gt=0.0)  # the association's ±10° margin: closed vs half-open
     # Door observations: Douglas-Peucker tolerance, polyline break distance and minimal points per segment,

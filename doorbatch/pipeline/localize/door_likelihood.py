@@ -149,9 +149,9 @@ def door_log_likelihood_at_poses(static_dist: npt.ArrayLike, pose: npt.ArrayLike
     localization's smoothing over the particle's pose region, :mod:`.smoothing`): σ₀² = σ_hit² + e and
     σ_k² = σ_hit² + e + J_k²·P_k, each density keeping its factor σ_hit / σ.
 
-    ``unobserved_var`` (D,): a door whose variance for a particle is at least this is weighed under the uniform
-    prior over its range (module docstring); None (or +inf): eq. (6) for every door. ``prior``: that prior, the
-    uniform one or the closed/open mixture of :mod:`.door_prior`.
+    ``unobserved_var`` (D,): a door whose variance for a particle is at least this is weighed under ``prior`` over
+    its range (module docstring: the uniform prior, or the closed/open mixture of :mod:`.door_prior`); None (or
+    +inf): eq. (6) for every door.
 
     Raises:
         ValueError: As :func:`door_log_likelihood`.
@@ -367,7 +367,7 @@ def _score_kernel(dist: npt.NDArray[np.float32], pts: FloatArray, poses: FloatAr
                 any_near |= near[m]
             if not any_near:
                 continue
-            if pv >= uni[k]:  # unobserved: the uniform prior over [lo, hi]
+            if pv >= uni[k]:  # unobserved: the door prior over [lo, hi] (uniform, or the closed/open mixture)
                 mid = 0.5 * (lo[k] + hi[k])
                 width = hi[k] - lo[k]
                 for m in range(b):

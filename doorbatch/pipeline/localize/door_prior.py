@@ -69,7 +69,8 @@ def unobserved_door_variance(doors: DoorSet, config: LocalizeConfig) -> FloatArr
     return out
 
 
-def _log_normal(x: FloatArray, mean: FloatArray | float, var: FloatArray | float) -> FloatArray:
+def log_normal(x: FloatArray, mean: FloatArray | float, var: FloatArray | float) -> FloatArray:
+    """log N(x; mean, var), elementwise."""
     return np.asarray(-0.5 * (x - mean) ** 2 / var - 0.5 * np.log(2 * math.pi * var), dtype=np.float64)
 
 
@@ -104,7 +105,7 @@ def _open_component(z: FloatArray, meas_var: FloatArray, lo: FloatArray, hi: Flo
     var = meas_var * (1.0 + alpha * ra - beta * rb - shift**2)
     var = np.clip(var, _MIN_VAR, np.maximum(np.minimum(meas_var, width**2 / 4.0), _MIN_VAR))
     with np.errstate(divide="ignore"):
-        log_ev = np.where(narrow, _log_normal(z, lo, meas_var), log_z - np.log(np.where(narrow, 1.0, width)))
+        log_ev = np.where(narrow, log_normal(z, lo, meas_var), log_z - np.log(np.where(narrow, 1.0, width)))
     return log_ev, np.where(narrow, lo, mean), np.where(narrow, _MIN_VAR, var)
 
 
@@ -134,7 +135,7 @@ def _evidence_and_posterior(z_in: npt.ArrayLike, r_in: npt.ArrayLike, lo_in: npt
     pc = prior.closed_prob
     if pc <= 0.0:
         return log_open, m_open, p_open
-    log_closed = _log_normal(z, 0.0, prior.closed_var + r)
+    log_closed = log_normal(z, 0.0, prior.closed_var + r)
     with np.errstate(divide="ignore"):
         terms = np.stack([math.log(pc) + log_closed, math.log1p(-pc) + log_open]) if pc < 1.0 else \
             np.stack([log_closed, np.full_like(log_closed, -np.inf)])

@@ -14,7 +14,8 @@ methods differ only in the map model)::
                     the closed/open prior of :mod:`.door_prior`); once converged, beams that
                     most of the weight explains by neither are skipped (Nav2's do_beamskip,
                     likelihood_field.skip_unexplained), as MCL does; with ``tracking_door_prior`` a door the
-                    particle has not observed is weighed under its prior over the range, as while global
+                    particle has not observed is weighed under the uniform prior over its range (global: the
+                    closed/open mixture)
     3. door update  one Douglas–Peucker polygon per scan, moved to every particle, associated to doors,
                     Kalman update of the associated doors' angles; while global with the door term, and in
                     tracking with ``tracking_door_prior``, each particle's other doors are also conditioned on
@@ -39,6 +40,7 @@ from doorbatch.pipeline.localize.door_prior import (
     UNIFORM,
     DoorPrior,
     log_evidence,
+    log_normal,
     posterior,
     unobserved_door_variance,
 )
@@ -248,7 +250,7 @@ def door_update_log_factor(prior: ParticleSet, update: DoorUpdate, doors: DoorSe
         i, k = np.nonzero(at_prior)
         z = update.angle[i, k]
         evidence = log_evidence(z, meas_var, doors.angle_min[k], doors.angle_max[k], DoorPrior.from_config(config))
-        at_post = -0.5 * (z - update.mean[i, k]) ** 2 / meas_var - 0.5 * math.log(2 * math.pi * meas_var)
+        at_post = log_normal(z, update.mean[i, k], meas_var)
         term[i, k] = evidence - at_post
     out: npt.NDArray[np.float64] = term.sum(axis=1)
     return out
@@ -320,8 +322,7 @@ def condition_doors_on_beams(particles: ParticleSet, beams: BeamSet, field: Dist
     hit = info_sum > 0
     post_var = np.where(hit, 1.0 / (1.0 / var + info_sum), var)
     post_mean = np.where(hit, post_var * (mean / var + phi_sum), mean)
-    at_prior = hit & (var >= thr)
-    if prior is not None and at_prior.any():
+    if prior is not None and (at_prior := hit & (var >= thr)).any():
         i, k = np.nonzero(at_prior)
         post_mean[i, k], post_var[i, k] = posterior(phi_sum[i, k] / info_sum[i, k], 1.0 / info_sum[i, k],
                                                     doors.angle_min[k], doors.angle_max[k], prior)
