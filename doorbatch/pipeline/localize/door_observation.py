@@ -50,13 +50,15 @@ PAIR_CHUNK_ELEMENTS = 1 << 19  # (particle, pair) elements per chunk in associat
 
 
 class DoorUpdate(NamedTuple):
-    """New door means and variances (N, D), which doors each particle observed (N, D), and the measured angles
-    (N, D; rad, 0 where not observed)."""
+    """New door means and variances (N, D), which doors each particle observed (N, D), the measured angles
+    (N, D; rad, 0 where not observed), and, where an update under a door prior computed it (the RBPF's global
+    phase, doors at their prior), each measurement's log-evidence log p(z) (N, D; NaN elsewhere)."""
 
     mean: FloatArray
     var: FloatArray
     observed: BoolArray
     angle: FloatArray
+    log_evidence: FloatArray | None = None
 
 
 # --------------------------------------------------------------------------------------------- polygon

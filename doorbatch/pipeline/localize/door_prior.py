@@ -117,19 +117,20 @@ def log_evidence(z: npt.ArrayLike, meas_var: npt.ArrayLike, lo: npt.ArrayLike, h
         z: measured angles (rad, relative to closed_yaw). meas_var: R (rad²).
         lo, hi: the doors' opening ranges (rad). prior: p_c and σ_c².
     """
-    return _evidence_and_posterior(z, meas_var, lo, hi, prior)[0]
+    return evidence_and_posterior(z, meas_var, lo, hi, prior)[0]
 
 
 def posterior(z: npt.ArrayLike, meas_var: npt.ArrayLike, lo: npt.ArrayLike, hi: npt.ArrayLike,
               prior: DoorPrior) -> tuple[FloatArray, FloatArray]:
     """The posterior of the door angle after z ~ N(a, R) under the mixture prior, moment-matched into one
     Gaussian: mean = Σ w_j·m_j, var = Σ w_j·(P_j + m_j²) − mean², w_j each component's share of p(z)."""
-    _, mean, var = _evidence_and_posterior(z, meas_var, lo, hi, prior)
+    _, mean, var = evidence_and_posterior(z, meas_var, lo, hi, prior)
     return mean, var
 
 
-def _evidence_and_posterior(z_in: npt.ArrayLike, r_in: npt.ArrayLike, lo_in: npt.ArrayLike, hi_in: npt.ArrayLike,
-                            prior: DoorPrior) -> tuple[FloatArray, FloatArray, FloatArray]:
+def evidence_and_posterior(z_in: npt.ArrayLike, r_in: npt.ArrayLike, lo_in: npt.ArrayLike, hi_in: npt.ArrayLike,
+                           prior: DoorPrior) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """:func:`log_evidence` and :func:`posterior` at once: (log p(z), mean, var)."""
     z, r, lo, hi = np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in (z_in, r_in, lo_in, hi_in)))
     log_open, m_open, p_open = _open_component(z, r, lo, hi)
     pc = prior.closed_prob

@@ -39,6 +39,7 @@ from doorbatch.pipeline.localize.door_observation import DoorUpdate, predict_doo
 from doorbatch.pipeline.localize.door_prior import (
     UNIFORM,
     DoorPrior,
+    evidence_and_posterior,
     log_evidence,
     log_normal,
     posterior,
@@ -217,9 +218,10 @@ def global_door_update(points_base: npt.ArrayLike, particles: ParticleSet, doors
     i, k = np.nonzero(at_prior)
     meas_var = math.radians(config.door_angle_sigma_deg) ** 2
     mean, var = update.mean.copy(), update.var.copy()
-    mean[i, k], var[i, k] = posterior(update.angle[i, k], meas_var, doors.angle_min[k], doors.angle_max[k],
-                                      DoorPrior.from_config(config))
-    return update._replace(mean=mean, var=var)
+    evidence = np.full_like(mean, np.nan)
+    evidence[i, k], mean[i, k], var[i, k] = evidence_and_posterior(
+        update.angle[i, k], meas_var, doors.angle_min[k], doors.angle_max[k], DoorPrior.from_config(config))
+    return update._replace(mean=mean, var=var, log_evidence=evidence)
 
 
 def door_update_log_factor(prior: ParticleSet, update: DoorUpdate, doors: DoorSet, config: LocalizeConfig
@@ -249,7 +251,8 @@ def door_update_log_factor(prior: ParticleSet, update: DoorUpdate, doors: DoorSe
     if at_prior.any():
         i, k = np.nonzero(at_prior)
         z = update.angle[i, k]
-        evidence = log_evidence(z, meas_var, doors.angle_min[k], doors.angle_max[k], DoorPrior.from_config(config))
+        evidence = (log_evidence(z, meas_var, doors.angle_min[k], doors.angle_max[k], DoorPrior.from_config(config))
+                    if update.log_evidence is None else update.log_evidence[i, k])  # global_door_update's
         at_post = log_normal(z, update.mean[i, k], meas_var)
         term[i, k] = evidence - at_post
     out: npt.NDArray[np.float64] = term.sum(axis=1)

@@ -15,7 +15,8 @@ from doorbatch.pipeline.localize.door_likelihood import (
     door_log_likelihood_at_poses,
     numba_available,
 )
-from doorbatch.pipeline.localize.door_prior import DoorPrior
+from doorbatch.pipeline.localize.door_prior import UNIFORM, DoorPrior
+from doorbatch.pipeline.localize.likelihood_field import endpoint_points
 
 FloatArray = npt.NDArray[np.float64]
 CONFIG = LocalizeConfig(z_hit=0.95, z_rand=0.05)  # a sharp mixture: the ranking margins below are in nats
@@ -231,20 +232,19 @@ def test_unobserved_door_is_weighed_under_its_uniform_prior_not_linearized_at_it
     np.testing.assert_array_equal(kept.beam_likelihood, old.beam_likelihood)
 
 
-def test_uniform_prior_backends_agree() -> None:
+@pytest.mark.parametrize(("seed", "prior"), [(3, UNIFORM), (4, DoorPrior(0.3, math.radians(3.0) ** 2))])
+def test_door_prior_backends_agree(seed: int, prior: DoorPrior) -> None:
+    """NumPy and numba agree for doors at the prior (uniform, or the closed/open mixture) and observed ones."""
     if not numba_available():
         pytest.skip("no numba")
-    rng = np.random.default_rng(3)
+    rng = np.random.default_rng(seed)
     pose = np.column_stack([rng.uniform(-0.5, 0.5, (50, 2)), rng.uniform(-0.3, 0.3, 50)])
     base = rng.uniform(-1.5, 1.5, (40, 2))
-    c, s = np.cos(pose[:, 2, None]), np.sin(pose[:, 2, None])
-    pts = np.stack([pose[:, 0, None] + c * base[:, 0] - s * base[:, 1],
-                    pose[:, 1, None] + s * base[:, 0] + c * base[:, 1]], axis=-1)
-    dist = wall_distance(pts)
+    dist = wall_distance(endpoint_points(pose, base))
     mean = rng.uniform(0.0, math.pi / 2, (50, 1))
     var = np.where(rng.random((50, 1)) < 0.5, 0.3, 0.01)
     out = [door_log_likelihood_at_poses(dist, pose, base, DOOR, mean, var, CONFIG, RANGE_MAX, backend=b,
-                                        unobserved_var=np.array([0.2])) for b in ("numpy", "numba")]
+                                        unobserved_var=np.array([0.2]), prior=prior) for b in ("numpy", "numba")]
     np.testing.assert_array_equal(out[0].association, out[1].association)
     np.testing.assert_allclose(out[0].log_likelihood, out[1].log_likelihood, rtol=1e-4, atol=1e-4)
 
@@ -283,22 +283,3 @@ def test_unobserved_door_under_the_closed_open_mixture_matches_its_quadrature(ba
     uniform = door_log_likelihood_at_poses(dist, np.zeros((1, 3)), points, DOOR, mean, var, CONFIG, RANGE_MAX,
                                            backend=backend, unobserved_var=var[0])
     assert res.beam_likelihood[0, 0] > 2.0 * uniform.beam_likelihood[0, 0]
-
-
-def test_mixture_prior_backends_agree() -> None:
-    if not numba_available():
-        pytest.skip("no numba")
-    rng = np.random.default_rng(4)
-    pose = np.column_stack([rng.uniform(-0.5, 0.5, (50, 2)), rng.uniform(-0.3, 0.3, 50)])
-    base = rng.uniform(-1.5, 1.5, (40, 2))
-    c, s = np.cos(pose[:, 2, None]), np.sin(pose[:, 2, None])
-    pts = np.stack([pose[:, 0, None] + c * base[:, 0] - s * base[:, 1],
-                    pose[:, 1, None] + s * base[:, 0] + c * base[:, 1]], axis=-1)
-    dist = wall_distance(pts)
-    mean = rng.uniform(0.0, math.pi / 2, (50, 1))
-    var = np.where(rng.random((50, 1)) < 0.5, 0.3, 0.01)
-    prior = DoorPrior(0.3, math.radians(3.0) ** 2)
-    out = [door_log_likelihood_at_poses(dist, pose, base, DOOR, mean, var, CONFIG, RANGE_MAX, backend=b,
-                                        unobserved_var=np.array([0.2]), prior=prior) for b in ("numpy", "numba")]
-    np.testing.assert_array_equal(out[0].association, out[1].association)
-    np.testing.assert_allclose(out[0].log_likelihood, out[1].log_likelihood, rtol=1e-4, atol=1e-4)
