@@ -34,7 +34,7 @@ def main() -> None:
     beams = collect_beams(recs, passes, config.em)
     final_beams = final_step_beams(recs, passes, config.em)
     c0 = time.process_time()
-    searched = build_object_map(beams, config.em.model_copy(update={"final_recut_sweeps": 0}))
+    searched = build_object_map(beams, config.em)  # no final_beams: the search alone
     search_s = time.process_time() - c0
     c0 = time.process_time()
     result = build_object_map(beams, config.em, final_beams=final_beams)

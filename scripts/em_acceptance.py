@@ -159,13 +159,17 @@ def false_positive_scores(site: Site, result: ObjectMapResult, beams: BeamSet, e
     re-evaluated on the kept beams), with the log-likelihood part with and without the colour term."""
     _, fp = match(detected_centres(result), site.truth_centres)
     obj_map, out = result.object_map, []
+    if not fp:
+        return out
+    no_colour = replace(obj_map.classes, has_color=False)
+    prior_all = log_prior(obj_map, em)
+    post_all = evaluate(beams, obj_map, em).log_posterior
+    post_range = evaluate(beams, replace(obj_map, classes=no_colour), em).log_posterior
     for i in fp:
         without = replace(obj_map, doors=obj_map.doors[:i] + obj_map.doors[i + 1:])
-        no_colour = replace(obj_map.classes, has_color=False)
-        dprior = log_prior(obj_map, em) - log_prior(without, em)
-        d_all = evaluate(beams, obj_map, em).log_posterior - evaluate(beams, without, em).log_posterior
-        d_range = (evaluate(beams, replace(obj_map, classes=no_colour), em).log_posterior
-                   - evaluate(beams, replace(without, classes=no_colour), em).log_posterior)
+        dprior = prior_all - log_prior(without, em)
+        d_all = post_all - evaluate(beams, without, em).log_posterior
+        d_range = post_range - evaluate(beams, replace(without, classes=no_colour), em).log_posterior
         p = result.doors[i].preview
         out.append({"hinge": [round(p.hinge_x, 2), round(p.hinge_y, 2)],
                     "pass_yaws_deg": np.rad2deg(result.doors[i].pass_yaws).round(0).tolist(),

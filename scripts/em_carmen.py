@@ -62,8 +62,9 @@ def main() -> None:
         passes = [[every_scan[i] for i in c] for c in np.array_split(np.arange(len(every_scan)), args.passes)]
         scans = [sc for p in passes for sc in p[::em.scan_stride]]
         beams = beams_from_scans([p[::em.scan_stride] for p in passes], em.max_range_m, em.beam_stride)
-        final = beams_from_scans([p[::em.final_scan_stride] for p in passes], em.max_range_m, em.final_beam_stride)
-        result = build_object_map(beams, em, final_beams=final if em.final_recut_sweeps else None)
+        final = (beams_from_scans([p[::em.final_scan_stride] for p in passes], em.max_range_m, em.final_beam_stride)
+                 if em.final_recut_sweeps else None)
+        result = build_object_map(beams, em, final_beams=final)
         walls = [w.endpoints() for w in result.object_map.walls if w.segments.size]
         image = render_preview(points_map(beams), [d.preview for d in result.doors],
                                walls=np.concatenate(walls) if walls else None)

@@ -26,7 +26,7 @@ import numpy.typing as npt
 
 from doorbatch.config import DoorbatchConfig, load_config
 from doorbatch.geometry.rotations import wrap_angle
-from doorbatch.geometry.se2 import interpolate_poses
+from doorbatch.geometry.se2 import interpolate_poses, transform_points
 from doorbatch.io.parquet import read_table
 from doorbatch.io.recording import Recording, load_recording
 from doorbatch.io.sim_truth import read_truth
@@ -40,9 +40,9 @@ from doorbatch.pipeline.localize.likelihood_field import (
     beam_likelihood,
     combine_beams,
     endpoint_distances,
-    select_beams,
     skip_unexplained,
 )
+from doorbatch.pipeline.localize.mcl import beams_from_scan
 from doorbatch.pipeline.localize.particles import ParticleSet
 from doorbatch.pipeline.localize.run import laser_to_base_4x4, load_localization_map
 
@@ -97,8 +97,7 @@ def _leaf_visibility(rec: Recording, truth_ns: npt.NDArray[np.int64], truth: Flo
         pose = ok_scans[0][i]
         pts, hit = rec.scans.endpoints_base(i)
         pts = pts[hit]
-        c, s_ = np.cos(pose[2]), np.sin(pose[2])
-        xy = np.stack([pose[0] + c * pts[:, 0] - s_ * pts[:, 1], pose[1] + s_ * pts[:, 0] + c * pts[:, 1]], axis=1)
+        xy = transform_points(pose, pts)
         ux, uy = leaf_directions(doors, mean_all[i])
         v = xy[:, None, :] - doors.hinge[None]
         t = v[..., 0] * ux + v[..., 1] * uy
@@ -185,9 +184,7 @@ def main() -> None:
         if not ok[0]:
             continue
         scan = rec.scans.scan(i)
-        beams = select_beams(scan.ranges, scan.angles, scan.range_min, scan.range_max,
-                             laser_to_base_4x4(rec.scans.laser_to_base[i]), lc.max_beams, lc.laser_min_range,
-                             lc.laser_max_range)
+        beams = beams_from_scan(scan, laser_to_base_4x4(rec.scans.laser_to_base[i]), lc)
         pose = ref[0] + rng.normal(0.0, 1.0, (n, 3)) * [args.xy_std_m, args.xy_std_m, np.radians(args.yaw_std_deg)]
         pose[0] = ref[0]
         w = np.full(n, 1.0 / n)

@@ -129,11 +129,15 @@ def first_beyond(beams: BeamSet, idx: IntArray, t: FloatArray, obj_map: ObjectMa
     than t ignored; object (cls, obj) left out): what the ray would meet behind a line it crosses at t."""
     delta = np.full(idx.shape[0], np.inf)
     kind = np.full(idx.shape[0], -1, dtype=np.int64)
+    if idx.size == 0:
+        return delta, kind
     for p in range(beams.n_passes):
         sel = np.flatnonzero(beams.pass_index[idx] == p)
+        if sel.size == 0:
+            continue
         segs, seg_cls, seg_obj = obj_map.segments(p)
         keep = ~((seg_cls == cls) & (seg_obj == obj))
-        if sel.size == 0 or not keep.any():
+        if not keep.any():
             continue
         b = idx[sel]
         rng, hit = cast_segments(beams.origin[b] + t[sel, None] * beams.direction[b], beams.direction[b],
