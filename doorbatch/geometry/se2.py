@@ -23,6 +23,22 @@ def rotation_matrix(yaw: npt.ArrayLike) -> FloatArray:
     return np.stack([np.stack([c, -s], axis=-1), np.stack([s, c], axis=-1)], axis=-2)
 
 
+def frame_rotation(yaw: float) -> FloatArray:
+    """G = diag(R(θ), 1) (3, 3): a pose increment's covariance in the frame of heading θ is G Σ Gᵀ in the map's."""
+    g = np.eye(3)
+    g[:2, :2] = rotation_matrix(yaw)
+    return g
+
+
+def compounded_covariance(covariance: npt.ArrayLike, shift_xy: npt.ArrayLike, added: npt.ArrayLike) -> FloatArray:
+    """Cov(x ⊕ u) to first order, J Σ_x Jᵀ + Σ_u (both map frame), J = ∂(x ⊕ u)/∂x = [[1, 0, −Δy], [0, 1, Δx],
+    [0, 0, 1]] with (Δx, Δy) = ``shift_xy`` the increment's translation in the map frame."""
+    dx, dy = (float(v) for v in np.asarray(shift_xy, dtype=np.float64)[:2])
+    jac = np.array([[1.0, 0.0, -dy], [0.0, 1.0, dx], [0.0, 0.0, 1.0]])
+    out: FloatArray = jac @ np.asarray(covariance, dtype=np.float64) @ jac.T + np.asarray(added, dtype=np.float64)
+    return out
+
+
 def compose(a: npt.ArrayLike, b: npt.ArrayLike) -> FloatArray:
     """a ⊕ b = (R(θ_a) t_b + t_a, θ_a + θ_b); broadcasts over leading axes."""
     pa = np.asarray(a, dtype=np.float64)

@@ -31,6 +31,32 @@ FloatArray = npt.NDArray[np.float64]
 Float32Array = npt.NDArray[np.float32]
 IntArray = npt.NDArray[np.int64]
 
+Window = tuple[tuple[float, float], float]  # correlative half-widths: (x, y) in m, yaw in deg
+
+
+def sigma_window(covariance: npt.ArrayLike, sigmas: float, min_m: float, max_m: float, min_deg: float,
+                 max_deg: float) -> Window:
+    """Correlative half-widths ((x, y) in m, yaw in deg): ``sigmas`` standard deviations of a pose covariance per
+    axis, clipped to [min, max]."""
+    std = np.sqrt(np.maximum(np.diag(np.asarray(covariance, dtype=np.float64)), 0.0)) * sigmas
+    wx, wy = np.clip(std[:2], min_m, max_m)
+    wyaw = min(max(math.degrees(float(std[2])), min_deg), max_deg)
+    return (float(wx), float(wy)), wyaw
+
+
+def lattice_steps_apart(a: npt.ArrayLike, b: npt.ArrayLike, resolution_m: float, step_deg: float) -> float:
+    """How many search-lattice steps (cells, yaw steps) two poses differ by on the worst axis."""
+    pa, pb = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    cells = float(np.max(np.abs(pa[:2] - pb[:2]))) / resolution_m
+    steps = abs(float(wrap_angle(pa[2] - pb[2]))) / math.radians(step_deg)
+    return max(cells, steps)
+
+
+def thinned(points: FloatArray, max_points: int) -> FloatArray:
+    """Every k-th point, k the smallest stride that leaves at most ``max_points`` (the search's scan)."""
+    return points[:: -(-points.shape[0] // max_points)] if points.shape[0] else points
+
+
 # Coarse candidates expanded at once (a small batch keeps the loop in NumPy without much wasted work).
 EXPAND_BATCH = 4
 

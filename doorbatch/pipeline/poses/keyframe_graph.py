@@ -19,21 +19,15 @@ import numpy as np
 import numpy.typing as npt
 
 from doorbatch.config import ScanMatchConfig
-from doorbatch.geometry.se2 import relative, rotation_matrix
+from doorbatch.geometry.se2 import compounded_covariance, frame_rotation, relative
 from doorbatch.pipeline.poses.pose_graph import PoseGraphEdges, PoseGraphSolution, optimize_pose_graph
 
 FloatArray = npt.NDArray[np.float64]
 
 
-def _frame_rotation(yaw: float) -> FloatArray:
-    g = np.eye(3)
-    g[:2, :2] = rotation_matrix(yaw)
-    return g
-
-
 def edge_covariance(covariance_map: npt.ArrayLike, first_pose: npt.ArrayLike, cfg: ScanMatchConfig) -> FloatArray:
     """Cov(z) = Gᵀ Σ G + diag(graph_min_std_m², graph_min_std_m², graph_min_std_deg²) (module docstring)."""
-    g = _frame_rotation(float(np.asarray(first_pose, dtype=np.float64)[2]))
+    g = frame_rotation(float(np.asarray(first_pose, dtype=np.float64)[2]))
     floor = np.array([cfg.graph_min_std_m, cfg.graph_min_std_m, math.radians(cfg.graph_min_std_deg)]) ** 2
     cov: FloatArray = g.T @ np.asarray(covariance_map, dtype=np.float64) @ g + np.diag(floor)
     return cov
@@ -65,10 +59,8 @@ class KeyframeGraph:
         cov = edge_covariance(covariance_map, prev, cfg)
         self._add(len(self.poses) - 1, len(self.poses), relative(prev, new), cov, robust=False)
         self.poses.append(new)
-        shift = new[:2] - prev[:2]
-        jac = np.array([[1.0, 0.0, -shift[1]], [0.0, 1.0, shift[0]], [0.0, 0.0, 1.0]])
-        g = _frame_rotation(float(prev[2]))
-        self.uncertainty = jac @ self.uncertainty @ jac.T + g @ cov @ g.T
+        g = frame_rotation(float(prev[2]))
+        self.uncertainty = compounded_covariance(self.uncertainty, new[:2] - prev[:2], g @ cov @ g.T)
 
     def add_loop(self, anchor: int, matched_pose: npt.ArrayLike, covariance_map: npt.ArrayLike,
                  cfg: ScanMatchConfig) -> None:

@@ -37,7 +37,15 @@ import numpy as np
 import numpy.typing as npt
 
 from doorbatch.config import ScanMatchConfig
-from doorbatch.pipeline.poses.correlative import Exclusion, build_likelihood_grid, correlative_match
+from doorbatch.pipeline.poses.correlative import (
+    Exclusion,
+    Window,
+    build_likelihood_grid,
+    correlative_match,
+    lattice_steps_apart,
+    sigma_window,
+    thinned,
+)
 from doorbatch.pipeline.poses.plicp import line_reference, plicp_configured
 
 FloatArray = npt.NDArray[np.float64]
@@ -91,12 +99,10 @@ def one_pass(candidates: IntArray, keyframe_poses: npt.ArrayLike, estimate: npt.
     return out
 
 
-def loop_window(uncertainty: FloatArray, cfg: ScanMatchConfig) -> tuple[tuple[float, float], float]:
+def loop_window(uncertainty: FloatArray, cfg: ScanMatchConfig) -> Window:
     """Correlative half-widths ((x, y) m, yaw deg): loop_search_sigmas σ per axis, clipped to the loop limits."""
-    std = np.sqrt(np.maximum(np.diag(uncertainty), 0.0)) * cfg.loop_search_sigmas
-    wx, wy = np.clip(std[:2], cfg.loop_window_min_m, cfg.loop_window_max_m)
-    wyaw = min(max(math.degrees(float(std[2])), cfg.loop_window_min_deg), cfg.loop_window_max_deg)
-    return (float(wx), float(wy)), wyaw
+    return sigma_window(uncertainty, cfg.loop_search_sigmas, cfg.loop_window_min_m, cfg.loop_window_max_m,
+                        cfg.loop_window_min_deg, cfg.loop_window_max_deg)
 
 
 def match_loop(points: npt.ArrayLike, normals: npt.ArrayLike, scan_xy: FloatArray, estimate: npt.ArrayLike,
@@ -119,7 +125,7 @@ def match_loop(points: npt.ArrayLike, normals: npt.ArrayLike, scan_xy: FloatArra
     window_m, window_deg = loop_window(uncertainty, cfg)
     grid = build_likelihood_grid(pts, resolution_m=cfg.grid_resolution_m, sigma_m=cfg.grid_sigma_m,
                                  window_m=max(window_m), coarse_cells=cfg.coarse_cells)
-    sparse = scan_xy[:: -(-n_scan // cfg.correlative_max_points)]
+    sparse = thinned(scan_xy, cfg.correlative_max_points)
     best = correlative_match(grid, sparse, x0, window_m=window_m, window_deg=window_deg,
                              step_deg=cfg.correlative_step_deg)
     if best.score < cfg.loop_min_score:
@@ -132,9 +138,7 @@ def match_loop(points: npt.ArrayLike, normals: npt.ArrayLike, scan_xy: FloatArra
         return None
     fine = plicp_configured(line_reference(pts, normals), scan_xy, best.pose, None, cfg)
     overlap = fine.n_inliers / (cfg.trim_fraction * n_scan)
-    shift = float(np.max(np.abs(fine.pose[:2] - best.pose[:2])))
-    turn = abs(math.remainder(float(fine.pose[2] - best.pose[2]), 2.0 * math.pi))
-    consistent = shift <= cfg.grid_resolution_m and turn <= math.radians(cfg.correlative_step_deg)
+    consistent = lattice_steps_apart(fine.pose, best.pose, cfg.grid_resolution_m, cfg.correlative_step_deg) <= 1.0
     if (overlap < cfg.loop_min_overlap_fraction or fine.degeneracy < cfg.min_degeneracy or not consistent
             or not np.all(np.isfinite(fine.covariance))):
         return None

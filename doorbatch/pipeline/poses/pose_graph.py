@@ -69,7 +69,6 @@ class PoseGraphSolution:
     poses: FloatArray  # (N, 3)
     active: BoolArray  # (E,) False for loop edges switched off by the χ² gate
     chi2: FloatArray  # (E,)
-    iterations: int
 
 
 def edge_errors(poses: FloatArray, edges: PoseGraphEdges) -> FloatArray:
@@ -150,7 +149,7 @@ def _normal_equations(poses: FloatArray, edges: PoseGraphEdges, weights: FloatAr
 
 
 def _solve_weighted(poses: FloatArray, edges: PoseGraphEdges, active: BoolArray, *, huber_sigmas: float,
-                    max_iterations: int, tolerance: float) -> tuple[FloatArray, int]:
+                    max_iterations: int, tolerance: float) -> FloatArray:
     """Levenberg–Marquardt with IRLS weights re-derived at every accepted step (module docstring)."""
     used = PoseGraphEdges(edges.first[active], edges.second[active], edges.measurement[active],
                           edges.information[active], edges.robust[active])
@@ -158,8 +157,7 @@ def _solve_weighted(poses: FloatArray, edges: PoseGraphEdges, active: BoolArray,
     chi2 = _chi2(edge_errors(x, used), used.information)
     cost = _cost(chi2, used.robust, huber_sigmas)
     damping = 1e-4
-    iterations = 0
-    for iterations in range(1, max_iterations + 1):  # noqa: B007 (the count is returned)
+    for _ in range(max_iterations):
         h, g = _normal_equations(x, used, _weights(chi2, used.robust, huber_sigmas))
         diag = h.diagonal()
         step = spla.spsolve(h + sp.diags(damping * np.maximum(diag, 1e-12)), -g)
@@ -178,7 +176,7 @@ def _solve_weighted(poses: FloatArray, edges: PoseGraphEdges, active: BoolArray,
             damping *= 10.0
             if damping > 1e8:
                 break
-    return x, iterations
+    return x
 
 
 def optimize_pose_graph(poses: npt.ArrayLike, edges: PoseGraphEdges, *, huber_sigmas: float = 3.0,
@@ -209,14 +207,12 @@ def optimize_pose_graph(poses: npt.ArrayLike, edges: PoseGraphEdges, *, huber_si
                        or max(edges.first.max(), edges.second.max()) >= x.shape[0]):
         raise ValueError("an edge names a node outside the graph")
     active = np.ones(edges.size, dtype=bool)
-    total = 0
     while True:
         if x.shape[0] > 1 and edges.size:
-            x, iterations = _solve_weighted(x, edges, active, huber_sigmas=huber_sigmas,
-                                            max_iterations=max_iterations, tolerance=tolerance)
-            total += iterations
+            x = _solve_weighted(x, edges, active, huber_sigmas=huber_sigmas, max_iterations=max_iterations,
+                                tolerance=tolerance)
         chi2 = _chi2(edge_errors(x, edges), edges.information) if edges.size else np.zeros(0)
         beyond = np.flatnonzero(active & edges.robust & (chi2 > outlier_chi2))
         if beyond.size == 0:
-            return PoseGraphSolution(x, active, chi2, total)
+            return PoseGraphSolution(x, active, chi2)
         active[beyond[np.argmax(chi2[beyond])]] = False

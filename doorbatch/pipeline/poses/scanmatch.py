@@ -83,8 +83,16 @@ import numpy.typing as npt
 from doorbatch.config import ScanMatchConfig
 from doorbatch.geometry.odometry import odometry_increments
 from doorbatch.geometry.rotations import wrap_angle
-from doorbatch.geometry.se2 import compose, relative, rotation_matrix
-from doorbatch.pipeline.poses.correlative import LikelihoodGrid, build_likelihood_grid, correlative_match
+from doorbatch.geometry.se2 import compose, compounded_covariance, frame_rotation, relative, rotation_matrix
+from doorbatch.pipeline.poses.correlative import (
+    LikelihoodGrid,
+    Window,
+    build_likelihood_grid,
+    correlative_match,
+    lattice_steps_apart,
+    sigma_window,
+    thinned,
+)
 from doorbatch.pipeline.poses.keyframe_graph import KeyframeGraph
 from doorbatch.pipeline.poses.loop_closure import loop_candidates, match_loop, one_pass
 from doorbatch.pipeline.poses.plicp import (
@@ -140,20 +148,27 @@ class ScanMatchResult:
 
 @dataclass(frozen=True, slots=True)
 class Keyframe:
-    """A keyframe's pose, its line samples with unit normals in its own frame, and its downsampled scan."""
+    """A keyframe's pose, its line samples with unit normals in its own frame and placed in the map frame, and
+    its downsampled scan. Made by :meth:`at`, which places the samples once per pose."""
 
     pose: FloatArray  # (3,)
     lines: ScanLines  # line samples and normals in the scan's own frame
     scan: FloatArray  # (N, 2) the downsampled scan, its own frame (matched for loop closures)
     path_m: float  # path length travelled from the first keyframe to this one
+    in_map: ScanLines  # ``lines`` placed at ``pose``
+    reach_m: float  # how far the farthest placed sample lies from the pose on either map axis (0 without samples)
 
-    def in_map(self) -> ScanLines:
-        """The line samples and normals in the map frame."""
-        return placed(self.lines, self.pose)
+    @classmethod
+    def at(cls, pose: npt.ArrayLike, lines: ScanLines, scan: FloatArray, path_m: float) -> Keyframe:
+        """The keyframe at ``pose``, its samples placed in the map frame."""
+        p = np.asarray(pose, dtype=np.float64)
+        in_map = placed(lines, p)
+        reach = float(np.abs(in_map.points - p[:2]).max()) if in_map.points.shape[0] else 0.0
+        return cls(p, lines, scan, path_m, in_map, reach)
 
     def moved(self, pose: npt.ArrayLike) -> Keyframe:
         """The keyframe at another pose (after a pose-graph optimization)."""
-        return Keyframe(np.asarray(pose, dtype=np.float64), self.lines, self.scan, self.path_m)
+        return Keyframe.at(pose, self.lines, self.scan, self.path_m)
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -224,7 +239,8 @@ def scan_match_trajectory(
         fallback_run = fallback_run + 1 if match.fallback else 0
         if fallback_run in (0, cfg.fallbacks_before_keyframe) and _is_keyframe(submap.last_keyframe_pose, match.pose,
                                                                                  cfg):
-            submap = add_keyframe(submap, hits[k], match.pose, cfg, old=_old_keyframes_usable(submap, graph, cfg))
+            submap = add_keyframe(submap, hits[k], match.pose, cfg, old=_old_keyframes_usable(submap, graph, cfg),
+                                  downsampled=scan)
             out.keyframe[k], fallback_run = True, 0
             if cfg.loop_closure:  # weak and fallback keyframes: the odometry's wider covariance (module docstring)
                 graph.add_sequential(match.pose, cov if match.fallback or match.weak else match.covariance, cfg)
@@ -257,9 +273,10 @@ def _finish_graph(out: ScanMatchResult, graph: KeyframeGraph, placement: _Placem
     """The final optimization; every scan placed relative to its optimized keyframe."""
     solution = graph.optimize(cfg)
     out.poses[:] = compose(solution.poses[placement.keyframe], placement.offset)
-    kept = solution.active & graph.edges().robust
+    robust, second = np.asarray(graph.robust, dtype=bool), np.asarray(graph.second, dtype=np.int64)
+    kept = solution.active & robust
     keyframe_scans = np.flatnonzero(out.keyframe)
-    out.loop_closure[keyframe_scans[graph.edges().second[kept]]] = True
+    out.loop_closure[keyframe_scans[second[kept]]] = True
     log.info("loop closure: %d loop edges kept of %d", int(kept.sum()), graph.n_loops)
 
 
@@ -268,13 +285,15 @@ def close_loop(submap: Submap, graph: KeyframeGraph, cfg: ScanMatchConfig) -> Su
     optimize the pose graph and return the submap rebuilt from the optimized keyframe poses."""
     keyframes = submap.keyframes
     newest = keyframes[-1]
+    if newest.path_m - graph.last_search_path_m < cfg.loop_attempt_spacing_m:
+        return submap
     poses = np.stack(graph.poses[:-1])
     candidates = loop_candidates(poses, [kf.path_m for kf in keyframes], newest.pose, graph.uncertainty, cfg)
-    if candidates.size == 0 or newest.path_m - graph.last_search_path_m < cfg.loop_attempt_spacing_m:
+    if candidates.size == 0:
         return submap
     candidates = one_pass(candidates, poses, newest.pose, cfg.submap_keyframes)
     graph.last_search_path_m = newest.path_m
-    reach = _reach_m(newest) + cfg.loop_window_max_m
+    reach = newest.reach_m + cfg.loop_window_max_m
     pts, nrm = _merged_samples([keyframes[i] for i in candidates], newest.pose, reach, cfg)
     match = match_loop(pts, nrm, newest.scan, newest.pose, graph.uncertainty, cfg)
     if match is None:
@@ -352,8 +371,7 @@ def increment_covariance(increment: npt.ArrayLike, cfg: ScanMatchConfig) -> Floa
 
 def prediction_covariance(increment: npt.ArrayLike, yaw: float, cfg: ScanMatchConfig) -> FloatArray:
     """Covariance of x ⊕ u in the map frame for a fixed x of heading ``yaw``: G Cov(u) Gᵀ, G = diag(R(yaw), 1)."""
-    g = np.eye(3)
-    g[:2, :2] = rotation_matrix(yaw)
+    g = frame_rotation(yaw)
     cov: FloatArray = g @ increment_covariance(increment, cfg) @ g.T
     return cov
 
@@ -368,21 +386,13 @@ def propagated_covariance(previous_covariance: npt.ArrayLike, previous_pose: npt
     """
     x = np.asarray(previous_pose, dtype=np.float64)
     shift = rotation_matrix(float(x[2])) @ np.asarray(increment, dtype=np.float64)[:2]
-    jac = np.array([[1.0, 0.0, -shift[1]], [0.0, 1.0, shift[0]], [0.0, 0.0, 1.0]])
-    cov: FloatArray = jac @ np.asarray(previous_covariance, dtype=np.float64) @ jac.T + prediction_covariance(
-        increment, float(x[2]), cfg)
-    return cov
+    return compounded_covariance(previous_covariance, shift, prediction_covariance(increment, float(x[2]), cfg))
 
 
-def search_window(covariance: FloatArray, cfg: ScanMatchConfig) -> tuple[tuple[float, float], float]:
+def search_window(covariance: FloatArray, cfg: ScanMatchConfig) -> Window:
     """Correlative half-widths ((x, y) in m, yaw in deg): window_sigmas standard deviations, clipped to the limits."""
-    std = np.sqrt(np.diag(covariance)) * cfg.window_sigmas
-    wx, wy = np.clip(std[:2], cfg.correlative_window_min_m, cfg.correlative_window_max_m)
-    wyaw = min(max(math.degrees(std[2]), cfg.correlative_window_min_deg), cfg.correlative_window_max_deg)
-    return (float(wx), float(wy)), wyaw
-
-
-Window = tuple[tuple[float, float], float]  # correlative half-widths: (x, y) in m, yaw in deg
+    return sigma_window(covariance, cfg.window_sigmas, cfg.correlative_window_min_m, cfg.correlative_window_max_m,
+                        cfg.correlative_window_min_deg, cfg.correlative_window_max_deg)
 
 
 def grown_window(window: Window, cfg: ScanMatchConfig) -> Window | None:
@@ -413,17 +423,11 @@ def _voxel_groups(points: FloatArray, voxel_m: float) -> tuple[IntArray, IntArra
     return first, inverse, counts
 
 
-def _reach_m(keyframe: Keyframe) -> float:
-    """How far the keyframe's farthest sample lies from its pose on either map axis (m; 0 without samples)."""
-    points = keyframe.in_map().points
-    return float(np.abs(points - keyframe.pose[:2]).max()) if points.shape[0] else 0.0
-
-
 def _merged_samples(keyframes: Sequence[Keyframe], centre: FloatArray, reach_m: float, cfg: ScanMatchConfig
                     ) -> tuple[FloatArray, FloatArray]:
     """The keyframes' samples and normals within ±reach_m of ``centre`` per axis, one per voxel (the first
     keyframe's in the given order wins)."""
-    lines = [kf.in_map() for kf in keyframes]
+    lines = [kf.in_map for kf in keyframes]
     pts = np.concatenate([ln.points for ln in lines], axis=0)
     nrm = np.concatenate([ln.normals for ln in lines], axis=0)
     inside = np.all(np.abs(pts - centre[:2]) <= reach_m, axis=1)
@@ -450,20 +454,22 @@ def _build_submap(keyframes: tuple[Keyframe, ...], cfg: ScanMatchConfig, *, old:
         near &= newest.path_m - np.array([kf.path_m for kf in keyframes]) < cfg.loop_min_travel_m
     near[-cfg.submap_keyframes :] = True
     local = [keyframes[i] for i in np.flatnonzero(near)]
-    reach = _reach_m(newest) + cfg.correlative_window_max_m if newest.lines.points.shape[0] else math.inf
+    reach = newest.reach_m + cfg.correlative_window_max_m if newest.lines.points.shape[0] else math.inf
     pts, nrm = _merged_samples(local, newest.pose, reach, cfg)
     grid = build_likelihood_grid(pts, resolution_m=cfg.grid_resolution_m, sigma_m=cfg.grid_sigma_m,
                                  window_m=cfg.correlative_window_max_m, coarse_cells=cfg.coarse_cells)
     return Submap(keyframes, line_reference(pts, nrm), grid)
 
 
-def _keyframe(scan_xy: FloatArray, pose: npt.ArrayLike, path_m: float, cfg: ScanMatchConfig) -> Keyframe:
-    """The scan's line samples and normals moved into the map frame at ``pose``."""
-    p = np.asarray(pose, dtype=np.float64)
+def _keyframe(scan_xy: FloatArray, pose: npt.ArrayLike, path_m: float, cfg: ScanMatchConfig,
+              downsampled: FloatArray | None = None) -> Keyframe:
+    """The scan's line samples and normals moved into the map frame at ``pose``; ``downsampled``: the scan's
+    voxel_downsample when the caller has it."""
     lines = scan_lines(scan_xy, spacing_m=cfg.submap_voxel_m, max_incidence_deg=cfg.line_max_incidence_deg,
                        range_sigma_m=cfg.range_sigma_m, normal_radius_m=cfg.normal_radius_m,
                        max_missing_beams=cfg.line_max_missing_beams)
-    return Keyframe(p, lines, voxel_downsample(scan_xy, cfg.scan_voxel_m), path_m)
+    scan = voxel_downsample(scan_xy, cfg.scan_voxel_m) if downsampled is None else downsampled
+    return Keyframe.at(pose, lines, scan, path_m)
 
 
 def start_submap(scan_xy: FloatArray, pose: npt.ArrayLike, cfg: ScanMatchConfig) -> Submap:
@@ -472,11 +478,12 @@ def start_submap(scan_xy: FloatArray, pose: npt.ArrayLike, cfg: ScanMatchConfig)
 
 
 def add_keyframe(submap: Submap, scan_xy: FloatArray, pose: npt.ArrayLike, cfg: ScanMatchConfig, *,
-                 old: bool = True) -> Submap:
-    """The submap with the scan at ``pose`` added, its local part re-selected around that pose."""
+                 old: bool = True, downsampled: FloatArray | None = None) -> Submap:
+    """The submap with the scan at ``pose`` added, its local part re-selected around that pose (``downsampled``:
+    the scan's voxel_downsample when the caller has it)."""
     last = submap.keyframes[-1]
     path_m = last.path_m + float(np.hypot(*(np.asarray(pose, dtype=np.float64)[:2] - last.pose[:2])))
-    return _build_submap((*submap.keyframes, _keyframe(scan_xy, pose, path_m, cfg)), cfg, old=old)
+    return _build_submap((*submap.keyframes, _keyframe(scan_xy, pose, path_m, cfg, downsampled)), cfg, old=old)
 
 
 def match_scan(submap: Submap, scan_xy: FloatArray, prior: FloatArray, prior_covariance: FloatArray,
@@ -487,17 +494,17 @@ def match_scan(submap: Submap, scan_xy: FloatArray, prior: FloatArray, prior_cov
     if scan_xy.shape[0] < cfg.min_inliers or submap.lines.size < cfg.min_inliers:
         return rejected
     window: Window = search_window(prior_covariance, cfg)
-    stride = -(-scan_xy.shape[0] // cfg.correlative_max_points)
+    sparse = thinned(scan_xy, cfg.correlative_max_points)
     gaussian = GaussianPrior(prior, np.asarray(np.linalg.inv(prior_covariance), dtype=np.float64))
     from_prior: PlicpResult | None = None  # ICP from the prediction does not depend on the window: run it once
     weak: tuple[PlicpResult, float] | None = None  # the first (narrowest-window) weak match and its score
     min_inliers_trusted = cfg.min_overlap_fraction * cfg.trim_fraction * scan_xy.shape[0]
     while True:
         (window_m, window_deg) = window
-        coarse = correlative_match(submap.grid, scan_xy[::stride], prior, window_m=window_m, window_deg=window_deg,
+        coarse = correlative_match(submap.grid, sparse, prior, window_m=window_m, window_deg=window_deg,
                                    step_deg=cfg.correlative_step_deg)
         fine = _refine(submap, scan_xy, coarse.pose, gaussian, cfg)
-        if _lattice_steps_apart(coarse.pose, prior, cfg) > 1.0:
+        if lattice_steps_apart(coarse.pose, prior, cfg.grid_resolution_m, cfg.correlative_step_deg) > 1.0:
             if from_prior is None:
                 from_prior = _refine(submap, scan_xy, prior, gaussian, cfg)
             sigma_m = min(fine.sigma_m, from_prior.sigma_m)  # one σ for both: the better fit's noise estimate
@@ -526,13 +533,6 @@ def _refine(submap: Submap, scan_xy: FloatArray, start: FloatArray, prior: Gauss
             cfg: ScanMatchConfig) -> PlicpResult:
     """MAP-PLICP of the scan against the submap's lines from ``start``."""
     return plicp_configured(submap.lines, scan_xy, start, prior, cfg)
-
-
-def _lattice_steps_apart(a: FloatArray, b: FloatArray, cfg: ScanMatchConfig) -> float:
-    """How many search-lattice steps (cells, yaw steps) two poses differ by on the worst axis."""
-    cells = float(np.max(np.abs(a[:2] - b[:2]))) / cfg.grid_resolution_m
-    steps = abs(float(wrap_angle(a[2] - b[2]))) / math.radians(cfg.correlative_step_deg)
-    return max(cells, steps)
 
 
 def _accept(fine: PlicpResult, prior: FloatArray, window_m: tuple[float, float], window_deg: float,
