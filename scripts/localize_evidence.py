@@ -11,10 +11,14 @@ this map can then settle on the truth within that window. Global localization on
 Usage::
 
     python scripts/localize_evidence.py LOG --map MAP.yaml|MAPDIR [--doors-closed] [--windows 5 10 20 30]
-        [--min-shift 0.3]
+        [--min-shift 0.3] [--bin-m 4]
+    python scripts/localize_evidence.py LOG --truth-map [--bin-m 4]
 
 ``--doors-closed`` (a map directory): the RBPF's model instead of the static one, every door of
-``doors.parquet`` at its closed angle (the truth of a ``loc_closed`` log).
+``doors.parquet`` at its closed angle (the truth of a ``loc_closed`` log). ``--truth-map``: the same with the
+simulator's truth (static map and every door, ``<log>.truth.yaml``). ``--bin-m B``: also how well the scans
+pin the pose along x where the robot is: per B-metre stretch of the true x, the summed log-likelihood of the
+truth shifted by −0.4…+0.4 m relative to the truth itself (a flat row: that stretch does not resolve x).
 """
 
 from __future__ import annotations
@@ -42,7 +46,7 @@ from doorbatch.pipeline.localize.likelihood_field import (
     field_log_likelihood,
 )
 from doorbatch.pipeline.localize.mcl import beams_from_scan
-from doorbatch.pipeline.localize.run import laser_to_base_4x4
+from doorbatch.pipeline.localize.run import laser_to_base_4x4, truth_localization_map
 
 SHIFTS_M = np.arange(-30.0, 38.0, 0.05)
 CENTERS_M = np.arange(0.0, 80.0, 0.05)
@@ -63,16 +67,26 @@ def scan_log_likelihoods(poses: np.ndarray, beams: BeamSet, field: DistanceField
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("log", type=Path)
-    ap.add_argument("--map", type=Path, required=True, help="map_server YAML or map directory")
+    ap.add_argument("--map", type=Path, help="map_server YAML or map directory")
     ap.add_argument("--doors-closed", action="store_true")
+    ap.add_argument("--truth-map", action="store_true", help="the log's simulator truth instead of --map")
+    ap.add_argument("--bin-m", type=float, default=0.0, help="per-stretch x profile (m; 0: off)")
     ap.add_argument("--windows", nargs="+", type=float, default=[5.0, 10.0, 20.0, 30.0])
     ap.add_argument("--min-shift", type=float, default=0.3, help="m; shifts at most this far count as the truth")
     args = ap.parse_args()
     config = load_config()
     lc = config.localize
-    yaml_path = args.map / "map.yaml" if args.map.is_dir() else args.map
-    field = build_distance_field(read_map(yaml_path), lc.laser_likelihood_max_dist, lc.unknown_as_max_dist)
-    doors = read_door_set(yaml_path.parent) if args.doors_closed else None
+    if args.truth_map:
+        lmap = truth_localization_map(args.log.with_suffix(".truth.yaml"), lc)
+        field, doors = lmap.field, lmap.doors
+    elif args.map is not None:
+        yaml_path = args.map / "map.yaml" if args.map.is_dir() else args.map
+        field = build_distance_field(read_map(yaml_path), lc.laser_likelihood_max_dist, lc.unknown_as_max_dist)
+        doors = read_door_set(yaml_path.parent) if args.doors_closed else None
+    else:
+        ap.error("give --map or --truth-map")
+    near = np.abs(SHIFTS_M) <= 0.4 + 1e-9
+    stretches: dict[int, np.ndarray] = {}
     rec = load_recording(args.log, config)
     assert rec.reference is not None
     ref, ok = interpolate_poses(rec.reference.stamps_ns, rec.reference.poses, rec.scans.stamps_ns)
@@ -101,7 +115,11 @@ def main() -> None:
         shifted[:, 0] += SHIFTS_M
         mirrored = np.column_stack([CENTERS_M - p[0], np.full(CENTERS_M.size, -p[1]),
                                     np.full(CENTERS_M.size, p[2] + math.pi)])
-        total_shift += scan_log_likelihoods(shifted, beams, field, doors, lc)
+        ll = scan_log_likelihoods(shifted, beams, field, doors, lc)
+        total_shift += ll
+        if args.bin_m > 0:
+            key = int(p[0] // args.bin_m)
+            stretches[key] = stretches.get(key, 0.0) + ll[near] - ll[np.argmin(np.abs(SHIFTS_M))]
         floor = lc.z_rand / beams.range_max_m
         cap = math.log((lc.z_hit + floor) / floor)
         pz = beam_likelihood(endpoint_distances(field, p[None, :], beams.points_base), lc.z_hit, lc.z_rand,
@@ -111,6 +129,12 @@ def main() -> None:
         total_mirror += scan_log_likelihoods(mirrored, beams, field, doors, lc)
     for window in windows[w:]:
         report(window, total_shift, total_mirror, args.min_shift)
+    if stretches:
+        print("x stretch (m) | summed log-likelihood of the truth shifted by " +
+              " ".join(f"{s:+.1f}" for s in SHIFTS_M[near][::2]) + " m, minus the truth's")
+        for key in sorted(stretches):
+            print(f"{key * args.bin_m:5.1f}-{(key + 1) * args.bin_m:<5.1f} | " +
+                  " ".join(f"{v:+.1f}" for v in stretches[key][::2]))
     print(f"static model at the truth, {len(floor_beams)} updates: {np.mean(floor_beams):.1f} of "
           f"{np.mean(beam_counts):.0f} beams per update at "
           f"the per-beam floor (max {max(floor_beams)}), each capped at {cap:.2f} nats below a perfect fit")
