@@ -2,10 +2,12 @@
 
 Node k is the k-th keyframe. A sequential edge joins consecutive keyframes with the front end's relative pose
 z = x_{k−1}⁻¹ ⊕ x_k; a loop edge joins an old keyframe a to the newest with z = x_a⁻¹ ⊕ x_match. A measurement
-made in the map frame with covariance Σ (x_{k−1} or x_a held fixed) has Cov(z) = Gᵀ Σ G, G = diag(R(θ), 1) of
-the edge's first node; ``graph_min_std_m`` / ``graph_min_std_deg`` are added to its standard deviations
-(variances) for the model error PLICP's covariance leaves out. The uncertainty accumulated since the last
-accepted loop closure compounds the sequential edges to first order, Σ ← J Σ Jᵀ + G Cov(z) Gᵀ,
+made in the map frame with covariance Σ (x_{k−1} or x_a held fixed) gives the edge error
+e = t2v(Z⁻¹ X_i⁻¹ X_j) (:mod:`.pose_graph`) the covariance Cov(e) = Gᵀ Σ G, G = diag(R(θ_j), 1) of the edge's
+*second* node, the measured pose (e's translation is R_zᵀ R_iᵀ δt_j = R_jᵀ δt_j);
+``graph_min_std_m`` / ``graph_min_std_deg`` are added to its standard deviations (variances) for the model
+error PLICP's covariance leaves out. The uncertainty accumulated since the last accepted loop closure
+compounds the sequential edges to first order, Σ ← J Σ Jᵀ + G Cov(e) Gᵀ,
 J = [[1, 0, −Δy], [0, 1, Δx], [0, 0, 1]] with (Δx, Δy) the edge's translation in the map frame; it sizes the
 next loop search (:mod:`.loop_closure`).
 """
@@ -25,9 +27,10 @@ from doorbatch.pipeline.poses.pose_graph import PoseGraphEdges, PoseGraphSolutio
 FloatArray = npt.NDArray[np.float64]
 
 
-def edge_covariance(covariance_map: npt.ArrayLike, first_pose: npt.ArrayLike, cfg: ScanMatchConfig) -> FloatArray:
-    """Cov(z) = Gᵀ Σ G + diag(graph_min_std_m², graph_min_std_m², graph_min_std_deg²) (module docstring)."""
-    g = frame_rotation(float(np.asarray(first_pose, dtype=np.float64)[2]))
+def edge_covariance(covariance_map: npt.ArrayLike, measured_pose: npt.ArrayLike, cfg: ScanMatchConfig) -> FloatArray:
+    """Cov(e) = Gᵀ Σ G + diag(graph_min_std_m², graph_min_std_m², graph_min_std_deg²), G of the measured (second)
+    pose (module docstring)."""
+    g = frame_rotation(float(np.asarray(measured_pose, dtype=np.float64)[2]))
     floor = np.array([cfg.graph_min_std_m, cfg.graph_min_std_m, math.radians(cfg.graph_min_std_deg)]) ** 2
     cov: FloatArray = g.T @ np.asarray(covariance_map, dtype=np.float64) @ g + np.diag(floor)
     return cov
@@ -56,17 +59,18 @@ class KeyframeGraph:
         """A new keyframe at ``pose``, joined to the previous one; the accumulated uncertainty grows."""
         prev = self.poses[-1]
         new = np.asarray(pose, dtype=np.float64).copy()
-        cov = edge_covariance(covariance_map, prev, cfg)
+        cov = edge_covariance(covariance_map, new, cfg)
         self._add(len(self.poses) - 1, len(self.poses), relative(prev, new), cov, robust=False)
         self.poses.append(new)
-        g = frame_rotation(float(prev[2]))
+        g = frame_rotation(float(new[2]))
         self.uncertainty = compounded_covariance(self.uncertainty, new[:2] - prev[:2], g @ cov @ g.T)
 
     def add_loop(self, anchor: int, matched_pose: npt.ArrayLike, covariance_map: npt.ArrayLike,
                  cfg: ScanMatchConfig) -> None:
         """A loop edge from keyframe ``anchor`` to the newest, which the match placed at ``matched_pose``."""
         a = self.poses[anchor]
-        self._add(anchor, len(self.poses) - 1, relative(a, matched_pose), edge_covariance(covariance_map, a, cfg),
+        self._add(anchor, len(self.poses) - 1, relative(a, matched_pose),
+                  edge_covariance(covariance_map, matched_pose, cfg),
                   robust=True)
 
     def _add(self, i: int, j: int, z: FloatArray, cov: FloatArray, *, robust: bool) -> None:

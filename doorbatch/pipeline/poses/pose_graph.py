@@ -46,7 +46,7 @@ class PoseGraphEdges:
         first: (E,) node index i.
         second: (E,) node index j.
         measurement: (E, 3) z_ij = x_i⁻¹ ⊕ x_j as measured (x, y in m, yaw in rad).
-        information: (E, 3, 3) Ω_ij, the inverse of the measurement's covariance in x_i's frame.
+        information: (E, 3, 3) Ω_ij, the inverse of the covariance of e_ij (the measured x_j's frame).
         robust: (E,) loop edges: Huber kernel and the χ² gate (sequential edges are trusted in full).
     """
 
