@@ -123,6 +123,20 @@ def _execute(step: Step, job: BatchJob, usable: Sequence[Step], key: StepKey) ->
     return warnings
 
 
+def wrapped_interrupt(err: BaseException) -> KeyboardInterrupt | None:
+    """The ``KeyboardInterrupt`` in ``err``'s cause/context chain, if any: Python wraps an exception raised in
+    some places into another (a SIGTERM arriving while an import runs a dataclass's ``__set_name__`` surfaces as
+    ``RuntimeError``), and an interruption must still unwind as one, not fail the step."""
+    seen: set[int] = set()
+    current: BaseException | None = err
+    while current is not None and id(current) not in seen:
+        if isinstance(current, KeyboardInterrupt):
+            return current
+        seen.add(id(current))
+        current = current.__cause__ or current.__context__
+    return None
+
+
 def execute_step(step: Step, job: BatchJob, usable: Sequence[Step] = ()) -> StepOutcome:
     """Run ``step`` unless its folder is up to date (or ``job.force``); never raises for a failing step.
 
@@ -142,6 +156,9 @@ def execute_step(step: Step, job: BatchJob, usable: Sequence[Step] = ()) -> Step
         return StepOutcome(step.id, StepStatus.FAILED, time.perf_counter() - start, str(err),
                            fingerprints=cache.new)
     except Exception as err:  # a bug or an unforeseen data problem: this step fails, the batch goes on
+        interrupt = wrapped_interrupt(err)
+        if interrupt is not None:
+            raise interrupt from err
         return StepOutcome(step.id, StepStatus.FAILED, time.perf_counter() - start,
                            f"internal error ({type(err).__name__}: {err})", traceback=traceback.format_exc(),
                            fingerprints=cache.new)
