@@ -21,6 +21,9 @@ from doorbatch.geometry.rotations import wrap_angle
 
 FloatArray = npt.NDArray[np.float64]
 
+# Nav2 AMCL: "Avoid computing a bearing from two poses that are extremely near each other (in-place rotation)".
+MIN_TRANS_FOR_BEARING_M = 0.01
+
 
 @dataclass(frozen=True)
 class Increments:
@@ -42,3 +45,14 @@ def odometry_increments(x: FloatArray, y: FloatArray, yaw: FloatArray, min_trans
     dyaw = wrap_angle(np.diff(yaw))
     rot1 = np.where(trans > min_trans_m, wrap_angle(np.arctan2(dy, dx) - yaw[:-1]), 0.0)
     return Increments(rot1, trans, wrap_angle(dyaw - rot1))
+
+
+def rotation_noise_magnitude(rot: npt.ArrayLike) -> FloatArray:
+    """r = min(|δrot|, π − |δrot|): the rotation the α-model's noise terms scale with (Nav2 AMCL's
+    ``DifferentialMotionModel``), so that a step backwards (δrot1 ≈ ±π, δrot2 ≈ ∓π) is no noisier than one
+    forwards: wheel odometry's heading error grows with the wheels' differential travel, and a backward step is
+    a sign of the bearing, not a half turn of the wheels."""
+    a = np.abs(wrap_angle(np.asarray(rot, dtype=np.float64)))
+    out: FloatArray = np.minimum(a, np.pi - a)
+    return out
+

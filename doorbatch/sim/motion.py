@@ -12,12 +12,15 @@ Odometry (Thrun, Burgard, Fox: Probabilistic Robotics, Table 5.6, sample_motion_
 true increment between consecutive odometry stamps is decomposed into (δrot1, δtrans, δrot2) and
 reported as
 
-    δ̂rot1  = δrot1 + ε1,                    ε1 ~ N(0, α1 δrot1² + α2 δtrans²)
-    δ̂trans = (1 + k) δtrans + ε2,           ε2 ~ N(0, α3 δtrans² + α4 (δrot1² + δrot2²))
-    δ̂rot2  = δrot2 + c δtrans + ε3,        ε3 ~ N(0, α1 δrot2² + α2 δtrans²)
+    δ̂rot1  = δrot1 + ε1,                    ε1 ~ N(0, α1 r1² + α2 δtrans²)
+    δ̂trans = (1 + k) δtrans + ε2,           ε2 ~ N(0, α3 δtrans² + α4 (r1² + r2²))
+    δ̂rot2  = δrot2 + c δtrans + ε3,        ε3 ~ N(0, α1 r2² + α2 δtrans²)
 
 with a systematic scale error k (``scale_error``) and a yaw drift c per metre driven (``yaw_drift_rad_per_m``);
-the α's are per odometry step (the model's variances, not standard deviations, as in the book and AMCL).
+the α's are per odometry step (the model's variances, not standard deviations, as in the book and AMCL), and
+r = min(|δrot|, π − |δrot|) as in Nav2 AMCL and the localizers' model: a step backwards (δrot1 ≈ ±π) is
+no noisier than one forwards (with δrot itself in the variances it drew heading errors of ~90° on 10 cm
+creeps backwards, which no wheel odometry makes).
 The reported increments are integrated into the odometry pose, which therefore drifts without bound.
 """
 
@@ -33,6 +36,7 @@ import numpy.typing as npt
 # The increment decomposition is shared with the localizers' motion model (re-exported for the simulator's callers).
 from doorbatch.geometry.odometry import Increments as Increments
 from doorbatch.geometry.odometry import odometry_increments as odometry_increments
+from doorbatch.geometry.odometry import rotation_noise_magnitude
 from doorbatch.geometry.rotations import wrap_angle
 
 FloatArray = npt.NDArray[np.float64]
@@ -294,15 +298,16 @@ def sample_trajectory(traj: Trajectory, t_s: npt.ArrayLike) -> PoseSamples:
 
 def sample_odometry_increments(true: Increments, noise: OdometryNoise, rng: np.random.Generator) -> Increments:
     """Reported increments: true ones with the α-model noise and the systematic bias (module docstring)."""
-    r1, tr, r2 = true.rot1, true.trans, true.rot2
+    tr = true.trans
+    r1, r2 = rotation_noise_magnitude(true.rot1), rotation_noise_magnitude(true.rot2)
     sd_rot1 = np.sqrt(noise.alpha1 * r1**2 + noise.alpha2 * tr**2)
     sd_trans = np.sqrt(noise.alpha3 * tr**2 + noise.alpha4 * (r1**2 + r2**2))
     sd_rot2 = np.sqrt(noise.alpha1 * r2**2 + noise.alpha2 * tr**2)
     eps = rng.standard_normal((3, r1.shape[0]))
     return Increments(
-        rot1=r1 + sd_rot1 * eps[0],
+        rot1=true.rot1 + sd_rot1 * eps[0],
         trans=(1.0 + noise.scale_error) * tr + sd_trans * eps[1],
-        rot2=r2 + noise.yaw_drift_rad_per_m * tr + sd_rot2 * eps[2],
+        rot2=true.rot2 + noise.yaw_drift_rad_per_m * tr + sd_rot2 * eps[2],
     )
 
 

@@ -24,6 +24,7 @@ from doorbatch.pipeline.mapping import pass_poses
 from doorbatch.pipeline.poses import ScanMatchConfig, scan_match_trajectory
 from doorbatch.pipeline.poses.scanmatch import (
     grown_window,
+    increment_covariance,
     prediction_covariance,
     propagated_covariance,
     search_window,
@@ -209,3 +210,15 @@ def test_a_scan_that_mostly_sees_ground_not_in_the_submap_is_weak_and_still_plac
     result = scan_match_trajectory(scans, odom, ScanMatchConfig())
     assert np.flatnonzero(result.weak).tolist() == [25] and not result.fallback.any()
     assert ate_rmse_m(result.poses, truth) < 0.05
+
+
+def test_a_step_backwards_gets_the_prior_of_the_same_step_forwards() -> None:
+    """The prior's α-model folds the rotations as the drift model and the localizers do (r = min(|δrot|,
+    π − |δrot|)): a 10 cm creep backwards is not given a ±π-sized rotation window."""
+    cfg = ScanMatchConfig()
+    forward = increment_covariance([0.1, 0.0, 0.02], cfg)
+    backward = increment_covariance([-0.1, 0.0, 0.02], cfg)
+    np.testing.assert_allclose(np.diag(backward), np.diag(forward), rtol=1e-9)
+    np.testing.assert_allclose(np.abs(backward), np.abs(forward), rtol=1e-9, atol=1e-15)  # a start-heading error
+    assert np.sqrt(backward[2, 2]) < np.radians(3.0)                    # moves a backward end point the other way
+

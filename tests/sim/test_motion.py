@@ -104,6 +104,24 @@ def test_odometry_increment_errors_have_the_model_statistics(rot1: float, trans:
             assert abs(err.mean()) < 5 * sd / math.sqrt(n)
 
 
+def test_a_step_backwards_is_no_noisier_than_the_same_step_forwards() -> None:
+    """A 10 cm creep backwards decomposes into δrot1 ≈ π, δrot2 ≈ −π; its heading error must be that of the
+    10 cm step forwards (wheel travel, not the bearing's sign, makes odometry noise; Nav2 AMCL folds the same
+    way), not σ = √α1·π (about 25° at α1 = 0.06)."""
+    noise = OdometryNoise(alpha1=0.06, alpha2=0.02, alpha3=0.04, alpha4=0.01)
+    n = 200_000
+    forward = odometry_increments(np.array([0.0, 0.1]), np.array([0.0, 0.0]), np.array([0.0, 0.02]))
+    backward = odometry_increments(np.array([0.0, -0.1]), np.array([0.0, 0.0]), np.array([0.0, 0.02]))
+    assert abs(backward.rot1[0]) == pytest.approx(math.pi)
+    turns = []
+    for inc in (forward, backward):
+        true = Increments(np.repeat(inc.rot1, n), np.repeat(inc.trans, n), np.repeat(inc.rot2, n))
+        rep = sample_odometry_increments(true, noise, np.random.default_rng(3))
+        turns.append(wrap_angle(rep.rot1 + rep.rot2 - inc.rot1[0] - inc.rot2[0]))
+    assert np.std(turns[1]) == pytest.approx(np.std(turns[0]), rel=0.02)
+    assert np.std(turns[1]) < math.radians(3.0)
+
+
 def test_odometry_along_a_path_drifts_with_the_systematic_bias() -> None:
     traj, t = _plan()
     truth = sample_trajectory(traj, t[::10])  # type: ignore[arg-type]  # 50 Hz

@@ -2,7 +2,8 @@
 
 Both trajectories are decomposed into increments (δrot1, δtrans, δrot2) between consecutive samples
 (Probabilistic Robotics Table 5.6). The model says the odometry's increment errors are zero-mean with
-variances σ²_rot = α1·δrot² + α2·δtrans² and σ²_trans = α3·δtrans² + α4·(δrot1² + δrot2²). With the squared
+variances σ²_rot = α1·r² + α2·δtrans² and σ²_trans = α3·δtrans² + α4·(r1² + r2²), r = min(|δrot|, π − |δrot|)
+as in the localizers' model (Nav2 AMCL's; a step backwards is no noisier than one forwards). With the squared
 errors as observations of those variances, the α are a non-negative least-squares fit. Systematic errors
 (a wheel-radius scale, a heading drift) count as noise here, which is what a particle filter needs: its
 spread must cover them.
@@ -16,7 +17,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.optimize import nnls
 
-from doorbatch.geometry.odometry import odometry_increments
+from doorbatch.geometry.odometry import odometry_increments, rotation_noise_magnitude
 from doorbatch.geometry.rotations import wrap_angle
 
 
@@ -47,10 +48,11 @@ def estimate_alphas(odometry: npt.ArrayLike, reference: npt.ArrayLike, min_motio
     e_r1 = wrap_angle(io.rot1[moving] - r1)
     e_tr = io.trans[moving] - tr
     e_r2 = wrap_angle(io.rot2[moving] - r2)
+    m1, m2 = rotation_noise_magnitude(r1), rotation_noise_magnitude(r2)
     # rotation errors: [α1, α2] from both rotations; translation errors: [α3, α4]
-    a_rot = np.concatenate([np.stack([r1**2, tr**2], 1), np.stack([r2**2, tr**2], 1)])
+    a_rot = np.concatenate([np.stack([m1**2, tr**2], 1), np.stack([m2**2, tr**2], 1)])
     b_rot = np.concatenate([e_r1**2, e_r2**2])
-    a_tr = np.stack([tr**2, r1**2 + r2**2], 1)
+    a_tr = np.stack([tr**2, m1**2 + m2**2], 1)
     alpha12, _ = nnls(a_rot, b_rot) if b_rot.size else (np.zeros(2), 0.0)
     alpha34, _ = nnls(a_tr, e_tr**2) if e_tr.size else (np.zeros(2), 0.0)
     return OdometryAlphas(float(alpha12[0]), float(alpha12[1]), float(alpha34[0]), float(alpha34[1]),

@@ -21,21 +21,18 @@ from collections.abc import Sequence
 import numpy as np
 import numpy.typing as npt
 
-from doorbatch.geometry.odometry import odometry_increments
+from doorbatch.geometry.odometry import MIN_TRANS_FOR_BEARING_M, odometry_increments, rotation_noise_magnitude
 from doorbatch.geometry.rotations import wrap_angle
 
 FloatArray = npt.NDArray[np.float64]
 
-# AMCL: "Avoid computing a bearing from two poses that are extremely near each other (in-place rotation)".
-MIN_TRANS_FOR_BEARING_M = 0.01
 
 
 def increment_noise_std(rot1: float, trans: float, rot2: float, alphas: Sequence[float]
                         ) -> tuple[float, float, float]:
     """Standard deviations of the noise on (δrot1, δtrans, δrot2) for one increment (AMCL's diff model)."""
     a1, a2, a3, a4 = (float(a) for a in alphas)
-    r1 = min(abs(rot1), np.pi - abs(rot1))
-    r2 = min(abs(rot2), np.pi - abs(rot2))
+    r1, r2 = (float(r) for r in rotation_noise_magnitude([rot1, rot2]))
     sd_rot1 = float(np.sqrt(a1 * r1 * r1 + a2 * trans * trans))
     sd_trans = float(np.sqrt(a3 * trans * trans + a4 * (r1 * r1 + r2 * r2)))
     sd_rot2 = float(np.sqrt(a1 * r2 * r2 + a2 * trans * trans))

@@ -7,14 +7,15 @@ For scans k = 1 … S−1 with odometry o_k (frame odom) and corrected poses x_k
     x_k     = MAP-PLICP(submap, scan_k, start = correlative(submap, scan_k, prior_k, window ∝ √diag Σ))
 
 Σ_k comes from the odometry motion model of Probabilistic Robotics (Table 5.6): the increment is split
-into (δrot1, δtrans, δrot2) with independent variances α1 δrot1² + α2 δtrans², α3 δtrans² + α4 (δrot1² +
-δrot2²), α1 δrot2² + α2 δtrans² (:func:`doorbatch.geometry.odometry.odometry_increments`), mapped to
+into (δrot1, δtrans, δrot2) with independent variances α1 r1² + α2 δtrans², α3 δtrans² + α4 (r1² + r2²),
+α1 r2² + α2 δtrans² (:func:`doorbatch.geometry.odometry.odometry_increments`), mapped to
 (x, y, θ) of the previous pose by the Jacobian of (δtrans cos δrot1, δtrans sin δrot1, δrot1 + δrot2), plus
-standard-deviation floors; G rotates it into the map frame. The rotations enter in full, as the simulator's
-drift model (:mod:`doorbatch.sim.motion`) draws them; AMCL's folding r = min(|δrot|, π − |δrot|) (localization's
-motion model) was tried and made the windows too narrow for the small backward jitters of in-place turns in
-the drift-corrupted CARMEN logs (intel and aces then diverged). A robot that really drives backwards gets
-wide windows here (a cost in speed, not in accuracy).
+standard-deviation floors; G rotates it into the map frame. The rotation terms are r = min(|δrot|, π − |δrot|)
+(Nav2 AMCL's folding, as the localizers' motion model and the simulator's drift model), so a creep backwards
+gets the rotation window of the same creep forwards (with δrot in full, a 10 cm creep backwards got a window of
+±π-sized rotations). Against the folded drift model, over drift seeds 1–16 on the CARMEN logs, the folded prior
+took the geometric-mean ATE from 0.80 / 0.40 / 0.64 m (δrot in full) to 0.56 / 0.29 / 0.38 m on orebro / intel /
+aces (docs/results.md).
 
 The correlative search (Olson, ICRA 2009; :mod:`.correlative`) looks ``window_sigmas`` standard deviations
 of that prediction around it on every map axis (clipped to configured limits), so that a 76° turn between
@@ -81,7 +82,7 @@ import numpy as np
 import numpy.typing as npt
 
 from doorbatch.config import ScanMatchConfig
-from doorbatch.geometry.odometry import odometry_increments
+from doorbatch.geometry.odometry import MIN_TRANS_FOR_BEARING_M, odometry_increments, rotation_noise_magnitude
 from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.geometry.se2 import compose, compounded_covariance, frame_rotation, relative, rotation_matrix
 from doorbatch.pipeline.poses.correlative import (
@@ -357,11 +358,13 @@ def _is_keyframe(last: FloatArray, pose: FloatArray, cfg: ScanMatchConfig) -> bo
 def increment_covariance(increment: npt.ArrayLike, cfg: ScanMatchConfig) -> FloatArray:
     """(3, 3) covariance of an odometry increment (dx, dy, dθ), in the frame of its start pose (module docstring)."""
     d = np.asarray(increment, dtype=np.float64)
-    inc = odometry_increments(np.array([0.0, d[0]]), np.array([0.0, d[1]]), np.array([0.0, d[2]]))
-    rot1, trans, rot2 = float(inc.rot1[0]), float(inc.trans[0]), float(inc.rot2[0])
-    var = np.array([cfg.odom_alpha1 * rot1**2 + cfg.odom_alpha2 * trans**2,
-                    cfg.odom_alpha3 * trans**2 + cfg.odom_alpha4 * (rot1**2 + rot2**2),
-                    cfg.odom_alpha1 * rot2**2 + cfg.odom_alpha2 * trans**2])
+    inc = odometry_increments(np.array([0.0, d[0]]), np.array([0.0, d[1]]), np.array([0.0, d[2]]),
+                              min_trans_m=MIN_TRANS_FOR_BEARING_M)
+    rot1, trans = float(inc.rot1[0]), float(inc.trans[0])
+    r1, r2 = (float(r) for r in rotation_noise_magnitude([rot1, float(inc.rot2[0])]))
+    var = np.array([cfg.odom_alpha1 * r1**2 + cfg.odom_alpha2 * trans**2,
+                    cfg.odom_alpha3 * trans**2 + cfg.odom_alpha4 * (r1**2 + r2**2),
+                    cfg.odom_alpha1 * r2**2 + cfg.odom_alpha2 * trans**2])
     c, s = math.cos(rot1), math.sin(rot1)
     jac = np.array([[-trans * s, c, 0.0], [trans * c, s, 0.0], [1.0, 0.0, 1.0]])  # ∂(dx, dy, dθ)/∂(r1, t, r2)
     floor = np.array([cfg.odom_min_std_m, cfg.odom_min_std_m, math.radians(cfg.odom_min_std_deg)]) ** 2
