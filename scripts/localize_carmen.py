@@ -5,7 +5,8 @@ The logs in ``../shared/datasets/carmen/`` are corrected logs: their odometry eq
 
 1. map from the corrected poses: ``doorbatch map LOG --pose-source reference -o WORK/<name>/map``;
 2. odometry replaced by the corrected poses at the scan stamps corrupted with the simulator's drift model
-   (the default scenario's odometry noise, :func:`doorbatch.sim.motion.drift_poses`, seed ``--seed``), as
+   (the default scenario's odometry noise at its 50 Hz odometry resolution,
+   :func:`doorbatch.sim.simulate.scenario_drift`, seed ``--seed``), as
    ``scripts/scanmatch_acceptance.py`` does; it starts at the first corrected pose;
 3. ``localize`` with ``--init reference`` (first corrected pose), MCL and RBPF, the default config
    (``--set`` overrides it);
@@ -35,17 +36,17 @@ from doorbatch.geometry.se2 import interpolate_poses
 from doorbatch.io.recording import PoseSeries, Recording, load_recording
 from doorbatch.pipeline.evaluate.trajectory_error import ate_rmse, position_errors
 from doorbatch.pipeline.localize.run import load_localization_map, localize_recording
-from doorbatch.sim.motion import drift_poses
 from doorbatch.sim.scenario import load_scenario
-from doorbatch.sim.simulate import odometry_noise
+from doorbatch.sim.simulate import scenario_drift
 
 REPO = Path(__file__).resolve().parents[1]
 CARMEN = REPO.parent / "shared" / "datasets" / "carmen"
 
 
 def drifting_odometry(ref: np.ndarray, seed: int) -> np.ndarray:
-    """Corrected poses (N, 3) corrupted with the default scenario's drift model (the simulator's odometry)."""
-    return drift_poses(ref, odometry_noise(load_scenario(None)), np.random.default_rng(seed))
+    """Corrected poses (N, 3) corrupted with the default scenario's drift model (the simulator's odometry, at
+    its odometry stream's resolution)."""
+    return scenario_drift(ref, load_scenario(None), np.random.default_rng(seed))
 
 
 def with_drifting_odometry(rec: Recording, seed: int) -> tuple[Recording, np.ndarray]:

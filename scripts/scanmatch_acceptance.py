@@ -42,14 +42,12 @@ from doorbatch.pipeline.evaluate.trajectory_metrics import umeyama_se2
 from doorbatch.pipeline.poses import scan_match_trajectory
 from doorbatch.pipeline.poses.correlative import build_likelihood_grid, correlative_match
 from doorbatch.pipeline.poses.plicp import placed, plicp, scan_line_reference, scan_lines
-from doorbatch.sim.motion import OdometryNoise, drift_poses
+from doorbatch.sim.scenario import load_scenario
+from doorbatch.sim.simulate import scenario_drift
 
 REPO = Path(__file__).resolve().parents[1]
 SAMPLE = REPO / "datasets" / "sample" / "logs"
 CARMEN = REPO.parent / "shared" / "datasets" / "carmen"
-# The default scenario's odometry model (configs/scenarios/default.yaml).
-NOISE = OdometryNoise(alpha1=0.02, alpha2=0.005, alpha3=0.02, alpha4=0.001, scale_error=0.015,
-                      yaw_drift_rad_per_m=0.003)
 
 
 def ate_se2_m(estimate: np.ndarray, reference: np.ndarray) -> float:
@@ -170,7 +168,9 @@ def _inputs(recs: list[Recording], drift_seed: int | None) -> tuple[np.ndarray, 
         odoms.append(odom[idx])
         scans += _hits(rec, idx)
     ref = np.concatenate(refs)
-    odom = np.concatenate(odoms) if drift_seed is None else drift_poses(ref, NOISE, np.random.default_rng(drift_seed))
+    # drift: the default scenario's odometry (configs/scenarios/default.yaml) at its 50 Hz resolution
+    odom = (np.concatenate(odoms) if drift_seed is None
+            else scenario_drift(ref, load_scenario(None), np.random.default_rng(drift_seed)))
     return ref, align_first_pose(odom, ref), scans
 
 

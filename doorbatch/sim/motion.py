@@ -341,14 +341,56 @@ def simulate_odometry(truth: PoseSamples, noise: OdometryNoise, rng: np.random.G
     return PoseSamples(truth.t_s, x, y, yaw, v, w)
 
 
-def drift_poses(poses: npt.ArrayLike, noise: OdometryNoise, rng: np.random.Generator) -> FloatArray:
+def drift_poses(poses: npt.ArrayLike, noise: OdometryNoise, rng: np.random.Generator,
+                step_m: float | None = None, step_rad: float | None = None) -> FloatArray:
     """Corrupt a pose sequence (N, 3) into drifting wheel odometry with the simulator's odometry model:
     the true increments get the α-noise and the systematic bias, and are integrated from the first pose.
+
+    The α's are per odometry step, so the noise a path gets depends on how finely it is stepped (variance ∝
+    step², so one 3 m step draws about √n times the heading noise of n steps covering it). With ``step_m`` and
+    ``step_rad`` each increment is first cut into the fewest equal substeps of at most that translation and
+    rotation (positions and heading interpolated linearly along it), the model applied per substep, and the
+    odometry returned at the given poses: a thinned log (CARMEN's corrected logs hold a pose every 0.5–3 m)
+    then gets the noise of the odometry stream that drove it (:func:`doorbatch.sim.simulate.scenario_drift`).
+    Without them each given increment is one odometry step.
 
     DESIGN.md: the CARMEN logs' own odometry equals their corrected poses, so tests of scan matching and
     localization on them need odometry made worse this way (with a fixed seed).
     """
     p = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    keep = np.arange(p.shape[0])
+    if (step_m is not None or step_rad is not None) and p.shape[0] > 1:
+        p, keep = _substeps(p, step_m or math.inf, step_rad or math.inf)
     rep = sample_odometry_increments(odometry_increments(p[:, 0], p[:, 1], p[:, 2]), noise, rng)
     x, y, yaw = integrate_odometry(float(p[0, 0]), float(p[0, 1]), float(p[0, 2]), rep)
-    return np.stack([x, y, yaw], axis=1)
+    return np.stack([x, y, yaw], axis=1)[keep]
+
+
+def _substeps(p: FloatArray, step_m: float, step_rad: float) -> tuple[FloatArray, npt.NDArray[np.int64]]:
+    """The poses with each increment driven as the motion model decomposes it, in substeps of at most
+    ``step_m`` / ``step_rad``: turn in place by δrot1, drive the chord, turn in place by δrot2 (a chord whose
+    bearing is behind the robot is driven backwards, turning by δrot1 − π); and the indices of the given poses
+    among them. Interpolating position and heading together instead would make the robot crab sideways, and
+    the model would charge every substep the heading-to-bearing angle as a rotation."""
+    inc = odometry_increments(p[:, 0], p[:, 1], p[:, 2])
+    backwards = np.abs(inc.rot1) > 0.5 * np.pi
+    turn1 = np.where(backwards, wrap_angle(inc.rot1 - np.pi), inc.rot1)
+    rows: list[FloatArray] = [p[:1]]
+    keep = [0]
+    for k in range(inc.trans.size):
+        x0, y0, yaw0 = p[k]
+        heading = yaw0 + turn1[k]
+        n1 = math.ceil(abs(turn1[k]) / step_rad)
+        n2 = math.ceil(inc.trans[k] / step_m)
+        turn2 = wrap_angle(p[k + 1, 2] - heading)
+        n3 = math.ceil(abs(turn2) / step_rad)
+        f1, f2, f3 = (np.arange(1, n + 1) / n for n in (n1, n2, n3))
+        rows.append(np.column_stack([np.full(n1, x0), np.full(n1, y0), yaw0 + f1 * turn1[k]]))
+        rows.append(np.column_stack([x0 + f2 * (p[k + 1, 0] - x0), y0 + f2 * (p[k + 1, 1] - y0), np.full(n2, heading)]))
+        rows.append(np.column_stack([np.full(n3, p[k + 1, 0]), np.full(n3, p[k + 1, 1]), heading + f3 * turn2]))
+        if n1 + n2 + n3 == 0:
+            rows.append(p[k + 1 : k + 2])
+        keep.append(keep[-1] + max(n1 + n2 + n3, 1))
+    fine = np.concatenate(rows)
+    fine[:, 2] = wrap_angle(fine[:, 2])
+    return fine, np.asarray(keep, dtype=np.int64)

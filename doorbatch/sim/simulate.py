@@ -33,7 +33,7 @@ from doorbatch.io.map_server import write_map
 from doorbatch.io.sim_truth import SimTruth, TruthDoor, TruthPass, output_paths, write_truth
 from doorbatch.io.split import copy_window
 from doorbatch.io.tum import write_tum
-from doorbatch.sim.motion import OdometryNoise, PoseSamples, sample_trajectory, simulate_odometry
+from doorbatch.sim.motion import OdometryNoise, PoseSamples, drift_poses, sample_trajectory, simulate_odometry
 from doorbatch.sim.raycast import RayBuffers
 from doorbatch.sim.scenario import Scenario, load_scenario, resolve_scenario
 from doorbatch.sim.sensors import (
@@ -122,6 +122,20 @@ def odometry_noise(scenario: Scenario) -> OdometryNoise:
     """The scenario's wheel-odometry noise model (α1–α4, scale error, yaw drift) for :func:`drift_poses`."""
     o = scenario.sensors.odometry
     return OdometryNoise(o.alpha1, o.alpha2, o.alpha3, o.alpha4, o.scale_error, o.yaw_drift_rad_per_m)
+
+
+def odometry_step(scenario: Scenario) -> tuple[float, float]:
+    """The largest increment (m, rad) between two odometry messages of ``scenario``: the robot's top speed and
+    turn rate over the odometry period."""
+    rate = scenario.sensors.odometry.rate_hz
+    return scenario.robot.max_speed_mps / rate, math.radians(scenario.robot.max_yaw_rate_dps) / rate
+
+
+def scenario_drift(poses: npt.ArrayLike, scenario: Scenario, rng: np.random.Generator) -> npt.NDArray[np.float64]:
+    """Poses (N, 3) corrupted into the wheel odometry ``scenario``'s robot would report along them: its noise
+    model applied at its odometry stream's resolution (:func:`odometry_step`, :func:`drift_poses`)."""
+    step_m, step_rad = odometry_step(scenario)
+    return drift_poses(poses, odometry_noise(scenario), rng, step_m=step_m, step_rad=step_rad)
 
 
 # --------------------------------------------------------------------------------------------- messages

@@ -13,6 +13,7 @@ from doorbatch.sim.motion import (
     Increments,
     MotionLimits,
     OdometryNoise,
+    drift_poses,
     integrate_odometry,
     new_builder,
     odometry_increments,
@@ -134,3 +135,41 @@ def test_odometry_along_a_path_drifts_with_the_systematic_bias() -> None:
     noisy = simulate_odometry(truth, OdometryNoise(0.02, 0.005, 0.02, 0.001, 0.015, 0.003),
                               np.random.default_rng(1))
     assert noisy.x[0] == 0.0 and noisy.y[0] == 0.0  # odom starts at the origin, like a robot that just booted
+
+
+def _arc_path(step_m: float) -> np.ndarray:
+    """An 8 m path (a straight 4 m, a quarter circle of radius 2.5 m) as poses every ``step_m``."""
+    s = np.arange(0.0, 4.0 + 2.5 * np.pi / 2 + 1e-9, step_m)
+    arc = np.clip(s - 4.0, 0.0, None) / 2.5
+    x = np.where(s <= 4.0, s, 4.0 + 2.5 * np.sin(arc))
+    y = np.where(s <= 4.0, 0.0, 2.5 * (1.0 - np.cos(arc)))
+    return np.column_stack([x, y, arc])
+
+
+def test_a_thinned_path_drifts_like_the_odometry_stream_that_drove_it() -> None:
+    """The α's are per odometry step: poses 1 m apart corrupted in 2 cm / 1.2° substeps drift like the same
+    path given every 2 cm, not like eight 1 m steps (√50 times the heading noise)."""
+    noise = OdometryNoise(alpha1=0.02, alpha2=0.005, alpha3=0.02, alpha4=0.001)
+    fine, coarse = _arc_path(0.02), _arc_path(1.0)
+    step = dict(step_m=0.02, step_rad=math.radians(1.2))
+
+    def end_yaw_std(poses: np.ndarray, **kw: float) -> float:
+        ends = [drift_poses(poses, noise, np.random.default_rng(seed), **kw)[-1, 2] - poses[-1, 2]
+                for seed in range(400)]
+        return float(np.std(wrap_angle(np.asarray(ends))))
+
+    reference, substepped, whole = end_yaw_std(fine), end_yaw_std(coarse, **step), end_yaw_std(coarse)
+    assert substepped == pytest.approx(reference, rel=0.2)
+    assert whole > 3.0 * reference
+
+
+def test_substeps_without_noise_return_the_poses_and_drive_a_backward_step_backwards() -> None:
+    poses = np.array([[0.0, 0.0, 0.0], [1.0, 0.2, 0.3], [0.9, 0.2, 0.3], [0.9, 0.2, -1.0], [0.9, 0.2, -1.0]])
+    exact = drift_poses(poses, OdometryNoise(0.0, 0.0, 0.0, 0.0), np.random.default_rng(0), step_m=0.02,
+                        step_rad=0.02)
+    np.testing.assert_allclose(exact, poses, atol=1e-9)
+    noise = OdometryNoise(alpha1=0.05, alpha2=0.0, alpha3=0.0, alpha4=0.0)  # rotation noise only
+    back = np.array([[0.0, 0.0, 0.0], [-0.1, 0.0, 0.0]])  # 10 cm straight back: no turn to charge
+    moved = drift_poses(back, noise, np.random.default_rng(1), step_m=0.02, step_rad=0.02)
+    np.testing.assert_allclose(moved, back, atol=1e-9)
+

@@ -13,9 +13,9 @@ into (δrot1, δtrans, δrot2) with independent variances α1 r1² + α2 δtrans
 standard-deviation floors; G rotates it into the map frame. The rotation terms are r = min(|δrot|, π − |δrot|)
 (Nav2 AMCL's folding, as the localizers' motion model and the simulator's drift model), so a creep backwards
 gets the rotation window of the same creep forwards (with δrot in full, a 10 cm creep backwards got a window of
-±π-sized rotations). Against the folded drift model, over drift seeds 1–16 on the CARMEN logs, the folded prior
-took the geometric-mean ATE from 0.80 / 0.40 / 0.64 m (δrot in full) to 0.56 / 0.29 / 0.38 m on orebro / intel /
-aces (docs/results.md).
+±π-sized rotations). Against the folded drift model applied per scan step, over drift seeds 1–16 on the CARMEN
+logs, the folded prior took the geometric-mean ATE from 0.80 / 0.40 / 0.64 m (δrot in full) to 0.57 / 0.37 /
+0.41 m on orebro / intel / aces (docs/results.md).
 
 The correlative search (Olson, ICRA 2009; :mod:`.correlative`) looks ``window_sigmas`` standard deviations
 of that prediction around it on every map axis (clipped to configured limits), so that a 76° turn between
