@@ -348,10 +348,11 @@ def drift_poses(poses: npt.ArrayLike, noise: OdometryNoise, rng: np.random.Gener
 
     The α's are per odometry step, so the noise a path gets depends on how finely it is stepped (variance ∝
     step², so one 3 m step draws about √n times the heading noise of n steps covering it). With ``step_m`` and
-    ``step_rad`` each increment is first cut into the fewest equal substeps of at most that translation and
-    rotation (positions and heading interpolated linearly along it), the model applied per substep, and the
-    odometry returned at the given poses: a thinned log (CARMEN's corrected logs hold a pose every 0.5–3 m)
-    then gets the noise of the odometry stream that drove it (:func:`doorbatch.sim.simulate.scenario_drift`).
+    ``step_rad`` each increment is first driven as the model decomposes it, in substeps of at most that
+    translation and rotation (:func:`_substeps`: turn in place, the chord forwards or backwards, turn in place),
+    the model applied per substep, and the odometry returned at the given poses: a thinned log (CARMEN's
+    corrected logs hold a pose every 0.5–3 m) then gets the noise of the odometry stream that drove it
+    (:func:`doorbatch.sim.simulate.scenario_drift`).
     Without them each given increment is one odometry step.
 
     DESIGN.md: the CARMEN logs' own odometry equals their corrected poses, so tests of scan matching and

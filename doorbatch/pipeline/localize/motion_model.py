@@ -27,7 +27,6 @@ from doorbatch.geometry.rotations import wrap_angle
 FloatArray = npt.NDArray[np.float64]
 
 
-
 def increment_noise_std(rot1: float, trans: float, rot2: float, alphas: Sequence[float]
                         ) -> tuple[float, float, float]:
     """Standard deviations of the noise on (δrot1, δtrans, δrot2) for one increment (AMCL's diff model)."""

@@ -361,7 +361,7 @@ def increment_covariance(increment: npt.ArrayLike, cfg: ScanMatchConfig) -> Floa
     inc = odometry_increments(np.array([0.0, d[0]]), np.array([0.0, d[1]]), np.array([0.0, d[2]]),
                               min_trans_m=MIN_TRANS_FOR_BEARING_M)
     rot1, trans = float(inc.rot1[0]), float(inc.trans[0])
-    r1, r2 = (float(r) for r in rotation_noise_magnitude([rot1, float(inc.rot2[0])]))
+    r1, r2 = rotation_noise_magnitude([inc.rot1[0], inc.rot2[0]])
     var = np.array([cfg.odom_alpha1 * r1**2 + cfg.odom_alpha2 * trans**2,
                     cfg.odom_alpha3 * trans**2 + cfg.odom_alpha4 * (r1**2 + r2**2),
                     cfg.odom_alpha1 * r2**2 + cfg.odom_alpha2 * trans**2])
