@@ -22,12 +22,15 @@ from doorbatch.io.recording import load_recording
 from doorbatch.pipeline.evaluate.trajectory_error import align_first_pose, ate_rmse
 from doorbatch.pipeline.mapping import pass_poses
 from doorbatch.pipeline.poses import ScanMatchConfig, scan_match_trajectory
+from doorbatch.pipeline.poses.plicp import GaussianPrior, map_cost, plicp_configured
 from doorbatch.pipeline.poses.scanmatch import (
+    basin_cost,
     grown_window,
     increment_covariance,
     prediction_covariance,
     propagated_covariance,
     search_window,
+    start_submap,
     voxel_downsample,
 )
 from tests.conftest import REPO
@@ -222,3 +225,34 @@ def test_a_step_backwards_gets_the_prior_of_the_same_step_forwards() -> None:
     np.testing.assert_allclose(np.abs(backward), np.abs(forward), rtol=1e-9, atol=1e-15)  # a start-heading error
     assert np.sqrt(backward[2, 2]) < np.radians(3.0)                    # moves a backward end point the other way
 
+
+
+def _front_half(scan: np.ndarray) -> np.ndarray:
+    """The hits of a 180° laser facing the heading (x > 0 in the sensor frame)."""
+    return scan[scan[:, 0] > 0.0]
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_scan_entering_a_corridor_is_not_pulled_back_onto_its_mapped_mouth(seed: int) -> None:
+    """A keyframe at the mouth of a 1 m corridor (180° laser facing down it) maps the walls' first 2 m and the end
+    wall 10 m away: the walls further down it sees only at grazing angles, too steep for lines. A scan 1 m into
+    the corridor fits in two basins: the truth, where its near-wall points run past the mapped mouth and its
+    end-wall points sit on the end wall, and about 0.8 m back, where the near-wall points land on the mouth and
+    the end-wall points short of the end wall. The plain MAP cost charges the unmapped wall points as misfits and
+    prefers the slip (intel at drift seed 1, scans 823-827); the basin cost charges only points that contradict
+    the keyframe's view, the end-wall points of the slip where it saw free space, and prefers the truth."""
+    rng = np.random.default_rng(seed)
+    walls = polyline([(-4, 4), (-4, 0), (-0.5, 0), (-0.5, -10), (0.5, -10), (0.5, 0), (4, 0), (4, 4), (-4, 4)])
+    cfg = ScanMatchConfig()
+    mouth, truth = np.array([0.0, 0.3, -np.pi / 2]), np.array([0.0, -0.7, -np.pi / 2])
+    submap = start_submap(_front_half(simulate_scan(walls, mouth, rng, max_range_m=20.0)), mouth, cfg)
+    scan = voxel_downsample(_front_half(simulate_scan(walls, truth, rng, max_range_m=20.0)), cfg.scan_voxel_m)
+    prior = GaussianPrior(truth, np.linalg.inv(np.diag([0.4**2, 0.4**2, np.radians(2.0) ** 2])))
+    at_truth = plicp_configured(submap.lines, scan, truth, prior, cfg)
+    slipped = plicp_configured(submap.lines, scan, mouth, prior, cfg)
+    assert abs(at_truth.pose[1] - truth[1]) < 0.05 and slipped.pose[1] - truth[1] > 0.4  # two basins
+    sigma_m = min(at_truth.sigma_m, slipped.sigma_m)
+    assert map_cost(slipped, sigma_m) < map_cost(at_truth, sigma_m)
+    assert basin_cost(submap, scan, at_truth, sigma_m, cfg) < basin_cost(submap, scan, slipped, sigma_m, cfg)
+    plain = ScanMatchConfig(free_space_basins=False)
+    assert basin_cost(submap, scan, slipped, sigma_m, plain) == map_cost(slipped, sigma_m)

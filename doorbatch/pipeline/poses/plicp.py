@@ -387,11 +387,17 @@ class _Scales:
     sigma_min_m: float
 
 
+def cauchy_rho(residual_m: npt.ArrayLike, robust_scale_m: float) -> FloatArray:
+    """The Cauchy loss ρ(r) = ½ c² ln(1 + r²/c²) whose IRLS weights are 1 / (1 + (r/c)²)."""
+    c2 = robust_scale_m**2
+    out: FloatArray = 0.5 * c2 * np.log1p(np.square(np.asarray(residual_m, dtype=np.float64)) / c2)
+    return out
+
+
 def _data_cost(lin: _Linearization, scales: _Scales) -> float:
     """D = Σ ρ(r_i) over the kept correspondences plus ρ(gate) for every other scan point."""
-    c2 = scales.robust_m**2
-    rho = 0.5 * c2 * np.log1p(lin.residuals**2 / c2)
-    return float(rho.sum()) + lin.n_unmatched * 0.5 * c2 * math.log1p(scales.gate_m**2 / c2)
+    return float(cauchy_rho(lin.residuals, scales.robust_m).sum()
+                 + lin.n_unmatched * cauchy_rho(scales.gate_m, scales.robust_m))
 
 
 def _prior_cost(pose: FloatArray, prior: GaussianPrior | None) -> float:

@@ -1,0 +1,69 @@
+"""What a scan's beams say about a point (doorbatch.pipeline.poses.free_space), on known geometry."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from doorbatch.geometry.se2 import transform_points
+from doorbatch.pipeline.poses.free_space import RangeProfile, on_seen_surfaces
+
+
+def _wall_scan(distance_m: float = 5.0, fov_deg: float = 90.0, beams: int = 91) -> np.ndarray:
+    """Hits of a scan facing a wall x = distance (sensor at the origin, heading +x, 1° beams)."""
+    a = np.radians(np.linspace(-fov_deg / 2, fov_deg / 2, beams))
+    r = distance_m / np.cos(a)
+    return np.stack([r * np.cos(a), r * np.sin(a)], axis=1)
+
+
+def test_in_front_of_the_hits_is_free_beyond_them_behind_on_them_or_outside_the_beams_neither() -> None:
+    profile = RangeProfile.of_scan(_wall_scan())
+    assert math.isclose(profile.bearing_tolerance_rad, 1.5 * math.radians(1.0), rel_tol=1e-6)
+    points = np.array([[3.0, 0.0],     # 2 m in front of the wall
+                       [4.8, 1.0],     # 0.2 m in front: within the 0.3 m margin, on the surface
+                       [6.0, 0.5],     # 1 m behind the wall
+                       [0.5, 3.0],     # bearing 80°, outside the ±45° beams
+                       [-2.0, 0.0]])   # behind the sensor
+    free, behind, near = profile.verdicts(points, margin_m=0.3)
+    assert free.tolist() == [True, False, False, False, False]
+    assert behind.tolist() == [False, False, True, False, False]
+    assert near.tolist() == [True, True, True, False, False]
+    assert on_seen_surfaces([profile], np.zeros((1, 3)), points, 0.3).tolist() == [False, True, False, False, False]
+
+
+def test_a_point_on_a_grazed_wall_between_two_beams_is_neither_free_nor_behind() -> None:
+    """A corridor wall y = 0.5 seen from its end: at 1° steps the beams hit it 0.4-0.9 m apart 3-5 m away. A
+    point on the wall between two such hits lies behind the nearer one and in front of the farther one: the scan
+    saw that surface, so it neither saw the point's place free nor hidden."""
+    a = np.radians(np.arange(3.0, 46.0, 1.0))
+    r = 0.5 / np.sin(a)
+    profile = RangeProfile.of_scan(np.stack([r * np.cos(a), r * np.sin(a)], axis=1))
+    between = math.radians(6.5)  # between the beams at 6° (4.78 m) and 7° (4.10 m)
+    on_wall = np.array([[0.5 / math.tan(between), 0.5]])
+    free, behind, near = profile.verdicts(on_wall, margin_m=0.3)
+    assert near[0] and not free[0] and not behind[0]
+    free, behind, _ = profile.verdicts(on_wall * 0.8, margin_m=0.3)  # 0.9 m short of the wall along it
+    assert free[0] and not behind[0]
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.floats(-5.0, 5.0), st.floats(-5.0, 5.0), st.floats(-math.pi, math.pi), st.floats(0.5, 8.0),
+       st.floats(-40.0, 40.0))
+def test_a_point_is_on_the_seen_wall_exactly_when_it_lies_within_the_margin_of_it(
+        x: float, y: float, yaw: float, r: float, bearing_deg: float) -> None:
+    """In the sensor frame and, with the scan at any pose, in the map frame."""
+    pose = np.array([x, y, yaw])
+    profile = RangeProfile.of_scan(_wall_scan())
+    b = math.radians(bearing_deg)
+    local = np.array([[r * math.cos(b), r * math.sin(b)]])
+    free, behind, near = profile.verdicts(local, 0.3)
+    assert near[0]  # every bearing in ±40° has beams within the tolerance
+    on_surface = bool(on_seen_surfaces([profile], pose[None], transform_points(pose, local), 0.3)[0])
+    assert on_surface == (not free[0] and not behind[0])
+    off_wall = 5.0 / math.cos(b) - r  # how far the wall lies beyond the point along its bearing
+    if abs(abs(off_wall) - 0.3) > 0.05:  # away from the margin (the neighbouring beams hit within ±4 cm)
+        assert bool(free[0]) == (off_wall > 0.3) and bool(behind[0]) == (off_wall < -0.3)
+        assert on_surface == (abs(off_wall) < 0.3)
