@@ -146,9 +146,10 @@ class ScanMatchConfig(Section):
     min_inliers: int = Field(30, ge=3)
     min_degeneracy: float = Field(0.02, ge=0.0)
     # When two ICP basins are compared (from the correlative optimum and from the prediction), a scan point
-    # that no submap line explains but that lies on a surface a local keyframe hit (within max_correspondence_m
-    # of its beams' hits, or between two grazing ones, and seen free or hidden by none) costs what a fitting
-    # point does, not a misfit (scanmatch.basin_cost). False: every such point counts against (plain MAP cost).
+    # that no submap line explains but that lies on a surface the local keyframes hit (within
+    # max_correspondence_m of their beams' hits, or between two grazing ones, for more keyframes than see it free
+    # or hidden) costs what a fitting point does, not a misfit (scanmatch.basin_cost). False: every such point
+    # counts against (plain MAP cost).
     free_space_basins: bool = True
     # A match is weak when fewer than this fraction of the scan's points found a submap line (the scan sees
     # mostly new ground, so a minority of its points picks the basin): wider windows are searched for a basin

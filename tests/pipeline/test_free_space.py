@@ -67,3 +67,16 @@ def test_a_point_is_on_the_seen_wall_exactly_when_it_lies_within_the_margin_of_i
     if abs(abs(off_wall) - 0.3) > 0.05:  # away from the margin (the neighbouring beams hit within ±4 cm)
         assert bool(free[0]) == (off_wall > 0.3) and bool(behind[0]) == (off_wall < -0.3)
         assert on_surface == (abs(off_wall) < 0.3)
+
+
+def test_a_point_is_on_a_seen_surface_when_more_scans_say_so_than_contradict_it() -> None:
+    """Three scans of the wall x = 5 see (4.9, 0) on it; one more saw past that place, its wall 1 m farther (a
+    pass whose pose was off, or a door open then): 3 votes to 1. Two against two is no longer on a seen surface,
+    nor is a point only contradicting scans look at."""
+    profile = RangeProfile.of_scan(_wall_scan())
+    past = RangeProfile.of_scan(_wall_scan(distance_m=6.0))  # its wall lies 1 m farther
+    point = np.array([[4.9, 0.0]])
+    at = np.zeros((4, 3))
+    assert on_seen_surfaces([profile] * 3 + [past], at, point, 0.3).tolist() == [True]
+    assert on_seen_surfaces([profile] * 2 + [past] * 2, at, point, 0.3).tolist() == [False]
+    assert on_seen_surfaces([past], at[:1], point, 0.3).tolist() == [False]

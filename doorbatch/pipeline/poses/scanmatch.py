@@ -555,14 +555,15 @@ def basin_cost(submap: Submap, scan_xy: FloatArray, result: PlicpResult, sigma_m
     scan points that lie on surfaces the submap saw but made no lines of costed as fitting.
 
     PLICP's D charges ρ(gate) for every scan point that no submap sample lies near (within
-    ``max_correspondence_m``). That is right for a point that contradicts a local keyframe's view (:mod:`.free_space`:
-    it lies where the keyframe saw free space, or behind a surface it saw), and for one on ground no keyframe's
-    beam reached (nothing says it fits). It is wrong for a point on a surface a keyframe hit at angles too grazing
-    to make lines of (the beams on either side of it stop around it): such a point costs ρ(σ) here, what a point
-    that fits costs. Charged in full, those points make the pose that pulls the scan back onto the mapped part
-    win: at intel's corridor entrance (drift seed 1, scans 823-827) the submap had the corridor's mouth and its
-    end wall but not its walls, and a pose 1 m short of the odometry's, which put the scan's dense near-wall
-    points on the mouth, won by 40-200 nats against a prior cost of 23-50 for five scans in a row, a 5 m slip.
+    ``max_correspondence_m``). That is right for a point that contradicts the local keyframes' view
+    (:mod:`.free_space`: it lies where they saw free space, or behind a surface they saw), and for one on ground
+    no keyframe's beam reached (nothing says it fits). It is wrong for a point on a surface the keyframes hit at
+    angles too grazing to make lines of (the beams on either side of it stop around it; more keyframes say so
+    than contradict it): such a point costs ρ(σ) here, what a point that fits costs. Charged in full, those
+    points make the pose that pulls the scan back onto the mapped part win: at intel's corridor entrance (drift
+    seed 1, scans 823-827) the submap had the corridor's mouth and its end wall but not its walls, and a pose
+    1 m short of the odometry's, which put the scan's dense near-wall points on the mouth, won by 40-200 nats
+    against a prior cost of 23-50 for five scans in a row, a 5 m slip.
     With ``free_space_basins`` off: :func:`.plicp.map_cost`.
     """
     if not cfg.free_space_basins:
