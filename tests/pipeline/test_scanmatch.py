@@ -17,11 +17,12 @@ from scanmatch_sim import (
 
 from doorbatch.config import DoorbatchConfig
 from doorbatch.geometry.rotations import wrap_angle
-from doorbatch.geometry.se2 import compose, interpolate_poses, relative
+from doorbatch.geometry.se2 import compose, interpolate_poses, relative, transform_points
 from doorbatch.io.recording import load_recording
 from doorbatch.pipeline.evaluate.trajectory_error import align_first_pose, ate_rmse
 from doorbatch.pipeline.mapping import pass_poses
 from doorbatch.pipeline.poses import ScanMatchConfig, scan_match_trajectory
+from doorbatch.pipeline.poses.free_space import on_seen_surfaces
 from doorbatch.pipeline.poses.plicp import GaussianPrior, map_cost, plicp_configured
 from doorbatch.pipeline.poses.scanmatch import (
     basin_cost,
@@ -256,3 +257,11 @@ def test_a_scan_entering_a_corridor_is_not_pulled_back_onto_its_mapped_mouth(see
     assert basin_cost(submap, scan, at_truth, sigma_m, cfg) < basin_cost(submap, scan, slipped, sigma_m, cfg)
     plain = ScanMatchConfig(free_space_basins=False)
     assert basin_cost(submap, scan, slipped, sigma_m, plain) == map_cost(slipped, sigma_m)
+    kf = submap.keyframes[0]
+    relieved = {}
+    for name, result in (("truth", at_truth), ("slipped", slipped)):
+        seen = on_seen_surfaces([kf.profile], kf.pose[None], transform_points(result.pose, scan[result.outside_gate]),
+                                cfg.max_correspondence_m)
+        relieved[name] = (int(seen.sum()), int(result.outside_gate.sum()))
+    assert relieved["truth"][0] >= 10  # the wall points past the mapped mouth
+    assert relieved["slipped"][0] < relieved["slipped"][1]  # its end-wall points, seen free, stay charged

@@ -7,10 +7,12 @@ within ``bearing_tolerance_rad`` (one at least: ``near``) with their hit ranges 
     free    ⇔ every such beam passed the point:       r_j − r > margin for all j
     behind  ⇔ every such beam stopped short of it:   r − r_j > margin for all j
 
-Otherwise the point lies on a surface the scan hit: within the margin of the hits, or between the hits of two
-beams that graze it ("every", not "any": a point on a corridor wall seen along its length has one neighbouring
-beam hit the wall nearer and the other farther). Where no beam points (outside the field of view, a beam
-without return) the scan says nothing.
+Otherwise the point lies on a surface the scan hit: within the margin of a hit, or between the hits of two
+beams that graze it ("every", not "any", above: a point on a corridor wall seen along its length has one
+neighbouring beam hit the wall nearer and the other farther). Two beams cannot tell that wall from a depth edge
+(a door jamb near, the wall behind it far), whose gap then counts as a surface too; the vote over keyframes
+(:func:`on_seen_surfaces`) is what outweighs one such view. Where no beam points (outside the field of view, a
+beam without return) the scan says nothing.
 
 Scan matching uses this to tell a scan point that no submap line explains because it lies on a surface the
 keyframes hit but made no lines of (grazing) from one that the keyframes saw free or could not see, or did not
@@ -35,6 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.geometry.se2 import inverse, transform_points
 
 FloatArray = npt.NDArray[np.float64]
@@ -43,8 +46,8 @@ BoolArray = npt.NDArray[np.bool_]
 
 @dataclass(frozen=True, slots=True)
 class RangeProfile:
-    """A scan's hits as beams: bearings sorted ascending (rad) with their ranges (m), and the bearing tolerance
-    within which a query direction belongs to a beam (1.5 median beam spacings)."""
+    """A scan's hits as beams: bearings in [−π, π] sorted ascending (rad) with their ranges (m), and the bearing
+    tolerance within which a query direction belongs to a beam."""
 
     bearing_rad: FloatArray  # (B,)
     range_m: FloatArray  # (B,)
@@ -52,36 +55,44 @@ class RangeProfile:
 
     @classmethod
     def of_scan(cls, scan_xy: npt.ArrayLike) -> RangeProfile:
-        """The profile of (N, 2) scan end points in the sensor frame (finite hits; order does not matter)."""
+        """The profile of (N, 2) scan end points in the sensor frame (finite hits; order does not matter).
+
+        The tolerance is 1.5 beam steps, the step estimated as the median gap between neighbouring hit bearings
+        (where many beams returned nothing the median grows, and directions without a return borrow the verdict
+        of the nearest one that did)."""
         pts = np.asarray(scan_xy, dtype=np.float64).reshape(-1, 2)
         bearing = np.arctan2(pts[:, 1], pts[:, 0])
-        order = np.argsort(bearing)
+        order = np.argsort(bearing, kind="stable")
         bearing, rng = bearing[order], np.hypot(pts[order, 0], pts[order, 1])
         gaps = np.diff(bearing)
-        spacing = float(np.median(gaps[gaps > 0])) if np.any(gaps > 0) else math.radians(1.0)
-        return cls(bearing, rng, 1.5 * spacing)
+        gaps = gaps[gaps > 0]
+        step = float(np.median(gaps)) if gaps.size else math.radians(1.0)
+        return cls(bearing, rng, 1.5 * step)
 
     def verdicts(self, points_xy: npt.ArrayLike, margin_m: float) -> tuple[BoolArray, BoolArray, BoolArray]:
-        """(M,) masks free, behind, near: each point (sensor frame) lies more than ``margin_m`` in front of (free)
-        or behind (behind) the hits of all the beams on either side of its direction within the bearing tolerance,
-        of which there is one at least (near)."""
+        """(M,) masks free, behind, on_surface for points in the sensor frame, from the beams on either side of
+        each point's bearing within the bearing tolerance (across ±π for a scan that closes the circle):
+
+        free: more than ``margin_m`` in front of all their hits; behind: more than ``margin_m`` behind all of them;
+        on_surface: neither (within ``margin_m`` of a hit, or between a nearer and a farther one).
+        """
         q = np.asarray(points_xy, dtype=np.float64).reshape(-1, 2)
         n = self.bearing_rad.shape[0]
+        none = np.zeros(q.shape[0], dtype=bool)
         if n == 0 or q.shape[0] == 0:
-            none = np.zeros(q.shape[0], dtype=bool)
             return none, none.copy(), none.copy()
         beta = np.arctan2(q[:, 1], q[:, 0])
         r = np.hypot(q[:, 0], q[:, 1])
         right = np.searchsorted(self.bearing_rad, beta)
-        any_near = np.zeros(q.shape[0], dtype=bool)
-        all_past = np.ones(q.shape[0], dtype=bool)
-        all_short = np.ones(q.shape[0], dtype=bool)
-        for j in (np.clip(right - 1, 0, n - 1), np.clip(right, 0, n - 1)):  # the beams on either side
-            near = np.abs(self.bearing_rad[j] - beta) <= self.bearing_tolerance_rad
-            any_near |= near
-            all_past &= ~near | (self.range_m[j] - r > margin_m)
-            all_short &= ~near | (r - self.range_m[j] > margin_m)
-        return any_near & all_past, any_near & all_short, any_near
+        sides = ((right - 1) % n, right % n)  # the beams on either side, wrapping around ±π
+        near = [np.abs(wrap_angle(self.bearing_rad[j] - beta)) <= self.bearing_tolerance_rad for j in sides]
+        any_near = near[0] | near[1]
+        all_past, all_short = any_near.copy(), any_near.copy()
+        for j, nj in zip(sides, near, strict=True):
+            ahead = self.range_m[j] - r
+            all_past &= ~nj | (ahead > margin_m)
+            all_short &= ~nj | (-ahead > margin_m)
+        return all_past, all_short, any_near & ~all_past & ~all_short
 
 
 def on_seen_surfaces(profiles: Sequence[RangeProfile], poses: npt.ArrayLike, points_xy: npt.ArrayLike,
@@ -92,8 +103,8 @@ def on_seen_surfaces(profiles: Sequence[RangeProfile], poses: npt.ArrayLike, poi
     against = np.zeros(q.shape[0], dtype=np.int64)
     on_surface = np.zeros(q.shape[0], dtype=np.int64)
     for profile, pose in zip(profiles, np.asarray(poses, dtype=np.float64).reshape(-1, 3), strict=True):
-        free, behind, near = profile.verdicts(transform_points(inverse(pose), q), margin_m)
+        free, behind, surface = profile.verdicts(transform_points(inverse(pose), q), margin_m)
         against += free | behind
-        on_surface += near & ~free & ~behind
+        on_surface += surface
     out: BoolArray = on_surface > against
     return out

@@ -106,6 +106,8 @@ class PlicpResult:
         degeneracy: Smallest eigenvalue of the dimensionless AᵀA / n (0: a direction is unconstrained).
         iterations: Gauss–Newton iterations run.
         converged: The last step was below the convergence thresholds.
+        outside_gate: (N,) the scan points with no reference sample within the gate in the last linearization,
+            those ``data_cost`` charges ρ(gate) for along with the trimmed ones.
     """
 
     pose: FloatArray
@@ -118,6 +120,7 @@ class PlicpResult:
     degeneracy: float
     iterations: int
     converged: bool
+    outside_gate: BoolArray
 
 
 @dataclass(frozen=True, slots=True)
@@ -128,7 +131,8 @@ class _Linearization:
     jacobian: FloatArray  # (n, 3)
     points: FloatArray  # (n, 2) scan points (sensor frame) that are inliers
     weights: FloatArray  # (n,) robust weights in (0, 1]
-    n_unmatched: int  # scan points with no reference sample within the gate
+    n_unmatched: int  # scan points without a kept correspondence (none within the gate, or trimmed)
+    outside_gate: BoolArray  # (N,) scan points with no reference sample within the gate
 
 
 def line_reference(points: npt.ArrayLike, normals: npt.ArrayLike) -> LineReference:
@@ -261,7 +265,7 @@ def _linearize(
     jacobian = np.stack([normals[:, 0], normals[:, 1], normals[:, 1] * rot_f[:, 0] - normals[:, 0] * rot_f[:, 1]],
                         axis=1)
     weights = 1.0 / (1.0 + (residuals / robust_scale_m) ** 2)
-    return _Linearization(residuals, jacobian, pts, weights, scan.shape[0] - residuals.shape[0])
+    return _Linearization(residuals, jacobian, pts, weights, scan.shape[0] - residuals.shape[0], ~np.isfinite(dist))
 
 
 def _degeneracy(lin: _Linearization) -> float:
@@ -349,7 +353,8 @@ def plicp(
     """
     scan = np.asarray(scan_xy, dtype=np.float64).reshape(-1, 2)
     pose = np.asarray(initial_pose, dtype=np.float64).copy()
-    lin = _Linearization(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 2)), np.zeros(0), scan.shape[0])
+    lin = _Linearization(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 2)), np.zeros(0), scan.shape[0],
+                         np.ones(scan.shape[0], dtype=bool))
     converged, iterations = False, 0
     scales = _Scales(max_correspondence_m, robust_scale_m, sigma_min_m)
     if reference.size == 0 or scan.shape[0] == 0:
@@ -428,4 +433,4 @@ def _result(lin: _Linearization, pose: FloatArray, prior: GaussianPrior | None, 
         cov = 0.5 * (cov + cov.T)
     sigma2 = max(float(np.mean(lin.residuals**2)), scales.sigma_min_m**2) if n > 3 else math.inf
     return PlicpResult(pose, cov, n, residual, _data_cost(lin, scales), _prior_cost(pose, prior), math.sqrt(sigma2),
-                       _degeneracy(lin), iterations, converged)
+                       _degeneracy(lin), iterations, converged, lin.outside_gate)

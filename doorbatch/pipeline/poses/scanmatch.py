@@ -193,7 +193,7 @@ class Submap:
     keyframes: tuple[Keyframe, ...]
     lines: LineReference
     grid: LikelihoodGrid
-    local: tuple[int, ...] = ()  # indices of the keyframes whose samples make up ``lines`` and ``grid``
+    local: tuple[int, ...]  # indices of the keyframes whose samples make up ``lines`` and ``grid``
 
     @property
     def last_keyframe_pose(self) -> FloatArray:
@@ -564,13 +564,14 @@ def basin_cost(submap: Submap, scan_xy: FloatArray, result: PlicpResult, sigma_m
     seed 1, scans 823-827) the submap had the corridor's mouth and its end wall but not its walls, and a pose
     1 m short of the odometry's, which put the scan's dense near-wall points on the mouth, won by 40-200 nats
     against a prior cost of 23-50 for five scans in a row, a 5 m slip.
-    With ``free_space_basins`` off: :func:`.plicp.map_cost`.
+    In full: C = (D − n_s (ρ(gate) − ρ(σ))) / σ² + P, with D the result's data cost and n_s the number of the
+    points it charged ρ(gate) for as outside the gate (its last linearization, ``outside_gate``) that lie on
+    seen surfaces, placed at the result's pose; so the relief never exceeds the charge. With
+    ``free_space_basins`` off, or σ infinite (three inliers or fewer): :func:`.plicp.map_cost`.
     """
-    if not cfg.free_space_basins:
+    if not cfg.free_space_basins or not math.isfinite(sigma_m):
         return map_cost(result, sigma_m)
-    world = transform_points(result.pose, scan_xy)
-    dist, _ = submap.lines.tree.query(world, k=1, distance_upper_bound=cfg.max_correspondence_m)
-    unmatched = world[~np.isfinite(dist)]
+    unmatched = transform_points(result.pose, scan_xy[result.outside_gate])
     local = [submap.keyframes[i] for i in submap.local]
     silent = int(np.count_nonzero(on_seen_surfaces([kf.profile for kf in local],
                                                    np.array([kf.pose for kf in local]).reshape(-1, 3), unmatched,
