@@ -12,6 +12,7 @@ is taken as a pure rotation: δrot1 = 0, δrot2 = θ' − θ (Nav2 AMCL uses 0.0
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -55,4 +56,16 @@ def rotation_noise_magnitude(rot: npt.ArrayLike) -> FloatArray:
     a = np.abs(wrap_angle(np.asarray(rot, dtype=np.float64)))
     out: FloatArray = np.minimum(a, np.pi - a)
     return out
+
+
+def increment_variances(rot1: npt.ArrayLike, trans: npt.ArrayLike, rot2: npt.ArrayLike, alphas: Sequence[float]
+                        ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Variances of the α-model's noise on (δrot1, δtrans, δrot2) (Probabilistic Robotics Table 5.6, Nav2 AMCL's
+    ``DifferentialMotionModel``): α1 r1² + α2 δtrans², α3 δtrans² + α4 (r1² + r2²), α1 r2² + α2 δtrans², with
+    r = :func:`rotation_noise_magnitude` of δrot; ``alphas`` = (α1, α2, α3, α4). The one model of the simulator's
+    drift, the localizers' motion model and the scan matcher's prior."""
+    a1, a2, a3, a4 = (float(a) for a in alphas)
+    tr = np.asarray(trans, dtype=np.float64)
+    r1, r2 = rotation_noise_magnitude(rot1), rotation_noise_magnitude(rot2)
+    return a1 * r1**2 + a2 * tr**2, a3 * tr**2 + a4 * (r1**2 + r2**2), a1 * r2**2 + a2 * tr**2
 

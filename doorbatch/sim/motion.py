@@ -35,8 +35,8 @@ import numpy.typing as npt
 
 # The increment decomposition is shared with the localizers' motion model (re-exported for the simulator's callers).
 from doorbatch.geometry.odometry import Increments as Increments
+from doorbatch.geometry.odometry import increment_variances
 from doorbatch.geometry.odometry import odometry_increments as odometry_increments
-from doorbatch.geometry.odometry import rotation_noise_magnitude
 from doorbatch.geometry.rotations import wrap_angle
 
 FloatArray = npt.NDArray[np.float64]
@@ -299,11 +299,10 @@ def sample_trajectory(traj: Trajectory, t_s: npt.ArrayLike) -> PoseSamples:
 def sample_odometry_increments(true: Increments, noise: OdometryNoise, rng: np.random.Generator) -> Increments:
     """Reported increments: true ones with the α-model noise and the systematic bias (module docstring)."""
     tr = true.trans
-    r1, r2 = rotation_noise_magnitude(true.rot1), rotation_noise_magnitude(true.rot2)
-    sd_rot1 = np.sqrt(noise.alpha1 * r1**2 + noise.alpha2 * tr**2)
-    sd_trans = np.sqrt(noise.alpha3 * tr**2 + noise.alpha4 * (r1**2 + r2**2))
-    sd_rot2 = np.sqrt(noise.alpha1 * r2**2 + noise.alpha2 * tr**2)
-    eps = rng.standard_normal((3, r1.shape[0]))
+    var_rot1, var_trans, var_rot2 = increment_variances(true.rot1, tr, true.rot2,
+                                                        (noise.alpha1, noise.alpha2, noise.alpha3, noise.alpha4))
+    sd_rot1, sd_trans, sd_rot2 = np.sqrt(var_rot1), np.sqrt(var_trans), np.sqrt(var_rot2)
+    eps = rng.standard_normal((3, tr.shape[0]))
     return Increments(
         rot1=true.rot1 + sd_rot1 * eps[0],
         trans=(1.0 + noise.scale_error) * tr + sd_trans * eps[1],

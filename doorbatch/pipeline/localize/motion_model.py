@@ -21,7 +21,7 @@ from collections.abc import Sequence
 import numpy as np
 import numpy.typing as npt
 
-from doorbatch.geometry.odometry import MIN_TRANS_FOR_BEARING_M, odometry_increments, rotation_noise_magnitude
+from doorbatch.geometry.odometry import MIN_TRANS_FOR_BEARING_M, increment_variances, odometry_increments
 from doorbatch.geometry.rotations import wrap_angle
 
 FloatArray = npt.NDArray[np.float64]
@@ -30,12 +30,8 @@ FloatArray = npt.NDArray[np.float64]
 def increment_noise_std(rot1: float, trans: float, rot2: float, alphas: Sequence[float]
                         ) -> tuple[float, float, float]:
     """Standard deviations of the noise on (δrot1, δtrans, δrot2) for one increment (AMCL's diff model)."""
-    a1, a2, a3, a4 = (float(a) for a in alphas)
-    r1, r2 = (float(r) for r in rotation_noise_magnitude([rot1, rot2]))
-    sd_rot1 = float(np.sqrt(a1 * r1 * r1 + a2 * trans * trans))
-    sd_trans = float(np.sqrt(a3 * trans * trans + a4 * (r1 * r1 + r2 * r2)))
-    sd_rot2 = float(np.sqrt(a1 * r2 * r2 + a2 * trans * trans))
-    return sd_rot1, sd_trans, sd_rot2
+    var_rot1, var_trans, var_rot2 = increment_variances(rot1, trans, rot2, alphas)
+    return float(np.sqrt(var_rot1)), float(np.sqrt(var_trans)), float(np.sqrt(var_rot2))
 
 
 def sample_motion_model_odometry(pose: npt.ArrayLike, odom_prev: npt.ArrayLike, odom_now: npt.ArrayLike,

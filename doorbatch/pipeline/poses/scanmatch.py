@@ -85,7 +85,7 @@ import numpy as np
 import numpy.typing as npt
 
 from doorbatch.config import ScanMatchConfig
-from doorbatch.geometry.odometry import MIN_TRANS_FOR_BEARING_M, odometry_increments, rotation_noise_magnitude
+from doorbatch.geometry.odometry import MIN_TRANS_FOR_BEARING_M, increment_variances, odometry_increments
 from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.geometry.se2 import (
     compose,
@@ -193,7 +193,8 @@ class Submap:
     keyframes: tuple[Keyframe, ...]
     lines: LineReference
     grid: LikelihoodGrid
-    local: tuple[int, ...]  # indices of the keyframes whose samples make up ``lines`` and ``grid``
+    local_profiles: tuple[RangeProfile, ...]  # the beams of the keyframes whose samples make up ``lines``, ``grid``
+    local_poses: FloatArray  # (L, 3) their poses
 
     @property
     def last_keyframe_pose(self) -> FloatArray:
@@ -376,10 +377,8 @@ def increment_covariance(increment: npt.ArrayLike, cfg: ScanMatchConfig) -> Floa
     inc = odometry_increments(np.array([0.0, d[0]]), np.array([0.0, d[1]]), np.array([0.0, d[2]]),
                               min_trans_m=MIN_TRANS_FOR_BEARING_M)
     rot1, trans = float(inc.rot1[0]), float(inc.trans[0])
-    r1, r2 = rotation_noise_magnitude([inc.rot1[0], inc.rot2[0]])
-    var = np.array([cfg.odom_alpha1 * r1**2 + cfg.odom_alpha2 * trans**2,
-                    cfg.odom_alpha3 * trans**2 + cfg.odom_alpha4 * (r1**2 + r2**2),
-                    cfg.odom_alpha1 * r2**2 + cfg.odom_alpha2 * trans**2])
+    var = np.array(increment_variances(inc.rot1[0], trans, inc.rot2[0],
+                                       (cfg.odom_alpha1, cfg.odom_alpha2, cfg.odom_alpha3, cfg.odom_alpha4)))
     c, s = math.cos(rot1), math.sin(rot1)
     jac = np.array([[-trans * s, c, 0.0], [trans * c, s, 0.0], [1.0, 0.0, 1.0]])  # ∂(dx, dy, dθ)/∂(r1, t, r2)
     floor = np.array([cfg.odom_min_std_m, cfg.odom_min_std_m, math.radians(cfg.odom_min_std_deg)]) ** 2
@@ -476,7 +475,7 @@ def _build_submap(keyframes: tuple[Keyframe, ...], cfg: ScanMatchConfig, *, old:
     pts, nrm = _merged_samples(local, newest.pose, reach, cfg)
     grid = build_likelihood_grid(pts, resolution_m=cfg.grid_resolution_m, sigma_m=cfg.grid_sigma_m,
                                  window_m=cfg.correlative_window_max_m, coarse_cells=cfg.coarse_cells)
-    return Submap(keyframes, line_reference(pts, nrm), grid, tuple(int(i) for i in np.flatnonzero(near)))
+    return Submap(keyframes, line_reference(pts, nrm), grid, tuple(kf.profile for kf in local), poses[near])
 
 
 def _keyframe(scan_xy: FloatArray, pose: npt.ArrayLike, path_m: float, cfg: ScanMatchConfig,
@@ -572,9 +571,7 @@ def basin_cost(submap: Submap, scan_xy: FloatArray, result: PlicpResult, sigma_m
     if not cfg.free_space_basins or not math.isfinite(sigma_m):
         return map_cost(result, sigma_m)
     unmatched = transform_points(result.pose, scan_xy[result.outside_gate])
-    local = [submap.keyframes[i] for i in submap.local]
-    silent = int(np.count_nonzero(on_seen_surfaces([kf.profile for kf in local],
-                                                   np.array([kf.pose for kf in local]).reshape(-1, 3), unmatched,
+    silent = int(np.count_nonzero(on_seen_surfaces(submap.local_profiles, submap.local_poses, unmatched,
                                                    cfg.max_correspondence_m)))
     relief = silent * float(cauchy_rho(cfg.max_correspondence_m, cfg.robust_scale_m)
                             - cauchy_rho(sigma_m, cfg.robust_scale_m))
