@@ -454,9 +454,16 @@ class LocalizeConfig(Section):
     ambiguity_yaw_deg: float = Field(45.0, gt=0.0)
     ambiguity_min_weight: float = Field(0.1, gt=0.0, le=1.0)
     # RBPF (paper 000 Sec. IV): door angles follow a random walk, var += sigma_d² · dt (so sigma_d is in
-    # rad/√s); the initial door angle std, which also caps the variance of a door left unobserved.
-    door_sigma_rad_per_sqrt_s: float = Field(0.1, ge=0.0)
+    # rad/√s); the initial door angle std, which also caps the variance of a door left unobserved. The paper gives
+    # no sigma_d. A door stands still nearly all the time and is moved in a second or two when it moves; the moved-
+    # door gate below catches those moves, so the walk only has to cover a still door's play: 0.01 rad/√s is 1.8°
+    # after 10 s unseen, small against the 3° measurement noise per scan. (0.1, before the gate: a door seen a few
+    # seconds ago was 5-10° uncertain, and the eq. (6) term then favoured poses that put closed leaves on plain wall.)
+    door_sigma_rad_per_sqrt_s: float = Field(0.01, ge=0.0)
     door_init_sigma_deg: float = Field(30.0, gt=0.0)
+    # A measured angle whose innovation² exceeds this χ² (1 dof) times (P + R) means the door was moved: its variance
+    # is raised to door_init_sigma_deg² before the Kalman update (door_observation.kalman_update). 10.83: p = 0.001.
+    door_moved_gate_chi2: float = Field(10.83, gt=0.0)
     # Doors of a global start (--init global): "sampled" draws each particle's angle uniformly from the door's range
     # with std door_global_init_sigma_deg (the particles' mixture is the uniform prior; meant for global_door_term,
     # whose closed/open prior then never applies: each start is below the prior variance); "mid_range": mid-range with

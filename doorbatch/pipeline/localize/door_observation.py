@@ -522,10 +522,16 @@ def predict_doors(door_var: npt.ArrayLike, dt_s: float, sigma_d: float,
 
 
 def kalman_update(door_mean: npt.ArrayLike, door_var: npt.ArrayLike, observed: npt.ArrayLike,
-                  mask: npt.ArrayLike, meas_var: float | npt.ArrayLike) -> tuple[FloatArray, FloatArray]:
+                  mask: npt.ArrayLike, meas_var: float | npt.ArrayLike, change_gate_chi2: float = math.inf,
+                  moved_var: float | npt.ArrayLike = 0.0) -> tuple[FloatArray, FloatArray]:
     """Linear Kalman update of each particle's door angles with the measured angles (H = 1).
 
     K = P / (P + R), μ' = μ + K·wrap(z − μ), P' = (1 − K)·P where ``mask``; unchanged elsewhere.
+
+    A door that somebody moved: where the innovation fails the gate, wrap(z − μ)² > ``change_gate_chi2``·(P + R)
+    (the measurement is implausible under the random walk), P is first raised to ``moved_var`` (the door's
+    angle is as unknown as an unobserved door's), so that the update takes the new angle at once instead of
+    creeping towards it with the small gain of a door that has been still for long.
 
     Args:
         door_mean: (N, D) means (rad).
@@ -533,6 +539,8 @@ def kalman_update(door_mean: npt.ArrayLike, door_var: npt.ArrayLike, observed: n
         observed: (N, D) measured angles (rad), from :func:`associate_segments`.
         mask: (N, D) which measurements exist.
         meas_var: R (rad²): scalar, (D,) or (N, D).
+        change_gate_chi2: the gate (χ², 1 degree of freedom); inf: never.
+        moved_var: P of a door found moved (rad²): scalar, (D,) or (N, D).
 
     Returns:
         ``(mean, var)``, new (N, D) arrays.
@@ -540,8 +548,11 @@ def kalman_update(door_mean: npt.ArrayLike, door_var: npt.ArrayLike, observed: n
     mu = np.asarray(door_mean, dtype=np.float64)
     p = np.asarray(door_var, dtype=np.float64)
     m = np.asarray(mask, dtype=bool)
-    gain = np.where(m, p / (p + np.asarray(meas_var, dtype=np.float64)), 0.0)
+    r = np.asarray(meas_var, dtype=np.float64)
     innovation = wrap_angle(np.asarray(observed, dtype=np.float64) - mu)
+    moved = m & (innovation**2 > change_gate_chi2 * (p + r))
+    p = np.where(moved, np.maximum(p, np.asarray(moved_var, dtype=np.float64)), p)
+    gain = np.where(m, p / (p + r), 0.0)
     return mu + gain * np.where(m, innovation, 0.0), (1.0 - gain) * p
 
 
@@ -568,5 +579,6 @@ def update_doors(points_base: npt.ArrayLike, particles: ParticleSet, doors: Door
     angle, mask = associate_segments(segments, particles.pose, doors, particles.door_mean, config,
                                      angle_margin_rad=margin, backend=backend)
     meas_var = math.radians(config.door_angle_sigma_deg) ** 2
-    mean, var = kalman_update(particles.door_mean, particles.door_var, angle, mask, meas_var)
+    mean, var = kalman_update(particles.door_mean, particles.door_var, angle, mask, meas_var,
+                              config.door_moved_gate_chi2, math.radians(config.door_init_sigma_deg) ** 2)
     return DoorUpdate(mean, var, mask, angle)
