@@ -546,14 +546,25 @@ def kalman_update(door_mean: npt.ArrayLike, door_var: npt.ArrayLike, observed: n
         ``(mean, var)``, new (N, D) arrays.
     """
     mu = np.asarray(door_mean, dtype=np.float64)
-    p = np.asarray(door_var, dtype=np.float64)
     m = np.asarray(mask, dtype=bool)
     r = np.asarray(meas_var, dtype=np.float64)
     innovation = wrap_angle(np.asarray(observed, dtype=np.float64) - mu)
-    moved = m & (innovation**2 > change_gate_chi2 * (p + r))
-    p = np.where(moved, np.maximum(p, np.asarray(moved_var, dtype=np.float64)), p)
+    p = gated_prior_variance(mu, door_var, observed, mask, meas_var, change_gate_chi2, moved_var)
     gain = np.where(m, p / (p + r), 0.0)
     return mu + gain * np.where(m, innovation, 0.0), (1.0 - gain) * p
+
+
+def gated_prior_variance(door_mean: npt.ArrayLike, door_var: npt.ArrayLike, observed: npt.ArrayLike,
+                         mask: npt.ArrayLike, meas_var: float | npt.ArrayLike, change_gate_chi2: float,
+                         moved_var: float | npt.ArrayLike) -> FloatArray:
+    """(N, D) the prior variance :func:`kalman_update` updates: P, or ``moved_var`` (if larger) where a measurement
+    fails the moved-door gate wrap(z − μ)² > ``change_gate_chi2``·(P + R)."""
+    p = np.asarray(door_var, dtype=np.float64)
+    r = np.asarray(meas_var, dtype=np.float64)
+    innovation = wrap_angle(np.asarray(observed, dtype=np.float64) - np.asarray(door_mean, dtype=np.float64))
+    moved = np.asarray(mask, dtype=bool) & (innovation**2 > change_gate_chi2 * (p + r))
+    out: FloatArray = np.where(moved, np.maximum(p, np.asarray(moved_var, dtype=np.float64)), p)
+    return out
 
 
 def update_doors(points_base: npt.ArrayLike, particles: ParticleSet, doors: DoorSet, config: LocalizeConfig,

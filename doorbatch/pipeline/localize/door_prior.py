@@ -62,7 +62,9 @@ def unobserved_door_variance(doors: DoorSet, config: LocalizeConfig) -> FloatArr
     ``door_init_sigma_deg``² when that is smaller (the random walk never lets a door exceed it).
 
     A tracked or mid-range start is at or above it until the door update has seen the door; a door unseen for
-    long returns to it through the random walk (its angle is then as unknown as at the start).
+    long returns to it through the random walk (its angle is then as unknown as at the start; with the default
+    0.01 rad/√s that takes about half an hour for a 90° range: a door that moves meanwhile is caught by the update's
+    moved-door gate instead, door_observation.kalman_update).
     """
     width = np.asarray(doors.angle_max, dtype=np.float64) - np.asarray(doors.angle_min, dtype=np.float64)
     out: FloatArray = np.minimum(width**2 / 12.0, math.radians(config.door_init_sigma_deg) ** 2)

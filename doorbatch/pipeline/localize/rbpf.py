@@ -35,7 +35,12 @@ from doorbatch.config import LocalizeConfig
 from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.maps import DoorSet
 from doorbatch.pipeline.localize.door_likelihood import STATIC, door_log_likelihood_at_poses
-from doorbatch.pipeline.localize.door_observation import DoorUpdate, predict_doors, update_doors
+from doorbatch.pipeline.localize.door_observation import (
+    DoorUpdate,
+    gated_prior_variance,
+    predict_doors,
+    update_doors,
+)
 from doorbatch.pipeline.localize.door_prior import (
     UNIFORM,
     DoorPrior,
@@ -240,12 +245,16 @@ def door_update_log_factor(prior: ParticleSet, update: DoorUpdate, doors: DoorSe
     (:func:`~.door_prior.log_evidence`; a⁺ its moment-matched posterior mean, :func:`global_door_update`); p(z)
     is at most N(z; z, R), and for ranges of 0.1° to 100° and measurements within the association's ±10° gate
     the factor stays ≤ −0.08 nats, so a door whose range is narrower than the measurement (the built map's
-    never-moved doors) earns nothing. A door not observed adds nothing (a⁺ = μ, P⁺ = P).
+    never-moved doors) earns nothing. A door not observed adds nothing (a⁺ = μ, P⁺ = P). A door the moved-door gate
+    restarted (:func:`~.door_observation.gated_prior_variance`) was updated from N(μ, P_moved), so that is its prior
+    here too.
     """
     mu, var = prior.door_mean, prior.door_var
     post_var = np.maximum(update.var, 1e-12)
     meas_var = math.radians(config.door_angle_sigma_deg) ** 2
-    gaussian = -0.5 * (update.mean - mu) ** 2 / var + 0.5 * np.log(post_var / var)
+    gated = gated_prior_variance(mu, var, update.angle, update.observed, meas_var, config.door_moved_gate_chi2,
+                                 math.radians(config.door_init_sigma_deg) ** 2)
+    gaussian = -0.5 * (update.mean - mu) ** 2 / gated + 0.5 * np.log(post_var / gated)
     at_prior = update.observed & (var >= unobserved_door_variance(doors, config))
     term = np.where(update.observed, gaussian, 0.0)
     if at_prior.any():

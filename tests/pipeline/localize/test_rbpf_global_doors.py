@@ -12,7 +12,7 @@ from mcl_sim import LASER_X, RES, polyline, rasterize, scan_beams, scan_ranges
 
 from doorbatch.config import LocalizeConfig
 from doorbatch.maps import DoorSet
-from doorbatch.pipeline.localize.door_observation import DoorUpdate, kalman_update
+from doorbatch.pipeline.localize.door_observation import DoorUpdate, gated_prior_variance, kalman_update
 from doorbatch.pipeline.localize.door_prior import UNIFORM, DoorPrior, log_evidence, posterior, unobserved_door_variance
 from doorbatch.pipeline.localize.likelihood_field import BeamCombination, build_distance_field
 from doorbatch.pipeline.localize.particles import ParticleSet
@@ -45,10 +45,13 @@ def test_door_update_factor_gives_the_marginal_likelihood_of_a_linear_gaussian_d
     z = mu + rng.normal(0.0, 0.3, (n, 3))
     observed = rng.random((n, 3)) < 0.6
     meas_var = math.radians(config.door_angle_sigma_deg) ** 2
-    mean, post = kalman_update(mu, var, z, observed, meas_var)
+    moved_var = math.radians(config.door_init_sigma_deg) ** 2  # as update_doors: a door 0.3 rad off may be "moved"
+    mean, post = kalman_update(mu, var, z, observed, meas_var, config.door_moved_gate_chi2, moved_var)
     prior = ParticleSet(np.zeros((n, 3)), np.full(n, 1.0 / n), mu, var)
     factor = door_update_log_factor(prior, DoorUpdate(mean, post, observed, z), DOORS, config)
-    want = np.where(observed, _log_normal(z, mu, var + meas_var) - _log_normal(z, mean, np.full_like(z, meas_var)),
+    used = gated_prior_variance(mu, var, z, observed, meas_var, config.door_moved_gate_chi2, moved_var)
+    assert np.any(used > var) and np.any(observed & (used == var))  # both kinds of door occur
+    want = np.where(observed, _log_normal(z, mu, used + meas_var) - _log_normal(z, mean, np.full_like(z, meas_var)),
                     0.0).sum(axis=1)
     np.testing.assert_allclose(factor, want, rtol=1e-9, atol=1e-9)
 
