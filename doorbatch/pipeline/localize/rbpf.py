@@ -284,7 +284,8 @@ def condition_doors_on_beams(particles: ParticleSet, beams: BeamSet, field: Dist
     spread again and again, which the joint likelihood p(z_1..t | x) does not (expert choice; the paper's
     door update uses the polygon only). The beams were weighed under the prior (FastSLAM's order), so this is
     the matching posterior. The beams of a door combine by information into one measurement z = Σ c_b·φ_b / Σ c_b
-    with variance σ_hit²/Σ c_b; with a ``prior`` (the global phase's closed/open mixture) a door still at its
+    with variance σ_hit²/Σ c_b (through the same moved-door gate as the polygon's update); with a ``prior`` (the
+    global phase's closed/open mixture) a door still at its
     prior (:func:`~.door_prior.unobserved_door_variance`) takes it under that prior (:func:`~.door_prior.posterior`,
     moment-matched), every other door under its Gaussian (product of Gaussians). Without one (tracking,
     ``tracking_door_prior``) every door takes it under its Gaussian: moment-matching the uniform prior's posterior,
@@ -332,6 +333,11 @@ def condition_doors_on_beams(particles: ParticleSet, beams: BeamSet, field: Dist
     info_sum = np.bincount(flat, weights=info, minlength=n * d).reshape(n, d)
     phi_sum = np.bincount(flat, weights=info * phi, minlength=n * d).reshape(n, d)
     hit = info_sum > 0
+    z = np.where(hit, phi_sum / np.where(hit, info_sum, 1.0), mean)
+    meas_var = np.where(hit, 1.0 / np.where(hit, info_sum, 1.0), 1.0)
+    # a door the beams put far from its estimate was moved: the polygon update's gate (kalman_update)
+    var = gated_prior_variance(mean, var, z, hit, meas_var, config.door_moved_gate_chi2,
+                               math.radians(config.door_init_sigma_deg) ** 2)
     post_var = np.where(hit, 1.0 / (1.0 / var + info_sum), var)
     post_mean = np.where(hit, post_var * (mean / var + phi_sum), mean)
     if prior is not None and (at_prior := hit & (var >= thr)).any():

@@ -12,10 +12,10 @@ from mcl_sim import LASER_X, RES, polyline, rasterize, scan_beams, scan_ranges
 from doorbatch.config import LocalizeConfig
 from doorbatch.maps import DoorSet
 from doorbatch.pipeline.localize.door_observation import DoorUpdate, kalman_update
-from doorbatch.pipeline.localize.likelihood_field import build_distance_field
+from doorbatch.pipeline.localize.likelihood_field import BeamSet, build_distance_field
 from doorbatch.pipeline.localize.mcl import MclState, initial_particles
 from doorbatch.pipeline.localize.particles import ParticleSet
-from doorbatch.pipeline.localize.rbpf import door_update_log_factor, rbpf_step
+from doorbatch.pipeline.localize.rbpf import condition_doors_on_beams, door_update_log_factor, rbpf_step
 
 FloatArray = npt.NDArray[np.float64]
 HINGES_X = (3.0, 6.0, 9.0)
@@ -126,3 +126,23 @@ def test_the_global_evidence_factor_uses_the_prior_the_gate_updated_from() -> No
     used = np.array([[moved_var, prior.door_var[0, 1]]])
     exact = (log_n(z, prior.door_mean, used + r) - log_n(z, mean, np.full_like(z, r))).sum()
     assert abs(float(factor[0]) - float(exact)) < 1e-9
+
+
+def test_beams_on_a_moved_leaf_restart_the_door_as_the_polygon_update_does() -> None:
+    """Six beams on a leaf at 40° for a door held at 0° ± 1°: their combined angle fails the gate, so the door's
+    conditioned mean lands near 40° (with the pre-gate variance it would move about a degree)."""
+    config = LocalizeConfig()
+    doors = DoorSet(np.array([[0.0, 0.0]]), np.array([0.8]), np.zeros(1), np.zeros(1), np.array([math.radians(90.0)]))
+    pose = np.array([[-1.0, -1.0, 0.0]])
+    t = np.linspace(0.3, 0.8, 6)
+    leaf = np.stack([t * math.cos(math.radians(40.0)), t * math.sin(math.radians(40.0))], axis=1)
+    beams = BeamSet((leaf - pose[0, :2]).astype(np.float32), np.zeros(2), 20.0, np.arange(6))
+    particles = ParticleSet(pose, np.ones(1), np.zeros((1, 1)), np.full((1, 1), math.radians(1.0) ** 2))
+    association = np.zeros((1, 6), dtype=np.int16)
+    mean, var = condition_doors_on_beams(particles, beams, None, doors, config, association=association)  # type: ignore[arg-type]
+    assert abs(math.degrees(mean[0, 0]) - 40.0) < 2.0, math.degrees(mean[0, 0])
+    assert var[0, 0] < config.sigma_hit**2 / float((t**2).sum())  # the beams' own variance, as after a restart
+    creeping, _ = condition_doors_on_beams(particles, beams, None, doors,  # type: ignore[arg-type]
+                                           config.model_copy(update={"door_moved_gate_chi2": 1e12}),
+                                           association=association)
+    assert math.degrees(creeping[0, 0]) < 10.0
