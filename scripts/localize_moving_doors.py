@@ -26,6 +26,7 @@ from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.geometry.se2 import interpolate_poses
 from doorbatch.io.recording import load_recording
 from doorbatch.io.sim_truth import read_truth
+from doorbatch.pipeline.evaluate.trajectory_metrics import ape_translation
 from doorbatch.pipeline.localize.run import localize_recording, truth_localization_map
 
 MOVING_RAD = math.radians(0.5)  # a true angle change between two updates larger than this: the door is moving
@@ -65,7 +66,7 @@ def main() -> None:
                   f"below {SETTLED_DEG:g}° after {settle}")
     ref, ok = interpolate_poses(rec.reference.stamps_ns, rec.reference.poses, res.stamps_ns,
                                 round(config.evaluate.global_success_max_reference_gap_s * 1e9))
-    err_xy = np.hypot(*(res.pose[ok, :2] - ref[ok, :2]).T)
+    err_xy = ape_translation(res.pose[ok], ref[ok])
     print(f"  position RMSE {np.sqrt(np.mean(err_xy ** 2)):.3f} m, max {err_xy.max():.3f} m")
 
 

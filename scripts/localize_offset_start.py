@@ -23,6 +23,7 @@ import numpy as np
 from doorbatch.config import load_config
 from doorbatch.geometry.se2 import interpolate_poses
 from doorbatch.io.recording import load_recording
+from doorbatch.pipeline.evaluate.trajectory_metrics import ape_translation
 from doorbatch.pipeline.localize.run import load_localization_map, localize_recording
 
 
@@ -58,7 +59,7 @@ def main() -> None:
             ref, ok = interpolate_poses(rec.reference.stamps_ns, rec.reference.poses, res.stamps_ns,
                                         round(config.evaluate.global_success_max_reference_gap_s * 1e9))
             est, ref = res.pose[ok], ref[ok]
-            err = np.hypot(est[:, 0] - ref[:, 0], est[:, 1] - ref[:, 1])
+            err = ape_translation(est, ref)
             ex = est[:, 0] - ref[:, 0]
             edges = np.arange(np.floor(ref[:, 0].min()), ref[:, 0].max() + args.bin_m, args.bin_m)
             stretch = " ".join(f"{a:.0f}:{ex[(ref[:, 0] >= a) & (ref[:, 0] < a + args.bin_m)].mean():+.2f}"

@@ -549,7 +549,7 @@ def kalman_update(door_mean: npt.ArrayLike, door_var: npt.ArrayLike, observed: n
     m = np.asarray(mask, dtype=bool)
     r = np.asarray(meas_var, dtype=np.float64)
     innovation = wrap_angle(np.asarray(observed, dtype=np.float64) - mu)
-    p = gated_prior_variance(mu, door_var, observed, mask, meas_var, change_gate_chi2, moved_var)
+    p = _gated(innovation, np.asarray(door_var, dtype=np.float64), m, r, change_gate_chi2, moved_var)
     gain = np.where(m, p / (p + r), 0.0)
     return mu + gain * np.where(m, innovation, 0.0), (1.0 - gain) * p
 
@@ -559,12 +559,23 @@ def gated_prior_variance(door_mean: npt.ArrayLike, door_var: npt.ArrayLike, obse
                          moved_var: float | npt.ArrayLike) -> FloatArray:
     """(N, D) the prior variance :func:`kalman_update` updates: P, or ``moved_var`` (if larger) where a measurement
     fails the moved-door gate wrap(z − μ)² > ``change_gate_chi2``·(P + R)."""
-    p = np.asarray(door_var, dtype=np.float64)
-    r = np.asarray(meas_var, dtype=np.float64)
     innovation = wrap_angle(np.asarray(observed, dtype=np.float64) - np.asarray(door_mean, dtype=np.float64))
-    moved = np.asarray(mask, dtype=bool) & (innovation**2 > change_gate_chi2 * (p + r))
+    return _gated(innovation, np.asarray(door_var, dtype=np.float64), np.asarray(mask, dtype=bool),
+                  np.asarray(meas_var, dtype=np.float64), change_gate_chi2, moved_var)
+
+
+def _gated(innovation: FloatArray, p: FloatArray, mask: BoolArray, r: FloatArray, change_gate_chi2: float,
+           moved_var: float | npt.ArrayLike) -> FloatArray:
+    """P raised to ``moved_var`` where the innovation fails the gate (:func:`gated_prior_variance`)."""
+    moved = mask & (innovation**2 > change_gate_chi2 * (p + r))
     out: FloatArray = np.where(moved, np.maximum(p, np.asarray(moved_var, dtype=np.float64)), p)
     return out
+
+
+def moved_door_gate(config: LocalizeConfig) -> tuple[float, float]:
+    """The moved-door gate's settings: ``door_moved_gate_chi2`` and the variance a moved door restarts from,
+    ``door_init_sigma_deg``² (rad²)."""
+    return config.door_moved_gate_chi2, math.radians(config.door_init_sigma_deg) ** 2
 
 
 def update_doors(points_base: npt.ArrayLike, particles: ParticleSet, doors: DoorSet, config: LocalizeConfig,
@@ -590,6 +601,5 @@ def update_doors(points_base: npt.ArrayLike, particles: ParticleSet, doors: Door
     angle, mask = associate_segments(segments, particles.pose, doors, particles.door_mean, config,
                                      angle_margin_rad=margin, backend=backend)
     meas_var = math.radians(config.door_angle_sigma_deg) ** 2
-    mean, var = kalman_update(particles.door_mean, particles.door_var, angle, mask, meas_var,
-                              config.door_moved_gate_chi2, math.radians(config.door_init_sigma_deg) ** 2)
+    mean, var = kalman_update(particles.door_mean, particles.door_var, angle, mask, meas_var, *moved_door_gate(config))
     return DoorUpdate(mean, var, mask, angle)

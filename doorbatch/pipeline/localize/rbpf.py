@@ -38,6 +38,7 @@ from doorbatch.pipeline.localize.door_likelihood import STATIC, door_log_likelih
 from doorbatch.pipeline.localize.door_observation import (
     DoorUpdate,
     gated_prior_variance,
+    moved_door_gate,
     predict_doors,
     update_doors,
 )
@@ -252,8 +253,7 @@ def door_update_log_factor(prior: ParticleSet, update: DoorUpdate, doors: DoorSe
     mu, var = prior.door_mean, prior.door_var
     post_var = np.maximum(update.var, 1e-12)
     meas_var = math.radians(config.door_angle_sigma_deg) ** 2
-    gated = gated_prior_variance(mu, var, update.angle, update.observed, meas_var, config.door_moved_gate_chi2,
-                                 math.radians(config.door_init_sigma_deg) ** 2)
+    gated = gated_prior_variance(mu, var, update.angle, update.observed, meas_var, *moved_door_gate(config))
     gaussian = -0.5 * (update.mean - mu) ** 2 / gated + 0.5 * np.log(post_var / gated)
     at_prior = update.observed & (var >= unobserved_door_variance(doors, config))
     term = np.where(update.observed, gaussian, 0.0)
@@ -336,8 +336,7 @@ def condition_doors_on_beams(particles: ParticleSet, beams: BeamSet, field: Dist
     z = np.where(hit, phi_sum / np.where(hit, info_sum, 1.0), mean)
     meas_var = np.where(hit, 1.0 / np.where(hit, info_sum, 1.0), 1.0)
     # a door the beams put far from its estimate was moved: the polygon update's gate (kalman_update)
-    var = gated_prior_variance(mean, var, z, hit, meas_var, config.door_moved_gate_chi2,
-                               math.radians(config.door_init_sigma_deg) ** 2)
+    var = gated_prior_variance(mean, var, z, hit, meas_var, *moved_door_gate(config))
     post_var = np.where(hit, 1.0 / (1.0 / var + info_sum), var)
     post_mean = np.where(hit, post_var * (mean / var + phi_sum), mean)
     if prior is not None and (at_prior := hit & (var >= thr)).any():
