@@ -179,7 +179,8 @@ def _leaf_candidates(beams: BeamSet, state: MapState, config: ObjectMapConfig) -
 def color_candidates(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> list[DoorCandidate]:
     """Doors from colour (Sec. VI): runs along a wall whose beams' colours are better explained by the
     door class than by the wall class, at least half a door width long; in a run longer than 1.5 widths
-    (overlapping colour classes), the door-wide window with the largest summed log-likelihood ratio."""
+    (overlapping colour classes), the door-wide window with the largest summed log-likelihood ratio. A run
+    is proposed only where its colour differs from the walls beside it (:func:`color_contrast`)."""
     obj_map = state.obj_map
     classes = obj_map.classes
     if not classes.has_color:
@@ -194,6 +195,7 @@ def color_candidates(beams: BeamSet, state: MapState, config: ObjectMapConfig) -
     door_like = ok & (ratio > 0.0)
     out: list[DoorCandidate] = []
     width = classes.door_width_m
+    ok_points, ok_colors, ok_obj = beams.points[ok], col[ok], state.first.obj[ok]
     for j, wall in enumerate(obj_map.walls):
         sel = door_like & (state.first.obj == j)
         if int(sel.sum()) < config.min_crossing_rays:
@@ -204,14 +206,60 @@ def color_candidates(beams: BeamSet, state: MapState, config: ObjectMapConfig) -
         order = np.argsort(s_all)
         s_all, csum = s_all[order], np.concatenate([[0.0], np.cumsum(ratio[on_wall][order])])
         base = wall.offset * wall.normal
-        for a, b, n in _intervals(s, config.candidate_cluster_m, config.min_crossing_rays, 0.5 * width):
-            if b - a > 1.5 * width:  # a long run (colours overlap): the door-wide window most door-like
-                starts = s_all[(s_all >= a) & (s_all <= b - width)]
-                score = csum[np.searchsorted(s_all, starts + width, "right")] - csum[np.searchsorted(s_all, starts)]
-                a = float(starts[int(np.argmax(score))])
-                b = a + width
+        col_all = col[on_wall][order]
+        gap = config.candidate_cluster_m
+        for a, b, n in _intervals(s, gap, config.min_crossing_rays, 0.5 * width):
+            # the door-wide window most door-like: the candidate in a long run (colours overlap), and where the
+            # colour is compared with the wall beside it in any run longer than a door
+            wa, wb = _most_door_like_window(s_all, csum, a, b, width) if b - a > width else (a, b)
+            if b - a > 1.5 * width:
+                a, b = wa, wb
+            inside = (s_all >= wa) & (s_all <= wb)
+            beside_s = ((s_all >= wa - width) & (s_all < wa - gap)) | ((s_all > wb + gap) & (s_all <= wb + width))
+            beside = col_all[beside_s]
+            if beside.shape[0] < config.min_crossing_rays:  # the run is its wall (a leaf that never moved, standing
+                # open): the other walls' beams within a door width of its ends
+                ends = base + np.array([wa, wb])[:, None] * wall.tangent
+                near = np.min(np.linalg.norm(ok_points[:, None, :] - ends[None], axis=2), axis=1) <= width
+                beside = ok_colors[near & (ok_obj != j)]
+            if color_contrast(col_all[inside], beside, config) < config.color_contrast_min_sigmas:
+                continue  # no colour edge at its ends: a differently painted wall, or classes that overlap
             out += _both_ends(base + a * wall.tangent, base + b * wall.tangent, "color", n)
     return out
+
+
+def _most_door_like_window(s_sorted: FloatArray, ratio_cumsum: FloatArray, a: float, b: float, width: float
+                           ) -> tuple[float, float]:
+    """The window [start, start + width] within [a, b] whose beams (positions ``s_sorted``, cumulative colour
+    log-likelihood ratios ``ratio_cumsum``, with a leading 0) sum to the largest door-over-wall ratio."""
+    starts = s_sorted[(s_sorted >= a) & (s_sorted <= b - width)]
+    if starts.size == 0:
+        return a, b
+    score = (ratio_cumsum[np.searchsorted(s_sorted, starts + width, "right")]
+             - ratio_cumsum[np.searchsorted(s_sorted, starts)])
+    start = float(starts[int(np.argmax(score))])
+    return start, start + width
+
+
+def color_contrast(inside: FloatArray, beside: FloatArray, config: ObjectMapConfig) -> float:
+    """How far a run's mean chromaticity lies from that of the same wall beside it, in pooled standard
+    deviations: sqrt(Σ_c (μ_in,c − μ_beside,c)² / ((σ²_in,c + σ²_beside,c) / 2)) over the chromaticities
+    c = r/(r+g+b), g/(r+g+b) (diagonal Mahalanobis distance between the two samples' means, with their own
+    spreads). 0 when either side has fewer than ``min_crossing_rays`` beams: no contrast can be seen.
+
+    Paper 001 scores every beam's colour independently under one Gaussian per class, so a wall whose paint
+    the two classes do not separate (or a wall of another paint, e.g. an end wall) gains a little per beam,
+    enough summed over a door-wide run to pay for a door. A door that never moved is told apart from its wall
+    by colour only when the colour changes where it begins and ends; that is what this measures.
+    Chromaticity, not RGB: brightness along a wall changes with the lighting and a camera's exposure (both
+    scale the three channels alike), the paint's hue does not (normalized rgb, Gevers & Smeulders 1999).
+    """
+    if inside.shape[0] < config.min_crossing_rays or beside.shape[0] < config.min_crossing_rays:
+        return 0.0
+    chroma = [c[:, :2] / np.maximum(c.sum(axis=1, keepdims=True), 1.0) for c in (inside, beside)]
+    level = max(float(inside.sum(axis=1).mean()), float(beside.sum(axis=1).mean()), 1.0)
+    pooled = np.maximum(0.5 * (chroma[0].var(axis=0) + chroma[1].var(axis=0)), config.color_var_floor / level**2)
+    return float(np.sqrt(np.sum((chroma[0].mean(axis=0) - chroma[1].mean(axis=0)) ** 2 / pooled)))
 
 
 def _near_existing(c: DoorCandidate, obj_map: ObjectMap, radius: float) -> bool:
