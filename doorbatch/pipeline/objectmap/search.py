@@ -215,7 +215,9 @@ def color_candidates(beams: BeamSet, state: MapState, config: ObjectMapConfig) -
             if b - a > 1.5 * width:
                 a, b = wa, wb
             inside = (s_all >= wa) & (s_all <= wb)
-            beside_s = ((s_all >= wa - width) & (s_all < wa - gap)) | ((s_all > wb + gap) & (s_all <= wb + width))
+            # beside: a door width either side of the window, outside the run when the run is the candidate
+            beside_s = ((s_all >= wa - width) & (s_all < min(wa, a) - gap)) | (
+                (s_all > max(wb, b) + gap) & (s_all <= wb + width))
             beside = col_all[beside_s]
             if beside.shape[0] < config.min_crossing_rays:  # the run is its wall (a leaf that never moved, standing
                 # open): the other walls' beams within a door width of its ends

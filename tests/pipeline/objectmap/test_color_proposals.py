@@ -83,12 +83,15 @@ def test_a_wall_painted_another_colour_all_along_is_no_door() -> None:
 def test_a_leaf_that_stands_apart_from_its_wall_is_compared_with_the_wall_near_it() -> None:
     # a wood leaf at y = 1.5 in front of the painted wall (its own wall object, nothing beside it on its line)
     classes = ClassParams(0.9, np.array([WALL_PAINT, WOOD]), np.array([[20.0**2] * 3, [12.0**2] * 3]), True)
-    beams = _wall_scene(lambda x: WOOD if 1.0 <= x <= 1.9 else WALL_PAINT, seed=4)
+    # the main wall is wood too at the mirror image x ∈ [−1.9, −1.0] (proposed itself, on the main wall): the leaf
+    # is compared with the wall near its own ends, not with the main wall anywhere or at the mirrored place
+    beams = _wall_scene(lambda x: WOOD if 1.0 <= abs(x) <= 1.9 else WALL_PAINT, seed=4)
     leaf = (beams.origin[:, 0] >= 1.0) & (beams.origin[:, 0] <= 1.9)
     beams = BeamSet(beams.pass_index, beams.origin, beams.direction, np.where(leaf, 1.5, 2.0), beams.dmax,
                     beams.hit, beams.color, 1)
     walls = [Wall(np.array([0.0, 1.0]), 2.0, np.array([[-6.0, 6.0]])),
              Wall(np.array([0.0, 1.0]), 1.5, np.array([[-1.95, -0.95]]))]  # s = −x along the tangent (−1, 0)
-    xs = _candidates_x(beams, classes, DoorbatchConfig().em, walls)
+    xs = [x for x in _candidates_x(beams, classes, DoorbatchConfig().em, walls) if x > 0.0]
     assert len(xs) == 2
     np.testing.assert_allclose(xs, [1.0, 1.9], atol=0.05)
+
