@@ -542,7 +542,7 @@ class ObjectMapConfig(Section):
     color_var_floor: float = Field(4.0, gt=0.0)  # per-channel colour variance floor (RGB units²)
     # A colour proposal's mean chromaticity must differ from its wall's just beside it by this many pooled
     # standard deviations (search.color_contrast), else no door is proposed there. 2: a beam is then told to
-    # the wrong side at most Φ(−1) = 16 % of the time; measured, doors 3.2–3.5, plain walls ≤ 1.3.
+    # the wrong side at most Φ(−1) = 16 % of the time; measured, doors 3.2–3.5, plain walls ≤ 1.4.
     color_contrast_min_sigmas: float = Field(2.0, ge=0.0)
     em_iterations: int = Field(6, ge=1)
     structure_rounds: int = Field(3, ge=1)  # outer loop: door proposals (motion, colour) then EM

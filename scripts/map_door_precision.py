@@ -21,7 +21,7 @@ import math
 import tempfile
 from pathlib import Path
 
-from gridmap_acceptance import Site, sample_site, simulated_site
+from gridmap_acceptance import Site, _fmt, sample_site, simulated_site
 
 from doorbatch.cli import main as doorbatch
 from doorbatch.io.parquet import read_table
@@ -31,8 +31,9 @@ COLUMNS = ("doors_detected", "door_precision", "door_recall_moved", "door_recall
            "door_hinge_error_mean", "door_range_error_mean")
 
 
-def score_site(site: Site, out: Path, sets: list[str]) -> dict[str, float]:
-    """Map the site's passes with the default stages and score the door map against its truth."""
+def score_site(site: Site, out: Path, sets: list[str]) -> dict[str, float | None]:
+    """Map the site's passes with the default stages and score the door map against its truth (None: no value,
+    e.g. no match to take an error from)."""
     overrides = [a for s in sets for a in ("--set", s)]
     mapdir, report = out / "map", out / "evaluate"
     if doorbatch(["map", *map(str, site.logs), "-o", str(mapdir), "-q", *overrides]) != 0:
@@ -40,11 +41,8 @@ def score_site(site: Site, out: Path, sets: list[str]) -> dict[str, float]:
     if doorbatch(["evaluate", str(mapdir), "--world", str(site.truth), "-o", str(report), "-q", *overrides]) != 0:
         raise SystemExit(f"doorbatch evaluate failed on {site.name}")
     metrics = read_table("metrics", report / "metrics.parquet").to_pydict()
-    return {m: v for m, v in zip(metrics["metric"], metrics["value"], strict=True) if m in COLUMNS}
-
-
-def _fmt(v: float | None, digits: int) -> str:
-    return "—" if v is None or math.isnan(v) else f"{v:.{digits}f}"
+    return {m: None if math.isnan(v) else v for m, v in zip(metrics["metric"], metrics["value"], strict=True)
+            if m in COLUMNS}
 
 
 def main() -> None:
@@ -61,10 +59,11 @@ def main() -> None:
         for site in [sample_site(), *(simulated_site(spec, work) for spec in args.site or DEFAULT_SITES)]:
             folder = work / "maps" / site.name.split(" ")[0].replace(":", "_")
             r = score_site(site, folder, args.sets)
-            print(f"| {site.name} | {r['doors_detected']:.0f} | {_fmt(r.get('door_precision'), 2)} "
+            print(f"| {site.name} | {_fmt(r['doors_detected'], 0)} | {_fmt(r.get('door_precision'), 2)} "
                   f"| {_fmt(r.get('door_recall_moved'), 2)} | {_fmt(r.get('door_recall_never_moved'), 2)} "
                   f"| {_fmt(r.get('door_hinge_error_mean'), 3)} "
-                  f"| {_fmt(math.degrees(r.get('door_range_error_mean', math.nan)), 1)} |", flush=True)
+                  f"| {_fmt(None if (e := r.get('door_range_error_mean')) is None else math.degrees(e), 1)} |",
+                  flush=True)
 
 
 if __name__ == "__main__":
