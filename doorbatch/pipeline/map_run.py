@@ -15,7 +15,7 @@ from doorbatch.io.manifest import Manifest
 from doorbatch.io.mapdir import write_map_dir
 from doorbatch.io.object_map import read_classes, write_classes, write_walls
 from doorbatch.io.recording import Recording, load_recording
-from doorbatch.pipeline.mapping import DoorMap, build_map, preview_doors
+from doorbatch.pipeline.mapping import DoorMap, build_map, preview_doors, without_leaves
 from doorbatch.pipeline.objectmap.stage import ObjectMapResult, em_stage
 
 STAGES = ("grid", "em")  # em (paper 001) takes the grid stage's poses: grid always runs
@@ -66,6 +66,7 @@ def run_map(logs: Sequence[Path], out: Path, config: DoorbatchConfig, stages: Se
     if "em" in stages and recordings is not None:
         t0 = time.perf_counter()
         em = em_stage(recordings, door_map.passes, config, classes)
+        door_map = without_leaves(door_map, [d.preview for d in em.doors], config)
         door_map.stage_seconds["em"] = time.perf_counter() - t0
     trajectories = [p.poses[p.valid] for p in door_map.passes]
     if em is None:

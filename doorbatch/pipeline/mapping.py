@@ -7,15 +7,17 @@ The stage in outline (paper 000, Sec. III)::
     passes     = robot poses at every scan, per pass, in one map frame
     grid       = integrate every pass into the grid, collecting dynamic points and door leaves
     doors      = doors from leaves that rotate about a common hinge; leaves removed from the static map
+    (em stage) = its doors' leaves removed too (without_leaves)
 """
 
 from __future__ import annotations
 
+import copy
 import itertools
 import logging
 import time
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -28,7 +30,8 @@ from doorbatch.io.preview import PreviewDoor
 from doorbatch.io.recording import Recording, load_recording
 from doorbatch.maps import OccupancyMap
 from doorbatch.pipeline.gridmap.build import GridMapper, MapScan
-from doorbatch.pipeline.gridmap.doors import DetectedDoor
+from doorbatch.pipeline.gridmap.doors import DetectedDoor, remove_leaves
+from doorbatch.pipeline.gridmap.occupancy import LogOddsGrid, to_occupancy_map
 from doorbatch.pipeline.poses import scan_match_trajectory
 
 log = logging.getLogger(__name__)
@@ -58,6 +61,7 @@ class DoorMap:
     n_dynamic_points: int
     warnings: list[str] = field(default_factory=list)
     stage_seconds: dict[str, float] = field(default_factory=dict)
+    grid: LogOddsGrid | None = None  # the final mapping state the static map came from
 
 
 def choose_pose_source(recordings: Sequence[Recording], wanted: str) -> str:
@@ -210,7 +214,25 @@ def build_map(logs: Sequence[Path], config: DoorbatchConfig | None = None,
     seconds["grid"] = time.perf_counter() - t0
     for w in warnings:
         log.warning("%s", w)
-    return DoorMap(result.static_map, result.doors, passes, source, result.n_dynamic_points, warnings, seconds)
+    return DoorMap(result.static_map, result.doors, passes, source, result.n_dynamic_points, warnings, seconds,
+                   result.grid)
+
+
+def without_leaves(door_map: DoorMap, doors: Sequence[PreviewDoor], config: DoorbatchConfig) -> DoorMap:
+    """The door map whose static map also lacks the leaves of ``doors`` (the em stage's), taken out as the
+    grid stage takes out its own (:func:`~doorbatch.pipeline.gridmap.doors.remove_leaves`: the sector each
+    leaf swept over its opening range, the hinge kept).
+
+    Paper 000's static map holds no leaves: the localizer models them from the door states. A door only the
+    em stage found (one that never moved while mapping) would otherwise stay in the grid at the angle it
+    stood at, e.g. a leaf standing open into the corridor where a later log has it closed.
+    """
+    if door_map.grid is None or not doors:
+        return door_map
+    grid = copy.deepcopy(door_map.grid)
+    remove_leaves(grid, [DetectedDoor(d.hinge_x, d.hinge_y, d.length, d.closed_yaw, d.angle_min, d.angle_max, 0,
+                                      d.moved) for d in doors], config.doors, config.grid)
+    return replace(door_map, static_map=to_occupancy_map(grid), grid=grid)
 
 
 def preview_doors(doors: Sequence[DetectedDoor]) -> list[PreviewDoor]:
