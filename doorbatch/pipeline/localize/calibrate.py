@@ -17,7 +17,12 @@ import numpy as np
 import numpy.typing as npt
 from scipy.optimize import nnls
 
-from doorbatch.geometry.odometry import odometry_increments, rotation_noise_magnitude
+from doorbatch.geometry.odometry import (
+    MIN_TRANS_FOR_BEARING_M,
+    Increments,
+    odometry_increments,
+    rotation_noise_magnitude,
+)
 from doorbatch.geometry.rotations import wrap_angle
 
 
@@ -32,6 +37,20 @@ class OdometryAlphas:
     increments: int
 
 
+def _as_pure_rotations_below_bearing_threshold(odo: Increments, ref: Increments) -> tuple[Increments, Increments]:
+    """Both decompositions with every step that either moves less than ``MIN_TRANS_FOR_BEARING_M`` taken as a
+    pure rotation (δrot1 = 0, δrot2 = the whole turn), as the localizers' motion model takes such an odometry
+    step (Nav2 AMCL). A millimetre's bearing is noise: compared as a rotation it makes an error of up to π that
+    only α1 · r², with r ≈ 0, could explain (the sample's mapping passes, which turn in place: α1 fitted as 400)."""
+    pure = (odo.trans < MIN_TRANS_FOR_BEARING_M) | (ref.trans < MIN_TRANS_FOR_BEARING_M)
+
+    def fold(inc: Increments) -> Increments:
+        turn = wrap_angle(inc.rot1 + inc.rot2)
+        return Increments(np.where(pure, 0.0, inc.rot1), inc.trans, np.where(pure, turn, inc.rot2))
+
+    return fold(odo), fold(ref)
+
+
 def estimate_alphas(odometry: npt.ArrayLike, reference: npt.ArrayLike, min_motion_m: float = 0.02
                     ) -> OdometryAlphas:
     """α1..α4 from odometry and reference poses (N, 3) sampled at the same times.
@@ -41,8 +60,8 @@ def estimate_alphas(odometry: npt.ArrayLike, reference: npt.ArrayLike, min_motio
     """
     odo = np.asarray(odometry, dtype=np.float64).reshape(-1, 3)
     ref = np.asarray(reference, dtype=np.float64).reshape(-1, 3)
-    io = odometry_increments(odo[:, 0], odo[:, 1], odo[:, 2])
-    ir = odometry_increments(ref[:, 0], ref[:, 1], ref[:, 2])
+    io, ir = _as_pure_rotations_below_bearing_threshold(odometry_increments(odo[:, 0], odo[:, 1], odo[:, 2]),
+                                                        odometry_increments(ref[:, 0], ref[:, 1], ref[:, 2]))
     moving = (ir.trans > min_motion_m) | (np.abs(ir.rot1) + np.abs(ir.rot2) > np.radians(1.0))
     r1, tr, r2 = ir.rot1[moving], ir.trans[moving], ir.rot2[moving]
     e_r1 = wrap_angle(io.rot1[moving] - r1)
