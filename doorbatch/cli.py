@@ -173,9 +173,11 @@ def simulate_cmd(ctx: Context, world: Path, output: Path, scenario: str | None, 
               "have per-beam colours, else grid).")
 @click.option("--classes", "classes_file", type=click.Path(path_type=Path, dir_okay=False), default=None,
               help="classes.json of an earlier em run: apply its class parameters without relearning.")
+@click.option("--mcap", "mcap", is_flag=True, help="Also write MAPDIR/annotated.mcap: the passes' messages with "
+              "the map, the doors of each pass, the poses, paths and map→odom.")
 @common_options
 def map_cmd(ctx: Context, logs: tuple[Path, ...], output: Path, pose_source: str | None, stages: str | None,
-            classes_file: Path | None) -> None:
+            classes_file: Path | None, mcap: bool) -> None:
     """Occupancy grid map with doors from LOG... (each log one pass; doors may move between passes)."""
     from doorbatch.pipeline.map_run import run_map
     from doorbatch.progress import progress_bar
@@ -185,7 +187,8 @@ def map_cmd(ctx: Context, logs: tuple[Path, ...], output: Path, pose_source: str
         config = config.model_copy(update={"mapping": config.mapping.model_copy(update={"pose_source": pose_source})})
     with progress_bar(len(logs), "map", unit="pass") as bar:
         wanted = None if stages is None else [s.strip() for s in stages.split(",") if s.strip()]
-        _, summary = run_map(list(logs), output, config, wanted, progress=bar.update, classes_file=classes_file)
+        _, summary = run_map(list(logs), output, config, wanted, progress=bar.update, classes_file=classes_file,
+                             mcap=mcap)
     ctx.summary(f"map of {summary.passes} pass(es) from {summary.pose_source} poses: {summary.doors} door(s) "
                 f"→ {summary.map_dir}", asdict(summary))
 

@@ -7,7 +7,8 @@ annotations, so the file plays back in Foxglove with the robot's data and doorba
 from __future__ import annotations
 
 import heapq
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Sequence
+from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -37,18 +38,22 @@ def _check(annotations: Iterable[Annotation]) -> Iterator[Annotation]:
         yield a
 
 
-def write_annotated_mcap(source: Path, output: Path, annotations: Iterable[Annotation],
+def write_annotated_mcap(source: Path | Sequence[Path], output: Path, annotations: Iterable[Annotation],
                          config: DoorbatchConfig | None = None) -> int:
-    """Copy ``source`` into ``output`` with ``annotations`` merged by log time; returns messages written.
+    """Copy ``source`` (one log, or several, e.g. the passes of a mapping run) into ``output`` with
+    ``annotations`` merged by log time; returns messages written.
 
     ``annotations`` must come in non-decreasing log time (each stage produces them in time order).
     """
     config = config or DoorbatchConfig()
+    sources = [source] if isinstance(source, Path) else list(source)
     written = 0
-    with open_log(source, config) as reader, LogWriter(output, LogFormat.MCAP) as writer:
-        inputs: Iterator[tuple[int, int, RawMessage | Annotation]] = (
-            (raw.log_time_ns, 0, raw) for raw in reader.raw_messages()
-        )
+    with ExitStack() as stack:
+        readers = [stack.enter_context(open_log(path, config)) for path in sources]
+        writer = stack.enter_context(LogWriter(output, LogFormat.MCAP))
+        inputs: Iterator[tuple[int, int, RawMessage | Annotation]] = heapq.merge(
+            *(((raw.log_time_ns, 0, raw) for raw in reader.raw_messages()) for reader in readers),
+            key=lambda t: t[0])
         added: Iterator[tuple[int, int, RawMessage | Annotation]] = (
             (a.log_time_ns, 1, a) for a in _check(annotations)
         )

@@ -1,18 +1,27 @@
-"""The map directory of ``doorbatch map``: map.yaml + map.pgm, doors.parquet, preview.png, manifest.json."""
+"""The map directory of ``doorbatch map``: map.yaml + map.pgm, doors.parquet, preview.png, manifest.json, and with
+``--mcap`` the messages of the mapping run's annotated.mcap (written with :mod:`doorbatch.io.annotated_mcap`)."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from doorbatch.geometry.rotations import wrap_angle
+from doorbatch.geometry.se2 import compose, inverse
+from doorbatch.io import ros_messages as rm
+from doorbatch.io.annotated_mcap import Annotation
 from doorbatch.io.map_server import write_map
 from doorbatch.io.parquet import read_table, write_table
 from doorbatch.io.preview import PreviewDoor, render_preview, write_preview
+from doorbatch.io.rundir import door_markers
 from doorbatch.maps import DoorSet, OccupancyMap
+
+FloatArray = npt.NDArray[np.float64]
 
 
 def doors_columns(doors: Sequence[PreviewDoor], n_observations: Sequence[int], source: str,
@@ -53,8 +62,62 @@ def read_door_set(map_dir: Path) -> DoorSet:
     return door_set_of(read_table("doors", path).to_pydict())
 
 
+def door_set_of_previews(doors: Sequence[PreviewDoor]) -> DoorSet:
+    """The doors a map directory writes (:class:`PreviewDoor`) as a DoorSet."""
+    return DoorSet(np.array([[d.hinge_x, d.hinge_y] for d in doors], dtype=np.float64).reshape(-1, 2),
+                   np.array([d.length for d in doors], dtype=np.float64),
+                   np.array([d.closed_yaw for d in doors], dtype=np.float64),
+                   np.array([d.angle_min for d in doors], dtype=np.float64),
+                   np.array([d.angle_max for d in doors], dtype=np.float64))
+
+
 def door_set_of(t: dict[str, list[Any]]) -> DoorSet:
     """doors.parquet columns (``to_pydict``) as a DoorSet."""
     return DoorSet(np.array([t["hinge_x"], t["hinge_y"]], dtype=np.float64).T.reshape(-1, 2),
                    np.asarray(t["length"], dtype=np.float64), np.asarray(t["closed_yaw"], dtype=np.float64),
                    np.asarray(t["angle_min"], dtype=np.float64), np.asarray(t["angle_max"], dtype=np.float64))
+
+
+@dataclass(frozen=True)
+class MappedPass:
+    """One pass of a mapping run as the annotated MCAP shows it: robot poses (map frame) at scan stamps, the
+    odometry there (None: no map→odom transform), and each door's angle relative to its closed direction
+    during the pass (NaN: not known, e.g. a grid-stage door, whose leaves are not kept per pass)."""
+
+    stamps_ns: npt.NDArray[np.int64]
+    poses: FloatArray
+    odometry: FloatArray | None
+    door_angles: FloatArray
+
+
+def mapping_annotations(passes: Sequence[MappedPass], static_map: OccupancyMap, doors: DoorSet,
+                        map_frame: str = "map", odom_frame: str = "odom", path_every: int = 10
+                        ) -> Iterator[Annotation]:
+    """The /doorbatch/* messages of a mapping run in time order: the static map at the first scan; per pass
+    the doors (leaves at the pass's angles, opening ranges, hinges) at its first scan; per scan the robot pose
+    and map→odom; every ``path_every`` scans (and at each pass's end) the pass's path so far."""
+    stamps = [p.stamps_ns for p in passes if p.stamps_ns.size]
+    if not stamps:
+        return
+    t0 = int(min(int(s[0]) for s in stamps))
+    yield Annotation("/doorbatch/map", "nav_msgs/msg/OccupancyGrid", t0,
+                     rm.occupancy_grid(t0, map_frame, static_map.occupancy, static_map.resolution_m,
+                                       static_map.origin_x_m, static_map.origin_y_m, static_map.origin_yaw_rad))
+    for mapped in sorted(passes, key=lambda p: int(p.stamps_ns[0]) if p.stamps_ns.size else 0):
+        n = mapped.stamps_ns.size
+        for i in range(n):
+            t = max(int(mapped.stamps_ns[i]), t0)
+            if i == 0 and len(doors):
+                yield Annotation("/doorbatch/doors", "visualization_msgs/msg/MarkerArray", t,
+                                 door_markers(t, map_frame, doors, mapped.door_angles))
+            x, y, yaw = (float(v) for v in mapped.poses[i])
+            yield Annotation("/doorbatch/pose", "geometry_msgs/msg/PoseWithCovarianceStamped", t,
+                             rm.pose_with_covariance_stamped(t, map_frame, x, y, yaw, np.zeros((6, 6))))
+            if mapped.odometry is not None:
+                map_to_odom = compose(mapped.poses[i], inverse(mapped.odometry[i]))
+                yield Annotation("/tf", "tf2_msgs/msg/TFMessage", t,
+                                 rm.tf_message([rm.planar_transform(t, map_frame, odom_frame, *map_to_odom)]))
+            if i % path_every == path_every - 1 or i == n - 1:
+                yield Annotation("/doorbatch/path", "nav_msgs/msg/Path", t,
+                                 rm.path(t, map_frame, mapped.stamps_ns[: i + 1], mapped.poses[: i + 1, 0],
+                                         mapped.poses[: i + 1, 1], mapped.poses[: i + 1, 2]))

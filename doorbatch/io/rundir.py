@@ -52,14 +52,17 @@ def write_run_tables(out: Path, result: LocalizationResult) -> list[Path]:
     return [out / "trajectory.parquet", out / "door_states.parquet", out / "trajectory.tum"]
 
 
-def _door_markers(stamp: int, frame: str, doors: DoorSet, angles: np.ndarray) -> object:
+def door_markers(stamp: int, frame: str, doors: DoorSet, angles: np.ndarray) -> object:
+    """A MarkerArray of the doors: each leaf at ``angles`` (D,) relative to its closed direction (none where the
+    angle is NaN: not known), its opening-range arc and its hinge."""
     markers = []
     for k in range(len(doors)):
         hinge = doors.hinge[k]
-        yaw = doors.closed_yaw[k] + angles[k]
-        end = hinge + doors.length[k] * np.array([np.cos(yaw), np.sin(yaw)])
-        markers.append(rm.marker(stamp, frame, "leaves", k, _LINE_LIST, [tuple(hinge), tuple(end)],
-                                 (0.9, 0.1, 0.1, 1.0), 0.05))
+        if np.isfinite(angles[k]):
+            yaw = doors.closed_yaw[k] + angles[k]
+            end = hinge + doors.length[k] * np.array([np.cos(yaw), np.sin(yaw)])
+            markers.append(rm.marker(stamp, frame, "leaves", k, _LINE_LIST, [tuple(hinge), tuple(end)],
+                                     (0.9, 0.1, 0.1, 1.0), 0.05))
         arc = doors.closed_yaw[k] + np.linspace(doors.angle_min[k], doors.angle_max[k], 16)
         pts = hinge + doors.length[k] * np.stack([np.cos(arc), np.sin(arc)], axis=1)
         markers.append(rm.marker(stamp, frame, "ranges", k, _LINE_STRIP, [tuple(p) for p in pts],
@@ -91,7 +94,7 @@ def run_annotations(result: LocalizationResult, occ: OccupancyMap, doors: DoorSe
                          rm.pose_array(t, map_frame, p[:, 0], p[:, 1], p[:, 2]))
         if len(doors):
             yield Annotation("/doorbatch/doors", "visualization_msgs/msg/MarkerArray", t,
-                             _door_markers(t, map_frame, doors, result.door_mean[i]))
+                             door_markers(t, map_frame, doors, result.door_mean[i]))
         map_to_odom = compose(result.pose[i], inverse(result.odom[i]))
         yield Annotation("/tf", "tf2_msgs/msg/TFMessage", t,
                          rm.tf_message([rm.planar_transform(t, map_frame, odom_frame, *map_to_odom)]))

@@ -8,11 +8,15 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import numpy.typing as npt
 
 from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import UsageError
+from doorbatch.geometry.rotations import wrap_angle
+from doorbatch.geometry.se2 import interpolate_poses
+from doorbatch.io.annotated_mcap import write_annotated_mcap
 from doorbatch.io.manifest import Manifest
-from doorbatch.io.mapdir import write_map_dir
+from doorbatch.io.mapdir import MappedPass, door_set_of_previews, mapping_annotations, write_map_dir
 from doorbatch.io.object_map import read_classes, write_classes, write_walls
 from doorbatch.io.recording import Recording, load_recording
 from doorbatch.pipeline.mapping import DoorMap, build_map, preview_doors, without_leaves
@@ -38,13 +42,29 @@ class MapRunSummary:
     warnings: list[str]
 
 
+def _mapped_passes(recordings: Sequence[Recording], door_map: DoorMap, door_angles: npt.NDArray[np.float64]
+                   ) -> list[MappedPass]:
+    """Each pass's scans that have a pose, with the odometry at their stamps (when the log has odometry)."""
+    out = []
+    for t, (rec, p) in enumerate(zip(recordings, door_map.passes, strict=True)):
+        stamps, poses = p.stamps_ns[p.valid], p.poses[p.valid]
+        odom = None
+        if rec.odometry is not None:
+            at, ok = interpolate_poses(rec.odometry.stamps_ns, rec.odometry.poses, stamps)
+            odom = at if ok.all() else None
+        out.append(MappedPass(stamps, poses, odom, door_angles[t]))
+    return out
+
+
 def run_map(logs: Sequence[Path], out: Path, config: DoorbatchConfig, stages: Sequence[str] | None = ("grid",),
-            progress: Callable[[int], object] | None = None, classes_file: Path | None = None
-            ) -> tuple[DoorMap, MapRunSummary]:
+            progress: Callable[[int], object] | None = None, classes_file: Path | None = None,
+            mcap: bool = False) -> tuple[DoorMap, MapRunSummary]:
     """Build the door map of ``logs`` (one pass each) and write ``out``/{map.yaml, map.pgm, doors.parquet,
     preview.png, manifest.json}; with the em stage also walls.parquet and classes.json, and doors.parquet
     holds the em doors (source ``em``). ``stages`` None: :func:`default_stages`. ``classes_file``: class
-    parameters applied without relearning (paper 001 Fig. 5b).
+    parameters applied without relearning (paper 001 Fig. 5b). ``mcap``: also ``out``/annotated.mcap, every
+    message of the passes with the map, the doors per pass, the poses, paths and map→odom (DESIGN's annotated
+    MCAP, :func:`~doorbatch.io.mapdir.mapping_annotations`).
 
     Raises:
         UsageError: an unknown stage, or --classes without the em stage.
@@ -58,6 +78,8 @@ def run_map(logs: Sequence[Path], out: Path, config: DoorbatchConfig, stages: Se
     if stages is None or "em" in stages:
         recordings = [load_recording(Path(p), config, with_colors=True) for p in logs]
         stages = default_stages(recordings) if stages is None else list(stages)
+    elif mcap:  # the odometry of each pass, for map→odom
+        recordings = [load_recording(Path(p), config) for p in logs]
     if classes is not None and "em" not in stages:
         raise UsageError("--classes applies to the em stage: add it with --stages grid,em")
     manifest = Manifest.start(config.as_dict(), [Path(p) for p in logs], command="map", stages=list(stages))
@@ -83,6 +105,16 @@ def run_map(logs: Sequence[Path], out: Path, config: DoorbatchConfig, stages: Se
         manifest.extra["em"] = {"beams": em.n_beams, "log_posterior": em.log_posterior,
                                 "walls": len(em.object_map.walls), "doors": len(em.doors),
                                 "grid_doors": len(door_map.doors), "classes_given": classes is not None}
+    if mcap and recordings is not None:
+        doors = [d.preview for d in em.doors] if em is not None else preview_doors(door_map.doors)
+        angles = (np.array([[d.pass_yaws[t] - d.preview.closed_yaw if d.pass_observed[t] else np.nan
+                             for d in em.doors] for t in range(len(recordings))]).reshape(len(recordings), -1)
+                  if em is not None else np.full((len(recordings), len(doors)), np.nan))
+        write_annotated_mcap([Path(p) for p in logs], out / "annotated.mcap",
+                             mapping_annotations(_mapped_passes(recordings, door_map, wrap_angle(angles)),
+                                                 door_map.static_map, door_set_of_previews(doors),
+                                                 config.frames.map, config.frames.odom), config)
+        files.append(out / "annotated.mcap")
     manifest.extra["pose_source"] = door_map.pose_source
     for w in door_map.warnings:
         manifest.warn(w)

@@ -80,3 +80,31 @@ def test_scanmatch_pose_source_is_used_and_recorded(write_log: Callable[..., Pat
     assert json.loads(capsys.readouterr().out)["pose_source"] == "scanmatch"
     assert json.loads((out / "manifest.json").read_text())["extra"]["pose_source"] == "scanmatch"
     assert np.isfinite(read_map(out / "map.yaml").origin_x_m)
+
+
+def _topic_counts(path: Path) -> dict[str, int]:
+    from rosbags.highlevel import AnyReader
+
+    counts: dict[str, int] = {}
+    with AnyReader([path]) as reader:
+        for conn in reader.connections:
+            counts[conn.topic] = counts.get(conn.topic, 0) + conn.msgcount
+    return counts
+
+
+def test_map_with_mcap_writes_the_passes_with_map_doors_poses_and_map_to_odom(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    logs = [SAMPLE_LOGS / f"map_pass{k}.mcap" for k in (1, 2, 3)]
+    out = tmp_path / "map"
+    assert main(["map", *map(str, logs), "-o", str(out), "--stages", "grid", "--mcap", "--json"]) == 0
+    assert str(out / "annotated.mcap") in json.loads(capsys.readouterr().out)["files"]
+    inputs = [_topic_counts(p) for p in logs]
+    counts = _topic_counts(out / "annotated.mcap")
+    for topic in ("/scan", "/odom", "/ground_truth"):  # every input message is kept
+        assert counts[topic] == sum(c[topic] for c in inputs)
+    scans = counts["/scan"]
+    assert counts["/doorbatch/map"] == 1
+    assert counts["/doorbatch/doors"] == 3  # the doors at the start of each pass
+    assert counts["/doorbatch/pose"] == scans  # every scan has a reference pose
+    assert counts["/tf"] == sum(c["/tf"] for c in inputs) + scans  # plus map→odom per scan
+    assert counts["/doorbatch/path"] == sum(-(-c["/scan"] // 10) for c in inputs)
