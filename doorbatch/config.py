@@ -483,7 +483,6 @@ class LocalizeConfig(Section):
     # Particles drawn into the annotated MCAP per update.
     annotate_particles: int = Field(200, ge=0)
     seed: int | None = None  # None: the top-level seed
-    backend: Literal["numpy", "torch"] = "numpy"
 
 
 class EvaluateConfig(Section):
