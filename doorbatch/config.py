@@ -341,8 +341,6 @@ class MappingConfig(Section):
     # Passes after the first must start within this distance of where the previous one's odometry ended
     # when poses come from odometry or scan matching (one odometry frame), else the frames are disjoint.
     odometry_continuity_m: float = Field(1.0, gt=0.0)
-    # Split one log into passes at time gaps longer than this (0: one log is one pass).
-    split_passes_gap_s: float = Field(0.0, ge=0.0)
     # Integrate every n-th scan (1: all).
     scan_stride: int = Field(1, ge=1)
 
