@@ -106,7 +106,7 @@ def mapping_annotations(passes: Sequence[MappedPass], static_map: OccupancyMap, 
     for mapped in sorted(passes, key=lambda p: int(p.stamps_ns[0]) if p.stamps_ns.size else 0):
         n = mapped.stamps_ns.size
         for i in range(n):
-            t = max(int(mapped.stamps_ns[i]), t0)
+            t = int(mapped.stamps_ns[i])
             if i == 0 and len(doors):
                 yield Annotation("/doorbatch/doors", "visualization_msgs/msg/MarkerArray", t,
                                  door_markers(t, map_frame, doors, mapped.door_angles))

@@ -56,6 +56,28 @@ def _mapped_passes(recordings: Sequence[Recording], door_map: DoorMap, door_angl
     return out
 
 
+def _pass_door_angles(em: ObjectMapResult | None, n_doors: int, n_passes: int) -> npt.NDArray[np.float64]:
+    """(passes, doors) each door's angle relative to its closed direction in each pass: the em stage's where it
+    saw the leaf, NaN elsewhere and for grid doors (the grid stage keeps no per-pass angle)."""
+    angles = np.full((n_passes, n_doors), np.nan)
+    for k, door in enumerate(em.doors if em is not None else []):
+        seen = door.pass_observed
+        angles[seen, k] = wrap_angle(door.pass_yaws[seen] - door.preview.closed_yaw)
+    return angles
+
+
+def _write_mapping_mcap(logs: Sequence[Path], recordings: Sequence[Recording], door_map: DoorMap,
+                        em: ObjectMapResult | None, path: Path, config: DoorbatchConfig) -> Path:
+    """annotated.mcap of the mapping run (:func:`~doorbatch.io.mapdir.mapping_annotations`)."""
+    doors = [d.preview for d in em.doors] if em is not None else preview_doors(door_map.doors)
+    angles = _pass_door_angles(em, len(doors), len(recordings))
+    write_annotated_mcap([Path(p) for p in logs], path,
+                         mapping_annotations(_mapped_passes(recordings, door_map, angles), door_map.static_map,
+                                             door_set_of_previews(doors), config.frames.map, config.frames.odom),
+                         config)
+    return path
+
+
 def run_map(logs: Sequence[Path], out: Path, config: DoorbatchConfig, stages: Sequence[str] | None = ("grid",),
             progress: Callable[[int], object] | None = None, classes_file: Path | None = None,
             mcap: bool = False) -> tuple[DoorMap, MapRunSummary]:
@@ -106,15 +128,7 @@ def run_map(logs: Sequence[Path], out: Path, config: DoorbatchConfig, stages: Se
                                 "walls": len(em.object_map.walls), "doors": len(em.doors),
                                 "grid_doors": len(door_map.doors), "classes_given": classes is not None}
     if mcap and recordings is not None:
-        doors = [d.preview for d in em.doors] if em is not None else preview_doors(door_map.doors)
-        angles = (np.array([[d.pass_yaws[t] - d.preview.closed_yaw if d.pass_observed[t] else np.nan
-                             for d in em.doors] for t in range(len(recordings))]).reshape(len(recordings), -1)
-                  if em is not None else np.full((len(recordings), len(doors)), np.nan))
-        write_annotated_mcap([Path(p) for p in logs], out / "annotated.mcap",
-                             mapping_annotations(_mapped_passes(recordings, door_map, wrap_angle(angles)),
-                                                 door_map.static_map, door_set_of_previews(doors),
-                                                 config.frames.map, config.frames.odom), config)
-        files.append(out / "annotated.mcap")
+        files.append(_write_mapping_mcap(logs, recordings, door_map, em, out / "annotated.mcap", config))
     manifest.extra["pose_source"] = door_map.pose_source
     for w in door_map.warnings:
         manifest.warn(w)
