@@ -18,7 +18,7 @@ from doorbatch.io.annotated_mcap import Annotation
 from doorbatch.io.map_server import write_map
 from doorbatch.io.parquet import read_table, write_table
 from doorbatch.io.preview import PreviewDoor, render_preview, write_preview
-from doorbatch.io.rundir import door_markers
+from doorbatch.io.rundir import door_markers, path_so_far
 from doorbatch.maps import DoorSet, OccupancyMap
 
 FloatArray = npt.NDArray[np.float64]
@@ -119,5 +119,4 @@ def mapping_annotations(passes: Sequence[MappedPass], static_map: OccupancyMap, 
                                  rm.tf_message([rm.planar_transform(t, map_frame, odom_frame, *map_to_odom)]))
             if i % path_every == path_every - 1 or i == n - 1:
                 yield Annotation("/doorbatch/path", "nav_msgs/msg/Path", t,
-                                 rm.path(t, map_frame, mapped.stamps_ns[: i + 1], mapped.poses[: i + 1, 0],
-                                         mapped.poses[: i + 1, 1], mapped.poses[: i + 1, 2]))
+                                 path_so_far(t, map_frame, mapped.stamps_ns[: i + 1], mapped.poses[: i + 1]))

@@ -52,6 +52,19 @@ def write_run_tables(out: Path, result: LocalizationResult) -> list[Path]:
     return [out / "trajectory.parquet", out / "door_states.parquet", out / "trajectory.tum"]
 
 
+PATH_MAX_POSES = 500  # poses in one /doorbatch/path message: the path so far, evenly thinned beyond this
+
+
+def path_so_far(stamp: int, frame: str, stamps_ns: np.ndarray, poses: np.ndarray,
+                max_poses: int = PATH_MAX_POSES) -> object:
+    """nav_msgs/Path of the poses (K, 3) so far, thinned to at most ``max_poses`` evenly spaced ones (the first
+    and the latest kept). Every message repeats the path, so without the cap an hour at 10 Hz would write
+    billions of poses (the file grows with the square of the run)."""
+    k = len(stamps_ns)
+    idx = np.unique(np.linspace(0, k - 1, min(k, max_poses)).round().astype(np.int64)) if k else np.zeros(0, int)
+    return rm.path(stamp, frame, stamps_ns[idx], poses[idx, 0], poses[idx, 1], poses[idx, 2])
+
+
 def door_markers(stamp: int, frame: str, doors: DoorSet, angles: np.ndarray) -> object:
     """A MarkerArray of the doors: each leaf at ``angles`` (D,) relative to its closed direction (none where the
     angle is NaN: not known), its opening-range arc and its hinge."""
@@ -100,5 +113,4 @@ def run_annotations(result: LocalizationResult, occ: OccupancyMap, doors: DoorSe
                          rm.tf_message([rm.planar_transform(t, map_frame, odom_frame, *map_to_odom)]))
         if i % path_every == path_every - 1 or i == len(result) - 1:
             yield Annotation("/doorbatch/path", "nav_msgs/msg/Path", t,
-                             rm.path(t, map_frame, result.stamps_ns[: i + 1], result.pose[: i + 1, 0],
-                                     result.pose[: i + 1, 1], result.pose[: i + 1, 2]))
+                             path_so_far(t, map_frame, result.stamps_ns[: i + 1], result.pose[: i + 1]))

@@ -61,3 +61,18 @@ def test_annotated_mcap_reads_back_with_rosbags(tmp_path: Path) -> None:
     assert counts["/doorbatch/doors"] == 5 and counts["/doorbatch/path"] == 3
     assert counts["/scan"] == 5 and counts["/tf"] == 5 + 5  # input TF plus map→odom per update
     assert pose.header.frame_id == "map"  # type: ignore[attr-defined]
+
+
+def test_a_long_path_is_thinned_evenly_keeping_its_first_and_latest_pose() -> None:
+    from doorbatch.io.rundir import path_so_far
+
+    k = 10_000
+    stamps = T0 + 100_000_000 * np.arange(k, dtype=np.int64)
+    poses = np.stack([np.arange(k) * 0.1, np.zeros(k), np.zeros(k)], axis=1)
+    msg = path_so_far(int(stamps[-1]), "map", stamps, poses, max_poses=500)
+    xs = np.array([p.pose.position.x for p in msg.poses])  # type: ignore[attr-defined]
+    assert len(xs) == 500 and xs[0] == 0.0 and xs[-1] == poses[-1, 0]
+    gaps = np.diff(xs)
+    assert gaps.min() > 0 and gaps.max() - gaps.min() <= 0.1 + 1e-9  # evenly spaced, within one pose
+    short = path_so_far(int(stamps[9]), "map", stamps[:10], poses[:10], max_poses=500)
+    assert len(short.poses) == 10  # type: ignore[attr-defined]
