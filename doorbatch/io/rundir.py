@@ -58,8 +58,8 @@ PATH_MAX_POSES = 500  # poses in one /doorbatch/path message: the path so far, e
 def path_so_far(stamp: int, frame: str, stamps_ns: np.ndarray, poses: np.ndarray,
                 max_poses: int = PATH_MAX_POSES) -> object:
     """nav_msgs/Path of the poses (K, 3) so far, thinned to at most ``max_poses`` evenly spaced ones (the first
-    and the latest kept). Every message repeats the path, so without the cap an hour at 10 Hz would write
-    billions of poses (the file grows with the square of the run)."""
+    and the latest kept). Every message repeats the path, so without the cap an hour at 10 Hz would write some
+    65 million poses (the work grows with the square of the run)."""
     k = len(stamps_ns)
     idx = np.unique(np.linspace(0, k - 1, min(k, max_poses)).round().astype(np.int64)) if k else np.zeros(0, int)
     return rm.path(stamp, frame, stamps_ns[idx], poses[idx, 0], poses[idx, 1], poses[idx, 2])
