@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import heapq
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -103,20 +104,27 @@ def mapping_annotations(passes: Sequence[MappedPass], static_map: OccupancyMap, 
     yield Annotation("/doorbatch/map", "nav_msgs/msg/OccupancyGrid", t0,
                      rm.occupancy_grid(t0, map_frame, static_map.occupancy, static_map.resolution_m,
                                        static_map.origin_x_m, static_map.origin_y_m, static_map.origin_yaw_rad))
-    for mapped in sorted(passes, key=lambda p: int(p.stamps_ns[0]) if p.stamps_ns.size else 0):
-        n = mapped.stamps_ns.size
-        for i in range(n):
-            t = int(mapped.stamps_ns[i])
-            if i == 0 and len(doors):
-                yield Annotation("/doorbatch/doors", "visualization_msgs/msg/MarkerArray", t,
-                                 door_markers(t, map_frame, doors, mapped.door_angles))
-            x, y, yaw = (float(v) for v in mapped.poses[i])
-            yield Annotation("/doorbatch/pose", "geometry_msgs/msg/PoseWithCovarianceStamped", t,
-                             rm.pose_with_covariance_stamped(t, map_frame, x, y, yaw, np.zeros((6, 6))))
-            if mapped.odometry is not None:
-                map_to_odom = compose(mapped.poses[i], inverse(mapped.odometry[i]))
-                yield Annotation("/tf", "tf2_msgs/msg/TFMessage", t,
-                                 rm.tf_message([rm.planar_transform(t, map_frame, odom_frame, *map_to_odom)]))
-            if i % path_every == path_every - 1 or i == n - 1:
-                yield Annotation("/doorbatch/path", "nav_msgs/msg/Path", t,
-                                 path_so_far(t, map_frame, mapped.stamps_ns[: i + 1], mapped.poses[: i + 1]))
+    # passes in time order, merged by time should two of them overlap (logs that each restart a simulated clock)
+    yield from heapq.merge(*(_pass_annotations(p, doors, map_frame, odom_frame, path_every) for p in passes),
+                           key=lambda a: a.log_time_ns)
+
+
+def _pass_annotations(mapped: MappedPass, doors: DoorSet, map_frame: str, odom_frame: str, path_every: int
+                      ) -> Iterator[Annotation]:
+    """One pass's messages of :func:`mapping_annotations`, in time order."""
+    n = mapped.stamps_ns.size
+    for i in range(n):
+        t = int(mapped.stamps_ns[i])
+        if i == 0 and len(doors):
+            yield Annotation("/doorbatch/doors", "visualization_msgs/msg/MarkerArray", t,
+                             door_markers(t, map_frame, doors, mapped.door_angles))
+        x, y, yaw = (float(v) for v in mapped.poses[i])
+        yield Annotation("/doorbatch/pose", "geometry_msgs/msg/PoseWithCovarianceStamped", t,
+                         rm.pose_with_covariance_stamped(t, map_frame, x, y, yaw, np.zeros((6, 6))))
+        if mapped.odometry is not None:
+            map_to_odom = compose(mapped.poses[i], inverse(mapped.odometry[i]))
+            yield Annotation("/tf", "tf2_msgs/msg/TFMessage", t,
+                             rm.tf_message([rm.planar_transform(t, map_frame, odom_frame, *map_to_odom)]))
+        if i % path_every == path_every - 1 or i == n - 1:
+            yield Annotation("/doorbatch/path", "nav_msgs/msg/Path", t,
+                             path_so_far(t, map_frame, mapped.stamps_ns[: i + 1], mapped.poses[: i + 1]))

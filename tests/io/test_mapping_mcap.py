@@ -53,3 +53,14 @@ def test_two_passes_keep_every_input_message_and_draw_each_pass_s_leaves(tmp_pat
     for tr in map_to_odom:
         assert tr.child_frame_id == "odom"
         np.testing.assert_allclose([tr.transform.translation.x, tr.transform.translation.y], [0.5, 0.2], atol=1e-9)
+
+
+def test_passes_on_one_restarted_clock_come_out_in_time_order() -> None:
+    """Two logs that each start their (simulated) clock at the same time: the annotations interleave by time,
+    as the annotated MCAP's merge with the input messages needs."""
+    doors = DoorSet(np.array([[1.0, 1.0]]), np.array([0.9]), np.zeros(1), np.zeros(1), np.full(1, 1.5))
+    occ = OccupancyMap(np.zeros((20, 30), dtype=np.int8), 0.1, -1.0, -1.0)
+    passes = [_pass(T0, 8, 0.0, [0.2]), _pass(T0 + 50_000_000, 6, 2.0, [0.4])]
+    stamps = [a.log_time_ns for a in mapping_annotations(passes, occ, doors)]
+    assert stamps == sorted(stamps)
+    assert len(stamps) == 1 + 2 + 2 * (8 + 6) + (1 + 1)  # map, doors per pass, pose + map→odom per scan, paths
