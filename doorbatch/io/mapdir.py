@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 import heapq
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -13,13 +13,12 @@ import numpy as np
 import numpy.typing as npt
 
 from doorbatch.geometry.rotations import wrap_angle
-from doorbatch.geometry.se2 import compose, inverse
 from doorbatch.io import ros_messages as rm
 from doorbatch.io.annotated_mcap import Annotation
 from doorbatch.io.map_server import write_map
 from doorbatch.io.parquet import read_table, write_table
 from doorbatch.io.preview import PreviewDoor, render_preview, write_preview
-from doorbatch.io.rundir import door_markers, path_so_far
+from doorbatch.io.rundir import door_markers, map_to_odom_tf, path_so_far
 from doorbatch.maps import DoorSet, OccupancyMap
 
 FloatArray = npt.NDArray[np.float64]
@@ -64,15 +63,11 @@ def read_door_set(map_dir: Path) -> DoorSet:
 
 
 def door_set_of_previews(doors: Sequence[PreviewDoor]) -> DoorSet:
-    """The doors a map directory writes (:class:`PreviewDoor`) as a DoorSet."""
-    return DoorSet(np.array([[d.hinge_x, d.hinge_y] for d in doors], dtype=np.float64).reshape(-1, 2),
-                   np.array([d.length for d in doors], dtype=np.float64),
-                   np.array([d.closed_yaw for d in doors], dtype=np.float64),
-                   np.array([d.angle_min for d in doors], dtype=np.float64),
-                   np.array([d.angle_max for d in doors], dtype=np.float64))
+    """The doors a map directory writes (:class:`PreviewDoor`) as a DoorSet, through their doors.parquet columns."""
+    return door_set_of(doors_columns(doors, [0] * len(doors), ""))
 
 
-def door_set_of(t: dict[str, list[Any]]) -> DoorSet:
+def door_set_of(t: Mapping[str, Any]) -> DoorSet:
     """doors.parquet columns (``to_pydict``) as a DoorSet."""
     return DoorSet(np.array([t["hinge_x"], t["hinge_y"]], dtype=np.float64).T.reshape(-1, 2),
                    np.asarray(t["length"], dtype=np.float64), np.asarray(t["closed_yaw"], dtype=np.float64),
@@ -122,9 +117,7 @@ def _pass_annotations(mapped: MappedPass, doors: DoorSet, map_frame: str, odom_f
         yield Annotation("/doorbatch/pose", "geometry_msgs/msg/PoseWithCovarianceStamped", t,
                          rm.pose_with_covariance_stamped(t, map_frame, x, y, yaw, np.zeros((6, 6))))
         if mapped.odometry is not None:
-            map_to_odom = compose(mapped.poses[i], inverse(mapped.odometry[i]))
-            yield Annotation("/tf", "tf2_msgs/msg/TFMessage", t,
-                             rm.tf_message([rm.planar_transform(t, map_frame, odom_frame, *map_to_odom)]))
+            yield map_to_odom_tf(t, mapped.poses[i], mapped.odometry[i], map_frame, odom_frame)
         if i % path_every == path_every - 1 or i == n - 1:
             yield Annotation("/doorbatch/path", "nav_msgs/msg/Path", t,
                              path_so_far(t, map_frame, mapped.stamps_ns[: i + 1], mapped.poses[: i + 1]))

@@ -65,6 +65,13 @@ def path_so_far(stamp: int, frame: str, stamps_ns: np.ndarray, poses: np.ndarray
     return rm.path(stamp, frame, stamps_ns[idx], poses[idx, 0], poses[idx, 1], poses[idx, 2])
 
 
+def map_to_odom_tf(stamp: int, pose: np.ndarray, odom: np.ndarray, map_frame: str, odom_frame: str) -> Annotation:
+    """/tf with map→odom = pose ⊕ odom⁻¹: the transform that puts the odometry pose on the map pose."""
+    map_to_odom = compose(pose, inverse(odom))
+    return Annotation("/tf", "tf2_msgs/msg/TFMessage", stamp,
+                      rm.tf_message([rm.planar_transform(stamp, map_frame, odom_frame, *map_to_odom)]))
+
+
 def door_markers(stamp: int, frame: str, doors: DoorSet, angles: np.ndarray) -> object:
     """A MarkerArray of the doors: each leaf at ``angles`` (D,) relative to its closed direction (none where the
     angle is NaN: not known), its opening-range arc and its hinge."""
@@ -108,9 +115,7 @@ def run_annotations(result: LocalizationResult, occ: OccupancyMap, doors: DoorSe
         if len(doors):
             yield Annotation("/doorbatch/doors", "visualization_msgs/msg/MarkerArray", t,
                              door_markers(t, map_frame, doors, result.door_mean[i]))
-        map_to_odom = compose(result.pose[i], inverse(result.odom[i]))
-        yield Annotation("/tf", "tf2_msgs/msg/TFMessage", t,
-                         rm.tf_message([rm.planar_transform(t, map_frame, odom_frame, *map_to_odom)]))
+        yield map_to_odom_tf(t, result.pose[i], result.odom[i], map_frame, odom_frame)
         if i % path_every == path_every - 1 or i == len(result) - 1:
             yield Annotation("/doorbatch/path", "nav_msgs/msg/Path", t,
                              path_so_far(t, map_frame, result.stamps_ns[: i + 1], result.pose[: i + 1]))
