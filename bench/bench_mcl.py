@@ -8,7 +8,9 @@ lookups scattered over the whole field). ``mcl_step`` is timed with a fixed part
 weighting, KLD-adaptive low-variance resampling. Peak memory: tracemalloc's peak (NumPy allocations) during
 one ``mcl_step`` with 50,000 particles, and the process's maximum resident set size.
 
-Run: ``taskset -c 0 python bench/bench_mcl.py [--repeats R]`` (one core, as in docs/benchmarks.md).
+Run: ``taskset -c 0 python bench/bench_mcl.py [--repeats R] [--torch-device cuda]`` (one core, as in
+docs/benchmarks.md; ``--torch-device``: the likelihood field's lookups on that torch device, ``localize.backend:
+torch``).
 """
 
 from __future__ import annotations
@@ -141,14 +143,16 @@ def bench_memory(field: DistanceField, beams: BeamSet) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--torch-device", default=None, help="run the field lookups in torch on this device")
     args = parser.parse_args()
+    print(f"backend: {'numpy' if args.torch_device is None else 'torch on ' + args.torch_device}")
     print(f"{platform.node()} {platform.processor() or platform.machine()} Python {platform.python_version()} "
           f"NumPy {np.__version__} {time.strftime('%Y-%m-%d')}")
     config = LocalizeConfig()
     segments = office_segments(np.random.default_rng(0))
     t0 = time.perf_counter()
     grid = rasterize(segments)
-    field = build_distance_field(grid, config.laser_likelihood_max_dist)
+    field = build_distance_field(grid, config.laser_likelihood_max_dist, torch_device=args.torch_device)
     print(f"map {grid.width} × {grid.height} cells; distance field built in {time.perf_counter() - t0:.2f} s")
     beams = scan(segments, config)
     bench_weigh(field, beams, config, args.repeats)

@@ -10,7 +10,9 @@ Particle-beam evaluations/s = N·B / (time of the whole update).
 Memory: peak traced NumPy memory of one update at 50,000 particles, the particle set included (tracemalloc),
 and the process's peak RSS.
 
-Run: ``taskset -c 0 python bench/bench_rbpf.py [--particles 10000 50000] [--repeats 5]``.
+Run: ``taskset -c 0 python bench/bench_rbpf.py [--particles 10000 50000] [--repeats 5] [--torch-device cuda]``
+(``--torch-device``: the static field's lookups in torch there, ``localize.backend: torch``; the door terms stay in
+NumPy/numba).
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ from doorbatch.pipeline.localize.particles import ParticleSet
 from doorbatch.pipeline.localize.rbpf import rbpf_step
 
 RES = 0.05
+TORCH_DEVICE: list[str | None] = [None]  # set from --torch-device
 
 
 def rasterize(walls: np.ndarray) -> OccupancyMap:
@@ -61,7 +64,7 @@ def setup(name: str, n: int, rng: np.random.Generator) -> tuple[MclState, BeamSe
     sel = sel[hit[sel]]
     beams = BeamSet(full[sel].astype(np.float32), np.zeros(2), RANGE_MAX_M, sel.astype(np.int64))
     config = LocalizeConfig(min_particles=n, max_particles=n, resample_neff_ratio=1.0)
-    field = build_distance_field(rasterize(walls), config.laser_likelihood_max_dist)
+    field = build_distance_field(rasterize(walls), config.laser_likelihood_max_dist, torch_device=TORCH_DEVICE[0])
     particles = ParticleSet.gaussian(truth, (0.1, 0.1, math.radians(3.0)), n, rng, door_mean=angles,
                                      door_var=np.full(len(doors), math.radians(10.0) ** 2))
     particles.door_mean += rng.normal(0.0, math.radians(10.0), particles.door_mean.shape)
@@ -111,7 +114,10 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--particles", type=int, nargs="+", default=[10000, 50000])
     parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--torch-device", default=None, help="run the static field's lookups in torch on this device")
     args = parser.parse_args()
+    TORCH_DEVICE[0] = args.torch_device
+    print(f"backend: {'numpy' if args.torch_device is None else 'torch on ' + args.torch_device}")
     print(f"{datetime.datetime.now(datetime.UTC):%Y-%m-%d %H:%M} UTC, "
           f"{platform.processor() or platform.machine()}, python {platform.python_version()}, "
           f"numpy {np.__version__}, numba {'yes' if numba_available() else 'no'}")

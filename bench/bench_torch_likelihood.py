@@ -1,10 +1,8 @@
-"""Would a torch backend beat NumPy on the localizers' hot loop? The likelihood-field endpoint model over
-particles × beams (transform every beam end point by every particle, look the distance up in the field, AMCL's
-Gaussian plus z_rand, summed logs), NumPy's fused chunked path against the same computation in torch.
-
-Issue #5 asks for a torch backend behind the same interface *if* it beats NumPy. On a CPU it does not (see
-docs/benchmarks.md), so there is none; this script is the measurement, and it runs on a GPU as it is (``--device
-cuda``) when one is lent.
+"""Does the torch backend (``localize.backend: torch``) beat NumPy on the localizers' hot loop? The likelihood
+field over particles × beams, through the one interface both backends share: ``endpoint_distances`` ((N, B)
+distances back in host memory, what beam skipping and the RBPF's door terms consume) and ``field_log_likelihood``
+(fused: only (N,) log-likelihoods come back). Particles spread over the sample's corridor, 60 beams. A field built
+with ``torch_device`` runs in torch (pipeline/localize/torch_field.py); the same poses go through both.
 
 Usage::
 
@@ -14,6 +12,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import platform
 import time
 from collections.abc import Callable
 from functools import partial
@@ -25,39 +24,17 @@ from doorbatch.config import load_config
 from doorbatch.io.map_server import read_map
 from doorbatch.pipeline.localize.likelihood_field import (
     BeamCombination,
-    DistanceField,
     build_distance_field,
+    endpoint_distances,
     field_log_likelihood,
 )
 
 REPO = Path(__file__).resolve().parents[1]
 
 
-def torch_log_likelihood(field: DistanceField, pose: np.ndarray, points: np.ndarray, z_hit: float, z_rand: float,
-                         sigma_hit: float, max_range: float, device: str) -> Callable[[], np.ndarray]:
-    """A closure computing Σ_b log(z_hit·exp(−d²/2σ²) + z_rand/max_range) per particle in torch, the map and the
-    particles already on ``device`` (a backend would keep them there between updates)."""
-    import torch
-
-    padded = torch.from_numpy(field.padded.copy()).to(device).reshape(-1)
-    width, height = field.width + 2, field.height + 2
-    grid = torch.from_numpy(field.to_grid(pose)).to(device)
-    cells = torch.from_numpy(points.astype(np.float64) / field.resolution_m).to(device)
-
-    def run() -> np.ndarray:
-        c, s = torch.cos(grid[:, 2:3]), torch.sin(grid[:, 2:3])
-        bx, by = cells[None, :, 0], cells[None, :, 1]
-        col = (grid[:, 0:1] + c * bx - s * by + 1.0).float().clamp_(0.0, width - 1.0)
-        row = (grid[:, 1:2] + s * bx + c * by + 1.0).float().clamp_(0.0, height - 1.0)
-        d = padded[row.long() * width + col.long()]
-        pz = torch.exp(d * d * (-0.5 / sigma_hit**2)) * z_hit + z_rand / max_range
-        out = torch.log(pz).sum(dim=1)
-        return out.cpu().numpy()
-
-    return run
-
-
 def best_of(f: Callable[[], object], repeats: int = 7) -> float:
+    """Best wall time of ``repeats`` calls after one warm-up (each call ends with its result in host memory)."""
+    f()
     best = float("inf")
     for _ in range(repeats):
         t0 = time.perf_counter()
@@ -70,28 +47,38 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--map", type=Path, default=REPO / "datasets" / "sample" / "logs" / "loc_closed.map_static.yaml")
+    ap.add_argument("--particles", type=int, nargs="+", default=[1_000, 10_000, 50_000, 200_000])
     args = ap.parse_args()
     import torch
 
     if args.device == "cpu":
         torch.set_num_threads(1)
+    name = torch.cuda.get_device_name() if args.device.startswith("cuda") else platform.processor()
     lc = load_config().localize
-    field = build_distance_field(read_map(args.map), lc.laser_likelihood_max_dist)
+    occ = read_map(args.map)
+    numpy_field = build_distance_field(occ, lc.laser_likelihood_max_dist)
+    torch_field = build_distance_field(occ, lc.laser_likelihood_max_dist, torch_device=args.device)
     rng = np.random.default_rng(0)
     angles = np.linspace(-2.3, 2.3, 60)
     ranges = rng.uniform(0.5, 8.0, 60)
     points = np.column_stack([ranges * np.cos(angles), ranges * np.sin(angles)]).astype(np.float32)
-    print(f"torch {torch.__version__} on {args.device}; 60 beams; best of 7")
-    for n in (10_000, 50_000):
+    print(f"{time.strftime('%Y-%m-%d %H:%M')} torch {torch.__version__} on {args.device} ({name}); NumPy "
+          f"{np.__version__}; 60 beams; best of 7")
+    print("| particles | call | NumPy ms | torch ms | NumPy M/s | torch M/s | cells equal |")
+    print("| --- | --- | --- | --- | --- | --- | --- |")
+    for n in args.particles:
         pose = np.column_stack([rng.uniform(0, 40, n), rng.uniform(-1, 1, n), rng.uniform(-np.pi, np.pi, n)])
-        numpy_run = partial(field_log_likelihood, field, pose, points, lc.z_hit, lc.z_rand, lc.sigma_hit, 20.0,
-                            BeamCombination.PRODUCT)
-        torch_run = torch_log_likelihood(field, pose, points, lc.z_hit, lc.z_rand, lc.sigma_hit, 20.0, args.device)
-        agree = float(np.median(np.abs(numpy_run() - torch_run())))
-        for name, f in (("numpy", numpy_run), (f"torch/{args.device}", torch_run)):
-            t = best_of(f)
-            print(f"N = {n:6d}  {name:10s} {t * 1e3:7.1f} ms  {n * 60 / t / 1e6:6.1f} M particle-beams/s")
-        print(f"           median |numpy − torch| per particle: {agree:.2e} nats")
+        equal = float(np.mean(endpoint_distances(numpy_field, pose, points)
+                              == endpoint_distances(torch_field, pose, points)))
+        for call in ("endpoint_distances", "field_log_likelihood"):
+            if call == "endpoint_distances":
+                runs = [partial(endpoint_distances, f, pose, points) for f in (numpy_field, torch_field)]
+            else:
+                runs = [partial(field_log_likelihood, f, pose, points, lc.z_hit, lc.z_rand, lc.sigma_hit, 20.0,
+                                BeamCombination.PRODUCT) for f in (numpy_field, torch_field)]
+            t_np, t_torch = best_of(runs[0]), best_of(runs[1])
+            print(f"| {n:,} | {call} | {t_np * 1e3:.2f} | {t_torch * 1e3:.2f} | {n * 60 / t_np / 1e6:.0f} | "
+                  f"{n * 60 / t_torch / 1e6:.0f} | {equal:.6f} |")
 
 
 if __name__ == "__main__":

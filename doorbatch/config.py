@@ -387,6 +387,11 @@ class LocalizeConfig(Section):
     beam_skip_error_threshold: float = Field(0.9, ge=0.0, le=1.0)
     # End points in unknown cells: their real distance to the nearest obstacle (nav2_amcl), or the maximum.
     unknown_as_max_dist: bool = False
+    # Where the likelihood field's particles x beams lookups run: "numpy", or "torch" on torch_device
+    # (pipeline/localize/torch_field.py, the same cells; needs the torch extra). On a CPU NumPy is faster;
+    # a GPU pays from a few thousand particles (docs/benchmarks.md). Door terms and resampling stay in NumPy.
+    backend: Literal["numpy", "torch"] = "numpy"
+    torch_device: str = "cuda"
     # Particles: KLD-sampling (Fox 2003) between min and max; bins 0.5 m x 0.5 m x 10 deg.
     min_particles: int = Field(500, ge=1)
     max_particles: int = Field(5000, ge=1)

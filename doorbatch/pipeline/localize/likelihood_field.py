@@ -34,7 +34,8 @@ float32 values stay small) and gathers the distances from a copy of the field pa
 maximum distance, so that clipping indices replaces the bounds test. It works on chunks of 1024 particles
 in work arrays reused from chunk to chunk; :func:`field_log_likelihood` fuses the likelihood into the same
 loop. NumPy alone reaches 35–50 M particle-beam evaluations per second on one core (bench/bench_mcl.py), so
-there is no compiled kernel.
+there is no compiled kernel. A field built with a ``torch_device`` runs both functions in torch instead
+(:mod:`.torch_field`: the same cells, for a GPU).
 """
 
 from __future__ import annotations
@@ -78,6 +79,9 @@ class DistanceField:
         dist: (H, W) float32, same indexing as :class:`~doorbatch.maps.OccupancyMap` (row 0 = lowest y).
         resolution_m, origin_x_m, origin_y_m, origin_yaw_rad: the map's geometry.
         max_dist_m: the cap (Nav2 ``laser_likelihood_max_dist``), also the distance of points off the map.
+        torch_device: None: the lookups run in NumPy; a torch device ("cuda", "cpu"): :func:`endpoint_distances`
+            and :func:`field_log_likelihood` run there (:mod:`.torch_field`, ``localize.backend: torch``).
+        device_cache: the field's copies on torch devices, made on first use (:mod:`.torch_field`).
     """
 
     dist: Float32Array
@@ -86,6 +90,8 @@ class DistanceField:
     origin_y_m: float
     origin_yaw_rad: float
     max_dist_m: float
+    torch_device: str | None = None
+    device_cache: dict[str, object] = field(init=False, repr=False, default_factory=dict)
     _padded: Float32Array = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -183,7 +189,8 @@ class BeamSet:
 
 
 def build_distance_field(occupancy_map: OccupancyMap, max_dist_m: float, unknown_as_max: bool = False,
-                         occupied_at_least: int = OCCUPIED_AT_LEAST) -> DistanceField:
+                         occupied_at_least: int = OCCUPIED_AT_LEAST, torch_device: str | None = None
+                         ) -> DistanceField:
     """The likelihood field of a map: distance to the nearest occupied cell (value ≥ ``occupied_at_least``).
 
     Args:
@@ -192,6 +199,7 @@ def build_distance_field(occupancy_map: OccupancyMap, max_dist_m: float, unknown
         unknown_as_max: give unknown cells (−1) the maximum distance instead of their distance to the
             nearest occupied cell. AMCL does not (False).
         occupied_at_least: occupancy (percent) from which a cell is an obstacle.
+        torch_device: run the lookups on this torch device (:class:`DistanceField`); None: NumPy.
 
     Raises:
         ValueError: ``max_dist_m`` is not positive.
@@ -208,7 +216,7 @@ def build_distance_field(occupancy_map: OccupancyMap, max_dist_m: float, unknown
     if unknown_as_max:
         dist[occ < 0] = max_dist_m
     return DistanceField(dist.astype(np.float32), occupancy_map.resolution_m, occupancy_map.origin_x_m,
-                         occupancy_map.origin_y_m, occupancy_map.origin_yaw_rad, float(max_dist_m))
+                         occupancy_map.origin_y_m, occupancy_map.origin_yaw_rad, float(max_dist_m), torch_device)
 
 
 def free_cells(occupancy_map: OccupancyMap, free_at_most: int = FREE_AT_MOST) -> FreeCells:
@@ -313,6 +321,10 @@ def endpoint_distances(dist_field: DistanceField, pose: npt.ArrayLike, points_ba
     Returns:
         (N, B) float32 distances in m (max_dist_m off the map).
     """
+    if dist_field.torch_device is not None:
+        from doorbatch.pipeline.localize import torch_field
+
+        return torch_field.endpoint_distances(dist_field, dist_field.torch_device, pose, points_base)
     n, b = np.asarray(pose).reshape(-1, 3).shape[0], np.asarray(points_base).reshape(-1, 2).shape[0]
     out = np.empty((n, b), dtype=np.float32)
     for part, grid, pts, scratch in _chunks(dist_field, pose, points_base, chunk):
@@ -326,6 +338,11 @@ def field_log_likelihood(dist_field: DistanceField, pose: npt.ArrayLike, points_
                          ) -> FloatArray:
     """log p(z | x) (N,) of each particle pose: :func:`endpoint_distances` then :func:`endpoint_log_likelihood`,
     fused per chunk of particles (no (N, B) array)."""
+    if dist_field.torch_device is not None:
+        from doorbatch.pipeline.localize import torch_field
+
+        return torch_field.field_log_likelihood(dist_field, dist_field.torch_device, pose, points_base, z_hit, z_rand,
+                                                sigma_hit, max_range, combination)
     n, b = np.asarray(pose).reshape(-1, 3).shape[0], np.asarray(points_base).reshape(-1, 2).shape[0]
     out = np.zeros(n)
     if b == 0:

@@ -41,6 +41,7 @@ from doorbatch.pipeline.localize.mcl import MclState, global_particles, initial_
 from doorbatch.pipeline.localize.particles import ParticleSet
 from doorbatch.pipeline.localize.rbpf import rbpf_step
 from doorbatch.pipeline.localize.result import LocalizationResult
+from doorbatch.pipeline.localize.torch_field import check_device
 
 log = logging.getLogger(__name__)
 FloatArray = npt.NDArray[np.float64]
@@ -62,8 +63,7 @@ def load_localization_map(map_path: Path, config: LocalizeConfig) -> Localizatio
     occ = read_map(yaml_path)
     doors = read_door_set(yaml_path.parent) if map_path.is_dir() else read_door_set(Path("/nonexistent"))
     doors = with_closed_in_range(doors)
-    field = build_distance_field(occ, config.laser_likelihood_max_dist, config.unknown_as_max_dist)
-    return LocalizationMap(occ, field, free_cells(occ), doors)
+    return LocalizationMap(occ, localization_field(occ, config), free_cells(occ), doors)
 
 
 def truth_localization_map(truth_path: Path, config: LocalizeConfig) -> LocalizationMap:
@@ -77,8 +77,22 @@ def truth_localization_map(truth_path: Path, config: LocalizeConfig) -> Localiza
     reach = np.array([d.opening_sign * d.max_angle for d in ds])
     doors = DoorSet(np.array([[d.hinge_x, d.hinge_y] for d in ds]).reshape(-1, 2), np.array([d.length for d in ds]),
                     np.array([d.closed_yaw for d in ds]), np.minimum(reach, 0.0), np.maximum(reach, 0.0))
-    field = build_distance_field(occ, config.laser_likelihood_max_dist, config.unknown_as_max_dist)
-    return LocalizationMap(occ, field, free_cells(occ), doors)
+    return LocalizationMap(occ, localization_field(occ, config), free_cells(occ), doors)
+
+
+def localization_field(occ: OccupancyMap, config: LocalizeConfig) -> DistanceField:
+    """The likelihood field of a map as the config asks: its cap, unknown cells, and backend (NumPy or torch).
+
+    Raises:
+        OptionalDependencyError: ``backend: torch`` without torch installed.
+        UsageError: ``backend: torch`` on a device torch cannot use.
+    """
+    device = None
+    if config.backend == "torch":
+        check_device(config.torch_device)
+        device = config.torch_device
+    return build_distance_field(occ, config.laser_likelihood_max_dist, config.unknown_as_max_dist,
+                                torch_device=device)
 
 
 def parse_init(text: str) -> str | tuple[float, float, float]:

@@ -66,6 +66,20 @@ def test_same_seed_same_outputs(sample_map: Path, tmp_path: Path, method: str, i
     assert (tmp_path / "a" / "trajectory.tum").read_bytes() != (tmp_path / "c" / "trajectory.tum").read_bytes()
 
 
+@pytest.mark.parametrize("device", ["cpu", "cuda"])
+def test_the_torch_backend_gives_numpys_outputs(sample_map: Path, tmp_path: Path, device: str) -> None:
+    torch = pytest.importorskip("torch")
+    if device == "cuda" and not torch.cuda.is_available():
+        pytest.skip("no CUDA")
+    log = str(SAMPLE_LOGS / "loc_partial.mcap")
+    for name, backend in (("numpy", "numpy"), ("torch", "torch")):
+        assert main(["localize", log, "--map", str(sample_map), "-o", str(tmp_path / name), "--set",
+                     f"localize.backend={backend}", "--set", f"localize.torch_device={device}", "-q"]) == 0
+    # the same cells looked up: the same filter, draw for draw
+    for name in ("trajectory.parquet", "door_states.parquet", "trajectory.tum"):
+        assert (tmp_path / "numpy" / name).read_bytes() == (tmp_path / "torch" / name).read_bytes(), name
+
+
 def test_runs_on_a_plain_map_server_map_without_doors(sample_map: Path, tmp_path: Path) -> None:
     plain = tmp_path / "plain"
     plain.mkdir()
