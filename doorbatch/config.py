@@ -334,10 +334,14 @@ class DoorDetectionConfig(Section):
 class MappingConfig(Section):
     """``doorbatch map``: where the poses come from and how logs become passes."""
 
-    # auto: reference if the log has one, else scan matching on odometry (recorded in the manifest).
+    # auto: reference if every log has one covering its scans, else scan matching on odometry (in the manifest).
     pose_source: Literal["auto", "reference", "odometry", "scanmatch"] = "auto"
     # A scan whose pose must be interpolated across a gap longer than this is skipped (with a warning).
     max_pose_gap_s: float = Field(0.5, gt=0.0)
+    # auto takes the reference only where it gives a pose to at least this share of every log's scans (a topic of
+    # localization poses published on filter updates only, or one a node published for a while, is not the
+    # trajectory); else scan matching, with a warning. Expert choice: half.
+    min_reference_coverage: float = Field(0.5, ge=0.0, le=1.0)
     # Passes after the first must start within this distance of where the previous one's odometry ended
     # when poses come from odometry or scan matching (one odometry frame), else the frames are disjoint.
     odometry_continuity_m: float = Field(1.0, gt=0.0)

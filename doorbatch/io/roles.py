@@ -62,11 +62,21 @@ _NAMES: dict[Role, tuple[str, ...]] = {
 
 # Words that mark an Odometry topic as a reference (ground truth / SLAM) rather than wheel odometry.
 _REFERENCE_WORDS = ("truth", "gt", "reference", "slam", "amcl", "pose")
+# Words that mark a pose topic as an operator's or a planner's input, never the robot's pose: RViz's
+# /initialpose and /goal_pose, move_base's /move_base_simple/goal and /move_base/current_goal, waypoints.
+_COMMAND_WORDS = ("goal", "initialpose", "initial", "target", "waypoint", "waypoints", "clicked", "setpoint", "cmd")
+
+
+def _words(name: str) -> list[str]:
+    return name.lower().replace("-", "_").replace("/", "_").split("_")
 
 
 def _looks_like_reference(name: str) -> bool:
-    words = name.lower().replace("-", "_").replace("/", "_").split("_")
-    return any(w in _REFERENCE_WORDS for w in words)
+    return any(w in _REFERENCE_WORDS for w in _words(name))
+
+
+def _looks_like_command(name: str) -> bool:
+    return any(w in _COMMAND_WORDS for w in _words(name))
 
 
 def _pick(role: Role, candidates: list[TopicInfo]) -> tuple[TopicInfo, str] | None:
@@ -120,7 +130,8 @@ def assign_roles(topics: Mapping[str, TopicInfo], overrides: TopicsConfig | None
         refs = [
             t
             for t in free(Role.REFERENCE)
-            if t.name in _NAMES[Role.REFERENCE] or t.msgtype != d.ODOMETRY or _looks_like_reference(t.name)
+            if (t.name in _NAMES[Role.REFERENCE] or t.msgtype != d.ODOMETRY or _looks_like_reference(t.name))
+            and not _looks_like_command(t.name)
         ]
         refs = [t for t in refs if t.name not in _NAMES[Role.ODOMETRY]]
         pick = _pick(Role.REFERENCE, refs)

@@ -64,23 +64,45 @@ class DoorMap:
     grid: LogOddsGrid | None = None  # the final mapping state the static map came from
 
 
-def choose_pose_source(recordings: Sequence[Recording], wanted: str) -> str:
-    """The pose source: the one asked for, or ``reference`` when every log has one, else ``scanmatch``.
+def reference_coverage(rec: Recording, max_gap_s: float) -> float:
+    """Share of the log's scans that get a reference pose (interpolated across gaps of at most ``max_gap_s``)."""
+    if rec.reference is None or len(rec.scans.stamps_ns) == 0:
+        return 0.0
+    _, valid = interpolate_poses(rec.reference.stamps_ns, rec.reference.poses, rec.scans.stamps_ns,
+                                 int(max_gap_s * 1e9))
+    return float(np.mean(valid))
+
+
+def choose_pose_source(recordings: Sequence[Recording], wanted: str, config: DoorbatchConfig | None = None
+                       ) -> tuple[str, list[str]]:
+    """The pose source and why another than asked for: the one asked for, or (``auto``) ``reference`` when
+    every log has a reference that covers at least ``mapping.min_reference_coverage`` of its scans, else
+    ``scanmatch`` (a sparse pose topic, e.g. localization poses published only on filter updates, is not the
+    trajectory: with it most scans would be skipped).
 
     Raises:
         PipelineError: a log lacks what the source needs, or has neither a reference nor odometry.
     """
+    mc = (config or DoorbatchConfig()).mapping
     for rec in recordings:
         if rec.reference is None and rec.odometry is None and wanted in ("auto", "odometry", "reference"):
             raise PipelineError(f"{rec.path}: no usable pose source: no reference pose topic and no odometry "
                                 "(nav_msgs/Odometry or TF odom→base_link); try --pose-source scanmatch")
     if wanted == "auto":
-        return "reference" if all(r.reference is not None for r in recordings) else "scanmatch"
+        if any(r.reference is None for r in recordings):
+            return "scanmatch", []
+        sparse = [(r, reference_coverage(r, mc.max_pose_gap_s)) for r in recordings]
+        sparse = [(r, c) for r, c in sparse if c < mc.min_reference_coverage]
+        if not sparse:
+            return "reference", []
+        why = [f"{r.path}: the reference poses cover {c:.0%} of the scans (< mapping.min_reference_coverage "
+               f"{mc.min_reference_coverage:.0%}); poses from scan matching instead" for r, c in sparse]
+        return "scanmatch", why
     need = {"reference": "reference", "odometry": "odometry"}.get(wanted)
     for rec in recordings:
         if need and getattr(rec, need) is None:
             raise PipelineError(f"{rec.path}: --pose-source {wanted} but the log has no {need} poses")
-    return wanted
+    return wanted, []
 
 
 def _hits_base(rec: Recording, i: int) -> FloatArray:
@@ -191,7 +213,7 @@ def build_map(logs: Sequence[Path], config: DoorbatchConfig | None = None,
     if recordings is None:
         recordings = [load_recording(Path(p), config) for p in logs]
     seconds["read"] = time.perf_counter() - t0
-    source = choose_pose_source(recordings, config.mapping.pose_source)
+    source, warnings = choose_pose_source(recordings, config.mapping.pose_source, config)
     check_common_frame(recordings, source, config)
     t0 = time.perf_counter()
     if source == "scanmatch":
@@ -199,7 +221,10 @@ def build_map(logs: Sequence[Path], config: DoorbatchConfig | None = None,
     else:
         passes = [pass_poses(rec, source, config) for rec in recordings]
     seconds["poses"] = time.perf_counter() - t0
-    warnings = [w for rec in recordings for w in rec.warnings]
+    if not any(p.valid.any() for p in passes):
+        raise PipelineError(f"no scan has a {source} pose within mapping.max_pose_gap_s "
+                            f"({config.mapping.max_pose_gap_s} s) of one: nothing to map (try another --pose-source)")
+    warnings += [w for rec in recordings for w in rec.warnings]
     for p in passes:
         skipped = int((~p.valid).sum())
         if skipped:

@@ -65,6 +65,60 @@ def test_a_log_without_any_pose_source_is_an_error(write_log: Callable[..., Path
     assert code == 3 and "no usable pose source" in err and "bare.mcap" in err
 
 
+def _nav2_like(reference_every: int | None) -> list[tuple[str, str, int, object]]:
+    """The sample messages without ground truth, plus what a Nav2 robot's log holds: an RViz /initialpose and a
+    /goal_pose, and (``reference_every``) /amcl_pose published on every n-th scan only."""
+    msgs: list[tuple[str, str, int, object]] = []
+    for i, (topic, msgtype, t, msg) in enumerate(x for x in sample_messages(20) if x[0] != "/ground_truth"):
+        msgs.append((topic, msgtype, t, msg))
+        if i == 3:
+            msgs.append(("/initialpose", "geometry_msgs/msg/PoseWithCovarianceStamped", t + 50_000_000,
+                         m.pose_with_covariance_stamped(t + 50_000_000, "map", 0.0, 0.0, 0.0, [0.0] * 36)))
+            msgs.append(("/goal_pose", "geometry_msgs/msg/PoseStamped", t, m.pose_stamped(t, "map", 9.0, 1.0, 0.0)))
+    if reference_every is not None:
+        scans = [t for topic, _, t, _ in msgs if topic == "/scan"]
+        for k, t in enumerate(scans[::reference_every]):
+            msgs.append(("/amcl_pose", "geometry_msgs/msg/PoseWithCovarianceStamped", t,
+                         m.pose_with_covariance_stamped(t, "map", 0.1 * k, 0.0, 0.0, [0.0] * 36)))
+    return sorted(msgs, key=lambda x: x[2])
+
+
+def test_goals_and_initial_poses_are_not_the_reference(write_log: Callable[..., Path], tmp_path: Path,
+                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    # before: /initialpose (one message) became the reference, every scan was skipped, and an empty map exit 0
+    log = write_log("nav2.mcap", _nav2_like(None))
+    assert main(["inspect", str(log), "--json"]) == 0
+    roles = {t["name"]: t.get("role") for t in json.loads(capsys.readouterr().out)["topics"]}
+    assert roles["/initialpose"] is None and roles["/goal_pose"] is None
+    out = tmp_path / "out"
+    assert main(["map", str(log), "-o", str(out), "--stages", "grid", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["pose_source"] == "scanmatch"
+    assert (read_map(out / "map.yaml").occupancy == 100).sum() > 100
+
+
+@pytest.mark.parametrize(("every", "source"), [(1, "reference"), (2, "reference"), (10, "scanmatch")])
+def test_auto_takes_the_reference_only_where_it_covers_the_scans(write_log: Callable[..., Path], tmp_path: Path,
+                                                                capsys: pytest.CaptureFixture[str], every: int,
+                                                                source: str) -> None:
+    # /amcl_pose on every scan, every 2nd (0.2 s apart: all scans within max_pose_gap_s) or every 10th (1 s gaps)
+    log = write_log("nav2.mcap", _nav2_like(every))
+    out = tmp_path / "out"
+    assert main(["map", str(log), "-o", str(out), "--stages", "grid", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["pose_source"] == source
+    warnings = " ".join(json.loads((out / "manifest.json").read_text()).get("warnings", []))
+    assert ("cover" in warnings) == (source == "scanmatch")
+
+
+def test_a_reference_that_gives_no_scan_a_pose_is_an_error(write_log: Callable[..., Path], tmp_path: Path,
+                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    log = write_log("nav2.mcap", _nav2_like(None))
+    code = main(["map", str(log), "-o", str(tmp_path / "out"), "--pose-source", "reference",
+                 "--set", "topics.reference=/initialpose"])
+    err = capsys.readouterr().err
+    assert code == 3 and "no scan has a reference pose" in err
+    assert not (tmp_path / "out" / "map.yaml").exists()
+
+
 def test_odometry_pose_source_uses_odometry(write_log: Callable[..., Path], tmp_path: Path,
                                            capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "out"
