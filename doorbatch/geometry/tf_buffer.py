@@ -82,7 +82,12 @@ class TfBuffer:
         """(parent, child, static) for every edge."""
         return [(e.parent, child, e.static) for child, e in self._edges.items()]
 
-    def _chain(self, frame: str) -> list[str]:
+    def chain(self, frame: str) -> list[str]:
+        """``frame`` and its ancestors up to the root of its tree, child first.
+
+        Raises:
+            TransformError: the tree has a cycle.
+        """
         chain = [frame]
         seen = {frame}
         while chain[-1] in self._edges:
@@ -97,7 +102,7 @@ class TfBuffer:
         """Whether the two frames are connected (ignoring time)."""
         if target == source:
             return True
-        return bool(set(self._chain(target)) & set(self._chain(source)))
+        return bool(set(self.chain(target)) & set(self.chain(source)))
 
     def lookup(self, target: str, source: str, stamp_ns: int) -> FloatArray:
         """4×4 transform taking points in ``source`` to ``target`` at ``stamp_ns``.
@@ -107,7 +112,7 @@ class TfBuffer:
         """
         if target == source:
             return np.eye(4)
-        up_src, up_tgt = self._chain(source), self._chain(target)
+        up_src, up_tgt = self.chain(source), self.chain(target)
         common = next((f for f in up_src if f in set(up_tgt)), None)
         if common is None:
             raise TransformError(f"no transform from frame {source!r} to {target!r}")

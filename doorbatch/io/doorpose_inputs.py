@@ -12,7 +12,7 @@ from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import LogContentError
 from doorbatch.geometry.tf_buffer import TfBuffer
 from doorbatch.io.reader import open_log
-from doorbatch.io.recording import PoseSeries, pose_series, read_transforms
+from doorbatch.io.recording import PoseSeries, base_pose_series, read_transforms
 from doorbatch.records import CameraInfo, Detection, Detections, Image, Pose2D, Role, Scan
 
 ImageDetector = Callable[[Image], tuple[Detection, ...]]
@@ -74,4 +74,6 @@ def read_doorpose_inputs(path: Path, config: DoorbatchConfig, detector: ImageDet
     if not scans:
         raise LogContentError("scan topic has no messages", path=path)
     return DoorPoseInputs(str(path), tf, info, sorted(scans, key=lambda s: s.stamp_ns),
-                          sorted(boxes, key=lambda d: d.stamp_ns), pose_series(ref), pose_series(odom), warnings)
+                          sorted(boxes, key=lambda d: d.stamp_ns),
+                          base_pose_series(ref, tf, config.frames.base_link),
+                          base_pose_series(odom, tf, config.frames.base_link), warnings)

@@ -154,7 +154,10 @@ class LogReader(ABC):
                         yield RoleMessage(Role.ODOMETRY, raw.topic, pose)
 
     def _odometry_from_tf(self, tf: Transform, log_time_ns: int) -> Pose2D | None:
-        if tf.parent != self.frames.odom or tf.child != self.frames.base_link:
+        """A dynamic odom→X transform as a pose of X (base_link, or a body frame above it such as TurtleBot's
+        base_footprint; :func:`~doorbatch.io.recording.base_pose_series` keeps X on base_link's chain and moves
+        the pose to base_link)."""
+        if tf.parent != self.frames.odom or tf.static:
             return None
         x, y, z, w = (float(v) for v in tf.rotation_xyzw)
         return Pose2D(tf.stamp_ns, log_time_ns, tf.parent, tf.child, float(tf.translation[0]),

@@ -7,7 +7,8 @@ Images are never loaded here; stages that need them stream the log themselves.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import math
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -94,6 +95,35 @@ def pose_series(poses: list[Pose2D]) -> PoseSeries | None:
                       np.array([[p.x, p.y, p.yaw] for p in poses], dtype=np.float64), poses[0].frame_id)
 
 
+def base_pose_series(poses: list[Pose2D], tf: TfBuffer, base: str) -> PoseSeries | None:
+    """Poses of ``base`` (stamp-sorted), from poses of whatever body frame a log gives.
+
+    A pose of frame X (Odometry's ``child_frame_id``: TurtleBot's odom → base_footprint; the odom → X transforms
+    of a TF-only log) is composed with X → ``base`` at its stamp when X is on ``base``'s chain in the TF tree
+    (an ancestor or a descendant): p_base = p_X ∘ T(X → base), planar part. A pose of ``base``, of an unnamed
+    frame, or of a frame the TF tree does not know is taken as the base's own. A pose of a frame the tree knows
+    but off ``base``'s chain (another child of odom) is not the robot's: left out.
+    """
+    kept: list[Pose2D] = []
+    on_chain = set(tf.chain(base)) if base in tf.frames else {base}
+    for p in poses:
+        child = p.child_frame_id
+        if not child or child == base or child not in tf.frames:
+            kept.append(p)
+            continue
+        if child not in on_chain and base not in tf.chain(child):
+            continue
+        try:
+            mat = tf.lookup(child, base, p.stamp_ns)
+        except TransformError:
+            continue
+        c, s = math.cos(p.yaw), math.sin(p.yaw)
+        tx, ty = float(mat[0, 3]), float(mat[1, 3])
+        kept.append(replace(p, child_frame_id=base, x=p.x + c * tx - s * ty, y=p.y + s * tx + c * ty,
+                            yaw=p.yaw + math.atan2(float(mat[1, 0]), float(mat[0, 0]))))
+    return pose_series(kept)
+
+
 def _planar_affine(tf: TfBuffer, base: str, frame: str, stamp_ns: int, assume_identity: bool) -> FloatArray:
     if frame == base:
         return np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
@@ -178,7 +208,8 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
         aligned, valid = camera_beam_colors(path, scans, tf, config)
         if not any(v.any() for v in valid):
             aligned, valid = None, None
-    return Recording(str(path), scan_set, pose_series(odom), pose_series(ref), aligned, warnings, valid)
+    return Recording(str(path), scan_set, base_pose_series(odom, tf, base), base_pose_series(ref, tf, base),
+                     aligned, warnings, valid)
 
 
 def _aligned_colors(colors: BeamColors | None, beams: int) -> npt.NDArray[np.uint8]:

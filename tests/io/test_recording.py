@@ -10,6 +10,7 @@ import pytest
 
 from doorbatch.config import DoorbatchConfig, IoConfig
 from doorbatch.errors import LogContentError
+from doorbatch.io import ros_messages as m
 from doorbatch.io.recording import load_recording
 from tests.conftest import sample_messages
 
@@ -37,3 +38,36 @@ def test_missing_laser_transform_is_an_error_unless_assumed(write_log: Callable[
         load_recording(path)
     rec = load_recording(path, DoorbatchConfig(io=IoConfig(assume_identity_laser_tf=True)))
     np.testing.assert_allclose(rec.scans.laser_to_base[0], [[1, 0, 0], [0, 1, 0]])
+
+
+def _footprint_robot(odom_topic: bool) -> list[tuple[str, str, int, object]]:
+    """The sample messages re-framed as a TurtleBot-like robot: odom → base_footprint (dynamic; the /odom
+    topic's child frame, or TF only) and base_footprint → base_link static, 0.1 m ahead and turned 0.2 rad;
+    plus a second dynamic child of odom (a tracked cart) that is not the robot."""
+    out: list[tuple[str, str, int, object]] = []
+    for topic, msgtype, t, msg in sample_messages(n_scans=8):
+        if topic == "/ground_truth" or (topic == "/odom" and not odom_topic):
+            continue
+        if topic == "/odom":
+            msg.child_frame_id = "base_footprint"
+        if topic == "/tf":
+            msg.transforms[0].child_frame_id = "base_footprint"
+            msg.transforms.append(m.planar_transform(t, "odom", "cart", 5.0, 5.0, 1.0))
+        if topic == "/tf_static":
+            msg.transforms.append(m.planar_transform(t, "base_footprint", "base_link", 0.1, 0.0, 0.2))
+        out.append((topic, msgtype, t, msg))
+    return out
+
+
+@pytest.mark.parametrize("odom_topic", [True, False])
+def test_odometry_of_a_footprint_frame_is_moved_to_base_link(write_log: Callable[..., Path],
+                                                             odom_topic: bool) -> None:
+    # before: a TF-only log with odom → base_footprint → base_link had no odometry at all (only a direct
+    # odom → base_link edge counted), and an /odom topic's base_footprint pose was taken as base_link's
+    rec = load_recording(write_log("tb.mcap", _footprint_robot(odom_topic)))
+    assert rec.odometry is not None and rec.odometry.poses.shape == (8, 3)
+    i = np.arange(8)
+    x, y, yaw = 0.1 * i, 0.02 * i, 0.01 * i  # the footprint's poses, as sample_messages writes them
+    np.testing.assert_allclose(rec.odometry.poses[:, 0], x + 0.1 * np.cos(yaw), atol=1e-9)
+    np.testing.assert_allclose(rec.odometry.poses[:, 1], y + 0.1 * np.sin(yaw), atol=1e-9)
+    np.testing.assert_allclose(rec.odometry.poses[:, 2], yaw + 0.2, atol=1e-9)
