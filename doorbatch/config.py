@@ -375,6 +375,9 @@ class LocalizeConfig(Section):
     max_beams: int = Field(60, ge=2)
     laser_max_range: float = Field(-1.0)  # m; < 0: use the scan's range_max
     laser_min_range: float = Field(-1.0)  # m; < 0: use the scan's range_min
+    # m; the model's range_max for a scan that states none (range_max inf/NaN) and no laser_max_range: some drivers
+    # publish inf, and z_rand / inf = 0 would let one far end point zero every particle. 30 m: a common 2D lidar's.
+    laser_max_range_fallback: float = Field(30.0, gt=0.0)
     # How beam likelihoods combine into a particle weight: "product" (Π p, paper 000 eq. 5 and the
     # textbook) or "amcl" (nav2_amcl's 1 + Σ p³). MCL and RBPF always use the same one.
     beam_combination: Literal["product", "amcl"] = "product"

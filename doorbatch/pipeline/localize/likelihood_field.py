@@ -411,7 +411,7 @@ def endpoint_log_likelihood(dist: npt.ArrayLike, z_hit: float, z_rand: float, si
 
 def select_beams(ranges: npt.ArrayLike, angles: npt.ArrayLike, range_min: float, range_max: float,
                  laser_to_base: npt.ArrayLike, max_beams: int, laser_min_range: float = -1.0,
-                 laser_max_range: float = -1.0) -> BeamSet:
+                 laser_max_range: float = -1.0, range_max_fallback_m: float = 30.0) -> BeamSet:
     """The beams AMCL's likelihood field model uses, as end points in base_link.
 
     Args:
@@ -421,6 +421,9 @@ def select_beams(ranges: npt.ArrayLike, angles: npt.ArrayLike, range_min: float,
         laser_to_base: 4×4 transform laser → base_link (an upside-down laser works).
         max_beams: Nav2 ``max_beams`` (≥ 2).
         laser_min_range, laser_max_range: Nav2 overrides; ≤ 0 keeps the scan's values.
+        range_max_fallback_m: the model's range_max when the scan states none (range_max inf or NaN, and no
+            ``laser_max_range``): z_rand / range_max would be 0 and one far end point would make every
+            particle impossible under the product of the beams.
 
     Raises:
         ValueError: ``max_beams`` < 2 or ranges and angles differ in length.
@@ -431,13 +434,17 @@ def select_beams(ranges: npt.ArrayLike, angles: npt.ArrayLike, range_min: float,
         raise ValueError(f"{r.shape[0]} ranges but {a.shape[0]} angles")
     if max_beams < 2:
         raise ValueError(f"max_beams must be at least 2, got {max_beams}")
-    rmax = min(range_max, laser_max_range) if laser_max_range > 0.0 else range_max
+    rmax = range_max if math.isfinite(range_max) else math.inf
+    rmax = min(rmax, laser_max_range) if laser_max_range > 0.0 else rmax
+    if not math.isfinite(rmax):
+        rmax = range_max_fallback_m
     rmin = max(range_min, laser_min_range) if laser_min_range > 0.0 else range_min
     step = max((r.shape[0] - 1) // (max_beams - 1), 1)
     idx = np.arange(0, r.shape[0], step)
     sub = r[idx]
     with np.errstate(invalid="ignore"):
-        keep = (sub > rmin) & (sub < rmax)  # NaN fails both; ≤ range_min becomes range_max in AMCL: skipped
+        # NaN fails both; ≤ range_min becomes range_max in AMCL: skipped; +inf (no return) too, whatever rmax
+        keep = (sub > rmin) & (sub < rmax) & np.isfinite(sub)
     idx = idx[keep]
     local = np.stack([r[idx] * np.cos(a[idx]), r[idx] * np.sin(a[idx]), np.zeros(idx.shape[0])], axis=1)
     tf = np.asarray(laser_to_base, dtype=np.float64)

@@ -145,7 +145,7 @@ def predict(particles: ParticleSet, odom_prev: npt.ArrayLike, odom_now: npt.Arra
 def beams_from_scan(scan: Scan, laser_to_base: npt.ArrayLike, config: LocalizeConfig) -> BeamSet:
     """The beams of a scan the endpoint model uses (AMCL's rules: max_beams, laser_min/max_range)."""
     return select_beams(scan.ranges, scan.angles, scan.range_min, scan.range_max, laser_to_base, config.max_beams,
-                        config.laser_min_range, config.laser_max_range)
+                        config.laser_min_range, config.laser_max_range, config.laser_max_range_fallback)
 
 
 def scan_log_likelihood(pose: npt.ArrayLike, beams: BeamSet, field: DistanceField, config: LocalizeConfig,

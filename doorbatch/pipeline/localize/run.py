@@ -35,9 +35,14 @@ from doorbatch.pipeline.localize.likelihood_field import (
     FreeCells,
     build_distance_field,
     free_cells,
-    select_beams,
 )
-from doorbatch.pipeline.localize.mcl import MclState, global_particles, initial_particles, mcl_step
+from doorbatch.pipeline.localize.mcl import (
+    MclState,
+    beams_from_scan,
+    global_particles,
+    initial_particles,
+    mcl_step,
+)
 from doorbatch.pipeline.localize.particles import ParticleSet
 from doorbatch.pipeline.localize.rbpf import rbpf_step
 from doorbatch.pipeline.localize.result import LocalizationResult
@@ -250,9 +255,7 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
         if not odom_ok[i]:
             continue
         scan = rec.scans.scan(i)
-        beams = select_beams(scan.ranges, scan.angles, scan.range_min, scan.range_max,
-                             laser_to_base_4x4(rec.scans.laser_to_base[i]), lc.max_beams, lc.laser_min_range,
-                             lc.laser_max_range)
+        beams = beams_from_scan(scan, laser_to_base_4x4(rec.scans.laser_to_base[i]), lc)
         stamp_s = scan.stamp_ns / 1e9
         first = state.odom_at_update is None
         if method == "rbpf":

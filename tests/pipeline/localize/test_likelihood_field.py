@@ -144,6 +144,22 @@ def test_beam_selection_follows_amcl() -> None:
         select_beams(ranges, angles, 0.1, 30.0, np.eye(4), 1)
 
 
+@pytest.mark.parametrize("stated", [np.inf, np.nan])
+def test_a_scan_without_a_finite_range_max_gets_the_fallback(stated: float) -> None:
+    # some drivers publish range_max = inf: z_rand / inf = 0, and one end point far from every wall (a person,
+    # a glass door) gave every particle log p = −inf under the product of the beams
+    ranges = np.array([4.0, np.inf, 12.0, np.nan])
+    angles = np.linspace(-1.0, 1.0, 4)
+    beams = select_beams(ranges, angles, 0.1, stated, np.eye(4), 60, range_max_fallback_m=25.0)
+    assert beams.range_max_m == 25.0 and beams.beam_index.tolist() == [0, 2]
+    assert select_beams(ranges, angles, 0.1, stated, np.eye(4), 60, laser_max_range=10.0).range_max_m == 10.0
+    field = build_distance_field(room_map(), 2.0)
+    pose = np.array([[50.0, 50.0, 0.0]])  # every end point off the map: the field's maximum distance
+    ll = field_log_likelihood(field, pose, beams.points_base, 0.8, 0.2, 0.1, beams.range_max_m,
+                              BeamCombination.PRODUCT)
+    assert np.isfinite(ll).all()
+
+
 def test_upside_down_laser_mirrors_the_beams() -> None:
     flipped = np.diag([1.0, -1.0, -1.0, 1.0])  # 180° about x
     flipped[0, 3] = 0.2
