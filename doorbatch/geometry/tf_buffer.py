@@ -82,6 +82,14 @@ class TfBuffer:
         """(parent, child, static) for every edge."""
         return [(e.parent, child, e.static) for child, e in self._edges.items()]
 
+    def is_static(self, child: str) -> bool:
+        """Whether the edge into ``child`` is static (KeyError: ``child`` has no parent)."""
+        return self._edges[child].static
+
+    def stamps(self, child: str) -> list[int]:
+        """The stamps (ns, sorted) of the edge into ``child`` (KeyError: ``child`` has no parent)."""
+        return list(self._edges[child].stamps)
+
     def chain(self, frame: str) -> list[str]:
         """``frame`` and its ancestors up to the root of its tree, child first.
 

@@ -12,7 +12,7 @@ from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import LogContentError
 from doorbatch.geometry.tf_buffer import TfBuffer
 from doorbatch.io.reader import open_log
-from doorbatch.io.recording import PoseSeries, base_pose_series, read_transforms
+from doorbatch.io.recording import PoseSeries, base_pose_series, read_transforms, tf_odometry
 from doorbatch.records import CameraInfo, Detection, Detections, Image, Pose2D, Role, Scan
 
 ImageDetector = Callable[[Image], tuple[Detection, ...]]
@@ -69,6 +69,9 @@ def read_doorpose_inputs(path: Path, config: DoorbatchConfig, detector: ImageDet
             elif isinstance(rec, Image) and detector is not None:
                 boxes.append(Detections(rec.stamp_ns, rec.log_time_ns, rec.frame_id, detector(rec)))
         warnings = list(reader.warnings)
+        if reader.roles.topic(Role.ODOMETRY) is None:
+            odom, note = tf_odometry(tf, config.frames.odom, config.frames.base_link)
+            warnings += [note] if note else []
     if info is None:
         raise LogContentError("camera_info topic has no messages", path=path)
     if not scans:

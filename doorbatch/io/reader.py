@@ -21,9 +21,9 @@ from rosbags.typesys.store import Typestore
 
 from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import DoorbatchError, LogReadError
-from doorbatch.io.decode import decode, yaw_from_quaternion
+from doorbatch.io.decode import decode
 from doorbatch.io.roles import RoleAssignment, TopicInfo, assign_roles
-from doorbatch.records import Pose2D, Role, RoleMessage, Transform
+from doorbatch.records import Role, RoleMessage
 
 log = logging.getLogger(__name__)
 
@@ -125,19 +125,15 @@ class LogReader(ABC):
                  stop_ns: int | None = None) -> Iterator[RoleMessage]:
         """Records of the requested roles (all assigned roles when None) in log-time order.
 
-        When odometry is requested and the log has no odometry topic, the TF transforms
-        odom→base_link stand in for it (DESIGN.md, Inputs), as :class:`Pose2D` records.
+        A log without an odometry topic has none here: :func:`~doorbatch.io.recording.tf_odometry` derives it
+        from the whole TF tree (DESIGN.md, Inputs: TF odom→base_link).
         """
         wanted = set(Role) if roles is None else set(roles)
         role_of = {t: r for t, r in self.roles.role_of().items() if r in wanted}
-        odom_from_tf = Role.ODOMETRY in wanted and self.roles.topic(Role.ODOMETRY) is None
-        topics = set(role_of)
-        if odom_from_tf:
-            topics.update(self.roles.topics.get(Role.TRANSFORMS, ()))
-        if not topics:
+        if not role_of:
             return
-        for raw in self.raw_messages(topics, start_ns, stop_ns):
-            role = role_of.get(raw.topic, Role.TRANSFORMS)
+        for raw in self.raw_messages(set(role_of), start_ns, stop_ns):
+            role = role_of[raw.topic]
             try:
                 records = list(decode(role, raw.msg, raw.msgtype, raw.log_time_ns, raw.topic))
             except DoorbatchError as err:
@@ -146,22 +142,7 @@ class LogReader(ABC):
                     err.args = (f"{self.path}: {err.args[0]}",)
                 raise
             for record in records:
-                if raw.topic in role_of:
-                    yield RoleMessage(role, raw.topic, record)
-                if odom_from_tf and isinstance(record, Transform):
-                    pose = self._odometry_from_tf(record, raw.log_time_ns)
-                    if pose is not None:
-                        yield RoleMessage(Role.ODOMETRY, raw.topic, pose)
-
-    def _odometry_from_tf(self, tf: Transform, log_time_ns: int) -> Pose2D | None:
-        """A dynamic odom→X transform as a pose of X (base_link, or a body frame above it such as TurtleBot's
-        base_footprint; :func:`~doorbatch.io.recording.base_pose_series` keeps X on base_link's chain and moves
-        the pose to base_link)."""
-        if tf.parent != self.frames.odom or tf.static:
-            return None
-        x, y, z, w = (float(v) for v in tf.rotation_xyzw)
-        return Pose2D(tf.stamp_ns, log_time_ns, tf.parent, tf.child, float(tf.translation[0]),
-                      float(tf.translation[1]), yaw_from_quaternion(x, y, z, w))
+                yield RoleMessage(role, raw.topic, record)
 
 
 ReaderFactory = Callable[[Path, DoorbatchConfig | None], LogReader]

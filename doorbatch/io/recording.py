@@ -95,6 +95,44 @@ def pose_series(poses: list[Pose2D]) -> PoseSeries | None:
                       np.array([[p.x, p.y, p.yaw] for p in poses], dtype=np.float64), poses[0].frame_id)
 
 
+def odometry_frame(tf: TfBuffer, odom: str, base: str) -> str | None:
+    """The frame TF odometry is read in: ``odom`` when ``base``'s chain reaches it; else the parent of the first
+    dynamic edge above ``base`` (a tree that calls it odom_combined, say); None when no dynamic edge is above."""
+    if base not in tf.frames:
+        return None
+    chain = tf.chain(base)
+    if odom in chain[1:]:
+        return odom
+    return next((tf.chain(child)[1] for child in chain[:-1] if not tf.is_static(child)), None)
+
+
+def tf_odometry(tf: TfBuffer, odom: str, base: str) -> tuple[list[Pose2D], str | None]:
+    """Odometry from the TF tree (DESIGN.md, Inputs: TF odom→base_link): ``base``'s pose in
+    :func:`odometry_frame` at every stamp of the dynamic edges between them, through static edges too
+    (odom → base_footprint → base_link). And a note when the frame is not ``odom``.
+    """
+    frame = odometry_frame(tf, odom, base)
+    if frame is None:
+        return [], None
+    chain = tf.chain(base)
+    edges = [c for c in chain[:chain.index(frame)] if not tf.is_static(c)]
+    stamps = sorted({t for c in edges for t in tf.stamps(c)})
+    poses = []
+    for t in stamps:
+        try:
+            mat = tf.lookup(frame, base, t)
+        except TransformError:  # another dynamic edge of the chain has no data near this stamp
+            continue
+        poses.append(Pose2D(t, t, frame, base, float(mat[0, 3]), float(mat[1, 3]),
+                            math.atan2(float(mat[1, 0]), float(mat[0, 0]))))
+    return poses, None if frame == odom else odometry_frame_note(frame, odom, base)
+
+
+def odometry_frame_note(frame: str, odom: str, base: str) -> str:
+    """What a user is told when TF odometry is read in another frame than ``odom``."""
+    return f"odometry from TF {frame}→{base}: the TF tree has no frame {odom!r} (set frames.odom to choose another)"
+
+
 def base_pose_series(poses: list[Pose2D], tf: TfBuffer, base: str) -> PoseSeries | None:
     """Poses of ``base`` (stamp-sorted), from poses of whatever body frame a log gives.
 
@@ -178,6 +216,9 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
             elif item.role is Role.COLORS and isinstance(rec, BeamColors):
                 colors[rec.stamp_ns] = rec
         warnings = list(reader.warnings)
+        if reader.roles.topic(Role.ODOMETRY) is None:
+            odom, note = tf_odometry(tf, config.frames.odom, config.frames.base_link)
+            warnings += [note] if note else []
         camera = reader.roles.topic(Role.IMAGE) is not None and reader.roles.topic(Role.CAMERA_INFO) is not None
     if not scans:
         raise LogContentError("scan topic has no messages", path=path, topic=scan_topic)

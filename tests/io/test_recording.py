@@ -71,3 +71,18 @@ def test_odometry_of_a_footprint_frame_is_moved_to_base_link(write_log: Callable
     np.testing.assert_allclose(rec.odometry.poses[:, 0], x + 0.1 * np.cos(yaw), atol=1e-9)
     np.testing.assert_allclose(rec.odometry.poses[:, 1], y + 0.1 * np.sin(yaw), atol=1e-9)
     np.testing.assert_allclose(rec.odometry.poses[:, 2], yaw + 0.2, atol=1e-9)
+
+
+def test_tf_odometry_in_an_odometry_frame_of_another_name(write_log: Callable[..., Path]) -> None:
+    # a PR2-style tree: odom_combined → base_link, no odom frame, no /odom topic
+    msgs = []
+    for topic, msgtype, t, msg in sample_messages(n_scans=6):
+        if topic in ("/odom", "/ground_truth"):
+            continue
+        if topic == "/tf":
+            msg.transforms[0].header.frame_id = "odom_combined"
+        msgs.append((topic, msgtype, t, msg))
+    rec = load_recording(write_log("pr2.mcap", msgs))
+    assert rec.odometry is not None and rec.odometry.frame_id == "odom_combined"
+    np.testing.assert_allclose(rec.odometry.poses[:, 0], 0.1 * np.arange(6), atol=1e-12)
+    assert any("odom_combined" in w and "frames.odom" in w for w in rec.warnings)
