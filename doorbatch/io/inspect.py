@@ -21,7 +21,7 @@ from doorbatch.errors import LogContentError
 from doorbatch.geometry.tf_buffer import TfBuffer
 from doorbatch.io.decode import decode_scan, decode_transforms, stamp_to_ns
 from doorbatch.io.reader import open_log
-from doorbatch.io.recording import odometry_frame, odometry_frame_note
+from doorbatch.io.recording import missing_laser_tf_hint, odometry_frame, odometry_frame_note
 from doorbatch.records import Role
 
 
@@ -197,7 +197,7 @@ def _check_roles(report: LogReport, chosen: dict[Role, tuple[str, ...]], scan_fr
                 add(Problem(Severity.WARNING, scan[0] if scan else None, message + "; assuming identity"))
             else:
                 add(Problem(Severity.ERROR, scan[0] if scan else None,
-                            message + " (io.assume_identity_laser_tf=true assumes the laser at the base origin)"))
+                            f"{message} ({missing_laser_tf_hint(tf, frames.base_link)})"))
 
 
 def _check_stamps(report: LogReport, stats: dict[str, _TopicStats], role_of: dict[str, Role],

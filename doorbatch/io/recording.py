@@ -128,6 +128,20 @@ def tf_odometry(tf: TfBuffer, odom: str, base: str) -> tuple[list[Pose2D], str |
     return poses, None if frame == odom else odometry_frame_note(frame, odom, base)
 
 
+def missing_laser_tf_hint(tf: TfBuffer, base: str) -> str:
+    """How to fix a scan frame with no transform to ``base``: name another base frame when the TF tree lacks
+    ``base`` itself (the robot's base is the child of its odometry edge, e.g. base_footprint), else say what
+    ``io.assume_identity_laser_tf`` does."""
+    if tf.frames and base not in tf.frames:
+        dynamic = sorted((parent, child) for parent, child, static in tf.edges() if not static)
+        guess = next((c for p, c in dynamic if "odom" in p), None) or next(
+            (f for f in sorted(tf.frames) if "base" in f), None)
+        example = f", e.g. --set frames.base_link={guess}" if guess else ""
+        return (f"the TF tree has no frame {base!r} (it has {', '.join(sorted(tf.frames))}): set frames.base_link "
+                f"to the robot's base frame{example}")
+    return "io.assume_identity_laser_tf=true assumes the laser at the base origin"
+
+
 def odometry_frame_note(frame: str, odom: str, base: str) -> str:
     """What a user is told when TF odometry is read in another frame than ``odom``."""
     return f"odometry from TF {frame}→{base}: the TF tree has no frame {odom!r} (set frames.odom to choose another)"
@@ -227,8 +241,8 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
         affines = np.stack([_planar_affine(tf, base, s.frame_id, s.stamp_ns, config.io.assume_identity_laser_tf)
                             for s in scans])
     except TransformError as err:
-        raise LogContentError(f"{err.reason} (io.assume_identity_laser_tf=true assumes the laser at the base "
-                              "origin)", path=path, topic=scan_topic) from err
+        raise LogContentError(f"{err.reason} ({missing_laser_tf_hint(tf, base)})", path=path,
+                              topic=scan_topic) from err
     scan_set = ScanSet(
         stamps_ns=np.array([s.stamp_ns for s in scans], dtype=np.int64),
         ranges=[s.ranges for s in scans],

@@ -86,3 +86,19 @@ def test_tf_odometry_in_an_odometry_frame_of_another_name(write_log: Callable[..
     assert rec.odometry is not None and rec.odometry.frame_id == "odom_combined"
     np.testing.assert_allclose(rec.odometry.poses[:, 0], 0.1 * np.arange(6), atol=1e-12)
     assert any("odom_combined" in w and "frames.odom" in w for w in rec.warnings)
+
+
+def test_a_tree_without_base_link_names_the_frame_to_use(write_log: Callable[..., Path]) -> None:
+    msgs = []
+    for topic, msgtype, t, msg in sample_messages(n_scans=4):
+        if topic == "/tf":
+            msg.transforms[0].child_frame_id = "base_footprint"
+        if topic == "/tf_static":
+            for tr in msg.transforms:
+                tr.header.frame_id = "base_footprint"
+        msgs.append((topic, msgtype, t, msg))
+    path = write_log("nobase.mcap", msgs)
+    with pytest.raises(LogContentError, match=r"no frame 'base_link'.*--set frames.base_link=base_footprint"):
+        load_recording(path)
+    rec = load_recording(path, DoorbatchConfig.model_validate({"frames": {"base_link": "base_footprint"}}))
+    np.testing.assert_allclose(rec.scans.laser_to_base[0], [[1, 0, 0.2], [0, 1, 0]], atol=1e-12)
