@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 
 from doorbatch.cli import main
-from tests.conftest import sample_messages
+from tests.conftest import REPO, sample_messages
 
 
 def _run(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str]:
@@ -32,13 +33,27 @@ def test_zero_byte_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> N
     assert str(path) in _one_line(err) and "empty" in err
 
 
-def test_truncated_mcap(write_log: Callable[..., Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_an_mcap_cut_off_before_its_first_message_is_an_error(write_log: Callable[..., Path], tmp_path: Path,
+                                                              capsys: pytest.CaptureFixture[str]) -> None:
     whole = write_log("whole.mcap").read_bytes()
     cut = tmp_path / "cut.mcap"
-    cut.write_bytes(whole[: len(whole) // 2])
+    cut.write_bytes(whole[:200])  # the header and part of the first schema
     code, err = _run(capsys, "inspect", str(cut))
     assert code == 3
-    assert str(cut) in _one_line(err)
+    assert str(cut) in _one_line(err) and "no readable message" in err
+
+
+def test_an_mcap_whose_recording_was_cut_off_reads_up_to_the_cut(write_log: Callable[..., Path], tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    # a recorder killed mid-file leaves no summary section: the messages before the cut are read, with a warning
+    whole = (REPO / "datasets" / "sample" / "logs" / "loc_open.mcap").read_bytes()  # chunks of ~1 s
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(whole[: len(whole) // 2])
+    assert main(["inspect", str(cut), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    scans = next(t for t in report["topics"] if t["name"] == "/scan")
+    assert 50 < scans["count"] < 400
+    assert any("no summary section" in p["message"] for p in report["problems"])
 
 
 def test_file_that_is_not_a_log(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -6,11 +6,15 @@ reader's own; channels whose encoding is not ROS (json, protobuf, ...) are liste
 
 from __future__ import annotations
 
+import heapq
 import logging
 from collections.abc import Collection, Iterator
 from typing import IO, Any
 
-from mcap.reader import McapReader, make_reader
+from mcap.exceptions import McapError
+from mcap.reader import McapReader, NonSeekingReader, make_reader
+from mcap.records import Channel, Message, Schema
+from mcap.stream_reader import StreamReader
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
@@ -22,6 +26,8 @@ from doorbatch.io.typestore import normalize_msgtype, ros1_typestore, ros2_types
 log = logging.getLogger(__name__)
 
 _ROS_ENCODINGS = {"cdr": False, "ros1": True}
+# Messages held back to restore log-time order in a file read linearly (one without a summary section).
+REORDER_WINDOW = 4096
 
 
 class McapLogReader(LogReader):
@@ -32,17 +38,25 @@ class McapLogReader(LogReader):
     def open(self) -> None:
         self._file: IO[bytes] | None = self.path.open("rb")
         self._reader: McapReader = make_reader(self._file)
-        summary = self._reader.get_summary()
-        if summary is None:
-            raise LogReadError("MCAP has no summary section (truncated, or written without one)",
-                               path=self.path)
+        try:
+            summary = self._reader.get_summary()
+        except McapError:  # a footer cut off, or summary offsets pointing past the end
+            summary = None
         self._stores = {False: get_typestore(Stores.EMPTY), True: get_typestore(Stores.EMPTY)}
         self._msgtype: dict[int, str] = {}
         self._ros1: dict[int, bool] = {}
-        counts = summary.statistics.channel_message_counts if summary.statistics else {}
+        if summary is None:
+            schemas, channels, counts, self._start, self._end = self._scan_unindexed()
+        else:
+            schemas, channels = summary.schemas, summary.channels
+            counts = summary.statistics.channel_message_counts if summary.statistics else {}
+            stats = summary.statistics
+            self._start = stats.message_start_time if stats else 0
+            self._end = stats.message_end_time if stats else 0
+        self._unindexed = summary is None
         topics: dict[str, TopicInfo] = {}
-        for cid, channel in summary.channels.items():
-            schema = summary.schemas.get(channel.schema_id)
+        for cid, channel in channels.items():
+            schema = schemas.get(channel.schema_id)
             name = normalize_msgtype(schema.name) if schema else ""
             if channel.message_encoding in _ROS_ENCODINGS and schema is not None:
                 ros1 = _ROS_ENCODINGS[channel.message_encoding]
@@ -53,9 +67,62 @@ class McapLogReader(LogReader):
             count = counts.get(cid, 0) + (prev.count if prev else 0)
             topics[channel.topic] = TopicInfo(channel.topic, name, count, channel.message_encoding)
         self._topics = topics
-        stats = summary.statistics
-        self._start = stats.message_start_time if stats else 0
-        self._end = stats.message_end_time if stats else 0
+
+    def _linear_messages(self, topics: list[str] | None, start_ns: int | None, stop_ns: int | None
+                         ) -> Iterator[tuple[Schema | None, Channel, Message]]:
+        """The messages of an MCAP without a summary in log-time order, up to where the file breaks off.
+
+        A recorder writes them nearly in time order; a heap of ``REORDER_WINDOW`` messages puts them in order
+        (NonSeekingReader's own ordering sorts the whole file first, so a file cut off yields nothing).
+        """
+        assert self._file is not None
+        self._file.seek(0)
+        heap: list[tuple[int, int, tuple[Schema | None, Channel, Message]]] = []
+        source = NonSeekingReader(self._file).iter_messages(topics, log_time_order=False, starting_at=start_ns,
+                                                            ending_before=stop_ns)
+        try:
+            for k, item in enumerate(source):
+                heapq.heappush(heap, (item[2].log_time, k, item))
+                if len(heap) > REORDER_WINDOW:
+                    yield heapq.heappop(heap)[2]
+        except (McapError, ValueError, EOFError):  # where the unfinished file breaks off (open() warned)
+            pass
+        while heap:
+            yield heapq.heappop(heap)[2]
+
+    def _scan_unindexed(self) -> tuple[dict[int, Schema], dict[int, Channel], dict[int, int], int, int]:
+        """Schemas, channels, message counts and time span of an MCAP without a summary section (a recorder
+        killed before it finished the file) from one pass over its records, up to where the file breaks off.
+
+        Raises:
+            LogReadError: not one message could be read.
+        """
+        schemas: dict[int, Schema] = {}
+        channels: dict[int, Channel] = {}
+        counts: dict[int, int] = {}
+        start, end, n = 0, 0, 0
+        assert self._file is not None
+        self._file.seek(0)
+        try:
+            for record in StreamReader(self._file, skip_magic=False).records:
+                if isinstance(record, Schema):
+                    schemas[record.id] = record
+                elif isinstance(record, Channel):
+                    channels[record.id] = record
+                elif isinstance(record, Message):
+                    counts[record.channel_id] = counts.get(record.channel_id, 0) + 1
+                    start = record.log_time if n == 0 else min(start, record.log_time)
+                    end = max(end, record.log_time)
+                    n += 1
+            cut = ""
+        except (McapError, ValueError, EOFError) as err:  # the last record is incomplete
+            cut = f", the file breaks off there ({type(err).__name__})"
+        if n == 0:
+            raise LogReadError(f"MCAP has no summary section and no readable message{cut}", path=self.path)
+        self.warnings.append(f"{self.path}: MCAP has no summary section (the recording was not closed): read "
+                             f"linearly, {n} messages over {(end - start) / 1e9:.1f} s{cut}")
+        self._file.seek(0)
+        return schemas, channels, counts, start, end
 
     def _register_schema(self, ros1: bool, name: str, text: str) -> None:
         store = self._stores[ros1]
@@ -93,9 +160,12 @@ class McapLogReader(LogReader):
         stores = self._stores
         deser = {False: stores[False].deserialize_cdr, True: stores[True].deserialize_ros1}
         wanted = None if topics is None else list(topics)
-        for _schema, channel, message in self._reader.iter_messages(
-            topics=wanted, start_time=start_ns, end_time=stop_ns, log_time_order=True
-        ):
+        if self._unindexed:  # linearly from the start: the summary the seeking reader looks for is not there
+            messages = self._linear_messages(wanted, start_ns, stop_ns)
+        else:
+            messages = self._reader.iter_messages(topics=wanted, start_time=start_ns, end_time=stop_ns,
+                                                  log_time_order=True)
+        for _schema, channel, message in messages:
             cid = channel.id
             msgtype = self._msgtype.get(cid)
             if msgtype is None:

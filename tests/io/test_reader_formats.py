@@ -14,7 +14,7 @@ from doorbatch.io.convert import convert_log
 from doorbatch.io.reader import open_log
 from doorbatch.io.typestore import ros1_typestore
 from doorbatch.records import Role, RoleMessage
-from tests.conftest import sample_messages
+from tests.conftest import REPO, sample_messages
 
 FORMATS = {"mcap": "log.mcap", "bag": "log.bag", "rosbag2": "log_sqlite3", "rosbag2-mcap": "log_mcapstore"}
 
@@ -116,3 +116,18 @@ def test_annotated_mcap_keeps_inputs_and_adds_annotations(write_log: Callable[..
     _, ref = _read(src)
     _, records = _read(out)
     _assert_same_records(records, ref)
+
+
+def test_an_mcap_without_summary_reads_the_messages_before_the_cut_in_time_order(tmp_path: Path) -> None:
+    whole = REPO / "datasets" / "sample" / "logs" / "loc_open.mcap"
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(whole.read_bytes()[: int(whole.stat().st_size * 0.6)])
+    with open_log(whole) as reader:
+        full = [(m.topic, m.log_time_ns) for m in reader.raw_messages()]
+    with open_log(cut) as reader:
+        assert any("no summary section" in w for w in reader.warnings)
+        got = [(m.topic, m.log_time_ns) for m in reader.raw_messages()]
+        assert sum(t.count for t in reader.topics.values()) == len(got)
+    assert len(full) * 0.3 < len(got) < len(full)
+    assert [t for _, t in got] == sorted(t for _, t in got)
+    assert sorted(got) == sorted(full[: len(got)])  # the log's first messages, nothing invented or lost before the cut

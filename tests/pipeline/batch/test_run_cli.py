@@ -95,7 +95,8 @@ def test_corrupt_log_fails_its_steps_and_the_rest_completes(
         tiny: Path, tiny_master: Path, tmp_path: Path, reference_out: Path, capsys: pytest.CaptureFixture[str]) -> None:
     log = tiny / "logs" / "loc_open.mcap"
     data = log.read_bytes()
-    log.write_bytes(data[: len(data) // 2])  # truncated mid-file
+    n = len(data)
+    log.write_bytes(data[: n // 2] + bytes(4096) + data[n // 2 + 4096:])  # a corrupt chunk mid-file
     out = tmp_path / "out"
     code, summary = run_json(tiny, out, capsys)
     assert code == 4
