@@ -130,3 +130,13 @@ def test_a_good_log_inspects_cleanly(write_log: Callable[..., Path], capsys: pyt
     roles = {t["name"]: t["role"] for t in report["topics"]}
     assert roles["/scan"] == "scan" and roles["/odom"] == "odometry" and roles["/ground_truth"] == "reference"
     assert report["problems"] == []
+
+
+def test_a_bag_folder_without_metadata_names_its_mcap(write_log: Callable[..., Path], tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    folder = tmp_path / "rosbag2_2026_11_26"
+    folder.mkdir()
+    mcap = write_log("rosbag2_2026_11_26_0.mcap").rename(folder / "rosbag2_2026_11_26_0.mcap")
+    code, err = _run(capsys, "inspect", str(folder))
+    assert code == 3 and "no metadata.yaml" in _one_line(err) and str(mcap) in err
+    assert main(["inspect", str(mcap)]) == 0

@@ -79,7 +79,10 @@ class Rosbag2Reader(_AnyBagReader):
 
     def open(self) -> None:
         if not (self.path / "metadata.yaml").exists():
-            raise LogReadError("folder is not a ROS 2 bag (no metadata.yaml)", path=self.path)
+            files = sorted(self.path.glob("*.mcap"))
+            hint = (f"; a recording stopped before it wrote metadata.yaml leaves its MCAP readable as a file: "
+                    f"give {files[0]}" if len(files) == 1 else "")
+            raise LogReadError(f"folder is not a ROS 2 bag (no metadata.yaml){hint}", path=self.path)
         super().open()
 
     def _storage_name(self) -> str:
