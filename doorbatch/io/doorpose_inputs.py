@@ -12,7 +12,7 @@ from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import LogContentError
 from doorbatch.geometry.tf_buffer import TfBuffer
 from doorbatch.io.reader import open_log
-from doorbatch.io.recording import PoseSeries, base_pose_series, read_transforms, tf_odometry
+from doorbatch.io.recording import PoseSeries, read_transforms, robot_pose_series
 from doorbatch.records import CameraInfo, Detection, Detections, Image, Pose2D, Role, Scan
 
 ImageDetector = Callable[[Image], tuple[Detection, ...]]
@@ -68,15 +68,12 @@ def read_doorpose_inputs(path: Path, config: DoorbatchConfig, detector: ImageDet
                 boxes.append(rec)
             elif isinstance(rec, Image) and detector is not None:
                 boxes.append(Detections(rec.stamp_ns, rec.log_time_ns, rec.frame_id, detector(rec)))
-        warnings = list(reader.warnings)
-        if reader.roles.topic(Role.ODOMETRY) is None:
-            odom, note = tf_odometry(tf, config.frames.odom, config.frames.base_link)
-            warnings += [note] if note else []
+        odometry, reference, notes = robot_pose_series(odom, ref, tf, reader.roles.topic(Role.ODOMETRY) is not None,
+                                                       config.frames)
+        warnings = list(reader.warnings) + notes
     if info is None:
         raise LogContentError("camera_info topic has no messages", path=path)
     if not scans:
         raise LogContentError("scan topic has no messages", path=path)
     return DoorPoseInputs(str(path), tf, info, sorted(scans, key=lambda s: s.stamp_ns),
-                          sorted(boxes, key=lambda d: d.stamp_ns),
-                          base_pose_series(ref, tf, config.frames.base_link),
-                          base_pose_series(odom, tf, config.frames.base_link), warnings)
+                          sorted(boxes, key=lambda d: d.stamp_ns), reference, odometry, warnings)

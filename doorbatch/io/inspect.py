@@ -183,12 +183,13 @@ def _check_roles(report: LogReport, chosen: dict[Role, tuple[str, ...]], scan_fr
         add(Problem(Severity.ERROR, None, "no sensor_msgs/LaserScan topic: doorbatch needs a 2D laser scan"))
     elif stats.get(scan[0], _TopicStats()).count == 0:
         add(Problem(Severity.ERROR, scan[0], "scan topic has no messages"))
-    odom_frame = odometry_frame(tf, frames.odom, frames.base_link)
-    if Role.ODOMETRY not in chosen and odom_frame is None:
-        add(Problem(Severity.WARNING, None,
-                    f"no odometry: no nav_msgs/Odometry topic and no TF {frames.odom}→{frames.base_link}"))
-    elif Role.ODOMETRY not in chosen and odom_frame is not None and odom_frame != frames.odom:
-        add(Problem(Severity.WARNING, None, odometry_frame_note(odom_frame, frames.odom, frames.base_link)))
+    if Role.ODOMETRY not in chosen:
+        odom_frame = odometry_frame(tf, frames.odom, frames.base_link)
+        if odom_frame is None:
+            add(Problem(Severity.WARNING, None,
+                        f"no odometry: no nav_msgs/Odometry topic and no TF {frames.odom}→{frames.base_link}"))
+        elif odom_frame != frames.odom:
+            add(Problem(Severity.WARNING, None, odometry_frame_note(odom_frame, frames.odom, frames.base_link)))
     assume = config.io.assume_identity_laser_tf
     for frame in sorted(scan_frames):
         if frame != frames.base_link and not tf.can_transform(frames.base_link, frame):

@@ -7,15 +7,16 @@ Images are never loaded here; stages that need them stream the log themselves.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
 
-from doorbatch.config import DoorbatchConfig
+from doorbatch.config import DoorbatchConfig, FramesConfig
 from doorbatch.errors import LogContentError, TransformError
+from doorbatch.geometry.rotations import yaw_of_matrix
+from doorbatch.geometry.se2 import compose
 from doorbatch.geometry.tf_buffer import TfBuffer
 from doorbatch.io.reader import LogReader, open_log
 from doorbatch.records import BeamColors, Pose2D, Role, Scan, Transform
@@ -103,7 +104,12 @@ def odometry_frame(tf: TfBuffer, odom: str, base: str) -> str | None:
     chain = tf.chain(base)
     if odom in chain[1:]:
         return odom
-    return next((tf.chain(child)[1] for child in chain[:-1] if not tf.is_static(child)), None)
+    return next((chain[i + 1] for i, child in enumerate(chain[:-1]) if not tf.is_static(child)), None)
+
+
+def _planar(mat: FloatArray) -> FloatArray:
+    """(x, y, yaw) of a 4×4 transform."""
+    return np.array([mat[0, 3], mat[1, 3], yaw_of_matrix(mat)])
 
 
 def tf_odometry(tf: TfBuffer, odom: str, base: str) -> tuple[list[Pose2D], str | None]:
@@ -120,11 +126,10 @@ def tf_odometry(tf: TfBuffer, odom: str, base: str) -> tuple[list[Pose2D], str |
     poses = []
     for t in stamps:
         try:
-            mat = tf.lookup(frame, base, t)
+            x, y, yaw = _planar(tf.lookup(frame, base, t))
         except TransformError:  # another dynamic edge of the chain has no data near this stamp
             continue
-        poses.append(Pose2D(t, t, frame, base, float(mat[0, 3]), float(mat[1, 3]),
-                            math.atan2(float(mat[1, 0]), float(mat[0, 0]))))
+        poses.append(Pose2D(t, t, frame, base, float(x), float(y), float(yaw)))
     return poses, None if frame == odom else odometry_frame_note(frame, odom, base)
 
 
@@ -156,24 +161,36 @@ def base_pose_series(poses: list[Pose2D], tf: TfBuffer, base: str) -> PoseSeries
     frame, or of a frame the TF tree does not know is taken as the base's own. A pose of a frame the tree knows
     but off ``base``'s chain (another child of odom) is not the robot's: left out.
     """
-    kept: list[Pose2D] = []
     on_chain = set(tf.chain(base)) if base in tf.frames else {base}
+    # per child frame: None = the base's own pose, True = move it to base, False = not the robot's
+    moved: dict[str, bool | None] = {}
+    kept: list[Pose2D] = []
     for p in poses:
         child = p.child_frame_id
-        if not child or child == base or child not in tf.frames:
+        if child not in moved:
+            own = not child or child == base or child not in tf.frames
+            moved[child] = None if own else (child in on_chain or base in tf.chain(child))
+        how = moved[child]
+        if how is None:
             kept.append(p)
-            continue
-        if child not in on_chain and base not in tf.chain(child):
-            continue
-        try:
-            mat = tf.lookup(child, base, p.stamp_ns)
-        except TransformError:
-            continue
-        c, s = math.cos(p.yaw), math.sin(p.yaw)
-        tx, ty = float(mat[0, 3]), float(mat[1, 3])
-        kept.append(replace(p, child_frame_id=base, x=p.x + c * tx - s * ty, y=p.y + s * tx + c * ty,
-                            yaw=p.yaw + math.atan2(float(mat[1, 0]), float(mat[0, 0]))))
+        elif how:
+            try:
+                x, y, yaw = compose((p.x, p.y, p.yaw), _planar(tf.lookup(child, base, p.stamp_ns)))
+            except TransformError:
+                continue
+            kept.append(replace(p, child_frame_id=base, x=float(x), y=float(y), yaw=float(yaw)))
     return pose_series(kept)
+
+
+def robot_pose_series(odom: list[Pose2D], ref: list[Pose2D], tf: TfBuffer, odometry_topic: bool,
+                      frames: FramesConfig) -> tuple[PoseSeries | None, PoseSeries | None, list[str]]:
+    """The odometry and reference poses of base_link a reader collected (:func:`base_pose_series`); without an
+    odometry topic, the odometry from TF (:func:`tf_odometry`). And the notes for the user."""
+    notes: list[str] = []
+    if not odometry_topic:
+        odom, note = tf_odometry(tf, frames.odom, frames.base_link)
+        notes += [note] if note else []
+    return base_pose_series(odom, tf, frames.base_link), base_pose_series(ref, tf, frames.base_link), notes
 
 
 def _planar_affine(tf: TfBuffer, base: str, frame: str, stamp_ns: int, assume_identity: bool) -> FloatArray:
@@ -229,10 +246,9 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
                 ref.append(rec)
             elif item.role is Role.COLORS and isinstance(rec, BeamColors):
                 colors[rec.stamp_ns] = rec
-        warnings = list(reader.warnings)
-        if reader.roles.topic(Role.ODOMETRY) is None:
-            odom, note = tf_odometry(tf, config.frames.odom, config.frames.base_link)
-            warnings += [note] if note else []
+        odometry, reference, notes = robot_pose_series(odom, ref, tf, reader.roles.topic(Role.ODOMETRY) is not None,
+                                                       config.frames)
+        warnings = list(reader.warnings) + notes
         camera = reader.roles.topic(Role.IMAGE) is not None and reader.roles.topic(Role.CAMERA_INFO) is not None
     if not scans:
         raise LogContentError("scan topic has no messages", path=path, topic=scan_topic)
@@ -263,8 +279,7 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
         aligned, valid = camera_beam_colors(path, scans, tf, config)
         if not any(v.any() for v in valid):
             aligned, valid = None, None
-    return Recording(str(path), scan_set, base_pose_series(odom, tf, base), base_pose_series(ref, tf, base),
-                     aligned, warnings, valid)
+    return Recording(str(path), scan_set, odometry, reference, aligned, warnings, valid)
 
 
 def _aligned_colors(colors: BeamColors | None, beams: int) -> npt.NDArray[np.uint8]:

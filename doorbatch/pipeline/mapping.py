@@ -73,7 +73,7 @@ def reference_coverage(rec: Recording, max_gap_s: float) -> float:
     return float(np.mean(valid))
 
 
-def choose_pose_source(recordings: Sequence[Recording], wanted: str, config: DoorbatchConfig | None = None
+def choose_pose_source(recordings: Sequence[Recording], wanted: str, config: DoorbatchConfig
                        ) -> tuple[str, list[str]]:
     """The pose source and why another than asked for: the one asked for, or (``auto``) ``reference`` when
     every log has a reference that covers at least ``mapping.min_reference_coverage`` of its scans, else
@@ -83,7 +83,7 @@ def choose_pose_source(recordings: Sequence[Recording], wanted: str, config: Doo
     Raises:
         PipelineError: a log lacks what the source needs, or has neither a reference nor odometry.
     """
-    mc = (config or DoorbatchConfig()).mapping
+    mc = config.mapping
     for rec in recordings:
         if rec.reference is None and rec.odometry is None and wanted in ("auto", "odometry", "reference"):
             raise PipelineError(f"{rec.path}: no usable pose source: no reference pose topic and no odometry "
@@ -91,13 +91,11 @@ def choose_pose_source(recordings: Sequence[Recording], wanted: str, config: Doo
     if wanted == "auto":
         if any(r.reference is None for r in recordings):
             return "scanmatch", []
-        sparse = [(r, reference_coverage(r, mc.max_pose_gap_s)) for r in recordings]
-        sparse = [(r, c) for r, c in sparse if c < mc.min_reference_coverage]
-        if not sparse:
-            return "reference", []
+        coverage = [(r, reference_coverage(r, mc.max_pose_gap_s)) for r in recordings]
         why = [f"{r.path}: the reference poses cover {c:.0%} of the scans (< mapping.min_reference_coverage "
-               f"{mc.min_reference_coverage:.0%}); poses from scan matching instead" for r, c in sparse]
-        return "scanmatch", why
+               f"{mc.min_reference_coverage:.0%}); poses from scan matching instead"
+               for r, c in coverage if c < mc.min_reference_coverage]
+        return ("scanmatch", why) if why else ("reference", [])
     need = {"reference": "reference", "odometry": "odometry"}.get(wanted)
     for rec in recordings:
         if need and getattr(rec, need) is None:

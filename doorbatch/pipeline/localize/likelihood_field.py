@@ -324,7 +324,7 @@ def endpoint_distances(dist_field: DistanceField, pose: npt.ArrayLike, points_ba
     if dist_field.torch_device is not None:
         from doorbatch.pipeline.localize import torch_field
 
-        return torch_field.endpoint_distances(dist_field, dist_field.torch_device, pose, points_base)
+        return torch_field.endpoint_distances(dist_field, pose, points_base)
     n, b = np.asarray(pose).reshape(-1, 3).shape[0], np.asarray(points_base).reshape(-1, 2).shape[0]
     out = np.empty((n, b), dtype=np.float32)
     for part, grid, pts, scratch in _chunks(dist_field, pose, points_base, chunk):
@@ -341,8 +341,8 @@ def field_log_likelihood(dist_field: DistanceField, pose: npt.ArrayLike, points_
     if dist_field.torch_device is not None:
         from doorbatch.pipeline.localize import torch_field
 
-        return torch_field.field_log_likelihood(dist_field, dist_field.torch_device, pose, points_base, z_hit, z_rand,
-                                                sigma_hit, max_range, combination)
+        return torch_field.field_log_likelihood(dist_field, pose, points_base, z_hit, z_rand, sigma_hit, max_range,
+                                                combination)
     n, b = np.asarray(pose).reshape(-1, 3).shape[0], np.asarray(points_base).reshape(-1, 2).shape[0]
     out = np.zeros(n)
     if b == 0:

@@ -66,6 +66,7 @@ class _DeviceField:
 
 
 def _device_field(dist_field: DistanceField, device: str) -> _DeviceField:
+    """The field's copy on ``device``, made on first use and kept in ``dist_field.device_cache``."""
     cached = dist_field.device_cache.get(device)
     if isinstance(cached, _DeviceField):
         return cached
@@ -99,20 +100,24 @@ def _block_distances(field: _DeviceField, grid: Any, cells: Any) -> Any:
     return field.padded[flat]
 
 
-def _blocks(dist_field: DistanceField, device: str, pose: npt.ArrayLike, points_base: npt.ArrayLike
+def _blocks(dist_field: DistanceField, pose: npt.ArrayLike, points_base: npt.ArrayLike
             ) -> tuple[_DeviceField, Any, Any]:
+    """The field on its device, the poses in grid units (N, 3, float64) and the end points in cell units (B, 2,
+    float32) there."""
     torch = _torch()
+    device = dist_field.torch_device
+    if device is None:
+        raise ValueError("the distance field has no torch_device")
     grid = dist_field.to_grid(np.asarray(pose, dtype=np.float64).reshape(-1, 3))
     cells = (np.asarray(points_base, dtype=np.float64).reshape(-1, 2) / dist_field.resolution_m).astype(np.float32)
     return (_device_field(dist_field, device), torch.from_numpy(grid).to(device),
             torch.from_numpy(cells).to(device))
 
 
-def endpoint_distances(dist_field: DistanceField, device: str, pose: npt.ArrayLike, points_base: npt.ArrayLike
-                       ) -> Float32Array:
-    """(N, B) float32 field distances of every beam end point of every particle, computed on ``device``
-    (:func:`~.likelihood_field.endpoint_distances`)."""
-    field, grid, cells = _blocks(dist_field, device, pose, points_base)
+def endpoint_distances(dist_field: DistanceField, pose: npt.ArrayLike, points_base: npt.ArrayLike) -> Float32Array:
+    """(N, B) float32 field distances of every beam end point of every particle, computed on the field's
+    ``torch_device`` (:func:`~.likelihood_field.endpoint_distances`)."""
+    field, grid, cells = _blocks(dist_field, pose, points_base)
     out = np.empty((grid.shape[0], cells.shape[0]), dtype=np.float32)
     for start in range(0, grid.shape[0], BLOCK_PARTICLES):
         stop = min(start + BLOCK_PARTICLES, grid.shape[0])
@@ -120,16 +125,16 @@ def endpoint_distances(dist_field: DistanceField, device: str, pose: npt.ArrayLi
     return out
 
 
-def field_log_likelihood(dist_field: DistanceField, device: str, pose: npt.ArrayLike, points_base: npt.ArrayLike,
-                         z_hit: float, z_rand: float, sigma_hit: float, max_range: float,
-                         combination: BeamCombination) -> FloatArray:
-    """log p(z | x) (N,) of each particle, fused on ``device`` (:func:`~.likelihood_field.field_log_likelihood`):
-    pz = z_hit·exp(−d²/2σ²) + z_rand/max_range per beam in float32, then log(1 + Σ pz³) (AMCL) or Σ log pz
-    (PRODUCT) summed in float64."""
+def field_log_likelihood(dist_field: DistanceField, pose: npt.ArrayLike, points_base: npt.ArrayLike, z_hit: float,
+                         z_rand: float, sigma_hit: float, max_range: float, combination: BeamCombination
+                         ) -> FloatArray:
+    """log p(z | x) (N,) of each particle, fused on the field's ``torch_device``
+    (:func:`~.likelihood_field.field_log_likelihood`): pz = z_hit·exp(−d²/2σ²) + z_rand/max_range per beam in
+    float32, then log(1 + Σ pz³) (AMCL) or Σ log pz (PRODUCT) summed in float64."""
     from doorbatch.pipeline.localize.likelihood_field import BeamCombination
 
     torch = _torch()
-    field, grid, cells = _blocks(dist_field, device, pose, points_base)
+    field, grid, cells = _blocks(dist_field, pose, points_base)
     out = np.zeros(grid.shape[0])
     if cells.shape[0] == 0:
         return out
