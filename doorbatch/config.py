@@ -365,6 +365,11 @@ class LocalizeConfig(Section):
     alpha2: float = Field(0.0025, ge=0.0)  # rotation noise from translation
     alpha3: float = Field(0.015, ge=0.0)  # translation noise from translation
     alpha4: float = Field(0.0005, ge=0.0)  # translation noise from rotation
+    # Nav2 robot_model_type: "differential" (the model above) or "omnidirectional" (Nav2's OmniMotionModel, for
+    # holonomic bases: translation, rotation and a sideways strafe; motion_model.sample_motion_model_omni).
+    robot_model_type: Literal["differential", "omnidirectional"] = "differential"
+    # Strafe noise from translation (omnidirectional only). Nav2's defaults give it alpha3's value; so do we.
+    alpha5: float = Field(0.015, ge=0.0)
     # Likelihood-field endpoint model (Nav2: laser_model_type likelihood_field).
     # z_rand 0.2 (Nav2 0.05... 0.5): people and doors the map lacks are common; a heavier floor keeps a few
     # unexplained beams from dominating the product of the beams.
@@ -408,6 +413,9 @@ class LocalizeConfig(Section):
     kld_bin_yaw_deg: float = Field(10.0, gt=0.0)
     # Resample with low-variance sampling when Neff < resample_neff_ratio * N (1.0: every update).
     resample_neff_ratio: float = Field(0.5, gt=0.0, le=1.0)
+    # ... and only on every resample_interval-th update (Nav2 resample_interval; Nav2 has no Neff test, i.e. ratio
+    # 1.0). Random-particle recovery injects only when resampling, as in Nav2.
+    resample_interval: int = Field(1, ge=1)
     # Random-particle recovery (Nav2 recovery_alpha_slow/fast; 0 disables).
     recovery_alpha_slow: float = Field(0.0, ge=0.0, le=1.0)
     recovery_alpha_fast: float = Field(0.0, ge=0.0, le=1.0)

@@ -12,9 +12,9 @@ One filter update, as nav2_amcl ``AmclNode::laserReceived`` composes it:
    applied in tempered stages with resampling in between, and resampled copies are jittered by the region
    (:mod:`.smoothing`, :func:`tempered_weighting`; not in nav2_amcl).
 4. ``resample_if_needed``: KLD-adaptive low-variance resampling with random-particle injection
-   (:mod:`.resampling`) when Neff < ``resample_neff_ratio``·N (AMCL resamples every ``resample_interval``
-   updates instead; ratio 1.0 resamples on every update), and whenever recovery asks for random particles
-   (else a kidnapped filter whose particles are all equally wrong would never inject any).
+   (:mod:`.resampling`) on every ``resample_interval``-th update (AMCL's rule), when Neff <
+   ``resample_neff_ratio``·N (not in AMCL; ratio 1.0 resamples on every due update), and whenever recovery asks
+   for random particles (else a kidnapped filter whose particles are all equally wrong would never inject any).
 
 The first update after initialization weighs and resamples without motion (AMCL's ``pf_init_``).
 
@@ -53,7 +53,7 @@ from doorbatch.pipeline.localize.likelihood_field import (
     select_beams,
     skip_unexplained,
 )
-from doorbatch.pipeline.localize.motion_model import sample_motion_model_odometry
+from doorbatch.pipeline.localize.motion_model import sample_motion_model_odometry, sample_motion_model_omni
 from doorbatch.pipeline.localize.particles import ParticleSet
 from doorbatch.pipeline.localize.resampling import RecoveryState, kld_resample, low_variance_resample
 from doorbatch.pipeline.localize.smoothing import (
@@ -85,12 +85,14 @@ class MclState:
         recovery: AMCL's w_slow / w_fast.
         odom_at_update: odometry pose (3,) at the last filter update; None before the first.
         global_start: the run started from a uniform cloud (``--init global``); see :func:`spread_cloud_config`.
+        updates: filter updates so far (resampling is due on every ``resample_interval``-th, as Nav2 counts).
     """
 
     particles: ParticleSet
     recovery: RecoveryState = dataclasses.field(default_factory=RecoveryState)
     odom_at_update: FloatArray | None = None
     global_start: bool = False
+    updates: int = 0
 
 
 def spread_cloud_config(config: LocalizeConfig, global_start: bool) -> LocalizeConfig:
@@ -121,9 +123,6 @@ class StepDiagnostics:
     log_avg_weight: float  # log w_avg of the weighting (nan without update)
 
 
-def alphas(config: LocalizeConfig) -> tuple[float, float, float, float]:
-    """(alpha1, alpha2, alpha3, alpha4)."""
-    return config.alpha1, config.alpha2, config.alpha3, config.alpha4
 
 
 def update_thresholds_met(odom_prev: npt.ArrayLike, odom_now: npt.ArrayLike, config: LocalizeConfig) -> bool:
@@ -137,8 +136,14 @@ def update_thresholds_met(odom_prev: npt.ArrayLike, odom_now: npt.ArrayLike, con
 
 def predict(particles: ParticleSet, odom_prev: npt.ArrayLike, odom_now: npt.ArrayLike, config: LocalizeConfig,
             rng: np.random.Generator) -> ParticleSet:
-    """Particles moved by the odometry motion model (weights and door arrays unchanged)."""
-    pose = sample_motion_model_odometry(particles.pose, odom_prev, odom_now, alphas(config), rng)
+    """Particles moved by the odometry motion model of ``robot_model_type`` (weights and door arrays unchanged)."""
+    c = config
+    if c.robot_model_type == "omnidirectional":
+        pose = sample_motion_model_omni(particles.pose, odom_prev, odom_now,
+                                        (c.alpha1, c.alpha2, c.alpha3, c.alpha4, c.alpha5), rng)
+    else:
+        pose = sample_motion_model_odometry(particles.pose, odom_prev, odom_now,
+                                            (c.alpha1, c.alpha2, c.alpha3, c.alpha4), rng)
     return replace(particles, pose=pose)
 
 
@@ -332,9 +337,12 @@ def finish_step(state: MclState, particles: ParticleSet, log_avg_weight: float, 
     recovery = state.recovery.update(log_avg_weight, config.recovery_alpha_slow, config.recovery_alpha_fast)
     fraction = recovery.random_fraction() if free is not None else 0.0
     neff = particles.neff()
-    particles, recovery, n_random = resample_if_needed(particles, config, rng, recovery, free, bandwidth)
+    updates = state.updates + 1
+    n_random = -1
+    if updates % config.resample_interval == 0:
+        particles, recovery, n_random = resample_if_needed(particles, config, rng, recovery, free, bandwidth)
     diag = StepDiagnostics(True, n_random >= 0, neff, len(particles), fraction, max(n_random, 0), log_avg_weight)
-    return MclState(particles, recovery, odom.copy(), state.global_start), diag
+    return MclState(particles, recovery, odom.copy(), state.global_start, updates), diag
 
 
 def initial_particles(mean: npt.ArrayLike, config: LocalizeConfig, rng: np.random.Generator,

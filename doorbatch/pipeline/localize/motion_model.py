@@ -12,6 +12,15 @@ own noisy copy of it,
 where, as in nav2_amcl ``DifferentialMotionModel::odometryUpdate``, the rotation terms of the variances are
 r = min(|δrot|, π − |δrot|), so that driving backwards (δrot1 ≈ ±π) costs no more rotation noise than
 driving forwards. The α's are variances per unit² (the book's and AMCL's convention, not standard deviations).
+
+For holonomic bases, :func:`sample_motion_model_omni` is Nav2 AMCL's ``OmniMotionModel``: the increment is a
+translation δtrans along the bearing β = atan2(Δy, Δx) − θ (odom frame) and a rotation δrot, each particle
+drawing a noisy translation, rotation and a sideways "strafe" along its own bearing θ_i + β,
+
+    δ̂trans = δtrans + ε_t,  ε_t ~ N(0, α3 δtrans² + α4 δrot²)
+    δ̂rot   = δrot + ε_r,    ε_r ~ N(0, α1 δrot² + α2 δtrans²)
+    δ̂strafe = ε_s,          ε_s ~ N(0, α4 δrot² + α5 δtrans²)
+    x ← x + δ̂trans cos b + δ̂strafe sin b,  y ← y + δ̂trans sin b − δ̂strafe cos b,  θ ← θ + δ̂rot,  b = θ + β.
 """
 
 from __future__ import annotations
@@ -34,6 +43,16 @@ def increment_noise_std(rot1: float, trans: float, rot2: float, alphas: Sequence
     return float(np.sqrt(var_rot1)), float(np.sqrt(var_trans)), float(np.sqrt(var_rot2))
 
 
+def _checked_poses(pose: npt.ArrayLike, alphas: Sequence[float], n_alphas: int) -> FloatArray:
+    """``pose`` as an (N, 3) float array, once it and the number of alphas are what a model needs."""
+    p = np.asarray(pose, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 3:
+        raise ValueError(f"pose must be (N, 3), got shape {p.shape}")
+    if len(alphas) != n_alphas:
+        raise ValueError(f"need {('four', 'five')[n_alphas - 4]} alphas (alpha1..alpha{n_alphas}), got {len(alphas)}")
+    return p
+
+
 def sample_motion_model_odometry(pose: npt.ArrayLike, odom_prev: npt.ArrayLike, odom_now: npt.ArrayLike,
                                  alphas: Sequence[float], rng: np.random.Generator) -> FloatArray:
     """Move every particle by a noisy copy of the odometry increment odom_prev → odom_now.
@@ -52,11 +71,7 @@ def sample_motion_model_odometry(pose: npt.ArrayLike, odom_prev: npt.ArrayLike, 
     Raises:
         ValueError: ``pose`` is not (N, 3) or there are not four alphas.
     """
-    p = np.asarray(pose, dtype=np.float64)
-    if p.ndim != 2 or p.shape[1] != 3:
-        raise ValueError(f"pose must be (N, 3), got shape {p.shape}")
-    if len(alphas) != 4:
-        raise ValueError(f"need four alphas (alpha1..alpha4), got {len(alphas)}")
+    p = _checked_poses(pose, alphas, 4)
     odo = np.stack([np.asarray(odom_prev, dtype=np.float64), np.asarray(odom_now, dtype=np.float64)])
     inc = odometry_increments(odo[:, 0], odo[:, 1], odo[:, 2], min_trans_m=MIN_TRANS_FOR_BEARING_M)
     rot1, trans, rot2 = float(inc.rot1[0]), float(inc.trans[0]), float(inc.rot2[0])
@@ -70,4 +85,32 @@ def sample_motion_model_odometry(pose: npt.ArrayLike, odom_prev: npt.ArrayLike, 
     out[:, 0] = p[:, 0] + trans_hat * np.cos(heading)
     out[:, 1] = p[:, 1] + trans_hat * np.sin(heading)
     out[:, 2] = wrap_angle(heading + rot2_hat)
+    return out
+
+
+def sample_motion_model_omni(pose: npt.ArrayLike, odom_prev: npt.ArrayLike, odom_now: npt.ArrayLike,
+                             alphas: Sequence[float], rng: np.random.Generator) -> FloatArray:
+    """Move every particle by a noisy copy of the odometry increment, Nav2 AMCL's omnidirectional model.
+
+    Arguments, result and errors as :func:`sample_motion_model_odometry`, except that ``alphas`` are five:
+    Nav2's ``alpha1``..``alpha5`` in the roles the module docstring gives them (α5: strafe noise from translation).
+    """
+    p = _checked_poses(pose, alphas, 5)
+    a1, a2, a3, a4, a5 = (float(a) for a in alphas)
+    prev = np.asarray(odom_prev, dtype=np.float64).reshape(3)
+    now = np.asarray(odom_now, dtype=np.float64).reshape(3)
+    dx, dy = now[0] - prev[0], now[1] - prev[1]
+    trans = float(np.hypot(dx, dy))
+    rot = float(wrap_angle(now[2] - prev[2]))
+    sd = np.sqrt([a3 * trans**2 + a4 * rot**2, a1 * rot**2 + a2 * trans**2, a4 * rot**2 + a5 * trans**2])
+    eps = rng.standard_normal((p.shape[0], 3)) * sd
+    trans_hat = trans + eps[:, 0]
+    strafe_hat = eps[:, 2]
+    # At a standstill atan2(0, 0) = 0 gives β = −θ_prev; the translation is then noise only, in any direction.
+    bearing = p[:, 2] + float(wrap_angle(np.arctan2(dy, dx) - prev[2]))
+    c, s = np.cos(bearing), np.sin(bearing)
+    out = np.empty_like(p)
+    out[:, 0] = p[:, 0] + trans_hat * c + strafe_hat * s
+    out[:, 1] = p[:, 1] + trans_hat * s - strafe_hat * c
+    out[:, 2] = wrap_angle(p[:, 2] + rot + eps[:, 1])
     return out

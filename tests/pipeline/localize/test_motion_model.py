@@ -9,7 +9,11 @@ import pytest
 
 from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.geometry.se2 import compose, relative
-from doorbatch.pipeline.localize.motion_model import increment_noise_std, sample_motion_model_odometry
+from doorbatch.pipeline.localize.motion_model import (
+    increment_noise_std,
+    sample_motion_model_odometry,
+    sample_motion_model_omni,
+)
 
 ALPHAS = (0.02, 0.01, 0.03, 0.01)
 
@@ -74,3 +78,50 @@ def test_bad_shapes_are_rejected() -> None:
         sample_motion_model_odometry(np.zeros(3), (0, 0, 0), (1, 0, 0), ALPHAS, np.random.default_rng())
     with pytest.raises(ValueError, match="four alphas"):
         sample_motion_model_odometry(np.zeros((1, 3)), (0, 0, 0), (1, 0, 0), (0.1, 0.1), np.random.default_rng())
+
+
+OMNI_ALPHAS = (0.02, 0.01, 0.03, 0.015, 0.04)
+
+
+def test_omni_model_without_noise_moves_particles_by_the_increment_in_their_own_frame() -> None:
+    rng = np.random.default_rng(5)
+    pose = np.column_stack([rng.uniform(-5, 5, (50, 2)), rng.uniform(-np.pi, np.pi, 50)])
+    prev, now = np.array([3.0, -1.0, 2.5]), np.array([2.6, -1.3, -2.9])  # sideways and backwards, turning
+    out = sample_motion_model_omni(pose, prev, now, (0.0,) * 5, rng)
+    expected = compose(pose, relative(prev, now))
+    assert np.allclose(out[:, :2], expected[:, :2], atol=1e-12)
+    assert np.allclose(wrap_angle(out[:, 2] - expected[:, 2]), 0.0, atol=1e-12)
+
+
+def test_omni_samples_have_nav2s_translation_rotation_and_strafe_variances() -> None:
+    """Particles at the origin heading 0; the odometry moved 0.8 m at bearing 0.6 rad off its heading and
+    turned 0.4 rad: the draws along and across that bearing and in yaw have Nav2 OmniMotionModel's spreads."""
+    trans, bearing, rot = 0.8, 0.6, 0.4
+    prev = np.array([1.0, 2.0, 0.3])
+    now = prev + np.array([trans * math.cos(prev[2] + bearing), trans * math.sin(prev[2] + bearing), rot])
+    n = 200_000
+    out = sample_motion_model_omni(np.zeros((n, 3)), prev, now, OMNI_ALPHAS, np.random.default_rng(6))
+    along = out[:, 0] * math.cos(bearing) + out[:, 1] * math.sin(bearing)
+    across = out[:, 0] * math.sin(bearing) - out[:, 1] * math.cos(bearing)
+    a1, a2, a3, a4, a5 = OMNI_ALPHAS
+    expected_sd = (math.sqrt(a3 * trans**2 + a4 * rot**2), math.sqrt(a4 * rot**2 + a5 * trans**2),
+                   math.sqrt(a1 * rot**2 + a2 * trans**2))
+    for sample, mean, sd in zip((along, across, out[:, 2]), (trans, 0.0, rot), expected_sd, strict=True):
+        assert abs(sample.mean() - mean) < 5 * sd / math.sqrt(n)
+        assert sample.std() == pytest.approx(sd, rel=0.01)
+
+
+def test_a_sideways_step_costs_the_omni_model_no_turn() -> None:
+    """A holonomic base strafing 0.5 m: the differential model reads a quarter turn there and a quarter turn
+    back (rotation noise α1·(π/2)² twice), the omnidirectional one only the α2·trans² of the step."""
+    n = 100_000
+    prev, now = (0.0, 0.0, 0.0), (0.0, 0.5, 0.0)
+    omni = sample_motion_model_omni(np.zeros((n, 3)), prev, now, OMNI_ALPHAS, np.random.default_rng(7))
+    diff = sample_motion_model_odometry(np.zeros((n, 3)), prev, now, OMNI_ALPHAS[:4], np.random.default_rng(7))
+    assert omni[:, 2].std() == pytest.approx(math.sqrt(OMNI_ALPHAS[1]) * 0.5, rel=0.02)
+    assert diff[:, 2].std() > 3 * omni[:, 2].std()
+
+
+def test_the_omni_model_needs_five_alphas() -> None:
+    with pytest.raises(ValueError, match="five alphas"):
+        sample_motion_model_omni(np.zeros((1, 3)), (0, 0, 0), (1, 0, 0), ALPHAS, np.random.default_rng())
