@@ -19,6 +19,7 @@ from typing import Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from doorbatch.amcl_params import is_ros2_parameter_file, translate_ros2_parameter_file
 from doorbatch.errors import ConfigError
 
 
@@ -799,6 +800,9 @@ def load_config(
 ) -> DoorbatchConfig:
     """Resolve the configuration: defaults < ``config_file`` < ``extra`` < ``overrides``.
 
+    A ``config_file`` that is a ROS 2 parameter file (a Nav2 ``nav2_params.yaml``) contributes its ``amcl`` node's
+    parameters (:mod:`doorbatch.amcl_params`).
+
     Raises:
         ConfigError: unreadable file, bad YAML, unknown key (with the closest valid one), wrong type.
     """
@@ -807,6 +811,9 @@ def load_config(
     if config_file is not None:
         tree = read_yaml_mapping(config_file)
         source = str(config_file)
+        if is_ros2_parameter_file(tree):  # a Nav2 params file: its amcl node, and any doorbatch sections over it
+            own = {k: v for k, v in tree.items() if k in DoorbatchConfig.model_fields}
+            tree = deep_merge(translate_ros2_parameter_file(tree, source).tree, own)
     if extra:
         tree = deep_merge(tree, extra)
     for text in overrides:

@@ -9,7 +9,10 @@ Usage::
 
     doorbatch map datasets/sample/logs/map_pass*.mcap -o /tmp/lm/map
     python scripts/localize_tracking.py --map /tmp/lm/map --logs datasets/sample/logs [--seeds 0 1] \
-        [--methods mcl rbpf] [--set localize.sigma_hit=0.1 ...] [--out /tmp/lm/tracking] [--workers 2]
+        [--methods mcl rbpf] [--config FILE] [--set localize.sigma_hit=0.1 ...] [--out /tmp/lm/tracking] \
+        [--workers 2]
+
+``--config`` is the base config of every run, as ``doorbatch --config`` takes it (a Nav2 parameter file too).
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ def main() -> None:
     ap.add_argument("--cases", nargs="+", default=["closed", "open", "partial"])
     ap.add_argument("--methods", nargs="+", default=["mcl", "rbpf"])
     ap.add_argument("--seeds", nargs="+", type=int, default=[0])
+    ap.add_argument("--config", type=Path, default=None, help="config file (YAML, or a Nav2 parameter file)")
     ap.add_argument("--set", dest="overrides", action="append", default=[], help="config override key=value")
     ap.add_argument("--out", type=Path, default=Path("/tmp/doorbatch-tracking"), help="report directory")
     ap.add_argument("--workers", type=int, default=1)
@@ -41,7 +45,7 @@ def main() -> None:
     spec = ExperimentSpec(name="tracking", map=map_source, init="reference", methods=tuple(args.methods),
                           logs=tuple((args.logs / f"loc_{c}.mcap").resolve() for c in args.cases),
                           seeds=tuple(args.seeds), set=tuple(args.overrides))
-    print(stdout_table(run_experiment(spec, args.out, load_config(), workers=args.workers)))
+    print(stdout_table(run_experiment(spec, args.out, load_config(args.config), workers=args.workers)))
 
 
 if __name__ == "__main__":

@@ -80,6 +80,23 @@ def test_the_torch_backend_gives_numpys_outputs(sample_map: Path, tmp_path: Path
         assert (tmp_path / "numpy" / name).read_bytes() == (tmp_path / "torch" / name).read_bytes(), name
 
 
+def test_a_nav2_params_file_runs_mcl_as_amcl_would(sample_map: Path, tmp_path: Path) -> None:
+    """A user's nav2_params.yaml as --config: MCL takes its amcl node (what it leaves out at nav2_amcl's defaults:
+    pf_err 0.05, z_hit 0.5, update_min_d 0.25, AMCL's likelihood_field) and tracks the sample."""
+    params = tmp_path / "nav2_params.yaml"
+    params.write_text("amcl:\n  ros__parameters:\n    base_frame_id: base_link\n    alpha1: 0.015\n"
+                      "    alpha2: 0.0025\n    alpha3: 0.015\n    alpha4: 0.0005\n    max_particles: 1000\n"
+                      "bt_navigator:\n  ros__parameters:\n    global_frame: map\n")
+    log = SAMPLE_LOGS / "loc_open.mcap"
+    run = tmp_path / "amcl"
+    assert main(["localize", str(log), "--map", str(sample_map), "-o", str(run), "--method", "mcl",
+                 "--config", str(params), "-q"]) == 0
+    lc = json.loads((run / "manifest.json").read_text())["config"]["localize"]
+    assert (lc["max_particles"], lc["pf_err"], lc["z_hit"], lc["update_min_d"]) == (1000, 0.05, 0.5, 0.25)
+    assert lc["beam_combination"] == "amcl" and lc["do_beamskip"] is False and lc["resample_neff_ratio"] == 1.0
+    assert _errors(run, log).mean() < 0.2  # tracks (0.07-0.09 m over seeds 0-2; doorbatch's defaults 0.02 m)
+
+
 def test_runs_on_a_plain_map_server_map_without_doors(sample_map: Path, tmp_path: Path) -> None:
     plain = tmp_path / "plain"
     plain.mkdir()
