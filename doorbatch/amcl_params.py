@@ -17,7 +17,7 @@ becomes the ``localize`` key of the same name, and the ones the file leaves out 
 - An initial pose (``set_initial_pose``) is not a config value here: the warning names the ``--init`` to pass.
 
 Other top-level keys that are doorbatch sections are kept and merged over the translation. Only ROS 2 files:
-ROS 1 amcl's names differ (``odom_alpha1``, ``laser_z_hit``, ``kld_err``) and are not translated.
+ROS 1 amcl's names differ (``odom_alpha1``, ``laser_z_hit``, ``kld_err``); such a file is a clear error.
 """
 
 from __future__ import annotations
@@ -71,6 +71,28 @@ class AmclTranslation:
     tree: dict[str, Any]
     warnings: list[str] = field(default_factory=list)
     ignored: list[str] = field(default_factory=list)  # known parameters without effect offline
+
+
+# Parameter names only ROS 1 amcl has (Nav2 renamed them): a file with them is a ROS 1 amcl configuration.
+_ROS1_ONLY = frozenset({"odom_model_type", "odom_alpha1", "odom_alpha2", "odom_alpha3", "odom_alpha4", "odom_alpha5",
+                        "laser_z_hit", "laser_z_rand", "laser_sigma_hit", "laser_max_beams", "kld_err", "kld_z"})
+
+
+def refuse_ros1_amcl_file(tree: Mapping[str, Any], source: str) -> None:
+    """Raise a clear error for a ROS 1 amcl parameter file (flat, or under an ``amcl`` key).
+
+    Not translated: ROS 1's default ``odom_model_type: diff`` draws its noise with the α-sums as standard deviations
+    (not variances), which no setting of Nav2's model reproduces.
+
+    Raises:
+        ConfigError: the tree holds ROS 1 amcl parameter names.
+    """
+    inner = tree.get(AMCL_NODE)
+    names = set(tree) | (set(inner) if isinstance(inner, Mapping) else set())
+    found = sorted(names & _ROS1_ONLY)
+    if found:
+        raise ConfigError(f"{source}: a ROS 1 amcl parameter file ({', '.join(found[:3])}, ...); doorbatch reads "
+                          "Nav2 (ROS 2) amcl files, whose names are the localize section's (alpha1, z_hit, pf_err)")
 
 
 def is_ros2_parameter_file(tree: Mapping[str, Any]) -> bool:

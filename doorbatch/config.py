@@ -19,7 +19,7 @@ from typing import Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from doorbatch.amcl_params import is_ros2_parameter_file, translate_ros2_parameter_file
+from doorbatch.amcl_params import is_ros2_parameter_file, refuse_ros1_amcl_file, translate_ros2_parameter_file
 from doorbatch.errors import ConfigError
 
 
@@ -814,6 +814,8 @@ def load_config(
         if is_ros2_parameter_file(tree):  # a Nav2 params file: its amcl node, and any doorbatch sections over it
             own = {k: v for k, v in tree.items() if k in DoorbatchConfig.model_fields}
             tree = deep_merge(translate_ros2_parameter_file(tree, source).tree, own)
+        else:
+            refuse_ros1_amcl_file(tree, source)
     if extra:
         tree = deep_merge(tree, extra)
     for text in overrides:
