@@ -1,7 +1,7 @@
 """MCAP logs through the ``mcap`` library; ROS 2 CDR and ROS 1 payloads deserialized by rosbags.
 
-Each channel's schema (``ros2msg`` or ``ros1msg`` text) is parsed with rosbags into a typestore of the
-reader's own; channels whose encoding is not ROS (json, protobuf, ...) are listed but not decoded.
+Each channel's schema (``ros2msg`` or ``ros1msg`` text, or ``ros2idl``) is parsed with rosbags into a typestore of
+the reader's own; channels whose encoding is not ROS (json, protobuf, ...) are listed but not decoded.
 """
 
 from __future__ import annotations
@@ -15,13 +15,13 @@ from mcap.exceptions import McapError
 from mcap.reader import McapReader, NonSeekingReader, make_reader
 from mcap.records import Channel, Message, Schema
 from mcap.stream_reader import StreamReader
-from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
 
 from doorbatch.errors import LogReadError
 from doorbatch.io.reader import LogReader, RawMessage
 from doorbatch.io.roles import TopicInfo
-from doorbatch.io.typestore import normalize_msgtype, ros1_typestore, ros2_typestore
+from doorbatch.io.typestore import normalize_msgtype, ros1_typestore, ros2_typestore, types_from_schema
 
 log = logging.getLogger(__name__)
 
@@ -60,7 +60,7 @@ class McapLogReader(LogReader):
             name = normalize_msgtype(schema.name) if schema else ""
             if channel.message_encoding in _ROS_ENCODINGS and schema is not None:
                 ros1 = _ROS_ENCODINGS[channel.message_encoding]
-                self._register_schema(ros1, name, schema.data.decode("utf-8", "replace"))
+                self._register_schema(ros1, name, schema.data.decode("utf-8", "replace"), schema.encoding)
                 self._msgtype[cid] = name
                 self._ros1[cid] = ros1
             prev = topics.get(channel.topic)
@@ -124,13 +124,13 @@ class McapLogReader(LogReader):
         self._file.seek(0)
         return schemas, channels, counts, start, end
 
-    def _register_schema(self, ros1: bool, name: str, text: str) -> None:
+    def _register_schema(self, ros1: bool, name: str, text: str, encoding: str) -> None:
         store = self._stores[ros1]
         if name in store.types:
             return
         base: Typestore = ros1_typestore() if ros1 else ros2_typestore()
         if text.strip():
-            types = get_types_from_msg(text, name)
+            types = types_from_schema(text, name, encoding)
         elif name in base.fielddefs:  # schema-less channel of a well-known type
             types = {k: v for k, v in base.fielddefs.items() if k == name or k.split("/")[0] != ""}
         else:

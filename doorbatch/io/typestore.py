@@ -9,7 +9,8 @@ from __future__ import annotations
 
 from functools import cache
 
-from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+from rosbags.interfaces.typing import Typesdict
+from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
 _VISION_ROS2 = {
@@ -71,3 +72,19 @@ def normalize_msgtype(name: str) -> str:
     if len(parts) == 2:
         return f"{parts[0]}/msg/{parts[1]}"
     return name.strip()
+
+
+# MCAP schema encodings whose text is OMG IDL (rosbag2 writes ros2idl for types defined in .idl files).
+IDL_SCHEMA_ENCODINGS = frozenset({"ros2idl", "omgidl"})
+_IDL_SEPARATOR = "=" * 80 + "\n"
+
+
+def types_from_schema(text: str, name: str, encoding: str) -> Typesdict:
+    """The types a channel's schema defines: ``.msg`` text (``ros2msg``, ``ros1msg``) or IDL (``ros2idl``:
+    the type's IDL and its dependencies', each after an ``IDL: pkg/msg/Type`` line between lines of 80 '=')."""
+    if encoding not in IDL_SCHEMA_ENCODINGS:
+        return get_types_from_msg(text, name)
+    types: Typesdict = {}
+    for part in (text.split(_IDL_SEPARATOR)[1:] if text.startswith(f"{_IDL_SEPARATOR}IDL: ") else [text]):
+        types.update(get_types_from_idl(part.split("\n", 1)[1] if part.startswith("IDL: ") else part))
+    return types

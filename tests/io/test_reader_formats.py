@@ -11,7 +11,7 @@ from mcap.writer import Writer as McapWriter
 
 from doorbatch.io.annotated_mcap import Annotation, write_annotated_mcap
 from doorbatch.io.convert import convert_log
-from doorbatch.io.reader import open_log
+from doorbatch.io.reader import RawMessage, open_log
 from doorbatch.io.typestore import ros1_typestore
 from doorbatch.records import Role, RoleMessage
 from tests.conftest import REPO, sample_messages
@@ -34,6 +34,25 @@ def _assert_same_records(a: list[RoleMessage], b: list[RoleMessage]) -> None:
                 np.testing.assert_array_equal(va, vb, err_msg=f"{x.topic}.{name}")
             else:
                 assert va == vb, f"{x.topic}.{name}: {va!r} != {vb!r}"
+
+
+def _rewrite_mcap(src: Path, path: Path, profile: str, schema: Callable[[RawMessage], tuple[str, str, str]]) -> None:
+    """Every message of ``src`` into the MCAP ``path``, with each topic's schema (name, encoding, text) from
+    ``schema`` and payloads serialized for ``profile`` (``ros1``, or ``ros2``: CDR)."""
+    with open_log(src) as reader, path.open("wb") as f:
+        writer = McapWriter(f)
+        writer.start(profile=profile, library="test")
+        channels: dict[str, int] = {}
+        for raw in reader.raw_messages():
+            if raw.topic not in channels:
+                name, encoding, text = schema(raw)
+                sid = writer.register_schema(name, encoding, text.encode())
+                channels[raw.topic] = writer.register_channel(raw.topic, "ros1" if profile == "ros1" else "cdr", sid)
+            store = raw.store
+            data = (store.serialize_ros1(raw.msg, raw.msgtype) if profile == "ros1"  # type: ignore[union-attr]
+                    else store.serialize_cdr(raw.msg, raw.msgtype))  # type: ignore[union-attr]
+            writer.add_message(channels[raw.topic], log_time=raw.log_time_ns, publish_time=raw.log_time_ns, data=data)
+        writer.finish()
 
 
 @pytest.mark.parametrize("fmt", ["bag", "rosbag2", "rosbag2-mcap"])
@@ -65,24 +84,46 @@ def test_ros1_messages_inside_mcap_read_like_ros2(write_log: Callable[..., Path]
     bag = write_log("src.bag", fmt="bag")
     store = ros1_typestore()
     path = tmp_path / "ros1.mcap"
-    from doorbatch.io.reader import open_log as _open
 
-    with _open(bag) as reader, path.open("wb") as f:
-        writer = McapWriter(f)
-        writer.start(profile="ros1", library="test")
-        channels: dict[str, int] = {}
-        for raw in reader.raw_messages():
-            if raw.topic not in channels:
-                text, _ = raw.store.generate_msgdef(raw.msgtype, ros_version=1)  # type: ignore[union-attr]
-                sid = writer.register_schema(raw.msgtype.replace("/msg/", "/"), "ros1msg", text.encode())
-                channels[raw.topic] = writer.register_channel(raw.topic, "ros1", sid)
-            data = raw.store.serialize_ros1(raw.msg, raw.msgtype)  # type: ignore[union-attr]
-            writer.add_message(channels[raw.topic], log_time=raw.log_time_ns, publish_time=raw.log_time_ns,
-                               data=data)
-        writer.finish()
+    def schema(raw: RawMessage) -> tuple[str, str, str]:
+        text, _ = raw.store.generate_msgdef(raw.msgtype, ros_version=1)  # type: ignore[union-attr]
+        return raw.msgtype.replace("/msg/", "/"), "ros1msg", text
+
+    _rewrite_mcap(bag, path, "ros1", schema)
     assert store is not None
     _, ref = _read(bag)
     _, records = _read(path)
+    _assert_same_records(records, ref)
+
+
+_SEP = "=" * 80 + "\n"
+# sensor_msgs/msg/LaserScan as rosbag2 writes a ros2idl schema: the type's IDL, then its dependencies'.
+LASERSCAN_ROS2IDL = (
+    f"{_SEP}IDL: sensor_msgs/msg/LaserScan\n"
+    "module sensor_msgs { module msg { struct LaserScan { std_msgs::msg::Header header; float angle_min;\n"
+    "  float angle_max; float angle_increment; float time_increment; float scan_time; float range_min;\n"
+    "  float range_max; sequence<float> ranges; sequence<float> intensities; }; }; };\n"
+    f"{_SEP}IDL: std_msgs/msg/Header\n"
+    "module std_msgs { module msg { struct Header { builtin_interfaces::msg::Time stamp; string frame_id; }; }; };\n"
+    f"{_SEP}IDL: builtin_interfaces/msg/Time\n"
+    "module builtin_interfaces { module msg { struct Time { int32 sec; uint32 nanosec; }; }; };\n"
+)
+
+
+def test_a_ros2idl_schema_reads_like_its_msg_text(write_log: Callable[..., Path], tmp_path: Path) -> None:
+    """rosbag2 and Foxglove write some channels' schemas as IDL (``ros2idl``) instead of .msg text."""
+    src = write_log("src.mcap")
+    path = tmp_path / "idl.mcap"
+
+    def schema(raw: RawMessage) -> tuple[str, str, str]:
+        if raw.msgtype == "sensor_msgs/msg/LaserScan":
+            return raw.msgtype, "ros2idl", LASERSCAN_ROS2IDL
+        return raw.msgtype, "ros2msg", raw.store.generate_msgdef(raw.msgtype)[0]  # type: ignore[union-attr]
+
+    _rewrite_mcap(src, path, "ros2", schema)
+    ref_roles, ref = _read(src)
+    roles, records = _read(path)
+    assert roles == ref_roles and Role.SCAN in roles
     _assert_same_records(records, ref)
 
 
