@@ -201,7 +201,8 @@ def map_cmd(ctx: Context, logs: tuple[Path, ...], output: Path, pose_source: str
               help="Run directory to write.")
 @click.option("--method", type=click.Choice(["rbpf", "mcl"]), default=None, help="Default: localize.method.")
 @click.option("--particles", type=int, default=None, help="Maximum (and global-init) particle count.")
-@click.option("--init", "init", default="reference", show_default=True, help="reference, global or X,Y,YAW.")
+@click.option("--init", "init", default="reference", show_default=True,
+              help="reference, global, X,Y,YAW, or a pose topic of LOG (/initialpose: its first message).")
 @common_options
 def localize_cmd(ctx: Context, log_path: Path, map_path: Path, output: Path, method: str | None,
                  particles: int | None, init: str) -> None:

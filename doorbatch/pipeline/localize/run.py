@@ -23,6 +23,7 @@ import numpy.typing as npt
 from doorbatch.config import DoorbatchConfig, LocalizeConfig
 from doorbatch.errors import PipelineError, UsageError
 from doorbatch.geometry.se2 import interpolate_poses
+from doorbatch.io.initial_pose import StartPose, read_start_pose
 from doorbatch.io.map_server import read_map
 from doorbatch.io.mapdir import read_door_set
 from doorbatch.io.recording import Recording, load_recording
@@ -50,6 +51,8 @@ from doorbatch.pipeline.localize.torch_field import check_device
 
 log = logging.getLogger(__name__)
 FloatArray = npt.NDArray[np.float64]
+# How a run starts: "reference", "global", a pose (x, y, yaw), or the first pose of a topic.
+Init = str | tuple[float, float, float] | StartPose
 
 
 @dataclass(frozen=True)
@@ -101,12 +104,13 @@ def localization_field(occ: OccupancyMap, config: LocalizeConfig) -> DistanceFie
 
 
 def parse_init(text: str) -> str | tuple[float, float, float]:
-    """``reference``, ``global`` or ``X,Y,YAW`` (yaw in radians).
+    """``reference``, ``global``, ``X,Y,YAW`` (yaw in radians) or a pose topic (``/initialpose``; a name with a
+    leading slash, returned as it is).
 
     Raises:
         UsageError: anything else.
     """
-    if text in ("reference", "global"):
+    if text in ("reference", "global") or text.startswith("/"):
         return text
     parts = text.split(",")
     try:
@@ -115,7 +119,7 @@ def parse_init(text: str) -> str | tuple[float, float, float]:
             return (x, y, yaw)
     except ValueError:
         pass
-    raise UsageError(f"--init {text!r}: expected reference, global or X,Y,YAW")
+    raise UsageError(f"--init {text!r}: expected reference, global, X,Y,YAW or a pose topic (/initialpose)")
 
 
 def laser_to_base_4x4(affine: FloatArray) -> FloatArray:
@@ -128,10 +132,15 @@ def laser_to_base_4x4(affine: FloatArray) -> FloatArray:
     return mat
 
 
-def _initial_particles(rec: Recording, lmap: LocalizationMap, init: str | tuple[float, float, float],
-                       method: str, config: LocalizeConfig, rng: np.random.Generator) -> ParticleSet:
+def _initial_particles(rec: Recording, lmap: LocalizationMap, init: Init, method: str, config: LocalizeConfig,
+                       rng: np.random.Generator) -> ParticleSet:
     if init == "global":
         particles = global_particles(lmap.free, config.global_particles, rng)
+    elif isinstance(init, StartPose):  # the message's spread, as AMCL's handleInitialPose; without one the
+        # config's (AMCL would put every particle on the one pose, a cloud that cannot absorb any error)
+        sigma = init.sigma if init.sigma is not None else (
+            config.init_sigma_xy_m, config.init_sigma_xy_m, math.radians(config.init_sigma_yaw_deg))
+        particles = ParticleSet.gaussian(init.pose, sigma, config.max_particles, rng)
     else:
         if init == "reference":
             if rec.reference is None:
@@ -211,21 +220,31 @@ class _Track:
 def localize(log_path: Path, lmap: LocalizationMap, config: DoorbatchConfig, method: str = "rbpf",
              init: str | tuple[float, float, float] = "reference",
              progress: Callable[[int], object] | None = None) -> LocalizationResult:
-    """Run MCL or the RBPF over a log (:func:`localize_recording` of the log's recording).
+    """Run MCL or the RBPF over a log (:func:`localize_recording` of the log's recording). ``init`` may also
+    name a pose topic of the log (``/initialpose``): its first message is the start (:mod:`doorbatch.io.initial_pose`).
 
     Raises:
         PipelineError: the log has no odometry, or --init reference without a reference.
-        UsageError: an unknown method.
+        UsageError: an unknown method, or an init topic the log lacks or that holds no pose.
     """
     if method not in ("mcl", "rbpf"):
         raise UsageError(f"--method {method!r}: expected rbpf or mcl")
-    return localize_recording(load_recording(log_path, config), lmap, config, method, init, progress)
+    start: Init = init
+    if isinstance(init, str) and init.startswith("/"):
+        start = read_start_pose(log_path, init)
+    rec = load_recording(log_path, config)
+    if isinstance(start, StartPose) and start.frame_id not in ("", config.frames.map):
+        rec.warnings.append(f"--init {start.topic}: its pose is in frame {start.frame_id!r}, taken as the map frame "
+                            f"{config.frames.map!r}")
+    return localize_recording(rec, lmap, config, method, start, progress)
 
 
 def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchConfig, method: str = "rbpf",
-                       init: str | tuple[float, float, float] = "reference",
-                       progress: Callable[[int], object] | None = None) -> LocalizationResult:
-    """Run MCL or the RBPF over a recording (e.g. one whose odometry a script has replaced).
+                       init: Init = "reference", progress: Callable[[int], object] | None = None
+                       ) -> LocalizationResult:
+    """Run MCL or the RBPF over a recording (e.g. one whose odometry a script has replaced). A
+    :class:`StartPose` start localizes only the scans from its stamp on (AMCL does nothing before its initial
+    pose).
 
     Raises:
         PipelineError: the recording has no odometry, or --init reference without a reference.
@@ -245,14 +264,18 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
     free = lmap.free if (lc.recovery_alpha_fast > 0.0 or init == "global") else None
     combination = BeamCombination(lc.beam_combination)
     track = _Track()
-    converged_ns = None if init == "global" else int(rec.scans.stamps_ns[0])
+    start_ns = init.stamp_ns if isinstance(init, StartPose) else None
+    first_i = 0 if start_ns is None else int(np.searchsorted(rec.scans.stamps_ns, start_ns))
+    if first_i >= len(rec.scans):
+        raise PipelineError(f"{log_path}: no scan after the start pose of {init.topic}")  # type: ignore[union-attr]
+    converged_ns = None if init == "global" else int(rec.scans.stamps_ns[first_i])
     monitor = ConvergenceMonitor()
     last_s: float | None = None
     k_draw = max(1, lc.annotate_particles)
     for i in range(len(rec.scans)):
         if progress is not None:
             progress(1)
-        if not odom_ok[i]:
+        if i < first_i or not odom_ok[i]:
             continue
         scan = rec.scans.scan(i)
         beams = beams_from_scan(scan, laser_to_base_4x4(rec.scans.laser_to_base[i]), lc)

@@ -97,6 +97,55 @@ def test_a_nav2_params_file_runs_mcl_as_amcl_would(sample_map: Path, tmp_path: P
     assert _errors(run, log).mean() < 0.2  # tracks (0.07-0.09 m over seeds 0-2; doorbatch's defaults 0.02 m)
 
 
+def _with_initial_pose(tmp_path: Path, after_scans: int) -> tuple[Path, int, np.ndarray]:
+    """loc_open.mcap plus an RViz-style /initialpose (0.5 m, 15 deg std) at the reference pose of a later scan,
+    0.2 m off it; returns the log, the message's stamp and the reference pose there."""
+    from doorbatch.io import ros_messages
+    from doorbatch.io.log_writer import LogWriter
+    from doorbatch.io.reader import open_log
+
+    src = SAMPLE_LOGS / "loc_open.mcap"
+    rec = load_recording(src, DoorbatchConfig())
+    assert rec.reference is not None
+    stamp = int(rec.scans.stamps_ns[after_scans])
+    (truth,), _ = interpolate_poses(rec.reference.stamps_ns, rec.reference.poses, np.array([stamp]))
+    cov = np.diag([0.25, 0.25, 0.0, 0.0, 0.0, 0.0685])
+    msg = ros_messages.pose_with_covariance_stamped(stamp, "map", truth[0] + 0.2, truth[1], truth[2], cov)
+    log = tmp_path / "with_initialpose.mcap"
+    with open_log(src) as reader, LogWriter(log) as writer:
+        for raw in reader.raw_messages():
+            if raw.log_time_ns > stamp and msg is not None:
+                writer.write("/initialpose", "geometry_msgs/msg/PoseWithCovarianceStamped", stamp, msg)
+                msg = None
+            writer.write(raw.topic, raw.msgtype, raw.log_time_ns, raw.msg, raw.store)
+    return log, stamp, truth
+
+
+def test_init_from_the_logs_initialpose_starts_there_and_then(sample_map: Path, tmp_path: Path) -> None:
+    """As Nav2 AMCL: the first /initialpose is the start, with its covariance, and scans before it are not used."""
+    log, stamp, _ = _with_initial_pose(tmp_path, after_scans=40)
+    run = tmp_path / "run"
+    assert main(["localize", str(log), "--map", str(sample_map), "-o", str(run), "--method", "mcl",
+                 "--init", "/initialpose", "-q"]) == 0
+    traj = read_table("trajectory", run / "trajectory.parquet").to_pydict()
+    assert min(traj["stamp_ns"]) == stamp  # the scan at the message's stamp is the first update
+    err = _errors(run, log)
+    assert err[:3].mean() > 0.05  # the start is the operator's guess: 0.2 m off, half a metre of spread
+    assert err[len(err) // 2:].mean() < 0.1  # and the scans pull it in
+    assert json.loads((run / "manifest.json").read_text())["extra"]["init"] == "/initialpose"
+
+
+def test_init_from_a_topic_the_log_lacks_is_a_usage_error(sample_map: Path, tmp_path: Path,
+                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    code = main(["localize", str(SAMPLE_LOGS / "loc_open.mcap"), "--map", str(sample_map), "-o", str(tmp_path / "r"),
+                 "--init", "/initialpose"])
+    err = capsys.readouterr().err
+    assert code == 2 and "/initialpose" in err and "/ground_truth" in err  # names the pose topics it has
+    code = main(["localize", str(SAMPLE_LOGS / "loc_open.mcap"), "--map", str(sample_map), "-o", str(tmp_path / "r"),
+                 "--init", "/scan"])
+    assert code == 2 and "not a pose" in capsys.readouterr().err
+
+
 def test_runs_on_a_plain_map_server_map_without_doors(sample_map: Path, tmp_path: Path) -> None:
     plain = tmp_path / "plain"
     plain.mkdir()

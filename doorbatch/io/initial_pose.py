@@ -1,0 +1,78 @@
+"""A localization start from a pose topic of the log: ``doorbatch localize --init /initialpose``.
+
+Nav2 AMCL starts from the ``/initialpose`` an operator sets in RViz (geometry_msgs/PoseWithCovarianceStamped,
+with its covariance) and does nothing with the scans before it. The first message of the named topic gives the
+start pose, its time and, where the message carries one, its covariance. Any pose type the reader decodes
+works (Odometry, PoseStamped, PoseWithCovarianceStamped), so ``--init /amcl_pose`` starts where AMCL's first
+estimate was.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+
+from doorbatch.errors import UsageError
+from doorbatch.io.decode import ODOMETRY, POSE_COV_STAMPED, POSE_STAMPED, decode_pose
+from doorbatch.io.reader import open_log
+
+log = logging.getLogger(__name__)
+
+FloatArray = npt.NDArray[np.float64]
+POSE_TYPES = (POSE_COV_STAMPED, POSE_STAMPED, ODOMETRY)
+
+
+@dataclass(frozen=True)
+class StartPose:
+    """The first pose of a topic: where and when to start, and how sure the message was.
+
+    Attributes:
+        topic: the topic it came from.
+        stamp_ns: the message's header stamp (scans before it are not localized).
+        pose: (3,) x, y, yaw in the message's frame.
+        frame_id: that frame.
+        sigma: (3,) standard deviations of x, y, yaw from the message's covariance; None where it has none
+            (PoseStamped) or it is not positive on those three axes.
+    """
+
+    topic: str
+    stamp_ns: int
+    pose: FloatArray
+    frame_id: str
+    sigma: FloatArray | None
+
+
+def _sigma(msg: object, msgtype: str) -> FloatArray | None:
+    """√ of the x, y and yaw variances of a 6×6 pose covariance (row-major x y z roll pitch yaw)."""
+    if msgtype == POSE_STAMPED:
+        return None
+    cov = np.asarray(msg.pose.covariance, dtype=np.float64).reshape(-1)  # type: ignore[attr-defined]
+    if cov.size != 36:
+        return None
+    var = cov[[0, 7, 35]]
+    return np.sqrt(var) if bool(np.all(np.isfinite(var)) and np.all(var > 0.0)) else None
+
+
+def read_start_pose(path: Path, topic: str) -> StartPose:
+    """The first message of ``topic`` in the log at ``path``.
+
+    Raises:
+        UsageError: the log has no such topic, it is not a pose type, or it has no message.
+    """
+    with open_log(path) as reader:
+        topics = reader.topics
+        poses = sorted(t for t, info in topics.items() if info.msgtype in POSE_TYPES)
+        listed = f"pose topics in the log: {', '.join(poses) or 'none'}"
+        if topic not in topics:
+            raise UsageError(f"--init {topic}: no such topic in {path.name} ({listed})")
+        if topics[topic].msgtype not in POSE_TYPES:
+            raise UsageError(f"--init {topic}: a {topics[topic].msgtype}, not a pose ({listed})")
+        for raw in reader.raw_messages([topic]):
+            p = decode_pose(raw.msg, raw.msgtype, raw.log_time_ns)
+            return StartPose(topic, p.stamp_ns or raw.log_time_ns, np.array([p.x, p.y, p.yaw]), p.frame_id,
+                             _sigma(raw.msg, raw.msgtype))
+    raise UsageError(f"--init {topic}: the topic has no message in {path.name}")
