@@ -33,6 +33,8 @@ class StartPose:
     Attributes:
         topic: the topic it came from.
         stamp_ns: the message's header stamp (scans before it are not localized).
+        log_time_ns: when the log recorded it (the start's time where the stamp is on another clock: RViz
+            stamps with wall time while a simulation's scans carry sim time).
         pose: (3,) x, y, yaw in the message's frame.
         frame_id: that frame.
         sigma: (3,) standard deviations of x, y, yaw from the message's covariance; None where it has none
@@ -41,6 +43,7 @@ class StartPose:
 
     topic: str
     stamp_ns: int
+    log_time_ns: int
     pose: FloatArray
     frame_id: str
     sigma: FloatArray | None
@@ -73,6 +76,6 @@ def read_start_pose(path: Path, topic: str) -> StartPose:
             raise UsageError(f"--init {topic}: a {topics[topic].msgtype}, not a pose ({listed})")
         for raw in reader.raw_messages([topic]):
             p = decode_pose(raw.msg, raw.msgtype, raw.log_time_ns)
-            return StartPose(topic, p.stamp_ns or raw.log_time_ns, np.array([p.x, p.y, p.yaw]), p.frame_id,
+            return StartPose(topic, p.stamp_ns, raw.log_time_ns, np.array([p.x, p.y, p.yaw]), p.frame_id,
                              _sigma(raw.msg, raw.msgtype))
     raise UsageError(f"--init {topic}: the topic has no message in {path.name}")

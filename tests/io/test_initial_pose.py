@@ -25,7 +25,7 @@ def test_the_first_initialpose_gives_pose_stamp_and_spread(write_log: Callable[.
     log = write_log("a.mcap", [*sample_messages(), ("/initialpose", msgtype, t0 + 6, first),
                                ("/initialpose", msgtype, t0 + 10, second)])
     start = read_start_pose(log, "/initialpose")
-    assert start.stamp_ns == t0 + 5 and start.frame_id == "map"
+    assert (start.stamp_ns, start.log_time_ns, start.frame_id) == (t0 + 5, t0 + 6, "map")
     np.testing.assert_allclose(start.pose, [1.0, -2.0, 0.5])
     assert start.sigma is not None
     np.testing.assert_allclose(start.sigma, [0.5, 0.5, math.sqrt(0.06853891945200942)])

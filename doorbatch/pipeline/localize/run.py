@@ -217,6 +217,23 @@ class _Track:
             warnings=warnings)
 
 
+def start_scan_index(rec: Recording, start: StartPose) -> int:
+    """The first scan at or after a start pose: by its header stamp, or by its log time where the stamp lies
+    after the last scan (another clock), with a warning.
+
+    Raises:
+        PipelineError: no scan comes after it on either clock.
+    """
+    last = int(rec.scans.stamps_ns[-1])
+    for t, clock in ((start.stamp_ns, "stamp"), (start.log_time_ns, "log time")):
+        if t <= last:
+            if clock != "stamp":
+                rec.warnings.append(f"--init {start.topic}: its stamp is after the last scan (another clock?); "
+                                    "started at its log time")
+            return int(np.searchsorted(rec.scans.stamps_ns, t))
+    raise PipelineError(f"{rec.path}: no scan after the start pose of {start.topic}")
+
+
 def localize(log_path: Path, lmap: LocalizationMap, config: DoorbatchConfig, method: str = "rbpf",
              init: str | tuple[float, float, float] = "reference",
              progress: Callable[[int], object] | None = None) -> LocalizationResult:
@@ -264,10 +281,7 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
     free = lmap.free if (lc.recovery_alpha_fast > 0.0 or init == "global") else None
     combination = BeamCombination(lc.beam_combination)
     track = _Track()
-    start_ns = init.stamp_ns if isinstance(init, StartPose) else None
-    first_i = 0 if start_ns is None else int(np.searchsorted(rec.scans.stamps_ns, start_ns))
-    if first_i >= len(rec.scans):
-        raise PipelineError(f"{log_path}: no scan after the start pose of {init.topic}")  # type: ignore[union-attr]
+    first_i = start_scan_index(rec, init) if isinstance(init, StartPose) else 0
     converged_ns = None if init == "global" else int(rec.scans.stamps_ns[first_i])
     monitor = ConvergenceMonitor()
     last_s: float | None = None

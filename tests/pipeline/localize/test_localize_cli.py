@@ -97,9 +97,10 @@ def test_a_nav2_params_file_runs_mcl_as_amcl_would(sample_map: Path, tmp_path: P
     assert _errors(run, log).mean() < 0.2  # tracks (0.07-0.09 m over seeds 0-2; doorbatch's defaults 0.02 m)
 
 
-def _with_initial_pose(tmp_path: Path, after_scans: int) -> tuple[Path, int, np.ndarray]:
+def _with_initial_pose(tmp_path: Path, after_scans: int, clock_offset_ns: int = 0) -> tuple[Path, int, np.ndarray]:
     """loc_open.mcap plus an RViz-style /initialpose (0.5 m, 15 deg std) at the reference pose of a later scan,
-    0.2 m off it; returns the log, the message's stamp and the reference pose there."""
+    0.2 m off it, recorded at that scan's time and stamped ``clock_offset_ns`` later; returns the log, the scan's
+    stamp and the reference pose there."""
     from doorbatch.io import ros_messages
     from doorbatch.io.log_writer import LogWriter
     from doorbatch.io.reader import open_log
@@ -110,7 +111,8 @@ def _with_initial_pose(tmp_path: Path, after_scans: int) -> tuple[Path, int, np.
     stamp = int(rec.scans.stamps_ns[after_scans])
     (truth,), _ = interpolate_poses(rec.reference.stamps_ns, rec.reference.poses, np.array([stamp]))
     cov = np.diag([0.25, 0.25, 0.0, 0.0, 0.0, 0.0685])
-    msg = ros_messages.pose_with_covariance_stamped(stamp, "map", truth[0] + 0.2, truth[1], truth[2], cov)
+    msg = ros_messages.pose_with_covariance_stamped(stamp + clock_offset_ns, "map", truth[0] + 0.2, truth[1],
+                                                    truth[2], cov)
     log = tmp_path / "with_initialpose.mcap"
     with open_log(src) as reader, LogWriter(log) as writer:
         for raw in reader.raw_messages():
@@ -121,9 +123,12 @@ def _with_initial_pose(tmp_path: Path, after_scans: int) -> tuple[Path, int, np.
     return log, stamp, truth
 
 
-def test_init_from_the_logs_initialpose_starts_there_and_then(sample_map: Path, tmp_path: Path) -> None:
-    """As Nav2 AMCL: the first /initialpose is the start, with its covariance, and scans before it are not used."""
-    log, stamp, _ = _with_initial_pose(tmp_path, after_scans=40)
+@pytest.mark.parametrize("clock_offset_ns", [0, 100_000 * 10**9])  # another clock: a day later
+def test_init_from_the_logs_initialpose_starts_there_and_then(sample_map: Path, tmp_path: Path,
+                                                              clock_offset_ns: int) -> None:
+    """As Nav2 AMCL: the first /initialpose is the start, with its covariance, and scans before it are not used.
+    RViz may stamp it with wall time while the scans carry sim time: then its log time says when."""
+    log, stamp, _ = _with_initial_pose(tmp_path, 40, clock_offset_ns)
     run = tmp_path / "run"
     assert main(["localize", str(log), "--map", str(sample_map), "-o", str(run), "--method", "mcl",
                  "--init", "/initialpose", "-q"]) == 0
@@ -132,7 +137,9 @@ def test_init_from_the_logs_initialpose_starts_there_and_then(sample_map: Path, 
     err = _errors(run, log)
     assert err[:3].mean() > 0.05  # the start is the operator's guess: 0.2 m off, half a metre of spread
     assert err[len(err) // 2:].mean() < 0.1  # and the scans pull it in
-    assert json.loads((run / "manifest.json").read_text())["extra"]["init"] == "/initialpose"
+    manifest = json.loads((run / "manifest.json").read_text())
+    assert manifest["extra"]["init"] == "/initialpose"
+    assert any("another clock" in w for w in manifest["warnings"]) == (clock_offset_ns > 0)
 
 
 def test_init_from_a_topic_the_log_lacks_is_a_usage_error(sample_map: Path, tmp_path: Path,
