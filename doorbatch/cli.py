@@ -222,7 +222,7 @@ def localize_cmd(ctx: Context, log_path: Path, map_path: Path, output: Path, met
 
 
 @cli.command("evaluate")
-@click.argument("run_dirs", metavar="RUNDIR...", nargs=-1, type=click.Path(path_type=Path, file_okay=False))
+@click.argument("run_dirs", metavar="RUNDIR...", nargs=-1, type=click.Path(path_type=Path))
 @click.option("-o", "--output", type=click.Path(path_type=Path, file_okay=False), required=True,
               help="Report directory to write.")
 @click.option("--reference", type=click.Path(path_type=Path), default=None,
@@ -237,7 +237,10 @@ def localize_cmd(ctx: Context, log_path: Path, map_path: Path, output: Path, met
 @common_options
 def evaluate_cmd(ctx: Context, run_dirs: tuple[Path, ...], output: Path, reference: Path | None,
                  truth: Path | None, align: str | None, experiment: Path | None, workers: int) -> None:
-    """Metrics (APE/RPE as evo, convergence, door maps, door states) and a report of RUNDIRs, or an experiment."""
+    """Metrics (APE/RPE as evo, convergence, door maps, door states) and a report of RUNDIRs, or an experiment.
+
+    RUNDIRs are localize run directories, map directories, or TUM trajectories of other localizers (with
+    --reference), e.g. AMCL's beside doorbatch's."""
     from doorbatch.errors import UsageError
     from doorbatch.io.report_writer import stdout_table
 

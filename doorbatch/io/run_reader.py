@@ -6,7 +6,9 @@ manifest names the log (first input) and the map (``map.yaml``, ``doors.parquet`
 ``<stem>.truth.yaml`` (truth): they are the run's own reference and truth when present; a log without the
 TUM file gives its reference pose topic (e.g. a CARMEN log's corrected poses), if it has one. A map directory
 (``doorbatch map``) holds doors.parquet; its manifest names its logs, whose folder may hold the mapping
-truth ``<stem>.truth.yaml`` of the sample layout (``map.truth.yaml`` for ``map_pass*.mcap``).
+truth ``<stem>.truth.yaml`` of the sample layout (``map.truth.yaml`` for ``map_pass*.mcap``). A TUM file is a
+run too (another localizer's trajectory, e.g. AMCL's beside doorbatch's); it has no log, so its reference is
+``--reference``.
 """
 
 from __future__ import annotations
@@ -28,11 +30,19 @@ from doorbatch.io.tum import read_tum
 from doorbatch.pipeline.evaluate.report import DoorStateTable, MapTables, ReferenceTrajectory, RunTables
 
 log = logging.getLogger(__name__)
+TUM_SUFFIXES = (".tum", ".txt")
 
 
 def is_run_dir(path: Path) -> bool:
     """Whether ``path`` is a localization run directory (has trajectory.parquet)."""
     return (Path(path) / "trajectory.parquet").is_file()
+
+
+def is_trajectory_file(path: Path) -> bool:
+    """Whether ``path`` is a trajectory file (TUM, ``.tum``/``.txt``): another localizer's output, e.g. AMCL's
+    ``/amcl_pose`` exported by ``evo_traj bag2 ... --save_as_tum``."""
+    p = Path(path)
+    return p.is_file() and p.suffix in TUM_SUFFIXES
 
 
 def is_map_dir(path: Path) -> bool:
@@ -48,7 +58,7 @@ def read_reference(path: Path, config: DoorbatchConfig) -> ReferenceTrajectory:
         InputDataError: unreadable, or a log without a reference pose topic.
     """
     path = Path(path)
-    if path.suffix in (".tum", ".txt"):
+    if path.suffix in TUM_SUFFIXES:
         tum = read_tum(path)
         return ReferenceTrajectory(tum.stamp_ns, np.stack([tum.x, tum.y, tum.yaw], axis=1))
     from doorbatch.io.recording import load_recording
@@ -151,6 +161,20 @@ def read_run_dir(run_dir: Path, config: DoorbatchConfig, name: str | None = None
         ambiguous=bool(extra.get("ambiguous", False)), door_states=_read_door_states(run_dir / "door_states.parquet"),
         map_doors=read_door_set(maps[0]) if maps and maps[0].is_dir() else None, reference=reference, truth=truth,
         params=dict(params) if isinstance(params, dict) else {})
+
+
+def read_trajectory_file(path: Path, name: str | None = None) -> RunTables:
+    """A TUM trajectory as a run (log: the file's name; method: its stem): a tracked start, no door states, no log
+    to find a reference beside (it must be given).
+
+    Raises:
+        InputDataError: unreadable, malformed or empty.
+    """
+    tum = read_tum(path)
+    if tum.stamp_ns.size == 0:
+        raise InputDataError("trajectory file has no poses", path=path)
+    return RunTables(name=name or Path(path).stem, log=Path(path).name, method=Path(path).stem, stamps_ns=tum.stamp_ns,
+                     pose=np.stack([tum.x, tum.y, tum.yaw], axis=1), converged_ns=int(tum.stamp_ns[0]))
 
 
 def read_map_dir(map_dir: Path, name: str | None = None) -> MapTables:

@@ -3,7 +3,8 @@
     evaluate_run_dirs(run_dirs: Sequence[Path], out_dir: Path, config: DoorbatchConfig, *,
                       reference: Path | None = None, truth: Path | None = None) -> Evaluation
 
-``run_dirs`` may mix localization run directories (trajectory.parquet) and map directories (doors.parquet);
+``run_dirs`` may mix localization run directories (trajectory.parquet), map directories (doors.parquet) and
+TUM trajectories (another localizer's, e.g. AMCL's, evaluated beside doorbatch's against ``reference``);
 ``reference`` is a TUM file or a log with a reference pose topic, ``truth`` a simulator truth YAML; both
 override what each run finds next to its log. Writes metrics.parquet, report.md, report.html, the plots and
 manifest.json into ``out_dir``.
@@ -15,18 +16,26 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from doorbatch.config import DoorbatchConfig
-from doorbatch.errors import InputDataError
+from doorbatch.errors import InputDataError, UsageError
 from doorbatch.io.manifest import Manifest
 from doorbatch.io.report_writer import write_report
-from doorbatch.io.run_reader import is_map_dir, is_run_dir, read_map_dir, read_reference, read_run_dirs
+from doorbatch.io.run_reader import (
+    is_map_dir,
+    is_run_dir,
+    is_trajectory_file,
+    read_map_dir,
+    read_reference,
+    read_run_dirs,
+    read_trajectory_file,
+)
 from doorbatch.io.sim_truth import read_truth
 from doorbatch.pipeline.evaluate.report import Evaluation, MapTables, RunTables, evaluate_runs
 
 
 def _names(dirs: Sequence[Path]) -> list[str]:
-    """Unique labels: the folder name, or parent/name where names repeat (runs/<log>/<method>)."""
-    names = [d.name for d in dirs]
-    return [f"{d.parent.name}/{d.name}" if names.count(d.name) > 1 else d.name for d in dirs]
+    """Unique labels: the folder name (a TUM file's stem), or parent/name where names repeat (runs/<log>/<method>)."""
+    names = [d.stem if d.is_file() else d.name for d in dirs]
+    return [f"{d.parent.name}/{n}" if names.count(n) > 1 else n for d, n in zip(dirs, names, strict=True)]
 
 
 def evaluate_run_dirs(run_dirs: Sequence[Path], out_dir: Path, config: DoorbatchConfig, *,
@@ -39,19 +48,23 @@ def evaluate_run_dirs(run_dirs: Sequence[Path], out_dir: Path, config: Doorbatch
         PipelineError: a run whose stamps match none of its reference's.
     """
     dirs = [Path(d) for d in run_dirs]
-    inputs = [d / "trajectory.parquet" if is_run_dir(d) else d / "doors.parquet" for d in dirs if
-              is_run_dir(d) or is_map_dir(d)]
+    for d in dirs:
+        if not (is_run_dir(d) or is_map_dir(d) or is_trajectory_file(d)):
+            raise InputDataError("neither a run directory (trajectory.parquet), a map directory (map.yaml, "
+                                 "doors.parquet) nor a TUM trajectory (.tum, .txt)", path=d)
+        if is_trajectory_file(d) and reference is None:
+            raise UsageError(f"evaluate {d}: a TUM trajectory has no log to find its reference beside; "
+                             "give --reference LOG|TUM")
+    inputs = [d / "trajectory.parquet" if is_run_dir(d) else d if is_trajectory_file(d) else d / "doors.parquet"
+              for d in dirs]
     manifest = Manifest.start(config.as_dict(), [*inputs, *(p for p in (reference, truth) if p is not None)],
                               command="evaluate")
-    for d in dirs:
-        if not (is_run_dir(d) or is_map_dir(d)):
-            raise InputDataError("neither a run directory (trajectory.parquet) nor a map directory "
-                                 "(map.yaml, doors.parquet)", path=d)
     labelled = list(zip(dirs, _names(dirs), strict=True))
-    runs: list[RunTables] = read_run_dirs([d for d, _ in labelled if is_run_dir(d)], config,
-                                          [n for d, n in labelled if is_run_dir(d)],
-                                          find_reference=reference is None)
-    maps: list[MapTables] = [read_map_dir(d, n) for d, n in labelled if not is_run_dir(d)]
+    run_dirs_read = iter(read_run_dirs([d for d, _ in labelled if is_run_dir(d)], config,
+                                       [n for d, n in labelled if is_run_dir(d)], find_reference=reference is None))
+    runs: list[RunTables] = [next(run_dirs_read) if is_run_dir(d) else read_trajectory_file(d, n)
+                             for d, n in labelled if is_run_dir(d) or is_trajectory_file(d)]
+    maps: list[MapTables] = [read_map_dir(d, n) for d, n in labelled if is_map_dir(d)]
     ref = read_reference(reference, config) if reference is not None else None
     world = read_truth(truth) if truth is not None else None
     evaluation = evaluate_runs(runs, config, reference=ref, truth=world, maps=maps).with_title(title)

@@ -182,6 +182,27 @@ def test_evaluate_cli_writes_the_report_directory(tmp_path: Path, capsys: pytest
         assert (again / name).read_bytes() == (out / name).read_bytes(), name
 
 
+def test_another_localizers_tum_trajectory_is_scored_beside_a_run(tmp_path: Path,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """AMCL's /amcl_pose exported as TUM (evo_traj) next to a doorbatch run, both against --reference: every 3rd
+    stamp only (AMCL publishes on its updates), 0.1 m off along y."""
+    stamps, ref = _straight()
+    log = tmp_path / "loc.mcap"
+    log.write_bytes(b"not read")
+    write_tum(tmp_path / "reference.tum", stamps, *ref.T)
+    _write_run(tmp_path / "rbpf", log, stamps, ref + np.array([0.0, 0.05, 0.0]), "rbpf", 0.3)
+    write_tum(tmp_path / "amcl.tum", stamps[::3], *(ref[::3] + np.array([0.0, 0.1, 0.0])).T)
+    out = tmp_path / "report"
+    args = ["evaluate", str(tmp_path / "rbpf"), str(tmp_path / "amcl.tum"), "-o", str(out)]
+    assert main([*args, "--reference", str(tmp_path / "reference.tum"), "-q"]) == 0
+    table = read_table("metrics", out / "metrics.parquet").to_pydict()
+    rmse = {r: v for r, m, v in zip(table["run"], table["metric"], table["value"], strict=True)
+            if m == "ape_trans_rmse"}
+    assert rmse == pytest.approx({"rbpf": 0.05, "amcl": 0.1})
+    assert main(args) == 2  # a TUM file has no log beside which to find its reference
+    assert "--reference" in capsys.readouterr().err
+
+
 def test_evaluate_cli_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["evaluate", "-o", str(tmp_path / "r")]) == 2
     (tmp_path / "empty").mkdir()
