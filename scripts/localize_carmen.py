@@ -17,7 +17,8 @@ The logs hold only the scans of the corrected trajectory (237 / 910 / 440 scans,
 scan is used; no window or decimation.
 
 Usage: ``python scripts/localize_carmen.py [--work DIR] [--seed N] [--filter-seed N] [--logs orebro intel aces]
-[--set localize.KEY=VALUE ...]``
+[--config FILE] [--set localize.KEY=VALUE ...]`` (``--config``: as ``doorbatch --config``, a Nav2 parameter file
+too).
 """
 
 from __future__ import annotations
@@ -60,13 +61,14 @@ def with_drifting_odometry(rec: Recording, seed: int) -> tuple[Recording, np.nda
     return dataclasses.replace(rec, odometry=series), ref
 
 
-def evaluate(name: str, work: Path, seed: int, filter_seed: int, overrides: list[str]) -> list[dict[str, object]]:
+def evaluate(name: str, work: Path, seed: int, filter_seed: int, overrides: list[str], config_file: Path | None = None
+             ) -> list[dict[str, object]]:
     """One row per method (and one for the corrupted odometry) for the log ``name``."""
     log = CARMEN / f"{name}-corrected.log.gz"
     map_dir = work / name / "map"
     if not (map_dir / "map.yaml").exists():
         assert cli_main(["map", str(log), "--pose-source", "reference", "-o", str(map_dir), "-q"]) == 0
-    config = load_config(overrides=[*overrides, f"seed={filter_seed}"])
+    config = load_config(config_file, [*overrides, f"seed={filter_seed}"])
     rec, ref = with_drifting_odometry(load_recording(log, config), seed)
     lmap = load_localization_map(map_dir, config.localize)
     assert rec.odometry is not None
@@ -93,12 +95,13 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=7, help="drift seed (scripts/scanmatch_acceptance.py's default)")
     ap.add_argument("--filter-seed", type=int, default=0)
     ap.add_argument("--logs", nargs="+", default=["orebro", "intel", "aces"])
+    ap.add_argument("--config", type=Path, default=None, help="config file (YAML, or a Nav2 parameter file)")
     ap.add_argument("--set", dest="overrides", action="append", default=[], help="config override key=value")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         work = args.work or Path(tmp)
         rows = [row for name in args.logs if (CARMEN / f"{name}-corrected.log.gz").exists()
-                for row in evaluate(name, work, args.seed, args.filter_seed, args.overrides)]
+                for row in evaluate(name, work, args.seed, args.filter_seed, args.overrides, args.config)]
     print(f"drift seed {args.seed}, filter seed {args.filter_seed}")
     print("| log | method | updates | ATE (m) | max err (m) | first update > 1 m | map doors | wall (s) |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- |")
