@@ -185,7 +185,10 @@ def translate_amcl_parameters(params: Mapping[str, Any], source: str = "config")
         tree["topics"] = {"scan": topic if topic.startswith("/") else f"/{topic}"}
 
     if given.get("set_initial_pose") is True:
-        x, y, yaw = (float(given.get(f"initial_pose.{k}", 0.0)) for k in ("x", "y", "yaw"))
+        try:
+            x, y, yaw = (float(given.get(f"initial_pose.{k}", 0.0)) for k in ("x", "y", "yaw"))
+        except (TypeError, ValueError) as err:
+            raise ConfigError(f"{source}: amcl initial_pose must hold numbers x, y, yaw ({err})") from err
         warnings.append(f"amcl set_initial_pose: pass --init {x:g},{y:g},{yaw:g} to start there "
                         f"(yaw {math.degrees(yaw):.1f}°); the config does not choose the start")
     known = set(NAV2_AMCL_DEFAULTS) | set(_FRAMES) | _NO_EFFECT_OFFLINE | set(_INITIAL_POSE) | {"scan_topic"}

@@ -101,6 +101,7 @@ def test_the_initial_pose_is_named_as_the_init_to_pass(tmp_path: Path, caplog: p
     ("bt_navigator:\n  ros__parameters:\n    global_frame: map\n", "without an 'amcl' node"),
     ("a:\n  amcl:\n    ros__parameters: {}\nb:\n  amcl:\n    ros__parameters: {}\n", "more than one"),
     ("amcl:\n  ros__parameters:\n    max_particles: many\n", "max_particles"),
+    ("amcl:\n  ros__parameters:\n    set_initial_pose: true\n    initial_pose: {x: one}\n", "initial_pose"),
     ("odom_model_type: diff\nodom_alpha1: 0.2\nlaser_z_hit: 0.95\n", "ROS 1 amcl"),  # a ROS 1 launch's rosparams
     ("amcl:\n  kld_err: 0.01\n", "ROS 1 amcl"),
 ])
