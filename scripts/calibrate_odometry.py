@@ -1,6 +1,7 @@
-"""Fit the odometry motion model's α1–α4 (localize.alpha1..alpha4) from a log with a reference pose topic.
+"""Fit the odometry motion model's α (localize.alpha1..alpha4, or ..alpha5) from logs with a reference pose topic.
 
-Usage: ``python scripts/calibrate_odometry.py LOG [LOG ...]`` — prints the α and a ``--set`` line.
+Usage: ``python scripts/calibrate_odometry.py LOG [LOG ...] [--model differential|omnidirectional]`` — prints the
+α and a ``--set`` line (``omnidirectional``: Nav2's OmniMotionModel, α1–α5, for holonomic bases).
 """
 
 from __future__ import annotations
@@ -13,12 +14,14 @@ import numpy as np
 from doorbatch.config import DoorbatchConfig
 from doorbatch.geometry.se2 import interpolate_poses
 from doorbatch.io.recording import load_recording
-from doorbatch.pipeline.localize.calibrate import estimate_alphas
+from doorbatch.pipeline.localize.calibrate import estimate_alphas, estimate_omni_alphas
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("logs", nargs="+", type=Path)
+    parser.add_argument("--model", choices=["differential", "omnidirectional"], default="differential",
+                        help="localize.robot_model_type to fit")
     args = parser.parse_args()
     odo_all, ref_all = [], []
     for path in args.logs:
@@ -31,12 +34,15 @@ def main() -> None:
         ok = ok1 & ok2
         odo_all.append(odo[ok])
         ref_all.append(ref[ok])
-    fits = [estimate_alphas(o, r) for o, r in zip(odo_all, ref_all, strict=True)]
+    omni = args.model == "omnidirectional"
+    fit = estimate_omni_alphas if omni else estimate_alphas
+    fits = [fit(o, r) for o, r in zip(odo_all, ref_all, strict=True)]
     n = np.array([f.increments for f in fits], dtype=float)
-    alphas = [float(np.average([getattr(f, a) for f in fits], weights=n)) for a in ("alpha1", "alpha2", "alpha3",
-                                                                                    "alpha4")]
-    print(" ".join(f"alpha{i + 1}={a:.4g}" for i, a in enumerate(alphas)), f"({int(n.sum())} increments)")
-    print(" ".join(f"--set localize.alpha{i + 1}={a:.4g}" for i, a in enumerate(alphas)))
+    names = [f"alpha{i}" for i in range(1, 6 if omni else 5)]
+    alphas = [float(np.average([getattr(f, a) for f in fits], weights=n)) for a in names]
+    print(" ".join(f"{name}={a:.4g}" for name, a in zip(names, alphas, strict=True)), f"({int(n.sum())} increments)")
+    sets = [f"--set localize.{name}={a:.4g}" for name, a in zip(names, alphas, strict=True)]
+    print(" ".join(sets + (["--set localize.robot_model_type=omnidirectional"] if omni else [])))
 
 
 if __name__ == "__main__":

@@ -1,4 +1,5 @@
-"""Calibrate the odometry motion model's α1–α4 from a log with a reference trajectory.
+"""Calibrate the odometry motion model's α from a log with a reference trajectory: α1–α4 of the differential
+model, or α1–α5 of the omnidirectional one (:func:`estimate_omni_alphas`).
 
 Both trajectories are decomposed into increments (δrot1, δtrans, δrot2) between consecutive samples
 (Probabilistic Robotics Table 5.6). The model says the odometry's increment errors are zero-mean with
@@ -24,6 +25,7 @@ from doorbatch.geometry.odometry import (
     rotation_noise_magnitude,
 )
 from doorbatch.geometry.rotations import wrap_angle
+from doorbatch.geometry.se2 import relative
 
 
 @dataclass(frozen=True)
@@ -76,3 +78,53 @@ def estimate_alphas(odometry: npt.ArrayLike, reference: npt.ArrayLike, min_motio
     alpha34, _ = nnls(a_tr, e_tr**2) if e_tr.size else (np.zeros(2), 0.0)
     return OdometryAlphas(float(alpha12[0]), float(alpha12[1]), float(alpha34[0]), float(alpha34[1]),
                           int(moving.sum()))
+
+
+@dataclass(frozen=True)
+class OmniOdometryAlphas:
+    """Fitted α1..α5 of Nav2 AMCL's omnidirectional model and the number of increments used."""
+
+    alpha1: float
+    alpha2: float
+    alpha3: float
+    alpha4: float
+    alpha5: float
+    increments: int
+
+
+def estimate_omni_alphas(odometry: npt.ArrayLike, reference: npt.ArrayLike, min_motion_m: float = 0.02
+                         ) -> OmniOdometryAlphas:
+    """α1..α5 of the omnidirectional model (:func:`~.motion_model.sample_motion_model_omni`) from odometry and
+    reference poses (N, 3) sampled at the same times.
+
+    Each increment is taken in the robot's frame at its start: the odometry's moves δtrans along the bearing β
+    and turns δrot. The reference's increment minus the odometry's is split into an error along β (variance α3
+    δtrans² + α4 δrot²), across it (the strafe, α4 δrot² + α5 δtrans²) and in heading (α1 δrot² + α2 δtrans²).
+    The squared errors are non-negative least-squares fits of those variances: heading alone (rad²) for α1, α2,
+    along and across together (m²) for α3, α4, α5. Increments where the robot moved less than ``min_motion_m``
+    and turned less than 1° are skipped.
+    """
+    odo = relative(*_consecutive(odometry))
+    ref = relative(*_consecutive(reference))
+    tr = np.hypot(odo[:, 0], odo[:, 1])
+    rot = wrap_angle(odo[:, 2])
+    moving = (np.hypot(ref[:, 0], ref[:, 1]) > min_motion_m) | (np.abs(wrap_angle(ref[:, 2])) > np.radians(1.0))
+    tr, rot, odo, ref = tr[moving], rot[moving], odo[moving], ref[moving]
+    bearing = np.arctan2(odo[:, 1], odo[:, 0])
+    dx, dy = ref[:, 0] - odo[:, 0], ref[:, 1] - odo[:, 1]
+    along = dx * np.cos(bearing) + dy * np.sin(bearing)
+    across = dx * np.sin(bearing) - dy * np.cos(bearing)
+    e_rot = wrap_angle(ref[:, 2] - odo[:, 2])
+    t2, r2, zero = tr**2, rot**2, np.zeros_like(tr)
+    alpha12, _ = nnls(np.stack([r2, t2], 1), e_rot**2) if tr.size else (np.zeros(2), 0.0)
+    a_xy = np.concatenate([np.stack([t2, r2, zero], 1), np.stack([zero, r2, t2], 1)])
+    alpha345, _ = nnls(a_xy, np.concatenate([along**2, across**2])) if tr.size else (np.zeros(3), 0.0)
+    a1, a2 = (float(a) for a in alpha12)
+    a3, a4, a5 = (float(a) for a in alpha345)
+    return OmniOdometryAlphas(a1, a2, a3, a4, a5, int(moving.sum()))
+
+
+def _consecutive(poses: npt.ArrayLike) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """(poses[:-1], poses[1:]) of an (N, 3) array."""
+    p = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    return p[:-1], p[1:]

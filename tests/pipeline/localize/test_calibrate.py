@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from doorbatch.pipeline.localize.calibrate import OdometryAlphas, estimate_alphas
+from doorbatch.geometry.se2 import compose
+from doorbatch.pipeline.localize.calibrate import OdometryAlphas, estimate_alphas, estimate_omni_alphas
 from doorbatch.sim.motion import OdometryNoise, drift_poses
 
 NOISE = OdometryNoise(alpha1=0.02, alpha2=0.005, alpha3=0.03, alpha4=0.001)
@@ -41,3 +42,28 @@ def test_turns_in_place_do_not_count_a_millimetre_bearing_as_a_rotation_error() 
     fit = _fit_on_a_wandering_path(5, 0.1)
     np.testing.assert_allclose([fit.alpha1, fit.alpha2, fit.alpha3], [0.02, 0.005, 0.03], rtol=0.2)
     np.testing.assert_allclose(fit.alpha4, 0.001, rtol=0.4)
+
+
+def test_omni_alphas_of_simulated_holonomic_odometry_are_recovered() -> None:
+    """A holonomic base: 20,000 steps of 0.05-0.3 m in any direction of its frame, turning up to ±20°; its odometry
+    increments carry Nav2 OmniMotionModel noise of known α (along, across and in heading)."""
+    alphas = (0.02, 0.005, 0.03, 0.01, 0.015)
+    a1, a2, a3, a4, a5 = alphas
+    rng = np.random.default_rng(8)
+    n = 20000
+    trans = rng.uniform(0.05, 0.3, n)
+    bearing = rng.uniform(-np.pi, np.pi, n)
+    rot = rng.uniform(-0.35, 0.35, n)
+    along = trans + rng.normal(0.0, 1.0, n) * np.sqrt(a3 * trans**2 + a4 * rot**2)
+    across = rng.normal(0.0, 1.0, n) * np.sqrt(a4 * rot**2 + a5 * trans**2)
+    turn = rot + rng.normal(0.0, 1.0, n) * np.sqrt(a1 * rot**2 + a2 * trans**2)
+    odo_steps = np.stack([trans * np.cos(bearing), trans * np.sin(bearing), rot], 1)
+    ref_steps = np.stack([along * np.cos(bearing) + across * np.sin(bearing),
+                          along * np.sin(bearing) - across * np.cos(bearing), turn], 1)
+    odo, ref = np.zeros((n + 1, 3)), np.zeros((n + 1, 3))
+    for k in range(n):
+        odo[k + 1] = compose(odo[k], odo_steps[k])
+        ref[k + 1] = compose(ref[k], ref_steps[k])
+    fit = estimate_omni_alphas(odo, ref)
+    assert fit.increments == n
+    np.testing.assert_allclose([fit.alpha1, fit.alpha2, fit.alpha3, fit.alpha4, fit.alpha5], alphas, rtol=0.15)
