@@ -11,7 +11,8 @@ becomes the ``localize`` key of the same name, and the ones the file leaves out 
 - ``robot_model_type``: ``nav2_amcl::DifferentialMotionModel`` / ``nav2_amcl::OmniMotionModel`` (or the older
   ``differential`` / ``omnidirectional``).
 - AMCL resamples on every ``resample_interval``-th update without an effective-sample-size test, so
-  ``resample_neff_ratio`` becomes 1.0.
+  ``resample_neff_ratio`` becomes 1.0; it skips a beam by the share of the particles that explain it
+  (``beam_skip_support: particles``).
 - ``base_frame_id``, ``odom_frame_id``, ``global_frame_id`` and ``scan_topic`` set ``frames`` and ``topics``
   only where the file gives them (nav2's default base frame, base_footprint, is often not in a log's tree).
 - An initial pose (``set_initial_pose``) is not a config value here: the warning names the ``--init`` to pass.
@@ -154,6 +155,7 @@ def translate_amcl_parameters(params: Mapping[str, Any], source: str = "config")
     merged = {**NAV2_AMCL_DEFAULTS, **{k: v for k, v in given.items() if k in NAV2_AMCL_DEFAULTS}}
     localize: dict[str, Any] = {name: merged[name] for name in _SAME_NAME}
     localize["resample_neff_ratio"] = 1.0  # nav2_amcl resamples every resample_interval updates, no Neff test
+    localize["beam_skip_support"] = "particles"  # and counts the particles that explain a beam
     warnings: list[str] = []
 
     model = str(merged["robot_model_type"])

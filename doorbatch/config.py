@@ -398,6 +398,9 @@ class LocalizeConfig(Section):
     beam_skip_distance: float = Field(0.15, gt=0.0)  # m (1.5 sigma_hit; nav2's 0.5 exceeds half a door gap)
     beam_skip_threshold: float = Field(0.5, ge=0.0, le=1.0)
     beam_skip_error_threshold: float = Field(0.9, ge=0.0, le=1.0)
+    # Whose share explains a beam: "posterior" (the weight given the other beams, above) or "particles" (nav2_amcl's
+    # count of the particles, unweighted; skips the corrective beams of a wide predicted cloud: CARMEN intel lost).
+    beam_skip_support: Literal["posterior", "particles"] = "posterior"
     # End points in unknown cells: their real distance to the nearest obstacle (nav2_amcl), or the maximum.
     unknown_as_max_dist: bool = False
     # Where the likelihood field's particles x beams lookups run: "numpy", or "torch" on torch_device

@@ -529,7 +529,8 @@ def skip_unexplained(pz: npt.ArrayLike, weight: npt.ArrayLike, pose: npt.ArrayLi
     of beams skipped. A beam is explained at a particle when its pz is at least that of an end point
     ``beam_skip_distance`` from the model (for the RBPF: from the model the beam was associated with); the
     share of the weight that explains it is taken under the other beams' clipped posterior
-    (:func:`beam_support_weights`).
+    (:func:`beam_support_weights`), or with ``beam_skip_support: particles`` as nav2_amcl takes it: the share of
+    the particles.
 
     Only a converged filter skips (weighted position std ≤ ``converged_xy_std_m``, yaw std ≤
     ``converged_yaw_std_deg``, particles ``pose`` (N, 3)): "most hypotheses cannot explain this beam" means
@@ -545,7 +546,10 @@ def skip_unexplained(pz: npt.ArrayLike, weight: npt.ArrayLike, pose: npt.ArrayLi
     floor = config.z_hit * math.exp(-0.5 * (config.beam_skip_distance / sig) ** 2) + config.z_rand / range_max_m
     with np.errstate(invalid="ignore"):
         explained = p >= np.float32(floor)
-    support = beam_support_weights(p, weight, floor, combination)
+    if config.beam_skip_support == "particles":  # nav2_amcl: the share of the particles, whatever their weight
+        support: npt.NDArray[np.floating] = np.ones(p.shape[0], dtype=np.float32)
+    else:
+        support = beam_support_weights(p, weight, floor, combination)
     skip = beam_skip_mask(explained, support, config.beam_skip_threshold, config.beam_skip_error_threshold)
     return drop_beams(p, skip, combination), int(skip.sum())
 

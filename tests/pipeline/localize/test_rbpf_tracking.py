@@ -18,6 +18,7 @@ from doorbatch.pipeline.localize.likelihood_field import (
     beam_support_weights,
     build_distance_field,
     drop_beams,
+    skip_unexplained,
 )
 from doorbatch.pipeline.localize.mcl import MclState, initial_particles, mcl_step
 from doorbatch.pipeline.localize.particles import ParticleSet
@@ -121,6 +122,18 @@ def test_beam_skipping_keeps_the_corrective_beams_of_a_wide_predicted_cloud() ->
                                                                    BeamCombination.PRODUCT)[:, 0], rtol=1e-6)
     support_amcl = beam_support_weights(pz, w, floor, BeamCombination.AMCL)
     assert np.all(support_amcl[:3, 4].sum() > w[:3].sum())
+
+
+def test_nav2s_particle_count_skips_the_corrective_beams_the_posterior_keeps() -> None:
+    """The wide predicted cloud above through skip_unexplained: ``beam_skip_support: particles`` (nav2_amcl) counts
+    7 of 10 particles missing the corrective wall and skips it with the obstacle; the default keeps it."""
+    pz = np.full((10, 7), 0.8, dtype=np.float32)
+    pz[3:, 4:6] = 0.01
+    pz[:, 6] = 0.01
+    w, pose = np.full(10, 0.1), np.zeros((10, 3))  # one pose: a converged cloud, so skipping is on
+    kept = {rule: skip_unexplained(pz, w, pose, LocalizeConfig(beam_skip_support=rule), 30.0,
+                                   BeamCombination.PRODUCT)[1] for rule in ("posterior", "particles")}
+    assert kept == {"posterior": 1, "particles": 3}
 
 
 def _step_with_door_mean(particles_pose: FloatArray, door_deg: float, global_door_term: bool = True,
