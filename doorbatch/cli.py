@@ -196,7 +196,7 @@ def map_cmd(ctx: Context, logs: tuple[Path, ...], output: Path, pose_source: str
 @cli.command("localize")
 @click.argument("log_path", metavar="LOG", type=click.Path(path_type=Path))
 @click.option("--map", "map_path", type=click.Path(path_type=Path), required=True,
-              help="Map directory of doorbatch map, or any map_server YAML.")
+              help="Map directory of doorbatch map, any map_server YAML, or a log with a /map OccupancyGrid.")
 @click.option("-o", "--output", type=click.Path(path_type=Path, file_okay=False), required=True,
               help="Run directory to write.")
 @click.option("--method", type=click.Choice(["rbpf", "mcl"]), default=None, help="Default: localize.method.")

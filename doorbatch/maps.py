@@ -123,6 +123,11 @@ class DoorSet:
     def __len__(self) -> int:
         return int(self.hinge.shape[0])
 
+    @classmethod
+    def empty(cls) -> DoorSet:
+        """No doors (a plain map_server map)."""
+        return cls(np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0))
+
     @property
     def range_global(self) -> tuple[FloatArray, FloatArray]:
         """Leaf directions at the two ends of the opening range, in the map frame."""

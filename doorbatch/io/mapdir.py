@@ -58,7 +58,7 @@ def read_door_set(map_dir: Path) -> DoorSet:
     no doors (a plain map_server map from another SLAM tool)."""
     path = map_dir / "doors.parquet"
     if not path.exists():
-        return DoorSet(np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0))
+        return DoorSet.empty()
     return door_set_of(read_table("doors", path).to_pydict())
 
 

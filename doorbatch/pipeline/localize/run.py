@@ -25,6 +25,7 @@ from doorbatch.errors import PipelineError, UsageError
 from doorbatch.geometry.se2 import interpolate_poses
 from doorbatch.io.initial_pose import StartPose, read_start_pose
 from doorbatch.io.map_server import read_map
+from doorbatch.io.map_topic import read_map_topic
 from doorbatch.io.mapdir import read_door_set
 from doorbatch.io.recording import Recording, load_recording
 from doorbatch.maps import DoorSet, OccupancyMap
@@ -65,11 +66,23 @@ class LocalizationMap:
     doors: DoorSet
 
 
+def is_map_log(map_path: Path) -> bool:
+    """Whether ``--map`` names a log (its OccupancyGrid topic is the map) rather than a map directory or a
+    map_server YAML file."""
+    return not (map_path / "map.yaml").is_file() and map_path.suffix not in (".yaml", ".yml")
+
+
 def load_localization_map(map_path: Path, config: LocalizeConfig) -> LocalizationMap:
-    """A map directory (map.yaml + doors.parquet) or a map_server YAML file from any SLAM tool."""
-    yaml_path = map_path / "map.yaml" if map_path.is_dir() else map_path
-    occ = read_map(yaml_path)
-    doors = read_door_set(yaml_path.parent) if map_path.is_dir() else read_door_set(Path("/nonexistent"))
+    """A map directory (map.yaml + doors.parquet), a map_server YAML file from any SLAM tool, or a log with a
+    nav_msgs/OccupancyGrid topic (``config.map_topic``; :mod:`doorbatch.io.map_topic`), such as the bag of a Nav2
+    session."""
+    if is_map_log(map_path):
+        occ = read_map_topic(map_path, config.map_topic)
+        doors = DoorSet.empty()
+    else:
+        yaml_path = map_path / "map.yaml" if map_path.is_dir() else map_path
+        occ = read_map(yaml_path)
+        doors = read_door_set(yaml_path.parent) if map_path.is_dir() else DoorSet.empty()
     doors = with_closed_in_range(doors)
     return LocalizationMap(occ, localization_field(occ, config), free_cells(occ), doors)
 
@@ -344,7 +357,7 @@ def run_localize(log_path: Path, map_path: Path, out: Path, config: DoorbatchCon
     from doorbatch.io.manifest import Manifest
     from doorbatch.io.rundir import run_annotations, write_run_tables
 
-    inputs = [log_path, map_path / "map.yaml" if map_path.is_dir() else map_path]
+    inputs = [log_path, map_path / "map.yaml" if (map_path / "map.yaml").is_file() else map_path]
     if map_path.is_dir() and (map_path / "doors.parquet").exists():
         inputs.append(map_path / "doors.parquet")
     manifest = Manifest.start(config.as_dict(), inputs, command="localize", method=method, init=init)
@@ -352,9 +365,8 @@ def run_localize(log_path: Path, map_path: Path, out: Path, config: DoorbatchCon
     result = localize(log_path, lmap, config, method, parse_init(init), progress)
     files = write_run_tables(out, result)
     write_annotated_mcap(log_path, out / "annotated.mcap",
-                         run_annotations(result, lmap.occupancy, lmap.doors if method == "rbpf" else DoorSet(
-                             np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0)),
-                             config.frames.map, config.frames.odom), config)
+                         run_annotations(result, lmap.occupancy, lmap.doors if method == "rbpf" else DoorSet.empty(),
+                                         config.frames.map, config.frames.odom), config)
     for w in result.warnings:
         manifest.warn(w)
     converged_s = None if result.converged_ns is None else (result.converged_ns - int(result.stamps_ns[0])) / 1e9

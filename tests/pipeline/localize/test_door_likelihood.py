@@ -114,7 +114,7 @@ def test_without_doors_it_is_the_static_endpoint_model(backend: str) -> None:
     rng = np.random.default_rng(1)
     dist = rng.uniform(0.0, 2.0, (50, 30)).astype(np.float32)
     pts = rng.uniform(-3, 3, (50, 30, 2))
-    no_doors = DoorSet(np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0))
+    no_doors = DoorSet.empty()
     res = door_log_likelihood(dist, pts, no_doors, np.zeros((50, 0)), np.zeros((50, 0)), CONFIG, RANGE_MAX,
                               backend=backend)
     np.testing.assert_allclose(res.log_likelihood, np.log(static_pz(dist.astype(np.float64))).sum(axis=1),

@@ -10,10 +10,11 @@ import numpy as np
 import pytest
 
 from doorbatch.cli import main
-from doorbatch.config import DoorbatchConfig
+from doorbatch.config import DoorbatchConfig, LocalizeConfig
 from doorbatch.geometry.se2 import interpolate_poses
 from doorbatch.io.parquet import read_table
 from doorbatch.io.recording import load_recording
+from doorbatch.pipeline.localize.run import load_localization_map
 from tests.conftest import REPO
 
 SAMPLE_LOGS = REPO / "datasets" / "sample" / "logs"
@@ -163,6 +164,37 @@ def test_runs_on_a_plain_map_server_map_without_doors(sample_map: Path, tmp_path
                  "--method", "mcl", "-q"])
     assert code == 0
     assert len(read_table("trajectory", run / "trajectory.parquet")) > 100
+
+
+def test_a_map_recorded_in_a_log_localizes_as_its_yaml(sample_map: Path, tmp_path: Path,
+                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """--map BAG: the last nav_msgs/OccupancyGrid on /map (a SLAM node's growing map: an earlier, smaller one
+    first; a costmap topic beside it) is the map: the YAML's cells, its resolution to float32 (MapMetaData's
+    type), and a run on it tracks."""
+    from doorbatch.io import ros_messages
+    from doorbatch.io.log_writer import LogWriter
+    from doorbatch.io.map_server import read_map
+
+    occ = read_map(sample_map / "map.yaml")
+    grid = "nav_msgs/msg/OccupancyGrid"
+    log = tmp_path / "nav2_session.mcap"
+    with LogWriter(log) as writer:
+        early = np.full((20, 30), -1, dtype=np.int8)
+        writer.write("/map", grid, 1, ros_messages.occupancy_grid(1, "map", early, 0.05, 0.0, 0.0))
+        writer.write("/global_costmap/costmap", grid, 2, ros_messages.occupancy_grid(2, "map", early, 0.05, 0.0, 0.0))
+        writer.write("/map", grid, 3, ros_messages.occupancy_grid(3, "map", occ.occupancy, occ.resolution_m,
+                                                                  occ.origin_x_m, occ.origin_y_m, occ.origin_yaw_rad))
+    recorded = load_localization_map(log, LocalizeConfig()).occupancy
+    np.testing.assert_array_equal(recorded.occupancy, occ.occupancy)
+    assert recorded.resolution_m == pytest.approx(occ.resolution_m, rel=1e-7)
+    assert (recorded.origin_x_m, recorded.origin_y_m, recorded.origin_yaw_rad) == (
+        occ.origin_x_m, occ.origin_y_m, occ.origin_yaw_rad)
+    closed = SAMPLE_LOGS / "loc_closed.mcap"
+    assert main(["localize", str(closed), "--map", str(log), "-o", str(tmp_path / "run"), "--method", "mcl",
+                 "-q"]) == 0
+    assert _errors(tmp_path / "run", closed).mean() < 0.1
+    code = main(["localize", str(closed), "--map", str(closed), "-o", str(tmp_path / "none"), "--method", "mcl"])
+    assert code == 2 and "OccupancyGrid topics in the log: none" in capsys.readouterr().err
 
 
 def test_bad_init_is_a_usage_error(sample_map: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
