@@ -117,7 +117,7 @@ def _format_report(report: Any) -> str:
     ]
     width = max((len(t.name) for t in report.topics), default=10)
     for t in report.topics:
-        role = f"role {t.role} ({t.why})" if t.role else "unused"
+        role = f"role {t.role} ({t.why})" if t.role else "unused" + (f" ({t.why})" if t.why else "")
         lines.append(f"  {t.name:<{width}}  {t.msgtype:<36} {t.count:>8} msgs {t.rate_hz:8.2f} Hz  {role}")
     lines.append(f"Frames:     {', '.join(report.frames) or '-'}")
     lines.append("Problems:" if report.problems else "Problems:   none")

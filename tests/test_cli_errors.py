@@ -132,6 +132,25 @@ def test_a_good_log_inspects_cleanly(write_log: Callable[..., Path], capsys: pyt
     assert report["problems"] == []
 
 
+def test_inspect_names_what_an_unused_map_or_initial_pose_can_be_given_as(
+        write_log: Callable[..., Path], capsys: pytest.CaptureFixture[str]) -> None:
+    import numpy as np
+
+    from doorbatch.io import ros_messages
+    from tests.conftest import sample_messages
+
+    t0 = sample_messages()[0][2]
+    extra = [("/map", "nav_msgs/msg/OccupancyGrid", t0,
+              ros_messages.occupancy_grid(t0, "map", np.zeros((3, 3), dtype=np.int8), 0.05, 0.0, 0.0)),
+             ("/initialpose", "geometry_msgs/msg/PoseWithCovarianceStamped", t0,
+              ros_messages.pose_with_covariance_stamped(t0, "map", 1.0, 2.0, 0.0, np.eye(6)))]
+    code = main(["inspect", str(write_log("nav2.mcap", [*sample_messages(), *extra]))])
+    out = capsys.readouterr().out
+    assert code == 0
+    assert "unused (a map: localize --map LOG)" in out
+    assert "unused (a start pose: localize --init /initialpose)" in out
+
+
 def test_a_bag_folder_without_metadata_names_its_mcap(write_log: Callable[..., Path], tmp_path: Path,
                                                       capsys: pytest.CaptureFixture[str]) -> None:
     folder = tmp_path / "rosbag2_2026_11_26"

@@ -20,8 +20,11 @@ from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import LogContentError
 from doorbatch.geometry.tf_buffer import TfBuffer
 from doorbatch.io.decode import decode_scan, decode_transforms, stamp_to_ns
+from doorbatch.io.initial_pose import POSE_TYPES
+from doorbatch.io.map_topic import OCCUPANCY_GRID
 from doorbatch.io.reader import open_log
 from doorbatch.io.recording import missing_laser_tf_hint, odometry_frame, odometry_frame_note
+from doorbatch.io.roles import TopicInfo
 from doorbatch.records import Role
 
 
@@ -39,6 +42,15 @@ class Problem:
     severity: Severity
     topic: str | None
     message: str
+
+
+def _unused_hint(info: TopicInfo) -> str | None:
+    """What an unused topic can still be given as: a map (``--map LOG``) or a start pose (``--init TOPIC``)."""
+    if info.msgtype == OCCUPANCY_GRID:
+        return "a map: localize --map LOG"
+    if info.msgtype in POSE_TYPES:
+        return f"a start pose: localize --init {info.name}"
+    return None
 
 
 @dataclass
@@ -152,7 +164,7 @@ def inspect_log(path: Path, config: DoorbatchConfig | None = None,
         topics = [
             TopicReport(info.name, info.msgtype, stats.get(info.name, _TopicStats()).count,
                         _rate(stats.get(info.name)), role_of[info.name].value if info.name in role_of else None,
-                        roles.reasons.get(info.name))
+                        roles.reasons.get(info.name) if info.name in role_of else _unused_hint(info))
             for info in sorted(reader.topics.values(), key=lambda t: t.name)
         ]
         report = LogReport(
