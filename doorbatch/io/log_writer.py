@@ -28,7 +28,7 @@ from doorbatch.errors import UsageError
 from doorbatch.io.decode import DETECTION2D_ARRAY, decode_detections, ros1_class_id
 from doorbatch.io.reader import RawMessage
 from doorbatch.io.ros_messages import detection_array
-from doorbatch.io.typestore import ros1_typestore, ros2_typestore
+from doorbatch.io.typestore import new_ros2_typestore, register_ros1_type, ros1_typestore, ros2_typestore
 
 
 class LogFormat(StrEnum):
@@ -40,13 +40,16 @@ class LogFormat(StrEnum):
     ROSBAG2_MCAP = "rosbag2-mcap"
 
 
-def to_ros2(raw: RawMessage, cache: dict[str, object]) -> tuple[Any, Typestore]:
+def to_ros2(raw: RawMessage, cache: dict[str, object], target: Typestore | None = None) -> tuple[Any, Typestore]:
     """A message read from any log as a ROS 2 object plus the store that can serialize it.
 
     ROS 1 messages are migrated field by field into the Humble layout (``Header.seq`` dropped, renamed
-    fields such as CameraInfo ``K``→``k`` matched); types Humble lacks keep their own definitions.
+    fields such as CameraInfo ``K``→``k`` matched). A ROS 1 type that Humble lacks is first registered into
+    ``target`` (a writer's own ROS 2 store, :func:`~doorbatch.io.typestore.new_ros2_typestore`) from its ROS 1
+    definition, with the ROS 2 layouts of the types it uses; without a ``target`` it keeps its ROS 1
+    definition.
     """
-    target = ros2_typestore()
+    target = target or ros2_typestore()
     if not raw.ros1:
         if raw.msgtype in target.types or raw.store is None:
             return raw.msg, target
@@ -57,7 +60,9 @@ def to_ros2(raw: RawMessage, cache: dict[str, object]) -> tuple[Any, Typestore]:
         boxes = [(d.class_id, d.score, d.center_x, d.center_y, d.size_x, d.size_y) for d in rec.detections]
         return detection_array(rec.stamp_ns, rec.frame_id, boxes), target
     if raw.msgtype not in target.types:
-        return raw.msg, src
+        if target is ros2_typestore():
+            return raw.msg, src
+        register_ros1_type(target, src, raw.msgtype)
     return migrate_message(src, target, raw.msgtype, raw.msgtype, cache, raw.msg), target
 
 
@@ -71,6 +76,7 @@ class LogWriter:
         self._channels: dict[tuple[str, str], Any] = {}
         self._schemas: dict[str, int] = {}
         self._migrate_cache: dict[str, object] = {}
+        self._ros2_store: Typestore | None = None  # ROS 2 types plus the ROS 1-only ones copied so far
         self._file: IO[bytes] | None = None
         self._mcap: McapWriter | None = None
         self._bag: Bag1Writer | Bag2Writer | None = None
@@ -127,7 +133,9 @@ class LogWriter:
 
     def write_raw(self, raw: RawMessage) -> None:
         """Copy a message read from any log, converting ROS 1 messages to ROS 2 first."""
-        msg, store = to_ros2(raw, self._migrate_cache)
+        if self._ros2_store is None:
+            self._ros2_store = new_ros2_typestore()
+        msg, store = to_ros2(raw, self._migrate_cache, self._ros2_store)
         self.write(raw.topic, raw.msgtype, raw.log_time_ns, msg, store)
 
     def _mcap_channel(self, topic: str, msgtype: str, store: Typestore) -> int:

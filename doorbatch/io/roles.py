@@ -42,7 +42,7 @@ _TYPES: dict[Role, tuple[str, ...]] = {
     Role.SCAN: (d.LASERSCAN,),
     Role.ODOMETRY: (d.ODOMETRY,),
     Role.REFERENCE: (d.ODOMETRY, d.POSE_STAMPED, d.POSE_COV_STAMPED),
-    Role.TRANSFORMS: (d.TF_MESSAGE,),
+    Role.TRANSFORMS: (d.TF_MESSAGE, d.TF_MESSAGE_ROS1_LEGACY),
     Role.COLORS: (d.POINTCLOUD2,),
     Role.IMAGE: (d.IMAGE, d.COMPRESSED_IMAGE),
     Role.CAMERA_INFO: (d.CAMERA_INFO,),
@@ -149,7 +149,7 @@ def assign_roles(topics: Mapping[str, TopicInfo], overrides: TopicsConfig | None
                 chosen[role] = tuple(tfs)
                 for name in tfs:
                     kind = "static" if name.rstrip("/").endswith("tf_static") else "dynamic"
-                    reasons[name] = f"type {d.TF_MESSAGE} ({kind} transforms)"
+                    reasons[name] = f"type {topics[name].msgtype} ({kind} transforms)"
                 taken.update(tfs)
             continue
         pick = _pick(role, free(role))

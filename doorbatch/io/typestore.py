@@ -52,9 +52,22 @@ def _register(store: Typestore, defs: dict[str, str]) -> None:
 @cache
 def ros2_typestore() -> Typestore:
     """ROS 2 Humble types plus vision_msgs; what doorbatch writes (CDR) is described by this store."""
+    return new_ros2_typestore()
+
+
+def new_ros2_typestore() -> Typestore:
+    """A fresh store of :func:`ros2_typestore`'s types, for a writer that registers more (ROS 1-only types)."""
     store = get_typestore(Stores.ROS2_HUMBLE)
     _register(store, _VISION_ROS2)
     return store
+
+
+def register_ros1_type(target: Typestore, source: Typestore, msgtype: str) -> None:
+    """Register a type that only ROS 1 knows (``tf/tfMessage``, a robot's own messages) into a ROS 2 store,
+    from its ROS 1 definition; the types it uses that the store has (``std_msgs/Header``, ...) keep their ROS 2
+    layout, so ``migrate_message`` moves a message into it as into any ROS 2 type."""
+    text, _ = source.generate_msgdef(msgtype, ros_version=1)
+    target.register({k: v for k, v in get_types_from_msg(text, msgtype).items() if k not in target.types})
 
 
 @cache

@@ -127,6 +127,37 @@ def test_a_ros2idl_schema_reads_like_its_msg_text(write_log: Callable[..., Path]
     _assert_same_records(records, ref)
 
 
+def test_a_ros1_bag_with_tf_tfmessage_reads_like_tf2(write_log: Callable[..., Path], tmp_path: Path) -> None:
+    """Bags of ROS 1 before Hydro (many public datasets) carry /tf as ``tf/tfMessage``: the same layout as
+    ``tf2_msgs/TFMessage`` under an older name."""
+    from rosbags.convert.converter import migrate_message
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    from doorbatch.io.log_writer import LogWriter
+    from doorbatch.io.typestore import ros2_typestore
+
+    store = get_typestore(Stores.ROS1_NOETIC)
+    store.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf/msg/tfMessage"))
+    legacy = store.types["tf/msg/tfMessage"]
+    cache: dict[str, object] = {}
+    path = tmp_path / "old.bag"
+    with LogWriter(path, "bag") as writer:
+        for topic, msgtype, t, msg in sample_messages():
+            if msgtype == "tf2_msgs/msg/TFMessage":
+                stamped = "geometry_msgs/msg/TransformStamped"
+                ros1 = [migrate_message(ros2_typestore(), store, stamped, stamped, cache, x) for x in msg.transforms]
+                writer.write(topic, "tf/msg/tfMessage", t, legacy(transforms=ros1), store)
+            else:
+                writer.write(topic, msgtype, t, msg)
+    ref_roles, ref = _read(write_log("new.bag", fmt="bag"))
+    roles, records = _read(path)
+    assert roles == ref_roles and Role.TRANSFORMS in roles
+    _assert_same_records(records, ref)
+    # converted to MCAP, the ROS 1-only type takes ROS 2's Header (no seq) and reads back the same
+    convert_log(path, tmp_path / "old.mcap")
+    _assert_same_records(_read(tmp_path / "old.mcap")[1], ref)
+
+
 @pytest.mark.parametrize("fmt", ["bag", "rosbag2"])
 def test_convert_to_mcap_keeps_every_record(write_log: Callable[..., Path], tmp_path: Path, fmt: str) -> None:
     src = write_log(FORMATS[fmt], fmt=fmt)
