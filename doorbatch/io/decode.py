@@ -12,6 +12,7 @@ from typing import Any
 
 import cv2
 import numpy as np
+import numpy.typing as npt
 
 from doorbatch.errors import LogContentError
 from doorbatch.records import (
@@ -28,6 +29,7 @@ from doorbatch.records import (
 )
 
 LASERSCAN = "sensor_msgs/msg/LaserScan"
+MULTI_ECHO_LASERSCAN = "sensor_msgs/msg/MultiEchoLaserScan"
 ODOMETRY = "nav_msgs/msg/Odometry"
 POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
 POSE_COV_STAMPED = "geometry_msgs/msg/PoseWithCovarianceStamped"
@@ -60,13 +62,20 @@ def expected_beam_count(angle_min: float, angle_max: float, angle_increment: flo
     return round((angle_max - angle_min) / angle_increment) + 1
 
 
-def decode_scan(msg: Any, log_time_ns: int, topic: str) -> Scan:
-    """sensor_msgs/LaserScan → :class:`Scan`, checking that ranges match the angles.
+def _first_echoes(beams: Any) -> npt.NDArray[np.float32]:
+    """Per beam of a MultiEchoLaserScan its first echo (NaN where a beam has none), as Cartographer reads them."""
+    return np.array([b.echoes[0] if len(b.echoes) else np.nan for b in beams], dtype=np.float32)
+
+
+def decode_scan(msg: Any, log_time_ns: int, topic: str, msgtype: str = LASERSCAN) -> Scan:
+    """sensor_msgs/LaserScan (or MultiEchoLaserScan, each beam's first echo) → :class:`Scan`, checking that
+    ranges match the angles.
 
     Raises:
         LogContentError: zero angle increment, or a ranges length that disagrees with the angles.
     """
-    ranges = np.asarray(msg.ranges, dtype=np.float32)
+    multi = msgtype == MULTI_ECHO_LASERSCAN
+    ranges = _first_echoes(msg.ranges) if multi else np.asarray(msg.ranges, dtype=np.float32)
     expected = expected_beam_count(msg.angle_min, msg.angle_max, msg.angle_increment)
     if expected < 0:
         raise LogContentError(f"scan has angle_increment {msg.angle_increment}", topic=topic)
@@ -77,7 +86,7 @@ def decode_scan(msg: Any, log_time_ns: int, topic: str) -> Scan:
             f"angle_increment {msg.angle_increment:.6f}",
             topic=topic,
         )
-    intensities = np.asarray(msg.intensities, dtype=np.float32)
+    intensities = _first_echoes(msg.intensities) if multi else np.asarray(msg.intensities, dtype=np.float32)
     return Scan(
         stamp_ns=stamp_to_ns(msg.header.stamp),
         log_time_ns=log_time_ns,
@@ -281,7 +290,7 @@ def decode_detections(msg: Any, log_time_ns: int) -> Detections:
 def decode(role: Role, msg: Any, msgtype: str, log_time_ns: int, topic: str) -> Iterator[Record]:
     """Decode one message of a topic with a known role into its records (TF gives several)."""
     if role is Role.SCAN:
-        yield decode_scan(msg, log_time_ns, topic)
+        yield decode_scan(msg, log_time_ns, topic, msgtype)
     elif role in (Role.ODOMETRY, Role.REFERENCE):
         yield decode_pose(msg, msgtype, log_time_ns)
     elif role is Role.TRANSFORMS:

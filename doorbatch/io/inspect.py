@@ -153,7 +153,7 @@ def inspect_log(path: Path, config: DoorbatchConfig | None = None,
                 st.last_stamp_ns = stamp
             if raw.topic == scan_topic:
                 try:
-                    scan_frames.add(decode_scan(raw.msg, raw.log_time_ns, raw.topic).frame_id)
+                    scan_frames.add(decode_scan(raw.msg, raw.log_time_ns, raw.topic, raw.msgtype).frame_id)
                 except LogContentError as err:
                     if not mismatch_reported:
                         problems.append(Problem(Severity.ERROR, raw.topic, err.reason))

@@ -39,7 +39,7 @@ class RoleAssignment:
 
 
 _TYPES: dict[Role, tuple[str, ...]] = {
-    Role.SCAN: (d.LASERSCAN,),
+    Role.SCAN: (d.LASERSCAN, d.MULTI_ECHO_LASERSCAN),
     Role.ODOMETRY: (d.ODOMETRY,),
     Role.REFERENCE: (d.ODOMETRY, d.POSE_STAMPED, d.POSE_COV_STAMPED),
     Role.TRANSFORMS: (d.TF_MESSAGE, d.TF_MESSAGE_ROS1_LEGACY),

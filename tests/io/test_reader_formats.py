@@ -158,6 +158,29 @@ def test_a_ros1_bag_with_tf_tfmessage_reads_like_tf2(write_log: Callable[..., Pa
     _assert_same_records(_read(tmp_path / "old.mcap")[1], ref)
 
 
+def test_a_multi_echo_scan_reads_as_its_first_echoes(write_log: Callable[..., Path]) -> None:
+    """sensor_msgs/MultiEchoLaserScan (Cartographer's Deutsches Museum bags): every beam's first echo, as
+    Cartographer takes it; a later echo (0.5 m behind) is ignored."""
+    from doorbatch.io.typestore import ros2_typestore
+
+    types = ros2_typestore().types
+    multi, echo = types["sensor_msgs/msg/MultiEchoLaserScan"], types["sensor_msgs/msg/LaserEcho"]
+    messages = []
+    for topic, msgtype, t, msg in sample_messages():
+        if msgtype == "sensor_msgs/msg/LaserScan":
+            msgtype = "sensor_msgs/msg/MultiEchoLaserScan"
+            msg = multi(header=msg.header, angle_min=msg.angle_min, angle_max=msg.angle_max,
+                        angle_increment=msg.angle_increment, time_increment=msg.time_increment,
+                        scan_time=msg.scan_time, range_min=msg.range_min, range_max=msg.range_max,
+                        ranges=[echo(echoes=np.array([r, r + 0.5], dtype=np.float32)) for r in msg.ranges],
+                        intensities=[echo(echoes=np.array([i, 0.0], dtype=np.float32)) for i in msg.intensities])
+        messages.append((topic, msgtype, t, msg))
+    ref_roles, ref = _read(write_log("single.mcap"))
+    roles, records = _read(write_log("multi.mcap", messages))
+    assert roles == ref_roles
+    _assert_same_records(records, ref)
+
+
 @pytest.mark.parametrize("fmt", ["bag", "rosbag2"])
 def test_convert_to_mcap_keeps_every_record(write_log: Callable[..., Path], tmp_path: Path, fmt: str) -> None:
     src = write_log(FORMATS[fmt], fmt=fmt)
