@@ -114,6 +114,12 @@ class ScanMatchConfig(Section):
     # Standard-deviation floors of every increment (a standing robot still has stamp and encoder quantization).
     odom_min_std_m: float = Field(0.01, gt=0.0)
     odom_min_std_deg: float = Field(0.5, gt=0.0)
+    # Without odometry (a handheld or backpack lidar, a bag without /odom): each scan is predicted at constant
+    # velocity (the last matched increment, scaled to the scan interval dt), off by at most an acceleration of
+    # this much over dt: std a·dt²/2 per axis, on top of the floors above. Expert choice: indoor robots
+    # accelerate at up to ~1 m/s² and 90°/s² (a walking person carrying a lidar about as much).
+    no_odometry_accel_m_s2: float = Field(1.0, gt=0.0)
+    no_odometry_accel_deg_s2: float = Field(90.0, gt=0.0)
     # Correlative search (Olson 2009) around the prior: half-widths of window_sigmas × the increment's σ per
     # map axis, clipped to [min, max] (the min covers events the α-model does not, e.g. a wheel slip).
     window_sigmas: float = Field(3.0, gt=0.0)

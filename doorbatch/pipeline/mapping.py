@@ -78,14 +78,15 @@ def choose_pose_source(recordings: Sequence[Recording], wanted: str, config: Doo
     """The pose source and why another than asked for: the one asked for, or (``auto``) ``reference`` when
     every log has a reference that covers at least ``mapping.min_reference_coverage`` of its scans, else
     ``scanmatch`` (a sparse pose topic, e.g. localization poses published only on filter updates, is not the
-    trajectory: with it most scans would be skipped).
+    trajectory: with it most scans would be skipped), on odometry or, for a log with neither, at constant
+    velocity (a handheld lidar).
 
     Raises:
         PipelineError: a log lacks what the source needs, or has neither a reference nor odometry.
     """
     mc = config.mapping
     for rec in recordings:
-        if rec.reference is None and rec.odometry is None and wanted in ("auto", "odometry", "reference"):
+        if rec.reference is None and rec.odometry is None and wanted in ("odometry", "reference"):
             raise PipelineError(f"{rec.path}: no usable pose source: no reference pose topic and no odometry "
                                 "(nav_msgs/Odometry or TF odom→base_link); try --pose-source scanmatch")
     if wanted == "auto":
@@ -109,23 +110,20 @@ def _hits_base(rec: Recording, i: int) -> FloatArray:
 
 
 def pass_poses(rec: Recording, source: str, config: DoorbatchConfig) -> PassPoses:
-    """Poses at the scan stamps from the chosen source (interpolated, or scan matched on odometry)."""
+    """Poses at the scan stamps from the chosen source (interpolated, or scan matched on odometry or, without
+    odometry, at constant velocity)."""
     stamps = rec.scans.stamps_ns
     gap_ns = int(config.mapping.max_pose_gap_s * 1e9)
     if source == "reference" and rec.reference is not None:
         poses, valid = interpolate_poses(rec.reference.stamps_ns, rec.reference.poses, stamps, gap_ns)
         return PassPoses(rec.path, stamps, poses, valid, source)
+    if source == "scanmatch":
+        return _chain_scanmatch([rec], config)[0][0]
     if rec.odometry is not None:
         odom, valid = interpolate_poses(rec.odometry.stamps_ns, rec.odometry.poses, stamps, gap_ns)
-    else:  # scan matching alone, from a constant-position prior
+    else:  # no odometry: every scan, for scan matching alone (_chain_scanmatch)
         odom, valid = np.zeros((stamps.shape[0], 3)), np.ones(stamps.shape[0], dtype=bool)
-    if source == "odometry":
-        return PassPoses(rec.path, stamps, odom, valid, source)
-    idx = np.flatnonzero(valid)
-    matched = scan_match_trajectory([_hits_base(rec, int(i)) for i in idx], odom[idx], config.scanmatch)
-    poses = odom.copy()
-    poses[idx] = matched.poses
-    return PassPoses(rec.path, stamps, poses, valid, source)
+    return PassPoses(rec.path, stamps, odom, valid, source)
 
 
 def check_common_frame(recordings: Sequence[Recording], source: str, config: DoorbatchConfig) -> None:
@@ -153,20 +151,31 @@ def check_common_frame(recordings: Sequence[Recording], source: str, config: Doo
                 f"{config.mapping.odometry_continuity_m}); give a reference pose topic, or map the logs separately")
 
 
-def _chain_scanmatch(recordings: Sequence[Recording], config: DoorbatchConfig) -> list[PassPoses]:
-    """Scan matching over all passes as one sequence (one odometry frame, the submap carries over)."""
+def _chain_scanmatch(recordings: Sequence[Recording], config: DoorbatchConfig) -> tuple[list[PassPoses], list[str]]:
+    """Scan matching over all passes as one sequence (one odometry frame, the submap carries over); without
+    odometry (one pass: :func:`check_common_frame`) each scan is predicted at constant velocity. Returns the
+    passes and warnings."""
     per_pass = [pass_poses(rec, "odometry", config) for rec in recordings]
     idx = [np.flatnonzero(p.valid) for p in per_pass]
     scans = [_hits_base(rec, int(i)) for rec, ii in zip(recordings, idx, strict=True) for i in ii]
     odom = np.concatenate([p.poses[ii] for p, ii in zip(per_pass, idx, strict=True)])
-    matched = scan_match_trajectory(scans, odom, config.scanmatch).poses
+    no_odometry = any(rec.odometry is None for rec in recordings)
+    stamps = np.concatenate([p.stamps_ns[ii] for p, ii in zip(per_pass, idx, strict=True)])
+    result = scan_match_trajectory(scans, None if no_odometry else odom, config.scanmatch, stamps)
+    matched = result.poses
+    warnings = []
+    if no_odometry:
+        share = float(np.mean(result.degenerate)) if result.degenerate.size else 0.0
+        warnings.append(f"no odometry: poses from scan matching alone, each scan predicted at constant velocity; "
+                        f"{share:.0%} of the scans left a direction unobserved (a featureless corridor), along which "
+                        "the trajectory is that guess")
     out, start = [], 0
     for p, ii in zip(per_pass, idx, strict=True):
         poses = p.poses.copy()
         poses[ii] = matched[start: start + ii.shape[0]]
         start += ii.shape[0]
         out.append(PassPoses(p.log, p.stamps_ns, poses, p.valid, "scanmatch"))
-    return out
+    return out, warnings
 
 
 def map_scans(rec: Recording, poses: PassPoses, stride: int = 1) -> Iterator[MapScan]:
@@ -215,7 +224,8 @@ def build_map(logs: Sequence[Path], config: DoorbatchConfig | None = None,
     check_common_frame(recordings, source, config)
     t0 = time.perf_counter()
     if source == "scanmatch":
-        passes = _chain_scanmatch(recordings, config)
+        passes, matching_notes = _chain_scanmatch(recordings, config)
+        warnings += matching_notes
     else:
         passes = [pass_poses(rec, source, config) for rec in recordings]
     seconds["poses"] = time.perf_counter() - t0

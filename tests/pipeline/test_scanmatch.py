@@ -15,7 +15,7 @@ from scanmatch_sim import (
     simulate_scan,
 )
 
-from doorbatch.config import DoorbatchConfig
+from doorbatch.config import DoorbatchConfig, load_config
 from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.geometry.se2 import compose, interpolate_poses, relative, transform_points
 from doorbatch.io.recording import load_recording
@@ -265,3 +265,21 @@ def test_a_scan_entering_a_corridor_is_not_pulled_back_onto_its_mapped_mouth(see
         relieved[name] = (int(seen.sum()), int(result.outside_gate.sum()))
     assert relieved["truth"][0] >= 10  # the wall points past the mapped mouth
     assert relieved["slipped"][0] < relieved["slipped"][1]  # its end-wall points, seen free, stay charged
+
+
+def test_without_odometry_scans_are_matched_at_constant_velocity() -> None:
+    """A log with no odometry (a handheld lidar): each scan predicted at the last matched velocity. The sample's
+    open-door run stays within centimetres; the constant-position prediction it replaced (all-zero odometry: a
+    robot that never moves, held there by the odometry floors' tight prior) ran off by metres."""
+    config = load_config()
+    rec = load_recording(REPO / "datasets" / "sample" / "logs" / "loc_open.mcap", config)
+    assert rec.reference is not None
+    stamps = rec.scans.stamps_ns
+    scans = [pts[hit] for pts, hit in (rec.scans.endpoints_base(i) for i in range(len(stamps)))]
+    ref, _ = interpolate_poses(rec.reference.stamps_ns, rec.reference.poses, stamps)
+    moving = scan_match_trajectory(scans, None, config.scanmatch, stamps).poses
+    standing = scan_match_trajectory(scans, np.zeros((len(stamps), 3)), config.scanmatch).poses
+    assert ate_rmse(align_first_pose(moving, ref), ref) < 0.1
+    assert ate_rmse(align_first_pose(standing, ref), ref) > 1.0
+    with pytest.raises(ValueError, match="stamps"):
+        scan_match_trajectory(scans, None, config.scanmatch)

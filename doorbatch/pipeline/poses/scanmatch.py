@@ -217,24 +217,34 @@ class ScanMatch:
 
 
 def scan_match_trajectory(
-    scans_xy: Sequence[npt.ArrayLike], odometry_poses: npt.ArrayLike, config: ScanMatchConfig | None = None
+    scans_xy: Sequence[npt.ArrayLike], odometry_poses: npt.ArrayLike | None, config: ScanMatchConfig | None = None,
+    stamps_ns: npt.ArrayLike | None = None,
 ) -> ScanMatchResult:
     """Correct odometry by matching each scan against a local submap (correlative search, then MAP-PLICP).
 
     Args:
         scans_xy: S arrays (N_i, 2) of scan end points in base_link (hits only, in beam order: the
             reference lines join consecutive hits).
-        odometry_poses: (S, 3) odometry x, y, yaw at the scan times.
+        odometry_poses: (S, 3) odometry x, y, yaw at the scan times; None: no odometry, each scan predicted at
+            constant velocity (the last matched increment scaled to the scan interval; std a·dt²/2 from
+            ``no_odometry_accel_*`` plus the floors).
         config: Parameters; the defaults when None.
+        stamps_ns: (S,) scan times; needed without odometry.
 
     Returns:
-        Corrected poses in the map frame (scan 0 keeps its odometry pose), covariances and statistics.
+        Corrected poses in the map frame (scan 0 keeps its odometry pose, or the origin), covariances and
+        statistics.
 
     Raises:
-        ValueError: The odometry is not (S, 3) with S = len(scans_xy), or is not finite.
+        ValueError: The odometry is not (S, 3) with S = len(scans_xy), or is not finite; no odometry and no
+            stamps.
     """
     cfg = config or ScanMatchConfig()
-    odom = _check_inputs(scans_xy, odometry_poses)
+    no_odometry = odometry_poses is None
+    if no_odometry and stamps_ns is None:
+        raise ValueError("scan matching without odometry needs the scans' stamps")
+    dt_s = np.diff(np.asarray(stamps_ns, dtype=np.int64)) / 1e9 if stamps_ns is not None else None
+    odom = np.zeros((len(scans_xy), 3)) if odometry_poses is None else _check_inputs(scans_xy, odometry_poses)
     hits = [_finite(s) for s in scans_xy]
     increments = relative(odom[:-1], odom[1:])
     out = _empty_result(odom.shape[0])
@@ -247,8 +257,13 @@ def scan_match_trajectory(
     carried = np.zeros((3, 3))  # uncertainty of the previous pose that no match to the submap took out
     fallback_run = 0  # fallback scans in a row, none of them a keyframe yet
     for k in range(1, odom.shape[0]):
+        accel_dt_s = None
+        if no_odometry and dt_s is not None:  # constant velocity: the last matched increment, over this interval
+            accel_dt_s = float(dt_s[k - 1])
+            increments[k - 1] = (constant_velocity_increment(out.poses[k - 2], out.poses[k - 1], float(dt_s[k - 2]),
+                                                             accel_dt_s) if k >= 2 else 0.0)
         prior = compose(out.poses[k - 1], increments[k - 1])
-        cov = propagated_covariance(carried, out.poses[k - 1], increments[k - 1], cfg)
+        cov = propagated_covariance(carried, out.poses[k - 1], increments[k - 1], cfg, accel_dt_s)
         scan = voxel_downsample(hits[k], cfg.scan_voxel_m)
         match = match_scan(submap, scan, prior, cov, cfg)
         _store(out, k, match)
@@ -386,15 +401,36 @@ def increment_covariance(increment: npt.ArrayLike, cfg: ScanMatchConfig) -> Floa
     return cov
 
 
-def prediction_covariance(increment: npt.ArrayLike, yaw: float, cfg: ScanMatchConfig) -> FloatArray:
-    """Covariance of x ⊕ u in the map frame for a fixed x of heading ``yaw``: G Cov(u) Gᵀ, G = diag(R(yaw), 1)."""
+def constant_velocity_increment(before: FloatArray, last: FloatArray, dt_before_s: float, dt_s: float) -> FloatArray:
+    """The increment ``before`` → ``last`` (over ``dt_before_s``) as a twist, repeated over ``dt_s``: the
+    constant-velocity prediction of the next scan (small increments: the twist scales linearly)."""
+    inc = relative(before, last)
+    scale = dt_s / dt_before_s if dt_before_s > 0.0 else 1.0
+    out: FloatArray = inc * scale
+    return out
+
+
+def constant_velocity_covariance(dt_s: float, cfg: ScanMatchConfig) -> FloatArray:
+    """Covariance of a constant-velocity increment over ``dt_s``: (a·dt²/2)² per axis from ``no_odometry_accel_*``,
+    plus the floors' squares (the matched velocity's own noise)."""
+    half = 0.5 * dt_s * dt_s
+    return np.diag([(cfg.no_odometry_accel_m_s2 * half) ** 2 + cfg.odom_min_std_m ** 2] * 2
+                   + [math.radians(cfg.no_odometry_accel_deg_s2 * half) ** 2 + math.radians(cfg.odom_min_std_deg) ** 2])
+
+
+def prediction_covariance(increment: npt.ArrayLike, yaw: float, cfg: ScanMatchConfig,
+                          accel_dt_s: float | None = None) -> FloatArray:
+    """Covariance of x ⊕ u in the map frame for a fixed x of heading ``yaw``: G Cov(u) Gᵀ, G = diag(R(yaw), 1);
+    Cov(u) from the odometry model, or, given ``accel_dt_s`` (no odometry), :func:`constant_velocity_covariance`."""
     g = frame_rotation(yaw)
-    cov: FloatArray = g @ increment_covariance(increment, cfg) @ g.T
+    inc_cov = (constant_velocity_covariance(accel_dt_s, cfg) if accel_dt_s is not None
+               else increment_covariance(increment, cfg))
+    cov: FloatArray = g @ inc_cov @ g.T
     return cov
 
 
 def propagated_covariance(previous_covariance: npt.ArrayLike, previous_pose: npt.ArrayLike, increment: npt.ArrayLike,
-                          cfg: ScanMatchConfig) -> FloatArray:
+                          cfg: ScanMatchConfig, accel_dt_s: float | None = None) -> FloatArray:
     """Covariance of the prediction x ⊕ u in the map frame: J Σ_x Jᵀ + G Cov(u) Gᵀ (first-order compounding).
 
     Σ_x is the uncertainty of the previous pose that no match to the submap took out: zero after a trusted
@@ -403,7 +439,8 @@ def propagated_covariance(previous_covariance: npt.ArrayLike, previous_pose: npt
     """
     x = np.asarray(previous_pose, dtype=np.float64)
     shift = rotation_matrix(float(x[2])) @ np.asarray(increment, dtype=np.float64)[:2]
-    return compounded_covariance(previous_covariance, shift, prediction_covariance(increment, float(x[2]), cfg))
+    return compounded_covariance(previous_covariance, shift,
+                                 prediction_covariance(increment, float(x[2]), cfg, accel_dt_s))
 
 
 def search_window(covariance: FloatArray, cfg: ScanMatchConfig) -> Window:
