@@ -14,7 +14,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +27,7 @@ from doorbatch.io.initial_pose import StartPose, read_start_pose
 from doorbatch.io.map_server import read_map
 from doorbatch.io.map_topic import read_map_topic
 from doorbatch.io.mapdir import read_door_set
-from doorbatch.io.recording import Recording, load_recording
+from doorbatch.io.recording import PoseSeries, Recording, load_recording
 from doorbatch.maps import DoorSet, OccupancyMap
 from doorbatch.pipeline.localize.convergence import ConvergenceMonitor, multimodal
 from doorbatch.pipeline.localize.door_geometry import subset_doors, with_closed_in_range
@@ -49,6 +49,7 @@ from doorbatch.pipeline.localize.particles import ParticleSet
 from doorbatch.pipeline.localize.rbpf import rbpf_step
 from doorbatch.pipeline.localize.result import LocalizationResult
 from doorbatch.pipeline.localize.torch_field import check_device
+from doorbatch.pipeline.mapping import pass_poses
 
 log = logging.getLogger(__name__)
 FloatArray = npt.NDArray[np.float64]
@@ -269,6 +270,22 @@ def localize(log_path: Path, lmap: LocalizationMap, config: DoorbatchConfig, met
     return localize_recording(rec, lmap, config, method, start, progress)
 
 
+def with_laser_odometry(rec: Recording, config: DoorbatchConfig) -> Recording:
+    """A recording without odometry given its scans matched at constant velocity as the motion input (laser
+    odometry, as robots without wheel encoders feed AMCL from a scan matcher), with a warning.
+
+    Raises:
+        PipelineError: no scan got a pose.
+    """
+    matched = pass_poses(rec, "scanmatch", config)
+    if not matched.valid.any():
+        raise PipelineError(f"{rec.path}: no odometry, and scan matching gave no scan a pose")
+    note = ("no odometry (nav_msgs/Odometry or TF odom→base_link): the motion input is the scans matched at "
+            "constant velocity (laser odometry); a featureless corridor leaves it guessing along the corridor")
+    return replace(rec, odometry=PoseSeries(matched.stamps_ns[matched.valid], matched.poses[matched.valid], "odom"),
+                   warnings=[*rec.warnings, note])
+
+
 def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchConfig, method: str = "rbpf",
                        init: Init = "reference", progress: Callable[[int], object] | None = None
                        ) -> LocalizationResult:
@@ -276,8 +293,10 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
     :class:`StartPose` start localizes only the scans from its stamp on (AMCL does nothing before its initial
     pose).
 
+    A recording without odometry moves by its scans matched at constant velocity (:func:`with_laser_odometry`).
+
     Raises:
-        PipelineError: the recording has no odometry, or --init reference without a reference.
+        PipelineError: --init reference without a reference.
         UsageError: an unknown method.
     """
     if method not in ("mcl", "rbpf"):
@@ -286,8 +305,8 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
     rng = np.random.default_rng(config.seed if lc.seed is None else lc.seed)
     log_path = Path(rec.path)
     if rec.odometry is None:
-        raise PipelineError(f"{log_path}: no odometry (nav_msgs/Odometry or TF odom→base_link): localization "
-                            "needs it as the motion input")
+        rec = with_laser_odometry(rec, config)
+    assert rec.odometry is not None
     odom, odom_ok = interpolate_poses(rec.odometry.stamps_ns, rec.odometry.poses, rec.scans.stamps_ns,
                                       int(config.mapping.max_pose_gap_s * 1e9))
     state = MclState(_initial_particles(rec, lmap, init, method, lc, rng), global_start=init == "global")

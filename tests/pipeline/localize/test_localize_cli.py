@@ -197,6 +197,25 @@ def test_a_map_recorded_in_a_log_localizes_as_its_yaml(sample_map: Path, tmp_pat
     assert code == 2 and "OccupancyGrid topics in the log: none" in capsys.readouterr().err
 
 
+def test_a_log_without_odometry_moves_by_its_matched_scans(sample_map: Path, tmp_path: Path) -> None:
+    """No /odom and no odom → base_link in /tf (a robot without wheel encoders): the scans matched at constant
+    velocity are the motion input (laser odometry), with a warning, and the filter tracks."""
+    from doorbatch.io.log_writer import LogWriter
+    from doorbatch.io.reader import open_log
+
+    src = SAMPLE_LOGS / "loc_open.mcap"
+    log = tmp_path / "no_odometry.mcap"
+    with open_log(src) as reader, LogWriter(log) as writer:
+        for raw in reader.raw_messages():
+            if raw.topic not in ("/odom", "/tf"):
+                writer.write(raw.topic, raw.msgtype, raw.log_time_ns, raw.msg, raw.store)
+    assert load_recording(log, DoorbatchConfig()).odometry is None
+    run = tmp_path / "run"
+    assert main(["localize", str(log), "--map", str(sample_map), "-o", str(run), "--method", "mcl", "-q"]) == 0
+    assert any("laser odometry" in w for w in json.loads((run / "manifest.json").read_text())["warnings"])
+    assert _errors(run, log).mean() < 0.1
+
+
 def test_bad_init_is_a_usage_error(sample_map: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     code = main(["localize", str(SAMPLE_LOGS / "loc_open.mcap"), "--map", str(sample_map), "-o", str(tmp_path / "r"),
                  "--init", "1,2"])
