@@ -259,13 +259,17 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
     except TransformError as err:
         raise LogContentError(f"{err.reason} ({missing_laser_tf_hint(tf, base)})", path=path,
                               topic=scan_topic) from err
+    range_min, range_max, note = usable_range_limits(np.array([s.range_min for s in scans]),
+                                                     np.array([s.range_max for s in scans]))
+    if note:
+        warnings.append(note)
     scan_set = ScanSet(
         stamps_ns=np.array([s.stamp_ns for s in scans], dtype=np.int64),
         ranges=[s.ranges for s in scans],
         angle_min=np.array([s.angle_min for s in scans]),
         angle_increment=np.array([s.angle_increment for s in scans]),
-        range_min=np.array([s.range_min for s in scans]),
-        range_max=np.array([s.range_max for s in scans]),
+        range_min=range_min,
+        range_max=range_max,
         laser_to_base=affines,
         frame_id=scans[0].frame_id,
     )
@@ -280,6 +284,21 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
         if not any(v.any() for v in valid):
             aligned, valid = None, None
     return Recording(str(path), scan_set, odometry, reference, aligned, warnings, valid)
+
+
+def usable_range_limits(range_min: FloatArray, range_max: FloatArray) -> tuple[FloatArray, FloatArray, str | None]:
+    """The scans' range limits with the ones that cannot be meant made harmless, and a warning saying so.
+
+    A NaN or negative range_min is 0. A NaN range_max, or one at or below range_min (drivers that leave it 0),
+    would make every reading a no-return (no hits, an empty map): it becomes +inf, no stated maximum (every
+    finite reading a hit; the localizers then use ``localize.laser_max_range_fallback`` in their model)."""
+    low = np.where(np.isfinite(range_min) & (range_min > 0.0), range_min, 0.0)
+    bad = np.isnan(range_max) | (range_max <= low)
+    if not bad.any():
+        return low, range_max, None
+    note = (f"{int(bad.sum())} of {bad.size} scans state a range_max that is NaN or not above range_min "
+            f"(e.g. {float(range_max[bad][0])!r}): read as no stated maximum, every finite reading a hit")
+    return low, np.where(bad, np.inf, range_max), note
 
 
 def _aligned_colors(colors: BeamColors | None, beams: int) -> npt.NDArray[np.uint8]:

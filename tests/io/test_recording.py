@@ -102,3 +102,17 @@ def test_a_tree_without_base_link_names_the_frame_to_use(write_log: Callable[...
         load_recording(path)
     rec = load_recording(path, DoorbatchConfig.model_validate({"frames": {"base_link": "base_footprint"}}))
     np.testing.assert_allclose(rec.scans.laser_to_base[0], [[1, 0, 0.2], [0, 1, 0]], atol=1e-12)
+
+
+def test_a_range_max_of_zero_or_nan_is_no_stated_maximum(write_log: Callable[..., Path]) -> None:
+    """Drivers that leave range_max 0 (or NaN): read as it was, every reading would be a no-return and the map
+    empty. It becomes +inf (every finite reading a hit), with a warning; a good range_max is kept."""
+    messages = sample_messages(n_scans=4)
+    scans = [msg for topic, _, _, msg in messages if topic == "/scan"]
+    good = float(scans[0].range_max)
+    scans[0].range_max, scans[1].range_max, scans[2].range_min = 0.0, float("nan"), float("nan")
+    rec = load_recording(write_log("zero_max.mcap", messages), DoorbatchConfig())
+    np.testing.assert_array_equal(rec.scans.range_max, [np.inf, np.inf, good, good])
+    assert rec.scans.range_min[2] == 0.0
+    assert any("range_max" in w and "2 of 4" in w for w in rec.warnings)
+    assert all(rec.scans.endpoints_base(i)[1].any() for i in range(4))  # hits in every scan
