@@ -286,13 +286,19 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
     return Recording(str(path), scan_set, odometry, reference, aligned, warnings, valid)
 
 
+# No lidar measures below a millimetre; a 0.0 reading is a driver's "no data".
+MIN_RANGE_M = 1e-3
+
+
 def usable_range_limits(range_min: FloatArray, range_max: FloatArray) -> tuple[FloatArray, FloatArray, str | None]:
     """The scans' range limits with the ones that cannot be meant made harmless, and a warning saying so.
 
-    A NaN or negative range_min is 0. A NaN range_max, or one at or below range_min (drivers that leave it 0),
-    would make every reading a no-return (no hits, an empty map): it becomes +inf, no stated maximum (every
-    finite reading a hit; the localizers then use ``localize.laser_max_range_fallback`` in their model)."""
-    low = np.where(np.isfinite(range_min) & (range_min > 0.0), range_min, 0.0)
+    range_min is at least 1 mm (a NaN or negative one too): a reading of exactly 0, some drivers' "no data", is
+    then no hit at the laser's own position even where range_min is 0. A NaN range_max, or one at or below
+    range_min (drivers that leave it 0), would make every reading a no-return (no hits, an empty map): it becomes
+    +inf, no stated maximum (every finite reading a hit; the localizers then use
+    ``localize.laser_max_range_fallback`` in their model)."""
+    low = np.where(np.isfinite(range_min) & (range_min > MIN_RANGE_M), range_min, MIN_RANGE_M)
     bad = np.isnan(range_max) | (range_max <= low)
     if not bad.any():
         return low, range_max, None

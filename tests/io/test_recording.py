@@ -113,6 +113,18 @@ def test_a_range_max_of_zero_or_nan_is_no_stated_maximum(write_log: Callable[...
     scans[0].range_max, scans[1].range_max, scans[2].range_min = 0.0, float("nan"), float("nan")
     rec = load_recording(write_log("zero_max.mcap", messages), DoorbatchConfig())
     np.testing.assert_array_equal(rec.scans.range_max, [np.inf, np.inf, good, good])
-    assert rec.scans.range_min[2] == 0.0
+    assert rec.scans.range_min[2] == 0.001  # a NaN range_min: the 1 mm floor, so a 0.0 reading is no hit
     assert any("range_max" in w and "2 of 4" in w for w in rec.warnings)
     assert all(rec.scans.endpoints_base(i)[1].any() for i in range(4))  # hits in every scan
+
+
+def test_a_zero_reading_is_no_hit_even_with_range_min_zero(write_log: Callable[..., Path]) -> None:
+    """Some drivers publish 0.0 for "no data" with range_min 0: as a hit, it would mark the laser's own cell
+    occupied along the whole path."""
+    messages = sample_messages(n_scans=2)
+    scan = next(msg for topic, _, _, msg in messages if topic == "/scan")
+    scan.range_min = 0.0
+    scan.ranges[:5] = 0.0
+    rec = load_recording(write_log("zeros.mcap", messages), DoorbatchConfig())
+    _, hit = rec.scans.endpoints_base(0)
+    assert not hit[:5].any() and hit[5:].any()
