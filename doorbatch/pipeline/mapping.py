@@ -82,7 +82,7 @@ def choose_pose_source(recordings: Sequence[Recording], wanted: str, config: Doo
     velocity (a handheld lidar).
 
     Raises:
-        PipelineError: a log lacks what the source needs, or has neither a reference nor odometry.
+        PipelineError: a log lacks what the source asked for needs (reference or odometry poses).
     """
     mc = config.mapping
     for rec in recordings:

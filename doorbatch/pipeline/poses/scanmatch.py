@@ -6,6 +6,10 @@ For scans k = 1 … S−1 with odometry o_k (frame odom) and corrected poses x_k
     prior_k = x_{k−1} ⊕ u_k                                    the prediction, N(prior_k, G Σ_k Gᵀ) in the map
     x_k     = MAP-PLICP(submap, scan_k, start = correlative(submap, scan_k, prior_k, window ∝ √diag Σ))
 
+Without odometry (a handheld lidar), u_k is the last matched increment x_{k−2}⁻¹ ⊕ x_{k−1} scaled to the scan
+interval (constant velocity) and Σ_k = diag((a·dt²/2)²) for the configured accelerations, plus the floors
+(:func:`constant_velocity_covariance`).
+
 Σ_k comes from the odometry motion model of Probabilistic Robotics (Table 5.6): the increment is split
 into (δrot1, δtrans, δrot2) with independent variances α1 r1² + α2 δtrans², α3 δtrans² + α4 (r1² + r2²),
 α1 r2² + α2 δtrans² (:func:`doorbatch.geometry.odometry.odometry_increments`), mapped to
@@ -243,6 +247,8 @@ def scan_match_trajectory(
     no_odometry = odometry_poses is None
     if no_odometry and stamps_ns is None:
         raise ValueError("scan matching without odometry needs the scans' stamps")
+    if stamps_ns is not None and np.shape(stamps_ns) != (len(scans_xy),):
+        raise ValueError(f"stamps_ns must be ({len(scans_xy)},), one stamp per scan; got {np.shape(stamps_ns)}")
     dt_s = np.diff(np.asarray(stamps_ns, dtype=np.int64)) / 1e9 if stamps_ns is not None else None
     odom = np.zeros((len(scans_xy), 3)) if odometry_poses is None else _check_inputs(scans_xy, odometry_poses)
     hits = [_finite(s) for s in scans_xy]
