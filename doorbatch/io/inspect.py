@@ -20,8 +20,8 @@ from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import LogContentError
 from doorbatch.geometry.tf_buffer import TfBuffer
 from doorbatch.io.decode import decode_scan, decode_transforms, stamp_to_ns
-from doorbatch.io.initial_pose import POSE_TYPES
 from doorbatch.io.map_topic import OCCUPANCY_GRID
+from doorbatch.io.pose_topic import POSE_TYPES
 from doorbatch.io.reader import open_log
 from doorbatch.io.recording import missing_laser_tf_hint, odometry_frame, odometry_frame_note
 from doorbatch.io.roles import TopicInfo

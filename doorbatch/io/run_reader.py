@@ -7,8 +7,8 @@ manifest names the log (first input) and the map (``map.yaml``, ``doors.parquet`
 TUM file gives its reference pose topic (e.g. a CARMEN log's corrected poses), if it has one. A map directory
 (``doorbatch map``) holds doors.parquet; its manifest names its logs, whose folder may hold the mapping
 truth ``<stem>.truth.yaml`` of the sample layout (``map.truth.yaml`` for ``map_pass*.mcap``). A TUM file is a
-run too (another localizer's trajectory, e.g. AMCL's beside doorbatch's); it has no log, so its reference is
-``--reference``.
+run too (another localizer's trajectory, e.g. AMCL's beside doorbatch's), and so is ``LOG:/TOPIC``, a pose topic
+of a log (the ``/amcl_pose`` of a recorded session); their reference is ``--reference``.
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ from doorbatch.errors import InputDataError
 from doorbatch.io.manifest import Manifest
 from doorbatch.io.mapdir import door_set_of, read_door_set
 from doorbatch.io.parquet import read_table
+from doorbatch.io.pose_topic import read_pose_topic
 from doorbatch.io.sim_truth import SimTruth, output_paths, read_truth
 from doorbatch.io.tum import read_tum
 from doorbatch.pipeline.evaluate.report import DoorStateTable, MapTables, ReferenceTrajectory, RunTables
@@ -175,6 +176,24 @@ def read_trajectory_file(path: Path, name: str | None = None) -> RunTables:
         raise InputDataError("trajectory file has no poses", path=path)
     return RunTables(name=name or Path(path).stem, log=Path(path).name, method=Path(path).stem, stamps_ns=tum.stamp_ns,
                      pose=np.stack([tum.x, tum.y, tum.yaw], axis=1), converged_ns=int(tum.stamp_ns[0]))
+
+
+def split_pose_topic_run(path: Path) -> tuple[Path, str] | None:
+    """``LOG:/TOPIC`` (a log and one of its pose topics, e.g. ``session.mcap:/amcl_pose``) as (log, topic), or
+    None when ``path`` is not of that form with an existing log."""
+    text = str(path)
+    head, sep, tail = text.rpartition(":/")
+    if not sep or not head or not Path(head).exists():
+        return None
+    return Path(head), "/" + tail
+
+
+def read_pose_topic_run(log_path: Path, topic: str, name: str | None = None) -> RunTables:
+    """A pose topic of a log as a run (log: the log's name; method: the topic without its slash): a tracked
+    start, no door states; its reference must be given (the log's own reference role is another topic)."""
+    stamps, poses = read_pose_topic(log_path, topic)
+    return RunTables(name=name or f"{log_path.name}{topic}", log=log_path.name, method=topic.strip("/"),
+                     stamps_ns=stamps, pose=poses, converged_ns=int(stamps[0]))
 
 
 def read_map_dir(map_dir: Path, name: str | None = None) -> MapTables:

@@ -3,8 +3,9 @@
     evaluate_run_dirs(run_dirs: Sequence[Path], out_dir: Path, config: DoorbatchConfig, *,
                       reference: Path | None = None, truth: Path | None = None) -> Evaluation
 
-``run_dirs`` may mix localization run directories (trajectory.parquet), map directories (doors.parquet) and
-TUM trajectories (another localizer's, e.g. AMCL's, evaluated beside doorbatch's against ``reference``);
+``run_dirs`` may mix localization run directories (trajectory.parquet), map directories (doors.parquet), TUM
+trajectories and ``LOG:/TOPIC`` pose topics (another localizer's, e.g. AMCL's, evaluated beside doorbatch's
+against ``reference``);
 ``reference`` is a TUM file or a log with a reference pose topic, ``truth`` a simulator truth YAML; both
 override what each run finds next to its log. Writes metrics.parquet, report.md, report.html, the plots and
 manifest.json into ``out_dir``.
@@ -24,9 +25,11 @@ from doorbatch.io.run_reader import (
     is_run_dir,
     is_trajectory_file,
     read_map_dir,
+    read_pose_topic_run,
     read_reference,
     read_run_dirs,
     read_trajectory_file,
+    split_pose_topic_run,
 )
 from doorbatch.io.sim_truth import read_truth
 from doorbatch.pipeline.evaluate.report import Evaluation, MapTables, RunTables, evaluate_runs
@@ -36,6 +39,16 @@ def _names(dirs: Sequence[Path]) -> list[str]:
     """Unique labels: the folder name (a TUM file's stem), or parent/name where names repeat (runs/<log>/<method>)."""
     names = [d.stem if d.is_file() else d.name for d in dirs]
     return [f"{d.parent.name}/{n}" if names.count(n) > 1 else n for d, n in zip(dirs, names, strict=True)]
+
+
+def _input_file(path: Path, topic: tuple[Path, str] | None) -> Path:
+    """The file of an input that the manifest hashes: a run's trajectory, a TUM file, a pose topic's log, a map's
+    doors."""
+    if is_run_dir(path):
+        return path / "trajectory.parquet"
+    if is_trajectory_file(path):
+        return path
+    return topic[0] if topic is not None else path / "doors.parquet"
 
 
 def evaluate_run_dirs(run_dirs: Sequence[Path], out_dir: Path, config: DoorbatchConfig, *,
@@ -48,22 +61,29 @@ def evaluate_run_dirs(run_dirs: Sequence[Path], out_dir: Path, config: Doorbatch
         PipelineError: a run whose stamps match none of its reference's.
     """
     dirs = [Path(d) for d in run_dirs]
+    topics = {d: split_pose_topic_run(d) for d in dirs}
     for d in dirs:
-        if not (is_run_dir(d) or is_map_dir(d) or is_trajectory_file(d)):
+        if not (is_run_dir(d) or is_map_dir(d) or is_trajectory_file(d) or topics[d]):
             raise InputDataError("neither a run directory (trajectory.parquet), a map directory (map.yaml, "
-                                 "doors.parquet) nor a TUM trajectory (.tum, .txt)", path=d)
-        if is_trajectory_file(d) and reference is None:
-            raise UsageError(f"evaluate {d}: a TUM trajectory has no log to find its reference beside; "
+                                 "doors.parquet), a TUM trajectory (.tum, .txt) nor LOG:/POSE_TOPIC", path=d)
+        if (is_trajectory_file(d) or topics[d]) and reference is None:
+            raise UsageError(f"evaluate {d}: another localizer's trajectory has no reference of its own; "
                              "give --reference LOG|TUM")
-    inputs = [d / "trajectory.parquet" if is_run_dir(d) else d if is_trajectory_file(d) else d / "doors.parquet"
-              for d in dirs]
+    inputs = [_input_file(d, topics[d]) for d in dirs]
     manifest = Manifest.start(config.as_dict(), [*inputs, *(p for p in (reference, truth) if p is not None)],
                               command="evaluate")
     labelled = list(zip(dirs, _names(dirs), strict=True))
     run_dirs_read = iter(read_run_dirs([d for d, _ in labelled if is_run_dir(d)], config,
                                        [n for d, n in labelled if is_run_dir(d)], find_reference=reference is None))
-    runs: list[RunTables] = [next(run_dirs_read) if is_run_dir(d) else read_trajectory_file(d, n)
-                             for d, n in labelled if is_run_dir(d) or is_trajectory_file(d)]
+    runs: list[RunTables] = []
+    for d, n in labelled:
+        topic = topics[d]
+        if is_run_dir(d):
+            runs.append(next(run_dirs_read))
+        elif is_trajectory_file(d):
+            runs.append(read_trajectory_file(d, n))
+        elif topic is not None:
+            runs.append(read_pose_topic_run(*topic, n))
     maps: list[MapTables] = [read_map_dir(d, n) for d, n in labelled if is_map_dir(d)]
     ref = read_reference(reference, config) if reference is not None else None
     world = read_truth(truth) if truth is not None else None

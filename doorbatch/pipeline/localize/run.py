@@ -23,10 +23,10 @@ import numpy.typing as npt
 from doorbatch.config import DoorbatchConfig, LocalizeConfig
 from doorbatch.errors import PipelineError, UsageError
 from doorbatch.geometry.se2 import interpolate_poses
-from doorbatch.io.initial_pose import StartPose, read_start_pose
 from doorbatch.io.map_server import read_map
 from doorbatch.io.map_topic import read_map_topic
 from doorbatch.io.mapdir import read_door_set
+from doorbatch.io.pose_topic import StartPose, read_start_pose
 from doorbatch.io.recording import PoseSeries, Recording, load_recording
 from doorbatch.maps import DoorSet, OccupancyMap
 from doorbatch.pipeline.localize.convergence import ConvergenceMonitor, multimodal
@@ -252,7 +252,7 @@ def localize(log_path: Path, lmap: LocalizationMap, config: DoorbatchConfig, met
              init: str | tuple[float, float, float] = "reference",
              progress: Callable[[int], object] | None = None) -> LocalizationResult:
     """Run MCL or the RBPF over a log (:func:`localize_recording` of the log's recording). ``init`` may also
-    name a pose topic of the log (``/initialpose``): its first message is the start (:mod:`doorbatch.io.initial_pose`).
+    name a pose topic of the log (``/initialpose``): its first message is the start (:mod:`doorbatch.io.pose_topic`).
 
     Raises:
         PipelineError: the log has no odometry, or --init reference without a reference.

@@ -201,6 +201,24 @@ def test_another_localizers_tum_trajectory_is_scored_beside_a_run(tmp_path: Path
     assert rmse == pytest.approx({"rbpf": 0.05, "amcl": 0.1})
     assert main(args) == 2  # a TUM file has no log beside which to find its reference
     assert "--reference" in capsys.readouterr().err
+    # the same poses straight from a recorded session's /amcl_pose (LOG:/TOPIC), no export
+    from doorbatch.io import ros_messages
+    from doorbatch.io.log_writer import LogWriter
+
+    session = tmp_path / "session.mcap"
+    with LogWriter(session) as writer:
+        for t, (x, y, yaw) in zip(stamps[::3], ref[::3], strict=True):
+            writer.write("/amcl_pose", "geometry_msgs/msg/PoseWithCovarianceStamped", int(t),
+                         ros_messages.pose_with_covariance_stamped(int(t), "map", x, y + 0.1, yaw, np.eye(6)))
+    out2 = tmp_path / "report2"
+    assert main(["evaluate", str(tmp_path / "rbpf"), f"{session}:/amcl_pose", "-o", str(out2), "--reference",
+                 str(tmp_path / "reference.tum"), "-q"]) == 0
+    table = read_table("metrics", out2 / "metrics.parquet").to_pydict()
+    rmse = {m: v for m, k, v in zip(table["method"], table["metric"], table["value"], strict=True)
+            if k == "ape_trans_rmse"}
+    assert rmse == pytest.approx({"rbpf": 0.05, "amcl_pose": 0.1})
+    assert main(["evaluate", f"{session}:/odom", "-o", str(out2), "--reference", str(tmp_path / "reference.tum")]) == 2
+    assert "pose topics in the log: /amcl_pose" in capsys.readouterr().err
 
 
 def test_evaluate_cli_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -1,15 +1,19 @@
-"""A localization start from a pose topic of the log: ``doorbatch localize --init /initialpose``.
+"""A log's pose topic as the start of a localization, or as another localizer's trajectory.
 
-Nav2 AMCL starts from the ``/initialpose`` an operator sets in RViz (geometry_msgs/PoseWithCovarianceStamped,
-with its covariance) and does nothing with the scans before it. The first message of the named topic gives the
-start pose, its time and, where the message carries one, its covariance. Any pose type the reader decodes
-works (Odometry, PoseStamped, PoseWithCovarianceStamped), so ``--init /amcl_pose`` starts where AMCL's first
-estimate was.
+``doorbatch localize --init /initialpose``: Nav2 AMCL starts from the ``/initialpose`` an operator sets in RViz
+(geometry_msgs/PoseWithCovarianceStamped, with its covariance) and does nothing with the scans before it. The
+first message of the named topic gives the start pose, its time and, where the message carries one, its
+covariance (:func:`read_start_pose`). Any pose type the reader decodes works (Odometry, PoseStamped,
+PoseWithCovarianceStamped), so ``--init /amcl_pose`` starts where AMCL's first estimate was.
+
+``doorbatch evaluate LOG:/amcl_pose``: every message of a pose topic, as a trajectory
+(:func:`read_pose_topic`), so that the AMCL that ran in a recorded session is scored beside doorbatch's runs.
 """
 
 from __future__ import annotations
 
 import logging
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -19,6 +23,7 @@ import numpy.typing as npt
 from doorbatch.errors import UsageError
 from doorbatch.io.decode import ODOMETRY, POSE_COV_STAMPED, POSE_STAMPED, decode_pose
 from doorbatch.io.reader import open_log
+from doorbatch.io.roles import TopicInfo
 
 log = logging.getLogger(__name__)
 
@@ -60,6 +65,16 @@ def _sigma(msg: object, msgtype: str) -> FloatArray | None:
     return np.sqrt(var) if bool(np.all(np.isfinite(var)) and np.all(var > 0.0)) else None
 
 
+def _check_pose_topic(topics: Mapping[str, TopicInfo], topic: str, path: Path, asked: str) -> None:
+    """Raise a :class:`UsageError` naming the log's pose topics unless ``topic`` is one (``asked``: the option)."""
+    poses = sorted(t for t, info in topics.items() if info.msgtype in POSE_TYPES)
+    listed = f"pose topics in the log: {', '.join(poses) or 'none'}"
+    if topic not in topics:
+        raise UsageError(f"{asked} {topic}: no such topic in {path.name} ({listed})")
+    if topics[topic].msgtype not in POSE_TYPES:
+        raise UsageError(f"{asked} {topic}: a {topics[topic].msgtype}, not a pose ({listed})")
+
+
 def read_start_pose(path: Path, topic: str) -> StartPose:
     """The first message of ``topic`` in the log at ``path``.
 
@@ -67,15 +82,25 @@ def read_start_pose(path: Path, topic: str) -> StartPose:
         UsageError: the log has no such topic, it is not a pose type, or it has no message.
     """
     with open_log(path) as reader:
-        topics = reader.topics
-        poses = sorted(t for t, info in topics.items() if info.msgtype in POSE_TYPES)
-        listed = f"pose topics in the log: {', '.join(poses) or 'none'}"
-        if topic not in topics:
-            raise UsageError(f"--init {topic}: no such topic in {path.name} ({listed})")
-        if topics[topic].msgtype not in POSE_TYPES:
-            raise UsageError(f"--init {topic}: a {topics[topic].msgtype}, not a pose ({listed})")
+        _check_pose_topic(reader.topics, topic, path, "--init")
         for raw in reader.raw_messages([topic]):
             p = decode_pose(raw.msg, raw.msgtype, raw.log_time_ns)
             return StartPose(topic, p.stamp_ns, raw.log_time_ns, np.array([p.x, p.y, p.yaw]), p.frame_id,
                              _sigma(raw.msg, raw.msgtype))
     raise UsageError(f"--init {topic}: the topic has no message in {path.name}")
+
+
+def read_pose_topic(path: Path, topic: str) -> tuple[npt.NDArray[np.int64], FloatArray]:
+    """Every pose of ``topic`` in the log at ``path``: stamps (N,) in header time, sorted, and (N, 3) x, y, yaw.
+
+    Raises:
+        UsageError: the log has no such topic, it is not a pose type, or it has no message.
+    """
+    with open_log(path) as reader:
+        _check_pose_topic(reader.topics, topic, path, "evaluate")
+        poses = [decode_pose(raw.msg, raw.msgtype, raw.log_time_ns) for raw in reader.raw_messages([topic])]
+    if not poses:
+        raise UsageError(f"evaluate {topic}: the topic has no message in {path.name}")
+    stamps = np.array([p.stamp_ns for p in poses], dtype=np.int64)
+    order = np.argsort(stamps, kind="stable")
+    return stamps[order], np.array([[p.x, p.y, p.yaw] for p in poses])[order]

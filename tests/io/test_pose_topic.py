@@ -11,7 +11,7 @@ import pytest
 
 from doorbatch.errors import UsageError
 from doorbatch.io import ros_messages
-from doorbatch.io.initial_pose import read_start_pose
+from doorbatch.io.pose_topic import read_pose_topic, read_start_pose
 from tests.conftest import sample_messages
 
 RVIZ_COVARIANCE = np.diag([0.25, 0.25, 0.0, 0.0, 0.0, 0.06853891945200942])  # RViz's 2D Pose Estimate
@@ -45,3 +45,16 @@ def test_a_topic_that_gives_no_pose_is_a_usage_error(write_log: Callable[..., Pa
                                                       message: str) -> None:
     with pytest.raises(UsageError, match=message):
         read_start_pose(write_log("c.mcap"), topic)
+
+
+def test_a_pose_topic_reads_as_a_trajectory_in_stamp_order(write_log: Callable[..., Path]) -> None:
+    """/amcl_pose as a trajectory: every message, ordered by header stamp (logged out of order here)."""
+    t0 = sample_messages()[0][2]
+    msgtype = "geometry_msgs/msg/PoseWithCovarianceStamped"
+    poses = [(t0 + 20, 2.0), (t0 + 10, 1.0), (t0 + 30, 3.0)]
+    log = write_log("amcl.mcap", [*sample_messages(), *[
+        ("/amcl_pose", msgtype, t0 + k, ros_messages.pose_with_covariance_stamped(t, "map", x, 0.0, 0.0, np.eye(6)))
+        for k, (t, x) in enumerate(poses)]])
+    stamps, xyz = read_pose_topic(log, "/amcl_pose")
+    np.testing.assert_array_equal(stamps, [t0 + 10, t0 + 20, t0 + 30])
+    np.testing.assert_allclose(xyz[:, 0], [1.0, 2.0, 3.0])
