@@ -78,17 +78,20 @@ def choose_pose_source(recordings: Sequence[Recording], wanted: str, config: Doo
     """The pose source and why another than asked for: the one asked for, or (``auto``) ``reference`` when
     every log has a reference that covers at least ``mapping.min_reference_coverage`` of its scans, else
     ``scanmatch`` (a sparse pose topic, e.g. localization poses published only on filter updates, is not the
-    trajectory: with it most scans would be skipped), on odometry or, for a log with neither, at constant
-    velocity (a handheld lidar).
+    trajectory: with it most scans would be skipped). ``scanmatch`` asked for matches a log without odometry at
+    constant velocity (a handheld lidar).
 
     Raises:
-        PipelineError: a log lacks what the source asked for needs (reference or odometry poses).
+        PipelineError: a log lacks what the source asked for needs, or (auto) has neither a reference nor
+            odometry.
     """
     mc = config.mapping
     for rec in recordings:
-        if rec.reference is None and rec.odometry is None and wanted in ("odometry", "reference"):
+        # auto too (issue #4: such a log is a clear error); matching the scans alone is a choice the user makes
+        if rec.reference is None and rec.odometry is None and wanted in ("auto", "odometry", "reference"):
             raise PipelineError(f"{rec.path}: no usable pose source: no reference pose topic and no odometry "
-                                "(nav_msgs/Odometry or TF odom→base_link); try --pose-source scanmatch")
+                                "(nav_msgs/Odometry or TF odom→base_link); --pose-source scanmatch matches the scans "
+                                "alone, at constant velocity")
     if wanted == "auto":
         if any(r.reference is None for r in recordings):
             return "scanmatch", []

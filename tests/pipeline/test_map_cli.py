@@ -65,12 +65,16 @@ def test_a_log_without_any_pose_source_is_an_error(write_log: Callable[..., Path
     assert code == 3 and "no usable pose source" in err and "bare.mcap" in err
 
 
-def test_a_log_with_scans_alone_is_scan_matched_at_constant_velocity(write_log: Callable[..., Path], tmp_path: Path,
+def test_a_log_with_scans_alone_is_scan_matched_when_asked(write_log: Callable[..., Path], tmp_path: Path,
                                                                      capsys: pytest.CaptureFixture[str]) -> None:
-    """No reference, no odometry (a handheld lidar): auto maps from scan matching alone and says so."""
+    """No reference, no odometry (a handheld lidar): without --pose-source a clear error that names the way;
+    --pose-source scanmatch maps from the scans alone and says so."""
     bare = [x for x in sample_messages(5) if x[0] not in ("/odom", "/ground_truth", "/tf")]
+    log = write_log("bare.mcap", bare)
     out = tmp_path / "out"
-    assert main(["map", str(write_log("bare.mcap", bare)), "-o", str(out), "--json"]) == 0
+    assert main(["map", str(log), "-o", str(out)]) == 3
+    assert "--pose-source scanmatch" in capsys.readouterr().err and not out.exists()
+    assert main(["map", str(log), "-o", str(out), "--pose-source", "scanmatch", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["pose_source"] == "scanmatch"
     warnings = json.loads((out / "manifest.json").read_text())["warnings"]
     assert any("no odometry" in w and "constant velocity" in w for w in warnings)
