@@ -136,7 +136,7 @@ def amcl_parameters(tree: Mapping[str, Any], source: str) -> dict[str, Any]:
         ConfigError: no node named ``amcl``, or more than one.
     """
     nodes = _nodes(tree)
-    amcl = {path: params for path, params in nodes.items() if path.rsplit("/", 1)[-1].lstrip("/") == AMCL_NODE}
+    amcl = {path: params for path, params in nodes.items() if path.rsplit("/", 1)[-1] == AMCL_NODE}
     if not amcl:
         raise ConfigError(f"{source}: a ROS 2 parameter file without an 'amcl' node (nodes: "
                           f"{', '.join(sorted(nodes))}); doorbatch reads nav2_amcl's parameters only")

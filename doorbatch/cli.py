@@ -239,8 +239,8 @@ def evaluate_cmd(ctx: Context, run_dirs: tuple[Path, ...], output: Path, referen
                  truth: Path | None, align: str | None, experiment: Path | None, workers: int) -> None:
     """Metrics (APE/RPE as evo, convergence, door maps, door states) and a report of RUNDIRs, or an experiment.
 
-    RUNDIRs are localize run directories, map directories, or TUM trajectories of other localizers (with
-    --reference), e.g. AMCL's beside doorbatch's."""
+    RUNDIRs are localize run directories, map directories, or other localizers' trajectories (with --reference):
+    TUM files, or a log's pose topic as LOG:/TOPIC, e.g. AMCL's beside doorbatch's."""
     from doorbatch.errors import UsageError
     from doorbatch.io.report_writer import stdout_table
 

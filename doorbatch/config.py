@@ -413,9 +413,9 @@ class LocalizeConfig(Section):
     # (pipeline/localize/torch_field.py, the same cells; needs the torch extra). On a CPU NumPy is faster;
     # a GPU pays from a few thousand particles (docs/benchmarks.md). Door terms and resampling stay in NumPy.
     backend: Literal["numpy", "torch"] = "numpy"
+    torch_device: str = "cuda"
     # --map LOG: the log's nav_msgs/OccupancyGrid topic that holds the map (None: /map, else the only one).
     map_topic: str | None = None
-    torch_device: str = "cuda"
     # Particles: KLD-sampling (Fox 2003) between min and max; bins 0.5 m x 0.5 m x 10 deg.
     min_particles: int = Field(500, ge=1)
     max_particles: int = Field(5000, ge=1)

@@ -62,11 +62,7 @@ def _at_scans(rec: Recording, series: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _hits(rec: Recording, idx: np.ndarray) -> list[np.ndarray]:
-    out = []
-    for i in idx:
-        pts, hit = rec.scans.endpoints_base(int(i))
-        out.append(pts[hit])
-    return out
+    return [rec.scans.hits_base(int(i)) for i in idx]
 
 
 def reference_consistency(scans: list[np.ndarray], ref: np.ndarray) -> tuple[float, float, np.ndarray]:

@@ -42,7 +42,7 @@ def main() -> None:
         stamps = rec.scans.stamps_ns
         ref, ok = interpolate_poses(rec.reference.stamps_ns, rec.reference.poses, stamps)
         idx = np.flatnonzero(ok)
-        scans = [pts[hit] for pts, hit in (rec.scans.endpoints_base(int(i)) for i in idx)]
+        scans = [rec.scans.hits_base(int(i)) for i in idx]
         moving = scan_match_trajectory(scans, None, config.scanmatch, stamps[idx])
         standing = scan_match_trajectory(scans, np.zeros((idx.size, 3)), config.scanmatch)
         cells = []

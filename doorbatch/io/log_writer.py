@@ -40,16 +40,14 @@ class LogFormat(StrEnum):
     ROSBAG2_MCAP = "rosbag2-mcap"
 
 
-def to_ros2(raw: RawMessage, cache: dict[str, object], target: Typestore | None = None) -> tuple[Any, Typestore]:
+def to_ros2(raw: RawMessage, cache: dict[str, object], target: Typestore) -> tuple[Any, Typestore]:
     """A message read from any log as a ROS 2 object plus the store that can serialize it.
 
     ROS 1 messages are migrated field by field into the Humble layout (``Header.seq`` dropped, renamed
-    fields such as CameraInfo ``K``→``k`` matched). A ROS 1 type that Humble lacks is first registered into
-    ``target`` (a writer's own ROS 2 store, :func:`~doorbatch.io.typestore.new_ros2_typestore`) from its ROS 1
-    definition, with the ROS 2 layouts of the types it uses; without a ``target`` it keeps its ROS 1
-    definition.
+    fields such as CameraInfo ``K``→``k`` matched) of ``target``, a writer's own ROS 2 store
+    (:func:`~doorbatch.io.typestore.new_ros2_typestore`). A ROS 1 type that Humble lacks is first registered
+    into it from its ROS 1 definition, with the ROS 2 layouts of the types it uses.
     """
-    target = target or ros2_typestore()
     if not raw.ros1:
         if raw.msgtype in target.types or raw.store is None:
             return raw.msg, target
@@ -60,8 +58,6 @@ def to_ros2(raw: RawMessage, cache: dict[str, object], target: Typestore | None 
         boxes = [(d.class_id, d.score, d.center_x, d.center_y, d.size_x, d.size_y) for d in rec.detections]
         return detection_array(rec.stamp_ns, rec.frame_id, boxes), target
     if raw.msgtype not in target.types:
-        if target is ros2_typestore():
-            return raw.msg, src
         register_ros1_type(target, src, raw.msgtype)
     return migrate_message(src, target, raw.msgtype, raw.msgtype, cache, raw.msg), target
 

@@ -121,7 +121,6 @@ class McapLogReader(LogReader):
             raise LogReadError(f"MCAP has no summary section and no readable message{cut}", path=self.path)
         self.warnings.append(f"{self.path}: MCAP has no summary section (the recording was not closed): read "
                              f"linearly, {n} messages over {(end - start) / 1e9:.1f} s{cut}")
-        self._file.seek(0)
         return schemas, channels, counts, start, end
 
     def _register_schema(self, ros1: bool, name: str, text: str, encoding: str) -> None:

@@ -72,6 +72,11 @@ class ScanSet:
             points = local @ affine[:, :2].T + affine[:, 2]
         return points, hit
 
+    def hits_base(self, i: int) -> FloatArray:
+        """The hits of scan i (:meth:`endpoints_base`) in base_link, in beam order (K, 2)."""
+        points, hit = self.endpoints_base(i)
+        return points[hit]
+
 
 @dataclass(frozen=True)
 class Recording:

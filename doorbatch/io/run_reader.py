@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import InputDataError
@@ -32,6 +33,7 @@ from doorbatch.pipeline.evaluate.report import DoorStateTable, MapTables, Refere
 
 log = logging.getLogger(__name__)
 TUM_SUFFIXES = (".tum", ".txt")
+FloatArray = npt.NDArray[np.float64]
 
 
 def is_run_dir(path: Path) -> bool:
@@ -174,8 +176,14 @@ def read_trajectory_file(path: Path, name: str | None = None) -> RunTables:
     tum = read_tum(path)
     if tum.stamp_ns.size == 0:
         raise InputDataError("trajectory file has no poses", path=path)
-    return RunTables(name=name or Path(path).stem, log=Path(path).name, method=Path(path).stem, stamps_ns=tum.stamp_ns,
-                     pose=np.stack([tum.x, tum.y, tum.yaw], axis=1), converged_ns=int(tum.stamp_ns[0]))
+    return _foreign_run(name or Path(path).stem, Path(path).name, Path(path).stem, tum.stamp_ns,
+                        np.stack([tum.x, tum.y, tum.yaw], axis=1))
+
+
+def _foreign_run(name: str, log: str, method: str, stamps_ns: npt.NDArray[np.int64], pose: FloatArray) -> RunTables:
+    """Another localizer's trajectory as a run: tracked from its first pose, no door states, no reference of its
+    own."""
+    return RunTables(name=name, log=log, method=method, stamps_ns=stamps_ns, pose=pose, converged_ns=int(stamps_ns[0]))
 
 
 def split_pose_topic_run(path: Path) -> tuple[Path, str] | None:
@@ -192,8 +200,7 @@ def read_pose_topic_run(log_path: Path, topic: str, name: str | None = None) -> 
     """A pose topic of a log as a run (log: the log's name; method: the topic without its slash): a tracked
     start, no door states; its reference must be given (the log's own reference role is another topic)."""
     stamps, poses = read_pose_topic(log_path, topic)
-    return RunTables(name=name or f"{log_path.name}{topic}", log=log_path.name, method=topic.strip("/"),
-                     stamps_ns=stamps, pose=poses, converged_ns=int(stamps[0]))
+    return _foreign_run(name or f"{log_path.name}{topic}", log_path.name, topic.strip("/"), stamps, poses)
 
 
 def read_map_dir(map_dir: Path, name: str | None = None) -> MapTables:

@@ -107,11 +107,6 @@ def choose_pose_source(recordings: Sequence[Recording], wanted: str, config: Doo
     return wanted, []
 
 
-def _hits_base(rec: Recording, i: int) -> FloatArray:
-    pts, hit = rec.scans.endpoints_base(i)
-    return pts[hit]
-
-
 def pass_poses(rec: Recording, source: str, config: DoorbatchConfig) -> PassPoses:
     """Poses at the scan stamps from the chosen source (interpolated, or scan matched on odometry or, without
     odometry, at constant velocity)."""
@@ -160,7 +155,7 @@ def _chain_scanmatch(recordings: Sequence[Recording], config: DoorbatchConfig) -
     passes and warnings."""
     per_pass = [pass_poses(rec, "odometry", config) for rec in recordings]
     idx = [np.flatnonzero(p.valid) for p in per_pass]
-    scans = [_hits_base(rec, int(i)) for rec, ii in zip(recordings, idx, strict=True) for i in ii]
+    scans = [rec.scans.hits_base(int(i)) for rec, ii in zip(recordings, idx, strict=True) for i in ii]
     odom = np.concatenate([p.poses[ii] for p, ii in zip(per_pass, idx, strict=True)])
     no_odometry = any(rec.odometry is None for rec in recordings)
     stamps = np.concatenate([p.stamps_ns[ii] for p, ii in zip(per_pass, idx, strict=True)])

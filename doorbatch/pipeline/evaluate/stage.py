@@ -14,7 +14,9 @@ manifest.json into ``out_dir``.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal
 
 from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import InputDataError, UsageError
@@ -41,14 +43,39 @@ def _names(dirs: Sequence[Path]) -> list[str]:
     return [f"{d.parent.name}/{n}" if names.count(n) > 1 else n for d, n in zip(dirs, names, strict=True)]
 
 
-def _input_file(path: Path, topic: tuple[Path, str] | None) -> Path:
-    """The file of an input that the manifest hashes: a run's trajectory, a TUM file, a pose topic's log, a map's
-    doors."""
-    if is_run_dir(path):
-        return path / "trajectory.parquet"
-    if is_trajectory_file(path):
-        return path
-    return topic[0] if topic is not None else path / "doors.parquet"
+@dataclass(frozen=True)
+class _Input:
+    """One evaluate argument, classified once: a run directory, a map directory, a TUM trajectory, or a pose topic
+    of a log (``topic``: (log, topic name))."""
+
+    path: Path
+    kind: Literal["run", "map", "tum", "topic"]
+    topic: tuple[Path, str] | None = None
+
+    @property
+    def file(self) -> Path:
+        """What the manifest hashes: the run's trajectory, the TUM file, the topic's log, the map's doors."""
+        return {"run": self.path / "trajectory.parquet", "map": self.path / "doors.parquet", "tum": self.path,
+                "topic": self.topic[0] if self.topic else self.path}[self.kind]
+
+
+def _classify(path: Path, reference: Path | None) -> _Input:
+    """What ``path`` is.
+
+    Raises:
+        InputDataError: none of the four.
+        UsageError: another localizer's trajectory (TUM or pose topic) without ``reference``.
+    """
+    topic = split_pose_topic_run(path)
+    item = (_Input(path, "run") if is_run_dir(path) else _Input(path, "map") if is_map_dir(path) else
+            _Input(path, "tum") if is_trajectory_file(path) else _Input(path, "topic", topic) if topic else None)
+    if item is None:
+        raise InputDataError("neither a run directory (trajectory.parquet), a map directory (map.yaml, "
+                             "doors.parquet), a TUM trajectory (.tum, .txt) nor LOG:/POSE_TOPIC", path=path)
+    if item.kind in ("tum", "topic") and reference is None:
+        raise UsageError(f"evaluate {path}: another localizer's trajectory has no reference of its own; "
+                         "give --reference LOG|TUM")
+    return item
 
 
 def evaluate_run_dirs(run_dirs: Sequence[Path], out_dir: Path, config: DoorbatchConfig, *,
@@ -58,33 +85,24 @@ def evaluate_run_dirs(run_dirs: Sequence[Path], out_dir: Path, config: Doorbatch
 
     Raises:
         InputDataError: a directory that is neither a run nor a map directory, or unreadable inputs.
+        UsageError: another localizer's trajectory without ``reference``.
         PipelineError: a run whose stamps match none of its reference's.
     """
-    dirs = [Path(d) for d in run_dirs]
-    topics = {d: split_pose_topic_run(d) for d in dirs}
-    for d in dirs:
-        if not (is_run_dir(d) or is_map_dir(d) or is_trajectory_file(d) or topics[d]):
-            raise InputDataError("neither a run directory (trajectory.parquet), a map directory (map.yaml, "
-                                 "doors.parquet), a TUM trajectory (.tum, .txt) nor LOG:/POSE_TOPIC", path=d)
-        if (is_trajectory_file(d) or topics[d]) and reference is None:
-            raise UsageError(f"evaluate {d}: another localizer's trajectory has no reference of its own; "
-                             "give --reference LOG|TUM")
-    inputs = [_input_file(d, topics[d]) for d in dirs]
-    manifest = Manifest.start(config.as_dict(), [*inputs, *(p for p in (reference, truth) if p is not None)],
+    items = [_classify(Path(d), reference) for d in run_dirs]
+    manifest = Manifest.start(config.as_dict(), [*(i.file for i in items), *(p for p in (reference, truth) if p)],
                               command="evaluate")
-    labelled = list(zip(dirs, _names(dirs), strict=True))
-    run_dirs_read = iter(read_run_dirs([d for d, _ in labelled if is_run_dir(d)], config,
-                                       [n for d, n in labelled if is_run_dir(d)], find_reference=reference is None))
+    labelled = list(zip(items, _names([i.path for i in items]), strict=True))
+    run_dirs_read = iter(read_run_dirs([i.path for i, _ in labelled if i.kind == "run"], config,
+                                       [n for i, n in labelled if i.kind == "run"], find_reference=reference is None))
     runs: list[RunTables] = []
-    for d, n in labelled:
-        topic = topics[d]
-        if is_run_dir(d):
+    for item, name in labelled:
+        if item.kind == "run":
             runs.append(next(run_dirs_read))
-        elif is_trajectory_file(d):
-            runs.append(read_trajectory_file(d, n))
-        elif topic is not None:
-            runs.append(read_pose_topic_run(*topic, n))
-    maps: list[MapTables] = [read_map_dir(d, n) for d, n in labelled if is_map_dir(d)]
+        elif item.kind == "tum":
+            runs.append(read_trajectory_file(item.path, name))
+        elif item.topic is not None:
+            runs.append(read_pose_topic_run(*item.topic, name))
+    maps: list[MapTables] = [read_map_dir(i.path, n) for i, n in labelled if i.kind == "map"]
     ref = read_reference(reference, config) if reference is not None else None
     world = read_truth(truth) if truth is not None else None
     evaluation = evaluate_runs(runs, config, reference=ref, truth=world, maps=maps).with_title(title)

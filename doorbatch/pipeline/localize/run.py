@@ -255,7 +255,7 @@ def localize(log_path: Path, lmap: LocalizationMap, config: DoorbatchConfig, met
     name a pose topic of the log (``/initialpose``): its first message is the start (:mod:`doorbatch.io.pose_topic`).
 
     Raises:
-        PipelineError: the log has no odometry, or --init reference without a reference.
+        PipelineError: --init reference without a reference, or a start pose after the last scan.
         UsageError: an unknown method, or an init topic the log lacks or that holds no pose.
     """
     if method not in ("mcl", "rbpf"):
@@ -328,9 +328,8 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
         stamp_s = scan.stamp_ns / 1e9
         first = state.odom_at_update is None
         if method == "rbpf":
-            pts, hit = rec.scans.endpoints_base(i)
-            state, diag, observed = rbpf_step(state, odom[i], stamp_s, last_s, beams, pts[hit], lmap.field,
-                                              lmap.doors, lc, rng, free, force=first)
+            state, diag, observed = rbpf_step(state, odom[i], stamp_s, last_s, beams, rec.scans.hits_base(i),
+                                              lmap.field, lmap.doors, lc, rng, free, force=first)
         else:
             state, diag = mcl_step(state, odom[i], beams, lmap.field, lc, rng, free, force=first,
                                    combination=combination)
