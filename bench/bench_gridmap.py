@@ -98,8 +98,8 @@ def read_passes(logs: list[str], config: DoorbatchConfig) -> list[list[MapScan]]
     passes = []
     for log in logs:
         rec = load_recording(log, config)
-        passes.append([MapScan(o, np.ascontiguousarray(p), d)
-                       for o, p, d in map_scans(rec, pass_poses(rec, "reference", config))])
+        passes.append([scan._replace(points=np.ascontiguousarray(scan.points))
+                       for scan in map_scans(rec, pass_poses(rec, "reference", config))])
     return passes
 
 
@@ -108,8 +108,8 @@ def time_grid(passes: list[list[MapScan]], config: GridConfig, integrate: Integr
     grid = new_grid(config, passes[0][0].origin)
     start = time.process_time()
     for scans in passes:
-        for origin, points, dirs in scans:
-            grid = integrate(grid, origin, points, dirs, config)
+        for origin, points, dirs, range_max_m in scans:
+            grid = integrate(grid, origin, points, dirs, config, None, range_max_m)
     to_occupancy_map(grid)
     return time.process_time() - start
 
@@ -120,8 +120,8 @@ def time_full(passes: list[list[MapScan]], config: GridConfig) -> tuple[float, f
     mapper = GridMapper(config)
     start = time.process_time()
     for scans in passes:
-        for origin, points, dirs in scans:
-            mapper.add_scan(origin, points, dirs)
+        for scan in scans:
+            mapper.add_scan(*scan)
         mapper.end_pass()
     middle = time.process_time()
     result = mapper.finish()

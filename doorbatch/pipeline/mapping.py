@@ -192,13 +192,13 @@ def map_scans(rec: Recording, poses: PassPoses, stride: int = 1) -> Iterator[Map
             no_return = np.isposinf(r) | (np.isfinite(r) & (r >= scans.range_max[i]))
         angles = scans.angle_min[i] + scans.angle_increment[i] * np.flatnonzero(no_return)
         dirs = np.stack([np.cos(angles), np.sin(angles)], axis=1) @ (rot @ affine[:, :2]).T
-        yield MapScan(origin, pts[hit] @ rot.T + pose[:2], dirs)
+        yield MapScan(origin, pts[hit] @ rot.T + pose[:2], dirs, float(scans.range_max[i]))
 
 
 def integrate_pass(mapper: GridMapper, rec: Recording, poses: PassPoses, stride: int) -> None:
     """Add every valid scan of one pass to the mapper (map frame), then close the pass."""
-    for origin, points, dirs in map_scans(rec, poses, stride):
-        mapper.add_scan(origin, points, dirs)
+    for scan in map_scans(rec, poses, stride):
+        mapper.add_scan(*scan)
     mapper.end_pass()
 
 

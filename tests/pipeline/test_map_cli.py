@@ -10,9 +10,11 @@ import numpy as np
 import pytest
 
 from doorbatch.cli import main
+from doorbatch.config import load_config
 from doorbatch.io import ros_messages as m
 from doorbatch.io.map_server import read_map
 from doorbatch.io.parquet import read_table
+from doorbatch.pipeline.mapping import build_map
 from tests.conftest import REPO, sample_messages
 
 SAMPLE_LOGS = REPO / "datasets" / "sample" / "logs"
@@ -132,6 +134,23 @@ def test_a_reference_that_gives_no_scan_a_pose_is_an_error(write_log: Callable[.
     err = capsys.readouterr().err
     assert code == 3 and "no scan has a reference pose" in err
     assert not (tmp_path / "out" / "map.yaml").exists()
+
+
+def test_a_short_range_lidar_clears_no_farther_than_its_range_max(write_log: Callable[..., Path]) -> None:
+    """A 3.5 m lidar (TurtleBot3's LDS) that saw nothing: free space reaches 3.5 m round the path, not the
+    configured 5 m no-return clearing (sensor_msgs/LaserScan: such a reading says nothing beyond range_max)."""
+    msgs = []
+    for topic, msgtype, t, msg in sample_messages(8):
+        if topic == "/scan":
+            msg = m.laser_scan(t, "laser", -np.pi, 2 * np.pi / 360, 0.12, 3.5, np.full(360, np.inf))
+        msgs.append((topic, msgtype, t, msg))
+    config = load_config(overrides=["grid.no_return_clear_m=5.0", "mapping.pose_source=reference"])
+    grid = build_map([write_log("tb3.mcap", msgs)], config).static_map
+    known = np.argwhere(grid.occupancy.T >= 0) * grid.resolution_m  # (x, y) offsets of the seen cells
+    width_x, width_y = np.ptp(known, axis=0) + grid.resolution_m
+    # The laser moves 0.7 m along x and 0.154 m along y: the union of 3.5 m discs round its positions.
+    assert 2 * 3.5 < width_x <= 2 * 3.5 + 0.7 + 2 * grid.resolution_m
+    assert 2 * 3.5 - 2 * grid.resolution_m < width_y <= 2 * 3.5 + 0.154 + 2 * grid.resolution_m
 
 
 def test_odometry_pose_source_uses_odometry(write_log: Callable[..., Path], tmp_path: Path,

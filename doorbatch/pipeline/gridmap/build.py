@@ -11,6 +11,7 @@ the map frame, hit points in beam order; reading logs is the caller's business.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import NamedTuple
@@ -38,11 +39,13 @@ from doorbatch.pipeline.gridmap.occupancy import LogOddsGrid, new_grid, to_occup
 
 
 class MapScan(NamedTuple):
-    """One scan in the map frame: sensor origin (2,), hit points (N, 2), no-return directions (M, 2)."""
+    """One scan in the map frame: sensor origin (2,), hit points (N, 2), no-return directions (M, 2), and the
+    scan's stated maximum range (no-return beams clear no farther)."""
 
     origin: npt.ArrayLike
     points: npt.ArrayLike
     no_return_dirs: npt.ArrayLike
+    range_max_m: float = math.inf
 
 
 @dataclass(frozen=True)
@@ -79,7 +82,8 @@ class GridMapper:
     _leaves: list[Leaves] = field(default_factory=list)
     _pass_begun: bool = False
 
-    def add_scan(self, origin: npt.ArrayLike, points: npt.ArrayLike, no_return_dirs: npt.ArrayLike) -> None:
+    def add_scan(self, origin: npt.ArrayLike, points: npt.ArrayLike, no_return_dirs: npt.ArrayLike,
+                 range_max_m: float = math.inf) -> None:
         """Classify, integrate and mine one scan (map frame; hit points in beam order) for leaves."""
         pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
         if self.grid is None:
@@ -88,7 +92,7 @@ class GridMapper:
             begin_pass(self.grid, self.grid_config)
             self._pass_begun = True
         self.grid, cls = classify_and_integrate(self.grid, origin, pts, no_return_dirs, self.grid_config,
-                                                self.door_config.door_length_max_m)
+                                                self.door_config.door_length_max_m, range_max_m)
         if cls.n_dynamic:
             self.n_dynamic_points += cls.n_dynamic
             # A leaf needs two points a leaf's length apart, or points that may complete a line.
@@ -131,13 +135,13 @@ def build_grid_map(passes: Iterable[Iterable[MapScan]], grid_config: GridConfig 
     """Occupancy grid and doors from passes of scans in the map frame (each pass: doors stationary).
 
     Args:
-        passes: For each pass, its scans in time order as (origin, points, no_return_dirs).
+        passes: For each pass, its scans in time order (:class:`MapScan`).
         grid_config: Grid parameters (defaults if None).
         door_config: Door detection parameters (defaults if None).
     """
     mapper = GridMapper(grid_config or GridConfig(), door_config or DoorDetectionConfig())
     for scans in passes:
-        for origin, points, dirs in scans:
-            mapper.add_scan(origin, points, dirs)
+        for scan in scans:
+            mapper.add_scan(*scan)
         mapper.end_pass()
     return mapper.finish()

@@ -158,13 +158,14 @@ def classify_scan(grid: LogOddsGrid, points_xy: npt.ArrayLike, config: GridConfi
 
 
 def classify_and_integrate(grid: LogOddsGrid, origin_xy: npt.ArrayLike, points_xy: npt.ArrayLike,
-                           no_return_dirs: npt.ArrayLike, config: GridConfig, reach_m: float = 0.0
-                           ) -> tuple[LogOddsGrid, ScanClasses]:
+                           no_return_dirs: npt.ArrayLike, config: GridConfig, reach_m: float = 0.0,
+                           range_max_m: float = math.inf) -> tuple[LogOddsGrid, ScanClasses]:
     """:func:`classify_scan`, then :func:`~doorbatch.pipeline.gridmap.occupancy.integrate_scan` without the
-    dynamic end points, in one compiled call (the mapper's per-scan step). Returns the grid (a new object
-    when it grew) and the classes. Classifying in the grown grid is the same: points outside the old grid
+    dynamic end points, in one compiled call (the mapper's per-scan step; ``range_max_m``: the scan's stated
+    maximum range, as ``integrate_scan`` takes it). Returns the grid (a new object when it grew) and the
+    classes. Classifying in the grown grid is the same: points outside the old grid
     fall on its never-touched rim, and in the grown grid on never-touched cells; static either way."""
-    prep = prepare_scan(grid, origin_xy, points_xy, no_return_dirs, config)
+    prep = prepare_scan(grid, origin_xy, points_xy, no_return_dirs, config, range_max_m)
     if prep is None:
         grid.scan_count += 1
         empty = np.zeros(0, dtype=bool)

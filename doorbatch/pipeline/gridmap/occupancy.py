@@ -11,8 +11,9 @@ point of some beam is not also made free by another beam of the same scan. A hit
 it comes within ``surface_band_m`` of the surface it hit (band / sin θ before its end, θ its angle to the
 surface, taken from the neighbouring end points): a wall on a cell border puts its hits into two rows of
 cells, and beams grazing it would otherwise clear both rows and make its points look dynamic. A no-return
-beam (+inf or ≥ range_max) clears free space up to ``no_return_clear_m``; a hit farther than ``max_range_m``
-is cut there and only clears.
+beam (+inf or ≥ range_max) clears free space up to ``no_return_clear_m``, and never beyond the scan's own
+``range_max`` (such a reading says only that nothing was within it); a hit farther than ``max_range_m`` is cut
+there and only clears.
 
 The beams are traversed by DDA: beam b takes n_b = ⌈max(|Δi|, |Δj|)⌉ steps of Δ/n_b (at most one cell along
 the major axis, so the sampled cells form an 8-connected line like Bresenham's), sample positions in
@@ -232,7 +233,7 @@ class _ScanCells(NamedTuple):
 
 def integrate_scan(grid: LogOddsGrid, origin_xy: npt.ArrayLike, points_xy: npt.ArrayLike,
                    no_return_dirs: npt.ArrayLike, config: GridConfig,
-                   dynamic_mask: npt.ArrayLike | None = None) -> LogOddsGrid:
+                   dynamic_mask: npt.ArrayLike | None = None, range_max_m: float = math.inf) -> LogOddsGrid:
     """Integrate one scan (map frame) into the grid; returns the grid, a new object when it had to grow.
 
     Args:
@@ -244,13 +245,14 @@ def integrate_scan(grid: LogOddsGrid, origin_xy: npt.ArrayLike, points_xy: npt.A
         config: Grid parameters.
         dynamic_mask: (N,) True for end points that are dynamic measurements (paper 000: end points in
             transient cells): their beams clear free space up to them, but they are not integrated.
+        range_max_m: The scan's stated maximum range: no-return beams clear no farther.
 
     The free update is applied first to every beam's cells; then each occupied end cell is set to
     min(l_before_scan + l_occ, l_max), which undoes any free update it got from another beam of the scan.
     The compiled kernel (:func:`doorbatch.pipeline.gridmap.kernels.integrate_kernel`) does the work;
     :func:`integrate_scan_numpy` is its NumPy reference.
     """
-    prep = prepare_scan(grid, origin_xy, points_xy, no_return_dirs, config)
+    prep = prepare_scan(grid, origin_xy, points_xy, no_return_dirs, config, range_max_m)
     if prep is not None:
         grid = prep.grid
         dynamic = _NO_MASK if dynamic_mask is None else np.asarray(dynamic_mask, dtype=bool).reshape(-1)
@@ -276,13 +278,14 @@ class PreparedScan(NamedTuple):
 
 
 def prepare_scan(grid: LogOddsGrid, origin_xy: npt.ArrayLike, points_xy: npt.ArrayLike,
-                 no_return_dirs: npt.ArrayLike, config: GridConfig) -> PreparedScan | None:
+                 no_return_dirs: npt.ArrayLike, config: GridConfig, range_max_m: float = math.inf
+                 ) -> PreparedScan | None:
     """Grow the grid to hold the scan's beams (:func:`grow_to_fit`); None when the scan has no beam."""
     o = np.asarray(origin_xy, dtype=np.float64).reshape(2)
     ox, oy = float(o[0]), float(o[1])
     pts = np.ascontiguousarray(points_xy, dtype=np.float64).reshape(-1, 2)
     dirs = np.ascontiguousarray(no_return_dirs, dtype=np.float64).reshape(-1, 2)
-    clear = min(config.no_return_clear_m, config.max_range_m)
+    clear = no_return_clear_distance(config, range_max_m)
     if pts.shape[0] == 0 and (clear <= 0.0 or dirs.shape[0] == 0):
         return None
     lox, loy, hix, hiy = scan_bounds(pts, dirs, ox, oy, clear)
@@ -296,10 +299,10 @@ _NO_MASK = np.zeros(0, dtype=bool)
 
 def integrate_scan_numpy(grid: LogOddsGrid, origin_xy: npt.ArrayLike, points_xy: npt.ArrayLike,
                          no_return_dirs: npt.ArrayLike, config: GridConfig,
-                         dynamic_mask: npt.ArrayLike | None = None) -> LogOddsGrid:
+                         dynamic_mask: npt.ArrayLike | None = None, range_max_m: float = math.inf) -> LogOddsGrid:
     """:func:`integrate_scan` in NumPy alone (the reference the compiled kernel is tested against): the
     vectorized DDA of :func:`dda_cells` and gather–scatter updates."""
-    grid, sc = _scan_cells(grid, origin_xy, points_xy, no_return_dirs, config, dynamic_mask)
+    grid, sc = _scan_cells(grid, origin_xy, points_xy, no_return_dirs, config, dynamic_mask, range_max_m)
     if sc is not None:
         hx, hy = sc.hx[sc.keep], sc.hy[sc.keep]
         ix, iy = hx.astype(np.intp), hy.astype(np.intp)
@@ -318,13 +321,13 @@ def integrate_scan_numpy(grid: LogOddsGrid, origin_xy: npt.ArrayLike, points_xy:
 
 
 def _scan_cells(grid: LogOddsGrid, origin_xy: npt.ArrayLike, points_xy: npt.ArrayLike,
-                no_return_dirs: npt.ArrayLike, config: GridConfig, dynamic_mask: npt.ArrayLike | None
-                ) -> tuple[LogOddsGrid, _ScanCells | None]:
+                no_return_dirs: npt.ArrayLike, config: GridConfig, dynamic_mask: npt.ArrayLike | None,
+                range_max_m: float) -> tuple[LogOddsGrid, _ScanCells | None]:
     """Grow the grid to hold the scan, and express the scan in its cells (None: no beam)."""
     o = np.asarray(origin_xy, dtype=np.float64).reshape(2)
     ox, oy = float(o[0]), float(o[1])
     pts = np.asarray(points_xy, dtype=np.float64).reshape(-1, 2)
-    ends = beam_ends(ox, oy, pts, no_return_dirs, config)
+    ends = beam_ends(ox, oy, pts, no_return_dirs, no_return_clear_distance(config, range_max_m))
     if ends.shape[1] == 0:
         return grid, None
     lo, hi = ends.min(axis=1), ends.max(axis=1)
@@ -373,11 +376,16 @@ def free_fraction(points: FloatArray, ox: float, oy: float, band_m: float) -> Fl
     return np.asarray(np.clip(1.0 - band_m / np.maximum(r_sin, 1e-12), 0.0, 1.0), dtype=np.float64)
 
 
-def beam_ends(ox: float, oy: float, points: FloatArray, no_return_dirs: npt.ArrayLike,
-              config: GridConfig) -> FloatArray:
-    """(2, B) x and y of where the free part of each beam ends: the hits, then o + min(no_return_clear_m,
-    max_range_m)·u for each no-return direction u (none when that distance is 0)."""
-    clear = min(config.no_return_clear_m, config.max_range_m)
+def no_return_clear_distance(config: GridConfig, range_max_m: float = math.inf) -> float:
+    """How far a no-return beam clears: min(no_return_clear_m, max_range_m, the scan's range_max). A reading
+    of +inf or ≥ range_max says nothing was within range_max (sensor_msgs/LaserScan); beyond it the sensor
+    saw nothing at all, so a short-range lidar (3.5 m) must not clear free space through the walls behind."""
+    return min(config.no_return_clear_m, config.max_range_m, range_max_m)
+
+
+def beam_ends(ox: float, oy: float, points: FloatArray, no_return_dirs: npt.ArrayLike, clear: float) -> FloatArray:
+    """(2, B) x and y of where the free part of each beam ends: the hits, then o + clear·u for each no-return
+    direction u (none when ``clear`` is 0; :func:`no_return_clear_distance`)."""
     dirs = np.asarray(no_return_dirs, dtype=np.float64).reshape(-1, 2)
     if clear <= 0.0 or dirs.shape[0] == 0:
         return np.ascontiguousarray(points.T)

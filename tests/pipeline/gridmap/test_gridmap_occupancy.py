@@ -16,6 +16,7 @@ from doorbatch.pipeline.gridmap.occupancy import (
     LogOddsGrid,
     free_fraction,
     integrate_scan,
+    integrate_scan_numpy,
     new_grid,
     to_occupancy_map,
 )
@@ -80,6 +81,16 @@ def test_no_return_beams_clear_up_to_no_return_clear_m_only() -> None:
     assert not np.any(grid.log_odds == np.float32(cfg.l_occ))
     off = CFG.model_copy(update={"no_return_clear_m": 0.0})
     assert not np.any(integrate_scan(_grid(), (0.25, 0.25), np.zeros((0, 2)), [[1.0, 0.0]], off).log_odds)
+
+
+@pytest.mark.parametrize("integrate", [integrate_scan, integrate_scan_numpy])
+def test_no_return_beams_clear_no_farther_than_the_scans_range_max(integrate: object) -> None:
+    # A 0.6 m lidar's no-return reading says nothing lies within 0.6 m; beyond it nothing was seen.
+    cfg = CFG.model_copy(update={"no_return_clear_m": 1.0})
+    grid = integrate(_grid(), (0.25, 0.25), np.zeros((0, 2)), [[1.0, 0.0]], cfg, None, 0.6)  # type: ignore[operator]
+    row = grid.log_odds[2]
+    assert np.allclose(row[2:8], cfg.l_free)  # x from 0.25 to 0.85 (exclusive)
+    assert np.all(row[8:] == 0.0)
 
 
 def test_hits_beyond_max_range_only_clear_up_to_max_range() -> None:
