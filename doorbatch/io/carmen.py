@@ -7,13 +7,16 @@ role detection and MCAP conversion treat it like any bag:
 ==============  ==========================  =====================================================
 topic           type                        from
 ==============  ==========================  =====================================================
-/scan           sensor_msgs/LaserScan       FLASER and ROBOTLASER1 readings, frame ``laser``
+/scan           sensor_msgs/LaserScan       FLASER and ROBOTLASER1 readings, frame ``laser`` (in a
+                                            log with neither: RAWLASER1, the front laser's raw lines)
 /odom           nav_msgs/Odometry           FLASER odometry fields (one per scan), ROBOTLASER1 robot
                                             pose, and ODOM lines (moved off the scans' stamps)
 /ground_truth   nav_msgs/Odometry           FLASER and ROBOTLASER1 laser pose (the corrected pose in
                                             corrected logs), moved back to base_link
 /tf             tf2_msgs/TFMessage          odom→base_link, one per odometry pose
-/tf_static      tf2_msgs/TFMessage          base_link→laser from ``robot_frontlaser_offset``
+/tf_static      tf2_msgs/TFMessage          base_link→laser from the ``robot_frontlaser_*offset`` PARAMs
+                                            (metres, metres, radians as CARMEN's simulator adds it), or
+                                            without them from ROBOTLASER1's laser pose in its robot pose
 ==============  ==========================  =====================================================
 
 The file has no index, so :meth:`CarmenReader.open` makes one pass over it: it validates every line,
@@ -62,7 +65,12 @@ ENCODING = "carmen"
 _FLASER = "FLASER"
 _ODOM = "ODOM"
 _ROBOTLASER1 = "ROBOTLASER1"
+_RAWLASER1 = "RAWLASER1"
 _TIMED = frozenset({_FLASER, _ODOM, _ROBOTLASER1})
+_TIMED_RAW = frozenset({_ODOM, _RAWLASER1})  # a log without FLASER and ROBOTLASER1 lines
+# ROBOTLASER1 without offset PARAMs: its laser pose in its robot pose is the mount when it holds this still.
+_MOUNT_TOLERANCE_M = 1e-3
+_MOUNT_TOLERANCE_RAD = 1e-3
 
 _NS = 1_000_000_000
 _MAX_STAMP_S = Decimal(2**62) / _NS  # beyond this a "stamp" is garbage, not a time
@@ -320,13 +328,13 @@ def repair_stamps(stamps_ns: Int64Array, is_scan: BoolArray, scan_period_s: floa
 
 @dataclass(frozen=True, slots=True)
 class _Laser:
-    """A FLASER or ROBOTLASER1 line."""
+    """A FLASER, ROBOTLASER1 or RAWLASER1 line (RAWLASER1: no poses)."""
 
     ranges: Float32Array
-    laser_pose: tuple[float, float, float]
-    robot_pose: tuple[float, float, float]
+    laser_pose: tuple[float, float, float] | None
+    robot_pose: tuple[float, float, float] | None
     stamp_ns: int
-    # ROBOTLASER1 only: its own geometry, range and remissions.
+    # ROBOTLASER1 and RAWLASER1 only: its own geometry, range and remissions.
     angle_min: float | None = None
     angle_increment: float | None = None
     range_max: float | None = None
@@ -401,39 +409,46 @@ def _parse_flaser(parts: list[str]) -> _Laser:
     return _Laser(ranges, _pose(poses[:3], "laser pose"), _pose(poses[3:], "odometry pose"), stamp)
 
 
-def _parse_robotlaser1(parts: list[str]) -> _Laser:
-    """``ROBOTLASER1 type start fov res max_range accuracy remission_mode n r.. n_rem rem.. laser_pose
-    robot_pose tv rv forward_safety side_safety turn_axis timestamp [host logger_timestamp]``."""
+def _parse_laser_with_header(parts: list[str], n_pose_fields: int) -> _Laser:
+    """``ROBOTLASER1`` or ``RAWLASER1 type start fov res max_range accuracy remission_mode n r.. n_rem rem..``,
+    then ``n_pose_fields`` (ROBOTLASER1: laser pose, robot pose, tv, rv, forward_safety, side_safety,
+    turn_axis; RAWLASER1: none), then ``timestamp [host logger_timestamp]`` (CARMEN logger, writelog.c)."""
+    keyword = parts[0]
     if len(parts) < 9:
-        raise _MalformedError(f"ROBOTLASER1 line has {len(parts)} fields, too few for its header")
+        raise _MalformedError(f"{keyword} line has {len(parts)} fields, too few for its header")
     header = _floats(parts[1:8], "laser header")
     n = _count(parts[8], "reading count")
     if len(parts) < 10 + n:
-        raise _MalformedError(f"ROBOTLASER1 line has {len(parts)} fields, fewer than its {n} readings need")
+        raise _MalformedError(f"{keyword} line has {len(parts)} fields, fewer than its {n} readings need")
     n_rem = _count(parts[9 + n], "remission count")
     rest = 10 + n + n_rem
-    stamp = _tail_stamp(parts, rest + 11, _ROBOTLASER1)
+    stamp = _tail_stamp(parts, rest + n_pose_fields, keyword)
     ranges = _floats(parts[9 : 9 + n], "reading", np.float32)
     remissions = _floats(parts[10 + n : rest], "remission", np.float32)
-    poses = _floats(parts[rest : rest + 8], "pose")
     _, start, fov, res, max_range = header[:5].tolist()
     if not (math.isfinite(start) and math.isfinite(fov) and math.isfinite(res)):
-        raise _MalformedError("ROBOTLASER1 start angle, field of view or resolution is not finite")
+        raise _MalformedError(f"{keyword} start angle, field of view or resolution is not finite")
     if res == 0.0:
         if n < 2 or fov == 0.0:
-            raise _MalformedError("ROBOTLASER1 has zero angular resolution and no field of view")
+            raise _MalformedError(f"{keyword} has zero angular resolution and no field of view")
         res = fov / (n - 1)
+    laser_pose = robot_pose = None
+    tv = rv = 0.0
+    if n_pose_fields:
+        poses = _floats(parts[rest : rest + 8], "pose")
+        laser_pose, robot_pose = _pose(poses[:3], "laser pose"), _pose(poses[3:6], "robot pose")
+        tv, rv = float(poses[6]), float(poses[7])
     return _Laser(
         ranges,
-        _pose(poses[:3], "laser pose"),
-        _pose(poses[3:6], "robot pose"),
+        laser_pose,
+        robot_pose,
         stamp,
         angle_min=float(start),
         angle_increment=float(res),
         range_max=float(max_range) if math.isfinite(max_range) and max_range > 0 else None,
         intensities=remissions if n_rem == n else None,
-        tv=float(poses[6]),
-        rv=float(poses[7]),
+        tv=tv,
+        rv=rv,
     )
 
 
@@ -449,7 +464,16 @@ def _parse(parts: list[str]) -> _Laser | _Odom:
         return _parse_odom(parts)
     if parts[0] == _FLASER:
         return _parse_flaser(parts)
-    return _parse_robotlaser1(parts)
+    return _parse_laser_with_header(parts, 11 if parts[0] == _ROBOTLASER1 else 0)
+
+
+def laser_in_robot(laser_pose: tuple[float, float, float],
+                   robot_pose: tuple[float, float, float]) -> tuple[float, float, float]:
+    """The laser pose in the robot's frame, (x, y, yaw): the mount, where both poses are of one instant."""
+    dx, dy = laser_pose[0] - robot_pose[0], laser_pose[1] - robot_pose[1]
+    c, s = math.cos(robot_pose[2]), math.sin(robot_pose[2])
+    dyaw = laser_pose[2] - robot_pose[2]
+    return c * dx + s * dy, -s * dx + c * dy, math.atan2(math.sin(dyaw), math.cos(dyaw))
 
 
 def base_from_laser(laser_pose: tuple[float, float, float],
@@ -489,6 +513,7 @@ class CarmenReader(LogReader):
         self._topics: dict[str, TopicInfo] = {}
         self._fov_deg = self.io_config.carmen_fov_deg
         self._resolution_deg: float | None = None  # PARAM laser_front_laser_resolution
+        self._timed = _TIMED  # the keywords this log's messages come from (_TIMED_RAW: RAWLASER1 scans)
 
     # ---- reading lines
 
@@ -526,6 +551,8 @@ class CarmenReader(LogReader):
         is_scan: list[bool] = []
         counts: Counter[str] = Counter()
         ignored: Counter[str] = Counter()
+        keywords: list[str] = []
+        mounts: list[tuple[float, float, float]] = []  # ROBOTLASER1: laser pose in robot pose
         largest = -math.inf
         band: Float32Array = np.empty(0, dtype=np.float32)  # distinct readings near the largest
         for lineno, parts in self._lines():
@@ -535,7 +562,7 @@ class CarmenReader(LogReader):
                     raise self._error(lineno, parts, "PARAM line needs a name and a value")
                 self.params[parts[1]] = parts[2]
                 continue
-            if keyword not in _TIMED:
+            if keyword not in _TIMED and keyword != _RAWLASER1:
                 ignored[keyword] += 1
                 continue
             try:
@@ -543,16 +570,30 @@ class CarmenReader(LogReader):
             except _MalformedError as err:
                 raise self._error(lineno, parts, str(err)) from err
             counts[keyword] += 1
+            keywords.append(keyword)
             stamps.append(record.stamp_ns)
             is_scan.append(isinstance(record, _Laser))
             if keyword == _FLASER and isinstance(record, _Laser):
                 largest, band = _update_band(largest, band, record.ranges)
+            elif isinstance(record, _Laser) and record.laser_pose is not None and record.robot_pose is not None:
+                mounts.append(laser_in_robot(record.laser_pose, record.robot_pose))
         n_scans = counts[_FLASER] + counts[_ROBOTLASER1]
+        if n_scans == 0 and counts[_RAWLASER1]:
+            # Choice: the raw front laser only where no line carries it with poses (the logger writes both).
+            self._timed, n_scans = _TIMED_RAW, counts[_RAWLASER1]
+            self._warn(f"scans from {n_scans} RAWLASER1 lines (no FLASER or ROBOTLASER1): they carry no pose, "
+                       f"so the log has {'odometry from its ODOM lines' if counts[_ODOM] else 'no odometry'} "
+                       f"and no reference")
+        elif counts[_RAWLASER1]:
+            ignored[_RAWLASER1] = counts[_RAWLASER1]
         if n_scans == 0:
-            raise LogReadError("no laser scans (FLASER or ROBOTLASER1 lines) in this CARMEN log",
+            raise LogReadError("no laser scans (FLASER, ROBOTLASER1 or RAWLASER1 lines) in this CARMEN log",
                                path=self.path)
+        keep = [k in self._timed for k in keywords]
+        stamps = [t for t, k in zip(stamps, keep, strict=True) if k]
+        is_scan = [v for v, k in zip(is_scan, keep, strict=True) if k]
         self.ignored_lines = dict(sorted(ignored.items()))
-        self._read_params(counts[_FLASER], largest, band)
+        self._read_params(counts[_FLASER], largest, band, mounts)
         repair = repair_stamps(np.array(stamps, dtype=np.int64), np.array(is_scan, dtype=bool),
                                self.io_config.carmen_scan_period_s)
         self._stamps = repair.stamps_ns
@@ -568,14 +609,14 @@ class CarmenReader(LogReader):
                        f"stamp (the scan's own odometry field is the odometry at that instant): re-stamped "
                        f"{separation.n_restamped} by interpolation between their neighbours in file order, "
                        f"dropped {n_dropped}")
-        n_odom = n_scans + counts[_ODOM] - n_dropped
-        self._topics = {
-            SCAN_TOPIC: TopicInfo(SCAN_TOPIC, LASERSCAN, n_scans, ENCODING),
-            ODOM_TOPIC: TopicInfo(ODOM_TOPIC, ODOMETRY, n_odom, ENCODING),
-            REFERENCE_TOPIC: TopicInfo(REFERENCE_TOPIC, ODOMETRY, n_scans, ENCODING),
-            TF_TOPIC: TopicInfo(TF_TOPIC, TF_MESSAGE, n_odom, ENCODING),
-            TF_STATIC_TOPIC: TopicInfo(TF_STATIC_TOPIC, TF_MESSAGE, 1, ENCODING),
-        }
+        n_posed = 0 if self._timed is _TIMED_RAW else n_scans  # scans whose line carries poses
+        n_odom = n_posed + counts[_ODOM] - n_dropped
+        topics = [TopicInfo(SCAN_TOPIC, LASERSCAN, n_scans, ENCODING),
+                  TopicInfo(ODOM_TOPIC, ODOMETRY, n_odom, ENCODING),
+                  TopicInfo(REFERENCE_TOPIC, ODOMETRY, n_posed, ENCODING),
+                  TopicInfo(TF_TOPIC, TF_MESSAGE, n_odom, ENCODING),
+                  TopicInfo(TF_STATIC_TOPIC, TF_MESSAGE, 1, ENCODING)]
+        self._topics = {t.name: t for t in topics if t.count}
 
     def _warn(self, message: str) -> None:
         log.warning("%s: %s", self.path, message)
@@ -593,13 +634,28 @@ class CarmenReader(LogReader):
             raise LogReadError(f"PARAM {name} {text!r} is not finite", path=self.path)
         return value
 
-    def _read_params(self, n_flaser: int, largest: float, band: Float32Array) -> None:
-        """Laser offset, FLASER field of view and the no-return value, from PARAMs or the readings."""
-        self.laser_offset = (
-            self._param_float("robot_frontlaser_offset") or 0.0,
-            self._param_float("robot_frontlaser_side_offset") or 0.0,
-            math.radians(self._param_float("robot_frontlaser_angular_offset") or 0.0),
-        )
+    def _read_params(self, n_flaser: int, largest: float, band: Float32Array,
+                     mounts: Sequence[tuple[float, float, float]] = ()) -> None:
+        """Laser offset, FLASER field of view and the no-return value, from PARAMs or the readings.
+
+        The angular offset is in radians: CARMEN's simulator and robot module add it to the heading as it
+        is (only the laser's field of view and resolution PARAMs are in degrees). Without any offset PARAM,
+        ROBOTLASER1 lines give the mount as their laser pose in their robot pose, when that holds still
+        over the log (in a corrected log the laser pose is the corrected one and it does not)."""
+        offsets = [self._param_float(f"robot_frontlaser_{name}")
+                   for name in ("offset", "side_offset", "angular_offset")]
+        self.laser_offset = (offsets[0] or 0.0, offsets[1] or 0.0, offsets[2] or 0.0)
+        if all(v is None for v in offsets) and mounts:
+            m = np.array(mounts)
+            turn = np.arctan2(np.sin(m[:, 2] - m[0, 2]), np.cos(m[:, 2] - m[0, 2]))  # about the first (±π)
+            if (np.ptp(m[:, :2], axis=0).max() <= _MOUNT_TOLERANCE_M
+                    and np.ptp(turn) <= _MOUNT_TOLERANCE_RAD):
+                x, y = np.median(m[:, :2], axis=0).tolist()
+                yaw = float(m[0, 2] + np.median(turn))
+                self.laser_offset = (float(x), float(y), math.atan2(math.sin(yaw), math.cos(yaw)))
+                if any(abs(v) > 0 for v in self.laser_offset):
+                    log.info("%s: laser mount (%.3f m, %.3f m, %.4f rad) from the ROBOTLASER1 poses",
+                             self.path, *self.laser_offset)
         names = [*_MAX_PARAMS, *sorted(p for p in self.params if p.startswith("laser_")
                                          and "max_range" in p and "rear" not in p)]
         for name in names:
@@ -660,7 +716,7 @@ class CarmenReader(LogReader):
         laser_wanted = bool(wanted & {SCAN_TOPIC, REFERENCE_TOPIC}) or odometry_wanted
         index = -1
         for lineno, parts in self._lines():
-            if parts[0] not in _TIMED:
+            if parts[0] not in self._timed:
                 continue
             index += 1
             if index >= self._stamps.size:
@@ -686,16 +742,18 @@ class CarmenReader(LogReader):
         if isinstance(record, _Odom):
             odom_pose, tv, rv = record.pose, record.tv, record.rv
         else:
-            odom_pose, tv, rv = record.robot_pose, record.tv, record.rv
             if SCAN_TOPIC in wanted:
                 yield RawMessage(SCAN_TOPIC, LASERSCAN, stamp, self._scan(record, stamp), False)
+            if record.robot_pose is None or record.laser_pose is None:  # RAWLASER1: the scan alone
+                return
+            odom_pose, tv, rv = record.robot_pose, record.tv, record.rv
         if ODOM_TOPIC in wanted:
             odom = rm.odometry(stamp, frames.odom, frames.base_link, *odom_pose, vx=tv, wz=rv)
             yield RawMessage(ODOM_TOPIC, ODOMETRY, stamp, odom, False)
         if TF_TOPIC in wanted:
             tf = rm.tf_message([rm.planar_transform(stamp, frames.odom, frames.base_link, *odom_pose)])
             yield RawMessage(TF_TOPIC, TF_MESSAGE, stamp, tf, False)
-        if isinstance(record, _Laser) and REFERENCE_TOPIC in wanted:
+        if isinstance(record, _Laser) and record.laser_pose is not None and REFERENCE_TOPIC in wanted:
             pose = base_from_laser(record.laser_pose, self.laser_offset)
             ref = rm.odometry(stamp, frames.map, frames.base_link, *pose)
             yield RawMessage(REFERENCE_TOPIC, ODOMETRY, stamp, ref, False)

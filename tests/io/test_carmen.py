@@ -243,6 +243,82 @@ def test_laser_offset_gives_tf_static_and_moves_the_reference_back(tmp_path: Pat
     assert reference[0].yaw == pytest.approx(math.pi / 2, abs=1e-5)
 
 
+def _static_yaw(records: list[RoleMessage]) -> float:
+    (static,) = [t for t in only(Transform, records) if t.static]
+    x, y, z, w = static.rotation_xyzw
+    return math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+
+
+def test_angular_offset_param_is_in_radians(tmp_path: Path) -> None:
+    """CARMEN adds robot_frontlaser_angular_offset to the heading as it is (carmen.ini: a rear laser is
+    3.1415923); only the laser's field of view and resolution PARAMs are degrees."""
+    lines = ["PARAM robot_frontlaser_angular_offset 0.1 nohost 0",
+             flaser([1.0] * 180, (1.0, 2.0, 0.3), "5.0"), flaser([1.0] * 180, (1.0, 3.0, 0.3), "5.2")]
+    records = read_all(write_log(tmp_path / "a.log", lines))
+    assert _static_yaw(records) == pytest.approx(0.1)
+    assert only(Pose2D, records, Role.REFERENCE)[0].yaw == pytest.approx(0.2)
+
+
+def robotlaser1(laser: tuple[float, float, float], robot: tuple[float, float, float], t: float, n: int = 5) -> str:
+    readings = " ".join(["1.0"] * n)
+    poses = " ".join(f"{v:.9f}" for v in (*laser, *robot))
+    return f"ROBOTLASER1 0 -1.0 2.0 0.5 20.0 0.01 0 {n} {readings} 0 {poses} 0.3 0.05 0 0 0 {t} host {t}"
+
+
+def _mounted(robot: tuple[float, float, float], mount: tuple[float, float, float]) -> tuple[float, float, float]:
+    c, s = math.cos(robot[2]), math.sin(robot[2])
+    return (robot[0] + c * mount[0] - s * mount[1], robot[1] + s * mount[0] + c * mount[1], robot[2] + mount[2])
+
+
+def test_robotlaser1_without_offset_params_takes_the_mount_from_its_two_poses(tmp_path: Path) -> None:
+    mount = (0.2, -0.05, math.pi)  # a laser looking backwards: its yaw wraps at ±π from line to line
+    robots = [(0.0, 0.0, 0.0), (0.5, 0.1, 0.4), (0.9, 0.4, -2.9)]
+    lines = [robotlaser1(_mounted(r, mount), r, 3.0 + 0.1 * k) for k, r in enumerate(robots)]
+    records = read_all(write_log(tmp_path / "a.clf", lines))
+    (static,) = [t for t in only(Transform, records) if t.static]
+    np.testing.assert_allclose(static.translation, [0.2, -0.05, 0.0], atol=1e-6)
+    assert abs(_wrap(_static_yaw(records) - math.pi)) < 1e-6
+    for ref, robot in zip(only(Pose2D, records, Role.REFERENCE), robots, strict=True):
+        assert (ref.x, ref.y) == pytest.approx(robot[:2], abs=1e-6) and abs(_wrap(ref.yaw - robot[2])) < 1e-6
+
+
+def test_robotlaser1_whose_laser_pose_was_corrected_keeps_a_zero_mount(tmp_path: Path) -> None:
+    # A corrected log: the laser pose is the corrected one, the robot pose the odometry; no fixed mount.
+    lines = [robotlaser1((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 3.0), robotlaser1((1.0, 0.0, 0.0), (0.9, 0.05, 0.02), 3.1)]
+    records = read_all(write_log(tmp_path / "a.clf", lines))
+    (static,) = [t for t in only(Transform, records) if t.static]
+    np.testing.assert_allclose(static.translation, 0.0)
+    assert only(Pose2D, records, Role.REFERENCE)[1].x == pytest.approx(1.0)
+
+
+def rawlaser1(t: float, n: int = 5) -> str:
+    readings = " ".join(["2.0"] * n)
+    return f"RAWLASER1 0 -1.0 2.0 0.5 30.0 0.01 0 {n} {readings} 0 {t} host {t}"
+
+
+def test_rawlaser1_lines_are_the_scans_of_a_log_without_flaser_or_robotlaser1(tmp_path: Path) -> None:
+    lines = ["PARAM robot_frontlaser_offset 0.25 nohost 0"]
+    for k in range(3):
+        lines += [odom_line((0.1 * k, 0.0, 0.0), f"{10.0 + 0.2 * k:.6f}"), rawlaser1(10.1 + 0.2 * k)]
+    with CarmenReader(write_log(tmp_path / "raw.log", lines)) as reader:
+        assert set(reader.topics) == {"/scan", "/odom", "/tf", "/tf_static"}  # no reference: no poses
+        assert reader.topics["/scan"].count == 3 and reader.topics["/odom"].count == 3
+        assert any("RAWLASER1" in w for w in reader.warnings)
+        records = list(reader.messages())
+    scans = only(Scan, records)
+    assert [s.stamp_ns for s in scans] == [10_100_000_000, 10_300_000_000, 10_500_000_000]
+    assert scans[0].angle_min == pytest.approx(-1.0) and scans[0].range_max == pytest.approx(30.0)
+    assert [p.x for p in only(Pose2D, records, Role.ODOMETRY)] == pytest.approx([0.0, 0.1, 0.2])
+
+
+def test_rawlaser1_lines_beside_flaser_lines_are_ignored_and_counted(tmp_path: Path) -> None:
+    lines = [*simple_log(n_scans=2), rawlaser1(100.05), rawlaser1(100.25)]
+    with CarmenReader(write_log(tmp_path / "a.log", lines)) as reader:
+        assert reader.ignored_lines == {"RAWLASER1": 2}
+        assert reader.topics["/scan"].count == 2
+        assert len(only(Scan, reader.messages([Role.SCAN]))) == 2
+
+
 def test_base_from_laser_inverts_the_mounting() -> None:
     base = (2.0, -1.0, 0.7)
     offset = (0.3, 0.1, 0.2)
