@@ -56,6 +56,20 @@ def test_an_mcap_whose_recording_was_cut_off_reads_up_to_the_cut(write_log: Call
     assert any("no summary section" in p["message"] for p in report["problems"])
 
 
+@pytest.mark.parametrize("fmt", ["bag", "rosbag2"])
+def test_a_damaged_bag_is_a_read_error_that_says_why(write_log: Callable[..., Path], tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture[str], fmt: str) -> None:
+    path = write_log(f"whole.{fmt}", fmt=fmt)
+    if fmt == "bag":
+        data = path.read_bytes()
+        path.write_bytes(data[: len(data) // 2])
+    else:  # a ROS 2 bag folder whose metadata.yaml is junk
+        (path / "metadata.yaml").write_text("rosbag2_bagfile_information: [1, 2\n")
+    code, err = _run(capsys, "inspect", str(path))
+    line = _one_line(err)
+    assert code == 3 and str(path) in line and "internal error" not in line and "is not open" not in line
+
+
 def test_file_that_is_not_a_log(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     path = tmp_path / "notes.txt"
     path.write_text("hello\n")

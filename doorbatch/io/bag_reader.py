@@ -35,9 +35,9 @@ class _AnyBagReader(LogReader):
 
     def close(self) -> None:
         reader = getattr(self, "_reader", None)
-        if reader is not None:
+        self._reader = None
+        if reader is not None and reader.stack:  # a failed open() leaves AnyReader closed already
             reader.close()
-            self._reader = None
 
     @property
     def topics(self) -> dict[str, TopicInfo]:
