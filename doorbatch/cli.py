@@ -146,7 +146,7 @@ def convert_cmd(ctx: Context, source: Path, output: Path) -> None:
 @click.option("-o", "--output", type=click.Path(path_type=Path), required=True,
               help="Output log: FILE.mcap, FILE.bag, or a folder for rosbag2.")
 @click.option("--scenario", default=None, help="A scenario name in configs/scenarios/ or a YAML path.")
-@click.option("--seed", type=int, default=None, help="Random seed (default: the config's seed).")
+@click.option("--seed", type=click.IntRange(min=0), default=None, help="Random seed (default: the config's seed).")
 @click.option("--format", "fmt", type=click.Choice(["mcap", "bag", "rosbag2", "rosbag2-mcap"]), default="mcap",
               show_default=True)
 @click.option("--split-passes", is_flag=True, help="Also write one log per pass (what doorbatch map takes).")
@@ -187,6 +187,8 @@ def map_cmd(ctx: Context, logs: tuple[Path, ...], output: Path, pose_source: str
         config = config.model_copy(update={"mapping": config.mapping.model_copy(update={"pose_source": pose_source})})
     with progress_bar(len(logs), "map", unit="pass") as bar:
         wanted = None if stages is None else [s.strip() for s in stages.split(",") if s.strip()]
+        if wanted == []:
+            raise UsageError(f"--stages {stages!r}: name grid, em or both")
         _, summary = run_map(list(logs), output, config, wanted, progress=bar.update, classes_file=classes_file,
                              mcap=mcap)
     ctx.summary(f"map of {summary.passes} pass(es) from {summary.pose_source} poses: {summary.doors} door(s) "
@@ -200,7 +202,8 @@ def map_cmd(ctx: Context, logs: tuple[Path, ...], output: Path, pose_source: str
 @click.option("-o", "--output", type=click.Path(path_type=Path, file_okay=False), required=True,
               help="Run directory to write.")
 @click.option("--method", type=click.Choice(["rbpf", "mcl"]), default=None, help="Default: localize.method.")
-@click.option("--particles", type=int, default=None, help="Maximum (and global-init) particle count.")
+@click.option("--particles", type=click.IntRange(min=1), default=None,
+              help="Maximum (and global-init) particle count.")
 @click.option("--init", "init", default="reference", show_default=True,
               help="reference, global, X,Y,YAW, or a pose topic of LOG (/initialpose: its first message).")
 @common_options

@@ -20,7 +20,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from doorbatch.amcl_params import is_ros2_parameter_file, refuse_ros1_amcl_file, translate_ros2_parameter_file
-from doorbatch.errors import ConfigError
+from doorbatch.errors import ConfigError, UsageError
 
 
 class Section(BaseModel):
@@ -210,6 +210,27 @@ class ScanMatchConfig(Section):
         if self.loop_window_min_m > self.loop_window_max_m or self.loop_window_min_deg > self.loop_window_max_deg:
             raise ValueError("loop_window_min_m / _deg must not exceed loop_window_max_m / _deg")
         return self
+
+
+def parse_init(text: str) -> str | tuple[float, float, float]:
+    """A localization start: ``reference``, ``global``, ``X,Y,YAW`` (finite; yaw in radians) or a pose topic
+    (``/initialpose``; a name with a leading slash, returned as it is).
+
+    Raises:
+        UsageError: anything else.
+    """
+    if text in ("reference", "global") or text.startswith("/"):
+        return text
+    parts = text.split(",")
+    try:
+        if len(parts) == 3:
+            x, y, yaw = (float(p) for p in parts)
+            if math.isfinite(x) and math.isfinite(y) and math.isfinite(yaw):
+                return (x, y, yaw)
+    except ValueError:
+        pass
+    raise UsageError(f"--init {text!r}: expected reference, global, X,Y,YAW (finite numbers) or a pose topic "
+                     f"(/initialpose)")
 
 
 def logit(p: float) -> float:
@@ -512,7 +533,14 @@ class LocalizeConfig(Section):
     door_angle_sigma_deg: float = Field(3.0, gt=0.0)  # measured leaf angle noise for the Kalman update
     # Particles drawn into the annotated MCAP per update.
     annotate_particles: int = Field(200, ge=0)
-    seed: int | None = None  # None: the top-level seed
+    seed: int | None = Field(None, ge=0)  # None: the top-level seed
+
+    @model_validator(mode="after")
+    def _check_particle_bounds(self) -> LocalizeConfig:
+        if self.min_particles > self.max_particles:
+            raise ValueError(f"min_particles ({self.min_particles}) must not exceed max_particles "
+                             f"({self.max_particles})")
+        return self
 
 
 class EvaluateConfig(Section):
@@ -673,7 +701,7 @@ class DoorPoseConfig(Section):
     goal_tolerance_m: float = Field(0.01, gt=0.0)
     goal_tolerance_deg: float = Field(1.0, gt=0.0)
     max_duration_s: float = Field(60.0, gt=0.0)
-    seed: int | None = None  # None: the top-level seed
+    seed: int | None = Field(None, ge=0)  # None: the top-level seed
 
     @model_validator(mode="after")
     def _stable_gains(self) -> DoorPoseConfig:
@@ -693,7 +721,20 @@ class RunConfig(Section):
     # Initial pose for localization: reference (the log's reference pose topic), global, or X,Y,YAW.
     init: str = "reference"
     # Map stages (doorbatch map --stages).
-    map_stages: list[str] = Field(default_factory=lambda: ["grid"], min_length=1)
+    map_stages: list[Literal["grid", "em"]] = Field(default_factory=lambda: ["grid"],  # type: ignore[arg-type]
+                                                    min_length=1)
+
+    @model_validator(mode="after")
+    def _check_run(self) -> RunConfig:
+        for name in ("methods", "map_stages"):
+            values = getattr(self, name)
+            if len(set(values)) != len(values):
+                raise ValueError(f"{name} lists a value twice: {values}")
+        try:
+            parse_init(self.init)
+        except UsageError as err:
+            raise ValueError(str(err)) from None
+        return self
     # How the work is spread (--workers, --executor, --scheduler) is no config: it must not change outputs
     # or the config hash in their manifests.
 
@@ -701,7 +742,7 @@ class RunConfig(Section):
 class DoorbatchConfig(Section):
     """The whole configuration tree."""
 
-    seed: int = 0
+    seed: int = Field(0, ge=0)
     topics: TopicsConfig = TopicsConfig()
     frames: FramesConfig = FramesConfig()
     io: IoConfig = IoConfig()

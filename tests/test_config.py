@@ -43,3 +43,24 @@ def test_wrong_type_is_a_config_error() -> None:
         load_config(overrides=["laser.beam_stride=zero"])
     with pytest.raises(ConfigError, match=r"expected section\.key=value"):
         load_config(overrides=["laser.beam_stride"])
+
+
+@pytest.mark.parametrize(("override", "named"), [
+    ("seed=-1", "seed"),
+    ("localize.seed=-2", "seed"),
+    ("localize.min_particles=6000", "min_particles"),
+    ("run.init=garbage", "init"),
+    ("run.init=nan,0,0", "init"),
+    ("run.methods=[mcl,mcl]", "methods"),
+    ("run.map_stages=[grid,grid]", "map_stages"),
+    ("run.map_stages=[slam]", "map_stages"),
+])
+def test_values_no_step_could_run_with_are_config_errors(override: str, named: str) -> None:
+    """Caught when the config is read (exit 2), not by every step of a batch (exit 4) or as a crash."""
+    with pytest.raises(ConfigError, match=named):
+        load_config(overrides=[override])
+
+
+def test_a_pose_and_a_topic_are_valid_run_inits() -> None:
+    assert load_config(overrides=["run.init=1.5,-2,0.3"]).run.init == "1.5,-2,0.3"
+    assert load_config(overrides=["run.init=/initialpose"]).run.init == "/initialpose"

@@ -30,7 +30,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from doorbatch.config import DoorbatchConfig, load_config
+from doorbatch.config import DoorbatchConfig, load_config, parse_init
 from doorbatch.io.manifest import Manifest
 from doorbatch.io.sim_truth import output_paths
 from doorbatch.pipeline.evaluate.report import Evaluation
@@ -114,7 +114,6 @@ def run_point(point: SweepPoint, map_path: Path | None, run_dir: Path, config: D
     from doorbatch.pipeline.localize.run import (
         load_localization_map,
         localize,
-        parse_init,
         truth_localization_map,
     )
 

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from doorbatch.config import DoorbatchConfig, LocalizeConfig
+from doorbatch.config import DoorbatchConfig, LocalizeConfig, parse_init
 from doorbatch.errors import PipelineError, UsageError
 from doorbatch.geometry.se2 import interpolate_poses
 from doorbatch.io.map_server import read_map
@@ -77,13 +77,18 @@ def load_localization_map(map_path: Path, config: LocalizeConfig) -> Localizatio
     """A map directory (map.yaml + doors.parquet), a map_server YAML file from any SLAM tool, or a log with a
     nav_msgs/OccupancyGrid topic (``config.map_topic``; :mod:`doorbatch.io.map_topic`), such as the bag of a Nav2
     session."""
+    if map_path.is_dir() and not (map_path / "map.yaml").is_file() and not (map_path / "metadata.yaml").is_file():
+        raise UsageError(f"--map {map_path}: the folder has no map.yaml (a doorbatch map directory) and is no "
+                         f"ROS 2 bag")
     if is_map_log(map_path):
         occ = read_map_topic(map_path, config.map_topic)
         doors = DoorSet.empty()
     else:
         yaml_path = map_path / "map.yaml" if map_path.is_dir() else map_path
         occ = read_map(yaml_path)
-        doors = read_door_set(yaml_path.parent) if map_path.is_dir() else DoorSet.empty()
+        # a doorbatch map directory's map.yaml named directly keeps its doors; another tool's YAML has none
+        has_doors = (yaml_path.parent / "doors.parquet").is_file()
+        doors = read_door_set(yaml_path.parent) if has_doors else DoorSet.empty()
     doors = with_closed_in_range(doors)
     return LocalizationMap(occ, localization_field(occ, config), free_cells(occ), doors)
 
@@ -115,25 +120,6 @@ def localization_field(occ: OccupancyMap, config: LocalizeConfig) -> DistanceFie
         device = config.torch_device
     return build_distance_field(occ, config.laser_likelihood_max_dist, config.unknown_as_max_dist,
                                 torch_device=device)
-
-
-def parse_init(text: str) -> str | tuple[float, float, float]:
-    """``reference``, ``global``, ``X,Y,YAW`` (yaw in radians) or a pose topic (``/initialpose``; a name with a
-    leading slash, returned as it is).
-
-    Raises:
-        UsageError: anything else.
-    """
-    if text in ("reference", "global") or text.startswith("/"):
-        return text
-    parts = text.split(",")
-    try:
-        if len(parts) == 3:
-            x, y, yaw = (float(p) for p in parts)
-            return (x, y, yaw)
-    except ValueError:
-        pass
-    raise UsageError(f"--init {text!r}: expected reference, global, X,Y,YAW or a pose topic (/initialpose)")
 
 
 def laser_to_base_4x4(affine: FloatArray) -> FloatArray:
@@ -260,6 +246,12 @@ def localize(log_path: Path, lmap: LocalizationMap, config: DoorbatchConfig, met
     """
     if method not in ("mcl", "rbpf"):
         raise UsageError(f"--method {method!r}: expected rbpf or mcl")
+    if isinstance(init, tuple) and not lmap.occupancy.contains(lmap.occupancy.world_to_cell(init[:2])):
+        occ = lmap.occupancy
+        corners = occ.cell_to_world([[0, 0], [occ.height - 1, occ.width - 1]])
+        raise UsageError(f"--init {init[0]:g},{init[1]:g},{init[2]:g}: the position lies outside the map "
+                         f"(cells from ({corners[0][0]:.2f}, {corners[0][1]:.2f}) to ({corners[1][0]:.2f}, "
+                         f"{corners[1][1]:.2f}) m)")
     start: Init = init
     if isinstance(init, str) and init.startswith("/"):
         start = read_start_pose(log_path, init)

@@ -216,7 +216,37 @@ def test_a_log_without_odometry_moves_by_its_matched_scans(sample_map: Path, tmp
     assert _errors(run, log).mean() < 0.1
 
 
-def test_bad_init_is_a_usage_error(sample_map: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+@pytest.mark.parametrize("init", ["1,2", "nan,0,0", "0,inf,0", "1e9,0,0"])
+def test_bad_init_is_a_usage_error(sample_map: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                   init: str) -> None:
+    """Not a pose, not finite, or off the map (1 km east): one line, exit 2, nothing written."""
     code = main(["localize", str(SAMPLE_LOGS / "loc_open.mcap"), "--map", str(sample_map), "-o", str(tmp_path / "r"),
-                 "--init", "1,2"])
-    assert code == 2 and "--init" in capsys.readouterr().err
+                 "--init", init])
+    err = capsys.readouterr().err
+    assert code == 2 and "--init" in err and "internal error" not in err
+    assert not (tmp_path / "r").exists()
+
+
+@pytest.mark.parametrize("particles", ["0", "-5"])
+def test_a_particle_count_below_one_is_a_usage_error(sample_map: Path, tmp_path: Path, particles: str,
+                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    code = main(["localize", str(SAMPLE_LOGS / "loc_open.mcap"), "--map", str(sample_map), "-o", str(tmp_path / "r"),
+                 "--particles", particles])
+    assert code == 2 and "--particles" in capsys.readouterr().err
+
+
+def test_the_map_yaml_of_a_map_directory_keeps_its_doors(sample_map: Path, tmp_path: Path) -> None:
+    run = tmp_path / "run"
+    assert main(["localize", str(SAMPLE_LOGS / "loc_open.mcap"), "--map", str(sample_map / "map.yaml"), "-o",
+                 str(run), "--method", "rbpf", "-q"]) == 0
+    states = read_table("door_states", run / "door_states.parquet")
+    assert len(states) > 0 and set(states.column("door_id").to_pylist()) == set(
+        read_table("doors", sample_map / "doors.parquet").column("door_id").to_pylist())
+
+
+def test_a_folder_without_map_yaml_is_named_as_such(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "not_a_map").mkdir()
+    code = main(["localize", str(SAMPLE_LOGS / "loc_open.mcap"), "--map", str(tmp_path / "not_a_map"), "-o",
+                 str(tmp_path / "r")])
+    err = capsys.readouterr().err
+    assert code == 2 and "no map.yaml" in err
