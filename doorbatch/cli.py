@@ -58,6 +58,24 @@ def _setup_logging(verbosity: int) -> None:
     root.setLevel(max(logging.DEBUG, min(logging.ERROR, level)))
 
 
+def _output_folder(_: click.Context, __: click.Parameter, value: Path | None) -> Path | None:
+    """``-o`` of a command that writes a folder: checked before any work (:func:`check_output_location`)."""
+    from doorbatch.io.staged_dir import check_output_location
+
+    if value is not None:
+        check_output_location(value, folder=True)
+    return value
+
+
+def _output_file(_: click.Context, __: click.Parameter, value: Path | None) -> Path | None:
+    """``-o`` of a command that writes one file (or a ROS 2 bag folder), checked before any work."""
+    from doorbatch.io.staged_dir import check_output_location
+
+    if value is not None:
+        check_output_location(value, folder=value.is_dir())
+    return value
+
+
 def common_options(func: F) -> F:
     """``--config``, ``--set``, ``-v/-q``, ``--json``; resolves the config into a :class:`Context`."""
 
@@ -128,7 +146,8 @@ def _format_report(report: Any) -> str:
 
 @cli.command("convert")
 @click.argument("source", metavar="IN", type=click.Path(path_type=Path))
-@click.option("-o", "--output", type=click.Path(path_type=Path), required=True, help="Output .mcap file.")
+@click.option("-o", "--output", type=click.Path(path_type=Path), required=True, callback=_output_file,
+              help="Output .mcap file.")
 @common_options
 def convert_cmd(ctx: Context, source: Path, output: Path) -> None:
     """Convert a CARMEN log or a ROS 1/2 bag to MCAP (ROS 2 CDR)."""
@@ -143,7 +162,7 @@ def convert_cmd(ctx: Context, source: Path, output: Path) -> None:
 
 @cli.command("simulate")
 @click.argument("world", type=click.Path(path_type=Path, dir_okay=False))
-@click.option("-o", "--output", type=click.Path(path_type=Path), required=True,
+@click.option("-o", "--output", type=click.Path(path_type=Path), required=True, callback=_output_file,
               help="Output log: FILE.mcap, FILE.bag, or a folder for rosbag2.")
 @click.option("--scenario", default=None, help="A scenario name in configs/scenarios/ or a YAML path.")
 @click.option("--seed", type=click.IntRange(min=0), default=None, help="Random seed (default: the config's seed).")
@@ -166,6 +185,7 @@ def simulate_cmd(ctx: Context, world: Path, output: Path, scenario: str | None, 
 @cli.command("map")
 @click.argument("logs", metavar="LOG...", nargs=-1, required=True, type=click.Path(path_type=Path))
 @click.option("-o", "--output", type=click.Path(path_type=Path, file_okay=False), required=True,
+              callback=_output_folder,
               help="Map directory to write.")
 @click.option("--pose-source", type=click.Choice(["reference", "odometry", "scanmatch"]), default=None,
               help="Where robot poses come from (default: reference if every log has one, else scanmatch).")
@@ -200,6 +220,7 @@ def map_cmd(ctx: Context, logs: tuple[Path, ...], output: Path, pose_source: str
 @click.option("--map", "map_path", type=click.Path(path_type=Path), required=True,
               help="Map directory of doorbatch map, any map_server YAML, or a log with a /map OccupancyGrid.")
 @click.option("-o", "--output", type=click.Path(path_type=Path, file_okay=False), required=True,
+              callback=_output_folder,
               help="Run directory to write.")
 @click.option("--method", type=click.Choice(["rbpf", "mcl"]), default=None, help="Default: localize.method.")
 @click.option("--particles", type=click.IntRange(min=1), default=None,
@@ -227,6 +248,7 @@ def localize_cmd(ctx: Context, log_path: Path, map_path: Path, output: Path, met
 @cli.command("evaluate")
 @click.argument("run_dirs", metavar="RUNDIR...", nargs=-1, type=click.Path(path_type=Path))
 @click.option("-o", "--output", type=click.Path(path_type=Path, file_okay=False), required=True,
+              callback=_output_folder,
               help="Report directory to write.")
 @click.option("--reference", type=click.Path(path_type=Path), default=None,
               help="Reference trajectory: a TUM file or a log with a reference pose topic.")
@@ -269,6 +291,7 @@ def evaluate_cmd(ctx: Context, run_dirs: tuple[Path, ...], output: Path, referen
 @cli.command("doorpose")
 @click.argument("log_path", metavar="LOG", type=click.Path(path_type=Path), required=False)
 @click.option("-o", "--output", type=click.Path(path_type=Path, file_okay=False), required=True,
+              callback=_output_folder,
               help="Run directory to write.")
 @click.option("--map", "map_path", type=click.Path(path_type=Path), default=None,
               help="Map directory: match each door pose to a mapped door and report its angle.")
@@ -303,6 +326,7 @@ def doorpose_cmd(ctx: Context, log_path: Path | None, output: Path, map_path: Pa
 @cli.command("run")
 @click.argument("dataset", type=click.Path(path_type=Path, file_okay=False))
 @click.option("-o", "--output", type=click.Path(path_type=Path, file_okay=False), required=True,
+              callback=_output_folder,
               help="Output folder (maps, runs, reports, dataset tables, run.log).")
 @click.option("--workers", type=click.IntRange(min=0), default=0, show_default=True,
               help="Parallel steps (0: one per CPU).")

@@ -173,3 +173,40 @@ def test_a_bag_folder_without_metadata_names_its_mcap(write_log: Callable[..., P
     code, err = _run(capsys, "inspect", str(folder))
     assert code == 3 and "no metadata.yaml" in _one_line(err) and str(mcap) in err
     assert main(["inspect", str(mcap)]) == 0
+
+
+_OUTPUT_COMMANDS = [
+    ["map", str(REPO / "datasets/sample/logs/map_pass1.mcap"), "--stages", "grid"],
+    ["convert", str(REPO / "datasets/sample/logs/map_pass1.mcap")],
+]
+
+
+def _target(command: list[str], folder: Path) -> Path:
+    return folder / ("x.mcap" if command[0] == "convert" else "x")
+
+
+@pytest.mark.parametrize("command", _OUTPUT_COMMANDS)
+def test_an_output_under_a_file_is_a_usage_error_before_any_work(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                                 command: list[str]) -> None:
+    blocker = tmp_path / "afile"
+    blocker.write_text("")
+    code, err = _run(capsys, *command, "-o", str(_target(command, blocker)))
+    assert code == 2 and f"{blocker} is a file" in _one_line(err)
+
+
+@pytest.mark.parametrize("command", _OUTPUT_COMMANDS)
+def test_an_output_in_a_read_only_folder_is_a_usage_error_before_any_work(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], command: list[str]) -> None:
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(0o500)
+    try:
+        try:
+            (locked / "probe").mkdir()
+            pytest.skip("this user writes in read-only folders (root)")
+        except PermissionError:
+            pass
+        code, err = _run(capsys, *command, "-o", str(_target(command, locked)))
+        assert code == 2 and f"cannot write in {locked}" in _one_line(err)
+    finally:
+        locked.chmod(0o700)

@@ -15,6 +15,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+from doorbatch.errors import UsageError
 from doorbatch.io.atomic import TEMP_MARKER
 
 _OLD_MARKER = ".old"
@@ -47,6 +48,31 @@ def staged_dir(dest: Path) -> Iterator[Path]:
         dest.rename(old)
     tmp.rename(dest)
     shutil.rmtree(old, ignore_errors=True)
+
+
+def check_output_location(dest: Path, folder: bool) -> None:
+    """Fail early, before any work, where ``dest`` (an output folder, or file) could not be written: a file
+    where a folder must go or the other way round, a parent that is a file, or a parent folder (created here
+    when missing) in which nothing can be created.
+
+    Raises:
+        UsageError: what is in the way, naming the path.
+    """
+    dest = Path(dest)
+    if dest.exists() and dest.is_dir() != folder:
+        raise UsageError(f"-o {dest}: exists and is {'a file' if folder else 'a folder'}, not "
+                         f"{'a folder' if folder else 'a file'}")
+    parent = dest.absolute().parent
+    blocking = next((a for a in (parent, *parent.parents) if a.exists() and not a.is_dir()), None)
+    if blocking is not None:
+        raise UsageError(f"-o {dest}: {blocking} is a file, not a folder")
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+        probe = _sibling(dest.absolute(), TEMP_MARKER)
+        probe.mkdir()
+        probe.rmdir()
+    except OSError as err:
+        raise UsageError(f"-o {dest}: cannot write in {parent}: {err.strerror or err}") from err
 
 
 def is_leftover(path: Path) -> bool:

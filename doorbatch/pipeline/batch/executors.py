@@ -18,11 +18,12 @@ from concurrent.futures import Executor, Future, ProcessPoolExecutor
 from contextlib import contextmanager
 from typing import Any, ParamSpec, TypeVar
 
-from doorbatch.errors import OptionalDependencyError
+from doorbatch.errors import OptionalDependencyError, UsageError
 
 log = logging.getLogger(__name__)
 P = ParamSpec("P")
 T = TypeVar("T")
+SCHEDULER_TIMEOUT_S = 10.0  # how long --scheduler ADDRESS may take to answer
 
 
 class InlineExecutor(Executor):
@@ -78,7 +79,10 @@ def _dask(workers: int, scheduler: str | None) -> Iterator[Executor]:
                                            dashboard_address=None)
         client = distributed.Client(cluster)
     else:
-        client = distributed.Client(scheduler)
+        try:
+            client = distributed.Client(scheduler, timeout=SCHEDULER_TIMEOUT_S)
+        except (OSError, TimeoutError, ValueError) as err:  # unreachable, refused, or not an address
+            raise UsageError(f"--scheduler {scheduler}: cannot reach a Dask scheduler there ({err})") from err
     try:
         yield client.get_executor(pure=False)
     finally:
@@ -93,6 +97,7 @@ def open_executor(kind: str, workers: int, scheduler: str | None = None) -> Iter
 
     Raises:
         OptionalDependencyError: ``dask`` without the ``dask`` extra installed.
+        UsageError: a ``scheduler`` address that answers nothing within ``SCHEDULER_TIMEOUT_S``.
     """
     if kind == "dask":
         with _dask(resolve_workers(workers), scheduler) as executor:

@@ -160,6 +160,20 @@ def test_sigterm_midway_leaves_no_partial_output_and_a_rerun_matches(
     assert output_digests(out, tiny) == output_digests(reference_out, tiny_master)
 
 
+def test_an_unreachable_dask_scheduler_is_a_usage_error(tiny: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("distributed")
+    from doorbatch.pipeline.batch import executors
+
+    monkeypatch.setattr(executors, "SCHEDULER_TIMEOUT_S", 0.5)
+    with socket.socket() as sock:  # a port nobody listens on
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+    code = main(["run", str(tiny), "-o", str(tmp_path / "out"), "--scheduler", f"tcp://127.0.0.1:{port}", "-q"])
+    err = capsys.readouterr().err
+    assert code == 2 and "cannot reach a Dask scheduler" in err and "internal error" not in err
+
+
 def test_dask_executor_gives_the_local_outputs(tiny: Path, tiny_master: Path, tmp_path: Path,
                                                reference_out: Path) -> None:
     pytest.importorskip("distributed")
