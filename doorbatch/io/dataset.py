@@ -24,7 +24,8 @@ from doorbatch.config import read_yaml_mapping
 from doorbatch.errors import ConfigError, InputDataError
 
 DATASET_FILE = "dataset.yaml"
-_SITE_NAME = re.compile(r"^[A-Za-z0-9_.-]+$")  # a folder name and a hive partition value without escaping
+# a folder name and a hive partition value without escaping; no leading dot (".", "..", hidden leftovers)
+_SITE_NAME = re.compile(r"^[A-Za-z0-9_-][A-Za-z0-9_.-]*$")
 _LOG_SUFFIXES = (".gz", ".mcap", ".bag", ".db3", ".log", ".clf")
 
 
@@ -69,7 +70,7 @@ def _paths(root: Path, site: str, key: str, value: Any, where: Path) -> tuple[Pa
 
 def _site(root: Path, name: Any, entry: Any, where: Path) -> Site:
     if not isinstance(name, str) or not _SITE_NAME.match(name):
-        raise InputDataError(f"site name {name!r}: use letters, digits, '_', '-', '.'", path=where)
+        raise InputDataError(f"site name {name!r}: use letters, digits, '_', '-', '.' (not first)", path=where)
     if not isinstance(entry, dict):
         raise InputDataError(f"sites.{name} must be a mapping with mapping/localization/truth", path=where)
     unknown = sorted(set(entry) - {"mapping", "localization", "truth"})

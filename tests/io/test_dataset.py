@@ -36,6 +36,8 @@ def test_log_name_drops_log_suffixes_only(name: str, expected: str) -> None:
     ("sites: {s: {mapping: []}}\n", "at least one mapping log"),
     ("sites: {s: {mapping: [a.mcap], localisation: [b.mcap]}}\n", "localisation"),
     ("sites: {'a/b': {mapping: [a.mcap]}}\n", "site name"),
+    ("sites: {'..': {mapping: [a.mcap]}}\n", "site name"),
+    ("sites: {.hidden: {mapping: [a.mcap]}}\n", "site name"),
     ("sites: {s: {mapping: [a.mcap], localization: [x/l.mcap, y/l.mcap]}}\n", "share the output name"),
     ("sites: {s: {mapping: [a.mcap]}}\nconfig: [1]\n", "'config' must be a mapping"),
     ("sites: {s: {mapping: [a.mcap]}}\nextra: 1\n", "unknown top-level"),

@@ -11,11 +11,17 @@ from dataclasses import dataclass
 from enum import StrEnum
 from pathlib import Path
 
-from doorbatch.io.dataset import Dataset, Site, log_name
+from doorbatch.errors import InputDataError
+from doorbatch.io.dataset import DATASET_FILE, Dataset, Site, log_name
+from doorbatch.io.run_lock import LOCK_NAME
+from doorbatch.io.run_log import RUN_LOG
 
 REPORT_DIR = "report"
 METRICS_DIR = "metrics"
 TRAJECTORIES_DIR = "trajectories"
+SUMMARY_FILE = "summary.json"
+# What OUT holds besides one folder per site: no site may take these names.
+OUT_ENTRIES = frozenset({REPORT_DIR, METRICS_DIR, TRAJECTORIES_DIR, SUMMARY_FILE, RUN_LOG, LOCK_NAME})
 
 
 class StepKind(StrEnum):
@@ -80,6 +86,9 @@ def plan_steps(dataset: Dataset, methods: list[str]) -> list[Step]:
     the dataset report over every site's evaluation."""
     steps: list[Step] = []
     for site in dataset.sites:
+        if site.name in OUT_ENTRIES:
+            raise InputDataError(f"site name {site.name!r} is taken by OUT/{site.name} of the batch itself; "
+                                 f"rename the site", path=dataset.root / DATASET_FILE)
         steps += _site_steps(site, methods)
     evaluations = tuple(s.id for s in steps if s.kind is StepKind.EVALUATE)
     steps.append(Step("report", StepKind.REPORT, REPORT_DIR, (), evaluations))

@@ -32,13 +32,12 @@ from doorbatch.io.run_lock import run_lock
 from doorbatch.io.run_log import RUN_LOG, JsonLinesHandler
 from doorbatch.io.staged_dir import remove_leftovers
 from doorbatch.pipeline.batch.executors import open_executor, resolve_workers
-from doorbatch.pipeline.batch.plan import REPORT_DIR, Step, StepKind, plan_steps
+from doorbatch.pipeline.batch.plan import REPORT_DIR, SUMMARY_FILE, Step, StepKind, plan_steps
 from doorbatch.pipeline.batch.scheduler import run_steps
 from doorbatch.pipeline.batch.steps import BatchJob, StepOutcome, StepStatus
 from doorbatch.progress import Progress, progress_bar
 
 log = logging.getLogger(__name__)
-SUMMARY_FILE = "summary.json"
 
 
 @dataclass(frozen=True)
@@ -189,12 +188,14 @@ def run_dataset(dataset: Dataset, out: Path, config: DoorbatchConfig, execution:
     lists failed steps (the caller turns them into exit code 4).
 
     Raises:
+        InputDataError: a site named like one of OUT's own entries (``plan.OUT_ENTRIES``).
         OutputLockedError: another live run holds ``out``.
         OptionalDependencyError: the Dask executor without the ``dask`` extra.
         KeyboardInterrupt: Ctrl-C or SIGTERM; staged folders are removed and completed steps stay.
     """
     out = Path(out).resolve()
     execution = execution or Execution()
+    plan_steps(dataset, list(config.run.methods))  # a dataset that cannot be planned touches nothing in OUT
     with run_lock(out) as (mine, stale), run_log_handler(out), sigterm_as_interrupt():
         log.info("run of %s started", dataset.root, extra={
             "event": "run_started", "dataset": str(dataset.root), "pid": mine.pid, "host": mine.host,

@@ -160,6 +160,17 @@ def test_sigterm_midway_leaves_no_partial_output_and_a_rerun_matches(
     assert output_digests(out, tiny) == output_digests(reference_out, tiny_master)
 
 
+@pytest.mark.parametrize("name", ["report", "metrics", "trajectories"])
+def test_a_site_named_like_the_batchs_own_outputs_is_refused_before_writing(tiny: Path, tmp_path: Path, name: str,
+                                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    dataset = tiny / "dataset.yaml"
+    dataset.write_text(dataset.read_text().replace("corridor:", f"{name}:", 1))
+    out = tmp_path / "out"
+    code = main(["run", str(tiny), "-o", str(out), "-q"])
+    assert code == 3 and f"site name '{name}'" in capsys.readouterr().err
+    assert not out.exists()
+
+
 def test_an_unreachable_dask_scheduler_is_a_usage_error(tiny: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                         capsys: pytest.CaptureFixture[str]) -> None:
     pytest.importorskip("distributed")
