@@ -65,6 +65,8 @@ def _site_tables(site: Site, out: Path, run_dirs: Sequence[str], config: Doorbat
     from doorbatch.io.sim_truth import read_truth
 
     tables = read_run_dirs([out / r for r in run_dirs], config, [f"{prefix}{_run_name(r)}" for r in run_dirs])
+    if prefix:  # the dataset report: logs of two sites may share a file name, never a row
+        tables = [replace(t, log=f"{prefix}{t.log}") for t in tables]
     door_map = read_map_dir(out / map_dir(site.name), f"{site.name}/map")
     if site.truth is not None:
         door_map = replace(door_map, truth=read_truth(site.truth))

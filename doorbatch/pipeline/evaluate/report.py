@@ -85,6 +85,7 @@ class RunTables:
         door_states: the RBPF's door angles (None for MCL); map_doors: the map's doors they refer to.
         reference, truth: the run's own reference trajectory and simulator truth, when known.
         params: the sweep point of an experiment (goes into metrics.parquet's params column).
+        map_path: the map the run localized on, when known.
     """
 
     name: str
@@ -100,6 +101,29 @@ class RunTables:
     reference: ReferenceTrajectory | None = None
     truth: SimTruth | None = None
     params: dict[str, Any] = field(default_factory=dict)
+    map_path: str | None = None
+
+
+def with_setups_told_apart(runs: Sequence[RunTables]) -> list[RunTables]:
+    """Runs outside an experiment (no params) of one log and method that differ in ``--init`` or in their map
+    get those as params, so that the summary does not average them as if they were seeds of one setup."""
+    setups: dict[tuple[str, str], set[tuple[str, str | None]]] = defaultdict(set)
+    for run in runs:
+        if not run.params:
+            setups[(run.log, run.method)].add((run.init, run.map_path))
+    out = []
+    for run in runs:
+        seen = setups.get((run.log, run.method), set())
+        if run.params or len(seen) < 2:
+            out.append(run)
+            continue
+        params: dict[str, Any] = {}
+        if len({init for init, _ in seen}) > 1:
+            params["init"] = run.init
+        if len({m for _, m in seen}) > 1:
+            params["map"] = run.map_path
+        out.append(replace(run, params=params))
+    return out
 
 
 def run_tables_from_result(result: LocalizationResult, *, name: str | None = None, init: str = "reference",
@@ -359,7 +383,7 @@ def evaluate_runs(runs: Sequence[RunTables], config: DoorbatchConfig, *,
     rows: list[MetricRow] = []
     series: list[ErrorSeries] = []
     door_series: list[DoorStateSeries] = []
-    for run in runs:
+    for run in with_setups_told_apart(runs):
         if len(run.stamps_ns) == 0:
             raise PipelineError(f"run {run.name}: empty trajectory")
         ref = reference if reference is not None else run.reference

@@ -17,6 +17,7 @@ import pytest
 
 from doorbatch.cli import main
 from doorbatch.io.manifest import utc_now_iso
+from doorbatch.io.parquet import read_table
 from doorbatch.io.run_lock import LOCK_NAME
 from doorbatch.io.run_log import read_run_log
 from tests.conftest import REPO
@@ -48,6 +49,9 @@ def test_run_writes_maps_runs_reports_and_hive_tables(reference_out: Path) -> No
                                                          "annotated.mcap", "manifest.json"}
     html = (out / "report" / "report.html").read_text()
     assert html.count("data:image/png;base64,") >= 2  # self-contained, with its plots
+    # the dataset report's rows are per site: two sites' logs of one file name are never averaged together
+    logs = set(read_table("metrics", out / "report" / "metrics.parquet").column("log").to_pylist()) - {""}
+    assert logs == {f"{SITE}/{log}.mcap" for log in LOCALIZATION}
     metrics = pads.dataset(out / "metrics", format="parquet", partitioning="hive").to_table().to_pydict()
     assert set(metrics["site"]) == {SITE}
     ape = {(r, v) for r, m, v in zip(metrics["run"], metrics["metric"], metrics["value"], strict=True)

@@ -304,6 +304,26 @@ def test_summary_rows_follow_the_particle_count_numerically() -> None:
     assert [labels[2] for labels, _ in table.rows] == [f"particles={n}" for n in (1000, 5000, 10000, 20000)]
 
 
+def test_runs_of_one_log_on_different_maps_or_starts_are_not_averaged_together() -> None:
+    stamps, ref = _straight(50)
+    reference = ReferenceTrajectory(stamps, ref)
+
+    def run(name: str, dy: float, init: str, map_path: str) -> RunTables:
+        return RunTables(name, "l", "mcl", stamps, ref + np.array([0.0, dy, 0.0]), init=init, reference=reference,
+                         map_path=map_path)
+
+    seeds = [run("a0", 0.1, "reference", "/m1/map.yaml"), run("a1", 0.3, "reference", "/m1/map.yaml")]
+    table = summary_table(evaluate_runs(seeds, DoorbatchConfig()))
+    assert [(labels[2], labels[3]) for labels, _ in table.rows] == [("", "2")]  # seeds of one setup: one row
+    mixed = [*seeds, run("b", 1.0, "global", "/m1/map.yaml"), run("c", 2.0, "reference", "/m2/map.yaml")]
+    table = summary_table(evaluate_runs(mixed, DoorbatchConfig()))
+    rmse = table.value_columns.index("ape_trans_rmse")
+    rows = {labels[2]: (labels[3], values[rmse]) for labels, values in table.rows}
+    assert rows == {"init=reference, map=/m1/map.yaml": ("2", pytest.approx(0.2)),
+                    "init=global, map=/m1/map.yaml": ("1", pytest.approx(1.0)),
+                    "init=reference, map=/m2/map.yaml": ("1", pytest.approx(2.0))}
+
+
 def test_a_log_without_truth_files_gives_its_reference_topic(tmp_path: Path) -> None:
     from doorbatch.io.run_reader import read_run_dir
     from tests.conftest import sample_messages, write_messages
