@@ -155,7 +155,9 @@ def convert_cmd(ctx: Context, source: Path, output: Path) -> None:
 
     if output.suffix != ".mcap":
         raise click.BadParameter("the output must be a .mcap file", param_hint="-o")
-    summary = convert_log(source, output, ctx.config)  # the reader logs its own warnings
+    summary = convert_log(source, output, ctx.config)
+    for warning in summary.warnings:
+        log.warning("%s", warning)
     ctx.summary(f"converted {summary.messages} messages on {len(summary.topics)} topics from "
                 f"{summary.storage} to {output}", asdict(summary))
 

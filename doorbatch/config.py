@@ -61,6 +61,10 @@ class IoConfig(Section):
     assume_identity_laser_tf: bool = False
     # Pair images/detections/colors with scans by nearest stamp within this tolerance.
     stamp_tolerance_s: float = Field(0.05, ge=0.0)
+    # Scans and odometry whose header stamps sit apart from their log times by medians that differ more than
+    # this are on different clocks (a laser driver stamping with its device clock): both are timed by their
+    # log times instead (one recorder clock), with a warning.
+    clock_mismatch_s: float = Field(1.0, gt=0.0)
     # CARMEN: laser field of view when 180/181 or 360/361 readings are given (paper-era SICK scanners).
     carmen_fov_deg: float = Field(180.0, gt=0.0, le=360.0)
     # CARMEN: maximum range used when the log gives none and no reading exceeds it.

@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from doorbatch.cli import main
+from doorbatch.io import ros_messages as m
 from tests.conftest import REPO, sample_messages
 
 
@@ -106,15 +107,30 @@ def test_scan_ranges_length_does_not_match_angles(write_log: Callable[..., Path]
     assert str(path) in line and "/scan" in line and "does not match" in line
 
 
-def test_scan_stamps_going_backwards(write_log: Callable[..., Path], capsys: pytest.CaptureFixture[str]) -> None:
+def _problems(capsys: pytest.CaptureFixture[str], path: Path) -> list[dict[str, str]]:
+    assert main(["inspect", str(path), "--json"]) == 0
+    return list(json.loads(capsys.readouterr().out)["problems"])
+
+
+def test_scan_stamps_going_backwards_are_a_warning_saying_they_are_sorted(
+        write_log: Callable[..., Path], capsys: pytest.CaptureFixture[str]) -> None:
     messages = sample_messages(5)
     scans = [msg for topic, _, _, msg in messages if topic == "/scan"]
     scans[3].header.stamp, scans[2].header.stamp = scans[2].header.stamp, scans[3].header.stamp
-    path = write_log("backwards.bag", messages, fmt="bag")
-    code, err = _run(capsys, "inspect", str(path))
-    assert code == 3
-    line = _one_line(err)
-    assert str(path) in line and "/scan" in line and "backwards" in line
+    problems = _problems(capsys, write_log("backwards.bag", messages, fmt="bag"))
+    assert any(p["topic"] == "/scan" and "backwards" in p["message"] and "sort them" in p["message"]
+               and p["severity"] == "warning" for p in problems)
+
+
+def test_unset_stamps_and_two_clocks_are_reported(write_log: Callable[..., Path],
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    messages = sample_messages(5)
+    for k, msg in enumerate(msg for topic, _, _, msg in messages if topic == "/scan"):
+        msg.header = m.header(10_000_000 * k, msg.header.frame_id)  # a device clock from 0; the first is 0
+    problems = _problems(capsys, write_log("device.mcap", messages))
+    assert any(p["topic"] == "/scan" and "1 of 5 header stamps are 0" in p["message"] for p in problems)
+    assert any("different clocks" in p["message"] for p in problems)
+    assert not any("clock" in p["message"] for p in _problems(capsys, write_log("fine.mcap", sample_messages(5))))
 
 
 def test_unknown_config_key_names_the_closest(write_log: Callable[..., Path],

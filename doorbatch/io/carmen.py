@@ -619,8 +619,10 @@ class CarmenReader(LogReader):
         self._topics = {t.name: t for t in topics if t.count}
 
     def _warn(self, message: str) -> None:
-        log.warning("%s: %s", self.path, message)
-        self.warnings.append(message)
+        """A repair or problem, for ``inspect`` and the manifests of the commands that read the log (which
+        print it once; logged here at debug level only)."""
+        log.debug("%s: %s", self.path, message)
+        self.warnings.append(f"{self.path}: {message}")
 
     def _param_float(self, name: str) -> float | None:
         text = self.params.get(name)

@@ -101,6 +101,8 @@ class _TopicStats:
     backwards: int = 0
     first_backwards: str = ""
     periods: list[int] = field(default_factory=list)
+    unset_stamps: int = 0  # header stamps of 0
+    lags: list[int] = field(default_factory=list)  # header stamp − log time, scan and odometry topics only
 
 
 def _size(path: Path) -> int:
@@ -144,6 +146,10 @@ def inspect_log(path: Path, config: DoorbatchConfig | None = None,
                     tf.add(t)
                 continue
             stamp = _header_stamp(raw.msg)
+            if stamp == 0:
+                st.unset_stamps += 1
+            elif stamp is not None and role_of.get(raw.topic) in (Role.SCAN, Role.ODOMETRY):
+                st.lags.append(stamp - raw.log_time_ns)
             if stamp is not None:
                 if st.last_stamp_ns is not None and stamp < st.last_stamp_ns:
                     st.backwards += 1
@@ -177,6 +183,7 @@ def inspect_log(path: Path, config: DoorbatchConfig | None = None,
     report.duration_s = (report.end_ns - report.start_ns) / 1e9
     _check_roles(report, roles.topics, scan_frames, tf, config, stats)
     _check_stamps(report, stats, role_of, config.io.gap_factor)
+    _check_clocks(report, stats, role_of, config.io.clock_mismatch_s)
     return report
 
 
@@ -218,9 +225,13 @@ def _check_stamps(report: LogReport, stats: dict[str, _TopicStats], role_of: dic
     for name, st in sorted(stats.items()):
         role = role_of.get(name)
         if st.backwards:
-            severity = Severity.ERROR if role in (Role.SCAN, Role.ODOMETRY, Role.REFERENCE) else Severity.WARNING
-            report.problems.append(Problem(severity, name, f"stamps go backwards {st.backwards} time(s): "
-                                                           f"first {st.first_backwards}"))
+            sorted_note = "; map and localize sort them by stamp" if role in (Role.SCAN, Role.ODOMETRY,
+                                                                             Role.REFERENCE) else ""
+            report.problems.append(Problem(Severity.WARNING, name, f"stamps go backwards {st.backwards} time(s): "
+                                                                   f"first {st.first_backwards}{sorted_note}"))
+        if st.unset_stamps:
+            report.problems.append(Problem(Severity.WARNING, name, f"{st.unset_stamps} of {st.count} header stamps "
+                                                                   f"are 0 (unset): their log time stands in"))
         if len(st.periods) >= 10:
             periods = np.asarray(st.periods, dtype=np.float64)
             nominal = float(np.median(periods))
@@ -231,3 +242,15 @@ def _check_stamps(report: LogReport, stats: dict[str, _TopicStats], role_of: dic
                         Severity.WARNING, name,
                         f"{gaps.size} gap(s) in time longer than {gap_factor:g}× the {nominal / 1e9:.3f} s period "
                         f"(longest {gaps.max() / 1e9:.3f} s)"))
+
+
+def _check_clocks(report: LogReport, stats: dict[str, _TopicStats], role_of: dict[str, Role],
+                  mismatch_s: float) -> None:
+    """Scan and odometry header stamps on two clocks (:func:`doorbatch.io.recording.on_one_clock`)."""
+    lag = {role: float(np.median(st.lags)) / 1e9 for name, st in stats.items()
+           if st.lags and (role := role_of.get(name)) in (Role.SCAN, Role.ODOMETRY)}
+    if len(lag) == 2 and abs(lag[Role.SCAN] - lag[Role.ODOMETRY]) > mismatch_s:
+        report.problems.append(Problem(
+            Severity.WARNING, None, f"scan and odometry header stamps are on different clocks (median stamp − log "
+                                    f"time {lag[Role.SCAN]:+.3f} s and {lag[Role.ODOMETRY]:+.3f} s): map and "
+                                    f"localize time them by their log times"))

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import time
 from collections.abc import Iterable, Iterator, Mapping
 from contextlib import AbstractContextManager, contextmanager
@@ -36,6 +37,8 @@ import doorbatch
 from doorbatch.config import tree_hash
 from doorbatch.errors import InputDataError
 from doorbatch.io.atomic import atomic_write_text
+
+log = logging.getLogger(__name__)
 
 MANIFEST_VERSION = 1
 BLOCK_BYTES = 1 << 20
@@ -153,7 +156,8 @@ class Manifest:
         self.inputs.append(file_fingerprint(path))
 
     def warn(self, message: str) -> None:
-        """Record a warning."""
+        """Record a warning, and log it (the one place a command's warnings reach the terminal)."""
+        log.warning("%s", message)
         self.warnings.append(message)
 
     def finish(self, timer: StageTimer | None = None) -> None:

@@ -119,8 +119,9 @@ class McapLogReader(LogReader):
             cut = f", the file breaks off there ({type(err).__name__})"
         if n == 0:
             raise LogReadError(f"MCAP has no summary section and no readable message{cut}", path=self.path)
-        self.warnings.append(f"{self.path}: MCAP has no summary section (the recording was not closed): read "
-                             f"linearly, {n} messages over {(end - start) / 1e9:.1f} s{cut}")
+        self.warnings.append(f"{self.path}: MCAP has no summary section (a writer may leave it out; a recording "
+                             f"cut off has none either): read linearly, {n} messages over "
+                             f"{(end - start) / 1e9:.1f} s{cut}")
         return schemas, channels, counts, start, end
 
     def _register_schema(self, ros1: bool, name: str, text: str, encoding: str) -> None:

@@ -65,9 +65,9 @@ class ScanSet:
         the hit mask (finite, range_min ≤ r < range_max)."""
         r = self.ranges[i].astype(np.float64)
         angles = self.angle_min[i] + self.angle_increment[i] * np.arange(r.shape[0])
-        local = np.stack([r * np.cos(angles), r * np.sin(angles)], axis=1)
         affine = self.laser_to_base[i]
-        with np.errstate(invalid="ignore"):
+        with np.errstate(invalid="ignore"):  # inf · sin(0) = NaN: a no-return beam straight ahead
+            local = np.stack([r * np.cos(angles), r * np.sin(angles)], axis=1)
             hit = np.isfinite(r) & (r >= self.range_min[i]) & (r < self.range_max[i])
             points = local @ affine[:, :2].T + affine[:, 2]
         return points, hit
@@ -220,6 +220,52 @@ def read_transforms(reader: LogReader, config: DoorbatchConfig) -> TfBuffer:
     return tf
 
 
+@dataclass(frozen=True)
+class OneClock:
+    """Scans (in stamp order) and poses on one time line; ``header_stamps_ns`` are the scans' stamps as logged
+    (what per-scan side messages such as beam colours carry), ``notes`` say what was changed."""
+
+    scans: list[Scan]
+    odom: list[Pose2D]
+    ref: list[Pose2D]
+    header_stamps_ns: list[int]
+    notes: list[str]
+
+
+def on_one_clock(scans: list[Scan], odom: list[Pose2D], ref: list[Pose2D], mismatch_s: float) -> OneClock:
+    """Scans and poses whose header stamps can be put on one time line, in stamp order, and notes saying what
+    was done. A header stamp of 0 is unset: the message's log time stands in. Scans and odometry whose median
+    (stamp − log time) differ by more than ``mismatch_s`` are on two clocks (a driver stamping with its
+    device's clock): every scan and pose is timed by its log time, the recorder's one clock. Scans that
+    arrived out of stamp order are sorted (bags record arrival order; the stamp is the measurement's time).
+    """
+    notes: list[str] = []
+    header = [s.stamp_ns for s in scans]
+    for name, records in (("scans", scans), ("odometry poses", odom), ("reference poses", ref)):
+        unset = sum(r.stamp_ns == 0 for r in records)
+        if unset:
+            notes.append(f"{unset} of {len(records)} {name} have header stamp 0 (unset): timed by their log time")
+    scans = [replace(s, stamp_ns=s.log_time_ns) if s.stamp_ns == 0 else s for s in scans]
+    odom = [replace(p, stamp_ns=p.log_time_ns) if p.stamp_ns == 0 else p for p in odom]
+    ref = [replace(p, stamp_ns=p.log_time_ns) if p.stamp_ns == 0 else p for p in ref]
+    if scans and odom:
+        lag_scan = float(np.median([s.stamp_ns - s.log_time_ns for s in scans])) / 1e9
+        lag_odom = float(np.median([p.stamp_ns - p.log_time_ns for p in odom])) / 1e9
+        if abs(lag_scan - lag_odom) > mismatch_s:
+            notes.append(f"scan and odometry header stamps are on different clocks (median stamp − log time "
+                         f"{lag_scan:+.3f} s and {lag_odom:+.3f} s): every scan and pose is timed by its log time")
+            scans = [replace(s, stamp_ns=s.log_time_ns) for s in scans]
+            odom = [replace(p, stamp_ns=p.log_time_ns) for p in odom]
+            ref = [replace(p, stamp_ns=p.log_time_ns) for p in ref]
+    stamps = np.array([s.stamp_ns for s in scans], dtype=np.int64)
+    back = int(np.count_nonzero(np.diff(stamps) < 0))
+    if back:
+        order = np.argsort(stamps, kind="stable")
+        scans, header = [scans[i] for i in order], [header[i] for i in order]
+        notes.append(f"scan header stamps go backwards {back} time(s) in log order: scans sorted by stamp")
+    return OneClock(scans, odom, ref, header, notes)
+
+
 def load_recording(path: Path, config: DoorbatchConfig | None = None, with_colors: bool = False) -> Recording:
     """Read the scans, odometry, reference poses (and beam colors) of a log into arrays.
 
@@ -251,9 +297,11 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
                 ref.append(rec)
             elif item.role is Role.COLORS and isinstance(rec, BeamColors):
                 colors[rec.stamp_ns] = rec
-        odometry, reference, notes = robot_pose_series(odom, ref, tf, reader.roles.topic(Role.ODOMETRY) is not None,
-                                                       config.frames)
-        warnings = list(reader.warnings) + notes
+        timed = on_one_clock(scans, odom, ref, config.io.clock_mismatch_s)
+        scans = timed.scans
+        odometry, reference, notes = robot_pose_series(timed.odom, timed.ref, tf,
+                                                       reader.roles.topic(Role.ODOMETRY) is not None, config.frames)
+        warnings = [*reader.warnings, *(f"{path}: {n}" for n in timed.notes), *notes]
         camera = reader.roles.topic(Role.IMAGE) is not None and reader.roles.topic(Role.CAMERA_INFO) is not None
     if not scans:
         raise LogContentError("scan topic has no messages", path=path, topic=scan_topic)
@@ -280,8 +328,9 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
     )
     aligned = None
     valid = None
-    if with_colors and colors:
-        aligned = [_aligned_colors(colors.get(s.stamp_ns), s.ranges.shape[0]) for s in scans]
+    if with_colors and colors:  # a scan's colours carry its header stamp as logged
+        aligned = [_aligned_colors(colors.get(t), s.ranges.shape[0]) for s, t in zip(scans, timed.header_stamps_ns,
+                                                                                      strict=True)]
     elif with_colors and camera:  # no /scan_colors: project the scan into the camera images
         from doorbatch.io.camera_colors import camera_beam_colors
 

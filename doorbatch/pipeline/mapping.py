@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import copy
 import itertools
-import logging
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
@@ -34,7 +33,6 @@ from doorbatch.pipeline.gridmap.doors import DetectedDoor, remove_leaves
 from doorbatch.pipeline.gridmap.occupancy import LogOddsGrid, to_occupancy_map
 from doorbatch.pipeline.poses import scan_match_trajectory
 
-log = logging.getLogger(__name__)
 FloatArray = npt.NDArray[np.float64]
 
 
@@ -243,8 +241,6 @@ def build_map(logs: Sequence[Path], config: DoorbatchConfig | None = None,
             progress(1)
     result = mapper.finish()
     seconds["grid"] = time.perf_counter() - t0
-    for w in warnings:
-        log.warning("%s", w)
     return DoorMap(result.static_map, result.doors, passes, source, result.n_dynamic_points, warnings, seconds,
                    result.grid)
 

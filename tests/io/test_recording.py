@@ -128,3 +128,45 @@ def test_a_zero_reading_is_no_hit_even_with_range_min_zero(write_log: Callable[.
     rec = load_recording(write_log("zeros.mcap", messages), DoorbatchConfig())
     _, hit = rec.scans.endpoints_base(0)
     assert not hit[:5].any() and hit[5:].any()
+
+
+def _restamped(messages: list, topic: str, stamp: Callable[[int, int], int]) -> list:
+    """The messages with the header stamp of each message on ``topic`` set to stamp(index, log time)."""
+    out, k = [], 0
+    for name, msgtype, t, msg in messages:
+        if name == topic:
+            msg.header = m.header(stamp(k, t), msg.header.frame_id)
+            k += 1
+        out.append((name, msgtype, t, msg))
+    return out
+
+
+def test_unset_scan_stamps_are_their_log_times(write_log: Callable[..., Path]) -> None:
+    messages = _restamped(sample_messages(6), "/scan", lambda k, t: 0)
+    rec = load_recording(write_log("zero.mcap", messages))
+    log_times = [t for name, _, t, _ in messages if name == "/scan"]
+    np.testing.assert_array_equal(rec.scans.stamps_ns, log_times)
+    assert any("6 of 6 scans have header stamp 0" in w for w in rec.warnings)
+    assert rec.odometry is not None and len(rec.odometry.stamps_ns) == 6
+
+
+def test_scans_stamped_by_a_device_clock_are_timed_by_the_log(write_log: Callable[..., Path]) -> None:
+    # the laser driver stamps from its own power-on (0 s), odometry and TF carry ROS time
+    messages = _restamped(sample_messages(6), "/scan", lambda k, t: 5_000_000 + 100_000_000 * k)
+    rec = load_recording(write_log("device.mcap", messages))
+    log_times = [t for name, _, t, _ in messages if name == "/scan"]
+    np.testing.assert_array_equal(rec.scans.stamps_ns, log_times)
+    assert any("different clocks" in w for w in rec.warnings)
+    same = load_recording(write_log("same.mcap", sample_messages(6)))
+    assert not any("clock" in w for w in same.warnings)
+    np.testing.assert_array_equal(same.scans.stamps_ns, log_times)
+
+
+def test_scans_logged_out_of_stamp_order_are_sorted(write_log: Callable[..., Path]) -> None:
+    messages = sample_messages(6)
+    scans = [msg for name, _, _, msg in messages if name == "/scan"]
+    scans[3].header.stamp, scans[2].header.stamp = scans[2].header.stamp, scans[3].header.stamp
+    rec = load_recording(write_log("back.mcap", messages))
+    assert np.all(np.diff(rec.scans.stamps_ns) > 0)
+    np.testing.assert_array_equal(rec.scans.ranges[2], scans[3].ranges)  # the ranges follow their stamp
+    assert any("go backwards 1 time(s)" in w for w in rec.warnings)
