@@ -52,7 +52,7 @@ class FingerprintCache:
         identity = file_identity(path)
         cached = self.entries.get(key)
         if identity is not None and cached is not None and all(cached.get(k) == identity[k] for k in _IDENTITY):
-            return {"path": str(path), "size": identity["size"], "sha256": cached["sha256"]}
+            return {"path": str(Path(path).absolute()), "size": identity["size"], "sha256": cached["sha256"]}
         found = file_fingerprint(path)
         after = file_identity(path)
         if identity is not None and after == identity:  # not changed while hashing: safe to remember

@@ -73,7 +73,8 @@ def _folder_files(folder: Path) -> list[tuple[str, Path]]:
 
 
 def file_fingerprint(path: Path) -> dict[str, Any]:
-    """``{"path", "size", "sha256"}`` of a file, or of a folder's files (see the module docstring).
+    """``{"path", "size", "sha256"}`` of a file, or of a folder's files (see the module docstring). The path is
+    absolute, so that ``evaluate`` finds a run's log and map from any working directory.
 
     Raises:
         InputDataError: The path does not exist or a file cannot be read (names it).
@@ -93,7 +94,7 @@ def file_fingerprint(path: Path) -> dict[str, Any]:
             _hash_into(digest, path)
     except OSError as err:
         raise InputDataError(f"cannot fingerprint input: {err.strerror or err}", path=path) from err
-    return {"path": str(path), "size": size, "sha256": digest.hexdigest()}
+    return {"path": str(path.absolute()), "size": size, "sha256": digest.hexdigest()}
 
 
 class StageTimer:

@@ -166,7 +166,7 @@ def run_doorpose(log_path: Path, out: Path, config: DoorbatchConfig, map_path: P
     from doorbatch.io.detector_model import load_detector
     from doorbatch.io.doorpose_inputs import read_doorpose_inputs
     from doorbatch.io.doorpose_rundir import doorpose_annotations, write_door_poses
-    from doorbatch.io.manifest import Manifest
+    from doorbatch.io.manifest import Manifest, StageTimer
     from doorbatch.io.mapdir import read_door_set
     from doorbatch.pipeline.doorpose.yolo import detect_image
 
@@ -181,20 +181,24 @@ def run_doorpose(log_path: Path, out: Path, config: DoorbatchConfig, map_path: P
         inputs_list.append(map_path / "doors.parquet" if map_path.is_dir() else map_path)
     manifest = Manifest.start(config.as_dict(), inputs_list, command="doorpose", fit=dc.fit, detector=dc.detector)
     forward = model.forward if model is not None else None
-    inputs = read_doorpose_inputs(log_path, config, None if forward is None else
-                                  (lambda image: detect_image(forward, image.pixels, dc)))
+    timer = StageTimer()
+    with timer("read"):  # the detector runs on each image as it is read
+        inputs = read_doorpose_inputs(log_path, config, None if forward is None else
+                                      (lambda image: detect_image(forward, image.pixels, dc)))
     doors = read_door_set(map_path) if map_path is not None else None
-    result = estimate_door_poses(inputs, config, doors, LineFit(dc.fit), progress)
-    out.mkdir(parents=True, exist_ok=True)
-    write_door_poses(out / "door_poses.parquet", result)
-    write_annotated_mcap(log_path, out / "annotated.mcap", doorpose_annotations(result), config)
+    with timer("doorpose"):
+        result = estimate_door_poses(inputs, config, doors, LineFit(dc.fit), progress)
+    with timer("write"):
+        out.mkdir(parents=True, exist_ok=True)
+        write_door_poses(out / "door_poses.parquet", result)
+        write_annotated_mcap(log_path, out / "annotated.mcap", doorpose_annotations(result), config)
     for w in result.warnings:
         manifest.warn(w)
     matched = [e for e in result.estimates if e.door_id >= 0]
     angles = {k: float(np.median([e.door_angle for e in matched if e.door_id == k]))
               for k in sorted({e.door_id for e in matched})}
     manifest.extra.update({"door_poses": len(result), "matched": len(matched), "door_angles": angles})
-    manifest.finish()
+    manifest.finish(timer)
     manifest.write(out / "manifest.json")
     files = [str(out / f) for f in ("door_poses.parquet", "annotated.mcap", "manifest.json")]
     summary = DoorPoseRunSummary(str(out), result.fit, result.frame, result.images, result.paired, len(result),

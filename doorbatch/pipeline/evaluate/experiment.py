@@ -31,7 +31,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 from doorbatch.config import DoorbatchConfig, load_config, parse_init
-from doorbatch.io.manifest import Manifest
+from doorbatch.io.manifest import Manifest, StageTimer
 from doorbatch.io.sim_truth import output_paths
 from doorbatch.pipeline.evaluate.report import Evaluation
 
@@ -128,13 +128,16 @@ def run_point(point: SweepPoint, map_path: Path | None, run_dir: Path, config: D
         lmap = load_localization_map(map_path, config.localize)
     manifest = Manifest.start(config.as_dict(), inputs, command="evaluate --experiment", method=point.method,
                               init=point.init, params=point.params())
-    result = localize(point.log, lmap, config, point.method, parse_init(point.init))
-    write_run_tables(run_dir, result)
+    timer = StageTimer()
+    with timer("localize"):
+        result = localize(point.log, lmap, config, point.method, parse_init(point.init))
+    with timer("write"):
+        write_run_tables(run_dir, result)
     converged_s = None if result.converged_ns is None else (result.converged_ns - int(result.stamps_ns[0])) / 1e9
     manifest.extra.update({"converged_after_s": converged_s, "ambiguous": result.ambiguous})
     for w in result.warnings:
         manifest.warn(w)
-    manifest.finish()
+    manifest.finish(timer)
     manifest.write(run_dir / "manifest.json")
     return run_dir
 

@@ -20,7 +20,7 @@ from typing import Literal
 
 from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import InputDataError, UsageError
-from doorbatch.io.manifest import Manifest
+from doorbatch.io.manifest import Manifest, StageTimer
 from doorbatch.io.report_writer import write_report
 from doorbatch.io.run_reader import (
     is_map_dir,
@@ -105,9 +105,16 @@ def evaluate_run_dirs(run_dirs: Sequence[Path], out_dir: Path, config: Doorbatch
     maps: list[MapTables] = [read_map_dir(i.path, n) for i, n in labelled if i.kind == "map"]
     ref = read_reference(reference, config) if reference is not None else None
     world = read_truth(truth) if truth is not None else None
-    evaluation = evaluate_runs(runs, config, reference=ref, truth=world, maps=maps).with_title(title)
-    write_report(evaluation, out_dir)
+    timer = StageTimer()
+    with timer("metrics"):
+        evaluation = evaluate_runs(runs, config, reference=ref, truth=world, maps=maps).with_title(title)
+    with timer("report"):
+        write_report(evaluation, out_dir)
+    for run in runs:
+        if ref is None and run.reference is None:
+            manifest.warn(f"run {run.name}: no reference trajectory (none beside its log, no --reference): "
+                          f"convergence metrics only")
     manifest.extra.update({"runs": len(runs), "maps": len(maps)})
-    manifest.finish()
+    manifest.finish(timer)
     manifest.write(out_dir / "manifest.json")
     return evaluation

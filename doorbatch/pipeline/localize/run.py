@@ -364,24 +364,29 @@ def run_localize(log_path: Path, map_path: Path, out: Path, config: DoorbatchCon
     """Localize a log on a map and write the run directory: trajectory.parquet, door_states.parquet,
     trajectory.tum, annotated.mcap, manifest.json."""
     from doorbatch.io.annotated_mcap import write_annotated_mcap
-    from doorbatch.io.manifest import Manifest
+    from doorbatch.io.manifest import Manifest, StageTimer
     from doorbatch.io.rundir import run_annotations, write_run_tables
 
     inputs = [log_path, map_path / "map.yaml" if (map_path / "map.yaml").is_file() else map_path]
     if map_path.is_dir() and (map_path / "doors.parquet").exists():
         inputs.append(map_path / "doors.parquet")
     manifest = Manifest.start(config.as_dict(), inputs, command="localize", method=method, init=init)
-    lmap = load_localization_map(map_path, config.localize)
-    result = localize(log_path, lmap, config, method, parse_init(init), progress)
-    files = write_run_tables(out, result)
-    write_annotated_mcap(log_path, out / "annotated.mcap",
-                         run_annotations(result, lmap.occupancy, lmap.doors if method == "rbpf" else DoorSet.empty(),
-                                         config.frames.map, config.frames.odom), config)
+    timer = StageTimer()
+    with timer("map"):
+        lmap = load_localization_map(map_path, config.localize)
+    with timer("localize"):
+        result = localize(log_path, lmap, config, method, parse_init(init), progress)
+    with timer("write"):
+        files = write_run_tables(out, result)
+        doors = lmap.doors if method == "rbpf" else DoorSet.empty()
+        write_annotated_mcap(log_path, out / "annotated.mcap",
+                             run_annotations(result, lmap.occupancy, doors, config.frames.map, config.frames.odom),
+                             config)
     for w in result.warnings:
         manifest.warn(w)
     converged_s = None if result.converged_ns is None else (result.converged_ns - int(result.stamps_ns[0])) / 1e9
     manifest.extra.update({"converged_after_s": converged_s, "ambiguous": result.ambiguous})
-    manifest.finish()
+    manifest.finish(timer)
     manifest.write(out / "manifest.json")
     summary = LocalizeRunSummary(str(out), method, len(result), float(result.n_particles.mean()),
                                  result.converged_ns is not None, converged_s, result.ambiguous,

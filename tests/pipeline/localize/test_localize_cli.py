@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import shutil
 from pathlib import Path
 
@@ -250,3 +251,22 @@ def test_a_folder_without_map_yaml_is_named_as_such(tmp_path: Path, capsys: pyte
                  str(tmp_path / "r")])
     err = capsys.readouterr().err
     assert code == 2 and "no map.yaml" in err
+
+
+def test_a_run_made_with_relative_paths_evaluates_from_any_folder(sample_map: Path, tmp_path: Path,
+                                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    work, elsewhere = tmp_path / "work", tmp_path / "else" / "where"  # another depth: ../ leads elsewhere
+    work.mkdir()
+    elsewhere.mkdir(parents=True)
+    monkeypatch.chdir(work)
+    log = os.path.relpath(SAMPLE_LOGS / "loc_open.mcap", work)
+    assert main(["localize", log, "--map", os.path.relpath(sample_map, work), "-o", "run", "--method", "mcl",
+                 "-q"]) == 0
+    monkeypatch.chdir(elsewhere)
+    assert main(["evaluate", str(work / "run"), "-o", "report", "-q"]) == 0
+    metrics = set(read_table("metrics", elsewhere / "report" / "metrics.parquet").column("metric").to_pylist())
+    assert "ape_trans_rmse" in metrics  # the reference was found beside the log the manifest names
+    stages = json.loads((work / "run" / "manifest.json").read_text())["stage_seconds"]
+    assert set(stages) == {"map", "localize", "write"} and all(v > 0 for v in stages.values())
+    assert set(json.loads((elsewhere / "report" / "manifest.json").read_text())["stage_seconds"]) == {"metrics",
+                                                                                                    "report"}
