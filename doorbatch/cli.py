@@ -168,14 +168,21 @@ def convert_cmd(ctx: Context, source: Path, output: Path) -> None:
               help="Output log: FILE.mcap, FILE.bag, or a folder for rosbag2.")
 @click.option("--scenario", default=None, help="A scenario name in configs/scenarios/ or a YAML path.")
 @click.option("--seed", type=click.IntRange(min=0), default=None, help="Random seed (default: the config's seed).")
-@click.option("--format", "fmt", type=click.Choice(["mcap", "bag", "rosbag2", "rosbag2-mcap"]), default="mcap",
-              show_default=True)
+@click.option("--format", "fmt", type=click.Choice(["mcap", "bag", "rosbag2", "rosbag2-mcap"]), default=None,
+              help="Default: from the -o suffix (.mcap, .bag; none: a rosbag2 folder).")
 @click.option("--split-passes", is_flag=True, help="Also write one log per pass (what doorbatch map takes).")
 @common_options
-def simulate_cmd(ctx: Context, world: Path, output: Path, scenario: str | None, seed: int | None, fmt: str,
+def simulate_cmd(ctx: Context, world: Path, output: Path, scenario: str | None, seed: int | None, fmt: str | None,
                  split_passes: bool) -> None:
     """Simulate a log with ground truth in WORLD (a YAML file of configs/worlds/)."""
     from doorbatch.sim.simulate import run_simulation
+
+    by_suffix = {".mcap": "mcap", ".bag": "bag"}.get(output.suffix)
+    if fmt is None:
+        fmt = by_suffix or "rosbag2"
+    elif (fmt in ("mcap", "bag") and by_suffix != fmt) or (fmt.startswith("rosbag2") and by_suffix is not None):
+        raise UsageError(f"-o {output} does not fit --format {fmt} (.mcap for mcap, .bag for bag, a folder name "
+                         f"without either suffix for rosbag2)")
 
     summary = run_simulation(world, output, scenario, ctx.config.seed if seed is None else seed, fmt,
                              split_passes=split_passes)

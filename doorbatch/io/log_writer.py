@@ -158,10 +158,24 @@ class LogWriter:
                 self._bag.close()
         finally:
             if exc_type is None:
+                if self.fmt in (LogFormat.ROSBAG2, LogFormat.ROSBAG2_MCAP):
+                    _name_storage_after(self.tmp, self.path.name)
                 _remove(self.path)
                 self.tmp.replace(self.path)
             else:
                 _remove(self.tmp)
+
+
+def _name_storage_after(bag: Path, name: str) -> None:
+    """rosbags names a ROS 2 bag's storage files after the folder (here its temporary name): give them the
+    final name, ``<name>_0.db3`` as ros2 bag record does, in the folder and in ``metadata.yaml``."""
+    metadata = bag / "metadata.yaml"
+    text = metadata.read_text()
+    for k, file in enumerate(sorted(f for f in bag.iterdir() if f.name.startswith(bag.name))):
+        final = f"{name}_{k}{file.suffix}"
+        file.rename(bag / final)
+        text = text.replace(file.name, final)
+    metadata.write_text(text)
 
 
 def detections_to_ros1(msg: Any) -> Any:

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from sim_helpers import OFFICE, office, short_scenario, write_scenario
 
+from doorbatch.cli import main
 from doorbatch.errors import ConfigError
 from doorbatch.io.map_server import read_map
 from doorbatch.io.reader import open_log
@@ -61,7 +62,7 @@ def test_same_seed_gives_byte_identical_files(runs: dict[str, SimulationSummary]
 def test_same_seed_gives_byte_identical_rosbag2_folders(runs: dict[str, SimulationSummary]) -> None:
     a, b = runs["rosbag2"].log_path, runs["rosbag2_again"].log_path
     names = sorted(p.name for p in a.iterdir())
-    assert names == sorted(p.name for p in b.iterdir()) and len(names) >= 2
+    assert names == sorted(p.name for p in b.iterdir()) == ["metadata.yaml", "run_0.db3"]  # not its temporary name
     for name in names:
         assert (a / name).read_bytes() == (b / name).read_bytes(), name
 
@@ -262,3 +263,18 @@ def test_logged_odometry_increments_have_the_model_statistics(tmp_path: Path) ->
     # the systematic part is there: odometry drifts away from the truth over the corridor
     end_error = math.hypot(odom[-1].x - (gt[-1].x - gt[0].x), odom[-1].y - (gt[-1].y - gt[0].y))
     assert end_error > 0.3
+
+
+@pytest.mark.parametrize(("args", "code"), [(["-o", "x.bag", "--format", "mcap"], 2),
+                                            (["-o", "x.mcap", "--format", "rosbag2"], 2),
+                                            (["-o", "x.txt", "--format", "bag"], 2)])
+def test_an_output_name_that_does_not_fit_the_format_is_a_usage_error(tmp_path: Path, scenario_file: Path,
+                                                                      args: list[str], code: int) -> None:
+    args = [a if not a.startswith("x.") else str(tmp_path / a) for a in args]
+    assert main(["simulate", str(OFFICE), "--scenario", str(scenario_file), *args, "-q"]) == code
+    assert not any(tmp_path.iterdir())
+
+
+def test_the_format_follows_the_output_suffix(tmp_path: Path, scenario_file: Path) -> None:
+    assert main(["simulate", str(OFFICE), "--scenario", str(scenario_file), "-o", str(tmp_path / "x.bag"), "-q"]) == 0
+    assert (tmp_path / "x.bag").read_bytes().startswith(b"#ROSBAG V2.0")
