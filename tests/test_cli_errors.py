@@ -226,3 +226,16 @@ def test_an_output_in_a_read_only_folder_is_a_usage_error_before_any_work(
         assert code == 2 and f"cannot write in {locked}" in _one_line(err)
     finally:
         locked.chmod(0o700)
+
+
+def test_a_few_malformed_scans_are_skipped_with_a_warning(write_log: Callable[..., Path], tmp_path: Path,
+                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    """DESIGN: a warning and a skip where the rest is usable (here 2 of 12 scans); most bad stays an error."""
+    messages = sample_messages(12)
+    for k, msg in enumerate(msg for topic, _, _, msg in messages if topic == "/scan"):
+        if k in (4, 7):
+            msg.angle_max = msg.angle_min + msg.angle_increment * (len(msg.ranges) + 9)
+    path = write_log("two_bad.mcap", messages)
+    assert any("2 of 12 scans are unusable" in p["message"] for p in _problems(capsys, path))
+    code, err = _run(capsys, "map", str(path), "-o", str(tmp_path / "map"), "--stages", "grid", "--json")
+    assert code == 0 and "2 of 12 messages on /scan skipped" in err

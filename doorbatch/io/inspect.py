@@ -133,7 +133,7 @@ def inspect_log(path: Path, config: DoorbatchConfig | None = None,
         roles = reader.roles
         role_of = roles.role_of()
         scan_topic = roles.topic(Role.SCAN)
-        mismatch_reported = False
+        bad_scans: list[str] = []  # reasons, one per scan that cannot be decoded
         for raw in reader.raw_messages():
             st = stats.setdefault(raw.topic, _TopicStats())
             st.count += 1
@@ -161,11 +161,15 @@ def inspect_log(path: Path, config: DoorbatchConfig | None = None,
                 try:
                     scan_frames.add(decode_scan(raw.msg, raw.log_time_ns, raw.topic, raw.msgtype).frame_id)
                 except LogContentError as err:
-                    if not mismatch_reported:
-                        problems.append(Problem(Severity.ERROR, raw.topic, err.reason))
-                        mismatch_reported = True
+                    bad_scans.append(err.reason)
             if progress is not None:
                 progress(1)
+        if bad_scans and scan_topic is not None:  # as LogReader.messages: skipped unless most are bad
+            n_scans = stats[scan_topic].count
+            most = 2 * len(bad_scans) > n_scans
+            problems.append(Problem(Severity.ERROR if most else Severity.WARNING, scan_topic,
+                                    bad_scans[0] if most else f"{len(bad_scans)} of {n_scans} scans are unusable and "
+                                                              f"skipped (first: {bad_scans[0]})"))
         problems.extend(Problem(Severity.WARNING, None, w) for w in reader.warnings)
         topics = [
             TopicReport(info.name, info.msgtype, stats.get(info.name, _TopicStats()).count,

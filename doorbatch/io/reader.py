@@ -11,21 +11,23 @@ from __future__ import annotations
 import importlib
 import logging
 from abc import ABC, abstractmethod
+from collections import Counter
 from collections.abc import Callable, Collection, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import Any, Self
+from typing import Any, Self, TypeVar
 
 from rosbags.typesys.store import Typestore
 
 from doorbatch.config import DoorbatchConfig
-from doorbatch.errors import DoorbatchError, LogReadError
+from doorbatch.errors import DoorbatchError, LogContentError, LogReadError
 from doorbatch.io.decode import decode
 from doorbatch.io.roles import RoleAssignment, TopicInfo, assign_roles
 from doorbatch.records import Role, RoleMessage
 
 log = logging.getLogger(__name__)
+E = TypeVar("E", bound=DoorbatchError)
 
 MCAP_MAGIC = b"\x89MCAP"
 BAG1_MAGIC = b"#ROSBAG V2.0"
@@ -132,17 +134,32 @@ class LogReader(ABC):
         role_of = {t: r for t, r in self.roles.role_of().items() if r in wanted}
         if not role_of:
             return
+        seen: Counter[str] = Counter()
+        bad: dict[str, list[LogContentError]] = {}
         for raw in self.raw_messages(set(role_of), start_ns, stop_ns):
             role = role_of[raw.topic]
+            seen[raw.topic] += 1
             try:
                 records = list(decode(role, raw.msg, raw.msgtype, raw.log_time_ns, raw.topic))
+            except LogContentError as err:  # one bad message: skipped, unless most of its topic is bad (below)
+                bad.setdefault(raw.topic, []).append(self._named(err))
+                continue
             except DoorbatchError as err:
-                if getattr(err, "path", "") is None:
-                    err.path = str(self.path)  # type: ignore[attr-defined]
-                    err.args = (f"{self.path}: {err.args[0]}",)
-                raise
+                raise self._named(err) from None
             for record in records:
                 yield RoleMessage(role, raw.topic, record)
+        for topic, errors in bad.items():
+            if 2 * len(errors) > seen[topic]:
+                raise errors[0]
+            self.warnings.append(f"{self.path}: {len(errors)} of {seen[topic]} messages on {topic} skipped, "
+                                 f"unusable (first: {errors[0].reason})")
+
+    def _named(self, err: E) -> E:
+        """``err`` naming this log's file when it names none yet."""
+        if getattr(err, "path", "") is None:
+            err.path = str(self.path)  # type: ignore[attr-defined]
+            err.args = (f"{self.path}: {err.args[0]}",)
+        return err
 
 
 ReaderFactory = Callable[[Path, DoorbatchConfig | None], LogReader]
