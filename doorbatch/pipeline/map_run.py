@@ -78,6 +78,10 @@ def _write_mapping_mcap(logs: Sequence[Path], recordings: Sequence[Recording], d
     return path
 
 
+# What a map directory holds only with some options (the em stage; --mcap).
+OPTIONAL_MAP_FILES = ("walls.parquet", "classes.json", "annotated.mcap")
+
+
 def run_map(logs: Sequence[Path], out: Path, config: DoorbatchConfig, stages: Sequence[str] | None = ("grid",),
             progress: Callable[[int], object] | None = None, classes_file: Path | None = None,
             mcap: bool = False) -> tuple[DoorMap, MapRunSummary]:
@@ -129,6 +133,9 @@ def run_map(logs: Sequence[Path], out: Path, config: DoorbatchConfig, stages: Se
                                 "grid_doors": len(door_map.doors), "classes_given": classes is not None}
     if mcap and recordings is not None:
         files.append(_write_mapping_mcap(logs, recordings, door_map, em, out / "annotated.mcap", config))
+    for name in OPTIONAL_MAP_FILES:  # an earlier run's, into the same folder: not of this map
+        if out / name not in files:
+            (out / name).unlink(missing_ok=True)
     manifest.extra["pose_source"] = door_map.pose_source
     for w in door_map.warnings:
         manifest.warn(w)

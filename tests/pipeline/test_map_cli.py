@@ -196,3 +196,6 @@ def test_map_with_mcap_writes_the_passes_with_map_doors_poses_and_map_to_odom(
     assert counts["/doorbatch/pose"] == scans  # every scan has a reference pose
     assert counts["/tf"] == sum(c["/tf"] for c in inputs) + scans  # plus map→odom per scan
     assert counts["/doorbatch/path"] == sum(-(-c["/scan"] // 10) for c in inputs)
+    # the same folder again without --mcap: the old annotated.mcap is not left to pass for this map's
+    assert main(["map", str(logs[0]), "-o", str(out), "--stages", "grid", "-q"]) == 0
+    assert not (out / "annotated.mcap").exists() and (out / "map.yaml").is_file()
