@@ -187,7 +187,8 @@ def simulate_cmd(ctx: Context, world: Path, output: Path, scenario: str | None, 
     summary = run_simulation(world, output, scenario, ctx.config.seed if seed is None else seed, fmt,
                              split_passes=split_passes)
     ctx.summary(f"simulated {summary.world}/{summary.scenario}: {summary.duration_s:.1f} s, "
-                f"{sum(summary.message_counts.values())} messages, {summary.passes} passes → {summary.log_path}",
+                f"{sum(summary.message_counts.values())} messages, {summary.passes} pass"
+                f"{'' if summary.passes == 1 else 'es'} → {summary.log_path}",
                 summary.as_dict())
 
 

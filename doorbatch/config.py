@@ -798,7 +798,7 @@ def parse_override(text: str) -> dict[str, Any]:
     try:
         value: Any = yaml.safe_load(raw) if raw.strip() else ""
     except yaml.YAMLError as err:
-        raise ConfigError(f"--set {text!r}: value is not valid YAML: {err}") from err
+        raise ConfigError(f"--set {text!r}: value is not valid YAML: {' '.join(str(err).split())}") from err
     nested: dict[str, Any] = {keys[-1]: value}
     for key in reversed(keys[:-1]):
         nested = {key: nested}
@@ -812,7 +812,7 @@ def read_yaml_mapping(path: Path) -> dict[str, Any]:
     except OSError as err:
         raise ConfigError(f"{path}: cannot read config: {err.strerror or err}") from err
     except yaml.YAMLError as err:
-        raise ConfigError(f"{path}: not valid YAML: {err}") from err
+        raise ConfigError(f"{path}: not valid YAML: {' '.join(str(err).split())}") from err  # one line
     if data is None:
         return {}
     if not isinstance(data, dict):

@@ -93,7 +93,7 @@ def file_fingerprint(path: Path) -> dict[str, Any]:
             size = path.stat().st_size
             _hash_into(digest, path)
     except OSError as err:
-        raise InputDataError(f"cannot fingerprint input: {err.strerror or err}", path=path) from err
+        raise InputDataError(f"cannot read input: {err.strerror or err}", path=path) from err
     return {"path": str(path.absolute()), "size": size, "sha256": digest.hexdigest()}
 
 

@@ -13,6 +13,7 @@ manifest.json into ``out_dir``.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,6 +36,8 @@ from doorbatch.io.run_reader import (
 )
 from doorbatch.io.sim_truth import read_truth
 from doorbatch.pipeline.evaluate.report import Evaluation, MapTables, RunTables, evaluate_runs
+
+log = logging.getLogger(__name__)
 
 
 def _names(dirs: Sequence[Path]) -> list[str]:
@@ -88,7 +91,10 @@ def evaluate_run_dirs(run_dirs: Sequence[Path], out_dir: Path, config: Doorbatch
         UsageError: another localizer's trajectory without ``reference``.
         PipelineError: a run whose stamps match none of its reference's.
     """
-    items = [_classify(Path(d), reference) for d in run_dirs]
+    unique = list(dict.fromkeys(str(d) if ":/" in str(d) else str(Path(d).resolve()) for d in run_dirs))
+    if len(unique) < len(run_dirs):  # the same run twice would count twice in every mean
+        log.warning("%d argument(s) named a run already given: each is evaluated once", len(run_dirs) - len(unique))
+    items = [_classify(Path(d), reference) for d in unique]
     manifest = Manifest.start(config.as_dict(), [*(i.file for i in items), *(p for p in (reference, truth) if p)],
                               command="evaluate")
     labelled = list(zip(items, _names([i.path for i in items]), strict=True))

@@ -180,6 +180,10 @@ def test_evaluate_cli_writes_the_report_directory(tmp_path: Path, capsys: pytest
                  "-q"]) == 0
     for name in ("metrics.parquet", "report.md", "report.html", "error_along_x.png"):
         assert (again / name).read_bytes() == (out / name).read_bytes(), name
+    twice = tmp_path / "twice"  # a run named twice (another spelling of its path) counts once
+    assert main(["evaluate", str(tmp_path / "runs" / "mcl"), str(tmp_path / "runs" / ".." / "runs" / "mcl"),
+                 str(tmp_path / "runs" / "rbpf"), "-o", str(twice), "-q"]) == 0
+    assert (twice / "metrics.parquet").read_bytes() == (out / "metrics.parquet").read_bytes()
 
 
 def test_another_localizers_tum_trajectory_is_scored_beside_a_run(tmp_path: Path,
