@@ -853,8 +853,10 @@ def load_config(
     config_file: Path | None = None,
     overrides: Iterable[str] = (),
     extra: Mapping[str, Any] | None = None,
+    extra_source: str = "config",
 ) -> DoorbatchConfig:
-    """Resolve the configuration: defaults < ``config_file`` < ``extra`` < ``overrides``.
+    """Resolve the configuration: defaults < ``config_file`` < ``extra`` < ``overrides``. An error names the
+    layers that were given (the file, ``extra_source`` for ``extra``, ``--set``).
 
     A ``config_file`` that is a ROS 2 parameter file (a Nav2 ``nav2_params.yaml``) contributes its ``amcl`` node's
     parameters (:mod:`doorbatch.amcl_params`).
@@ -876,7 +878,8 @@ def load_config(
         tree = deep_merge(tree, extra)
     for text in overrides:
         tree = deep_merge(tree, parse_override(text))
-        source = "config" if config_file is None else source
+    layers = [str(config_file)] * (config_file is not None) + [extra_source] * bool(extra) + ["--set"] * bool(overrides)
+    source = " or ".join(layers) or source
     try:
         return DoorbatchConfig.model_validate(tree)
     except ValidationError as err:

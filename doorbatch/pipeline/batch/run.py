@@ -230,4 +230,5 @@ def prepare_run(dataset_path: Path, config_file: Path | None, overrides: tuple[s
     from doorbatch.io.dataset import read_dataset
 
     dataset = read_dataset(Path(dataset_path).resolve())  # manifests name absolute inputs: any worker finds them
-    return dataset, load_config(config_file, overrides, extra=dataset.config)
+    return dataset, load_config(config_file, overrides, extra=dataset.config,
+                                extra_source=f"{dataset.root / 'dataset.yaml'} (config:)")

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pyarrow.dataset as pads
 import pytest
+import yaml
 
 from doorbatch.cli import main
 from doorbatch.io.manifest import utc_now_iso
@@ -173,6 +174,16 @@ def test_a_site_named_like_the_batchs_own_outputs_is_refused_before_writing(tiny
     code = main(["run", str(tiny), "-o", str(out), "-q"])
     assert code == 3 and f"site name '{name}'" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_a_config_typo_in_dataset_yaml_names_the_file(tiny: Path, tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    dataset = yaml.safe_load((tiny / "dataset.yaml").read_text())
+    dataset["config"]["localize"]["sigma_hitt"] = 0.1
+    (tiny / "dataset.yaml").write_text(yaml.safe_dump(dataset))
+    code = main(["run", str(tiny), "-o", str(tmp_path / "out"), "-q"])
+    err = capsys.readouterr().err
+    assert code == 2 and "dataset.yaml (config:)" in err and "did you mean 'localize.sigma_hit'" in err
 
 
 def test_an_unreachable_dask_scheduler_is_a_usage_error(tiny: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
