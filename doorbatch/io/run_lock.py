@@ -38,8 +38,13 @@ class LockInfo:
     started_at: str
 
     def describe(self) -> str:
-        """``pid 123 on host since 2026-...Z``."""
+        """``pid 123 on host since 2026-...Z`` (``an unreadable lock file`` for :data:`UNREADABLE`)."""
+        if self == UNREADABLE:
+            return "an unreadable lock file"
         return f"pid {self.pid} on {self.host} since {self.started_at}"
+
+
+UNREADABLE = LockInfo(-1, "?", "?")  # the holder of a lock file that cannot be read
 
 
 def pid_alive(pid: int) -> bool:
@@ -120,9 +125,8 @@ def acquire_lock(folder: Path) -> tuple[LockInfo, LockInfo | None]:
         if held is not None and (held.host != mine.host or holder_running(held)):
             raise OutputLockedError(f"{folder} is in use by another doorbatch run ({held.describe()}); "
                                     f"if that run is gone, remove {path}")
-        stale = held or LockInfo(-1, "?", "?")
-        log.warning("taking over the stale lock %s (%s: not running)", path,
-                    stale.describe() if held else "unreadable lock file")
+        stale = held or UNREADABLE
+        log.debug("taking over the stale lock %s (%s: not running)", path, stale.describe())  # run.log says so
         path.unlink(missing_ok=True)
     raise OutputLockedError(f"{folder}: could not take the lock {path} (another run keeps taking it)")
 
