@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import copy
 import itertools
+import logging
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
@@ -34,6 +35,8 @@ from doorbatch.pipeline.gridmap.occupancy import LogOddsGrid, to_occupancy_map
 from doorbatch.pipeline.poses import scan_match_trajectory
 
 FloatArray = npt.NDArray[np.float64]
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -216,7 +219,11 @@ def build_map(logs: Sequence[Path], config: DoorbatchConfig | None = None,
     if recordings is None:
         recordings = [load_recording(Path(p), config) for p in logs]
     seconds["read"] = time.perf_counter() - t0
+    for rec in recordings:
+        log.info("%s: %d scans, odometry %s, reference %s", rec.path, len(rec.scans),
+                 "yes" if rec.odometry is not None else "no", "yes" if rec.reference is not None else "no")
     source, warnings = choose_pose_source(recordings, config.mapping.pose_source, config)
+    log.info("pose source: %s", source)
     check_common_frame(recordings, source, config)
     t0 = time.perf_counter()
     if source == "scanmatch":
