@@ -68,11 +68,12 @@ def _output_folder(_: click.Context, __: click.Parameter, value: Path | None) ->
 
 
 def _output_file(_: click.Context, __: click.Parameter, value: Path | None) -> Path | None:
-    """``-o`` of a command that writes one file (or a ROS 2 bag folder), checked before any work."""
+    """``-o`` of a command that writes one file, checked before any work (an existing folder there is an
+    error, never replaced)."""
     from doorbatch.io.staged_dir import check_output_location
 
     if value is not None:
-        check_output_location(value, folder=value.is_dir())
+        check_output_location(value, folder=False)
     return value
 
 
@@ -164,7 +165,7 @@ def convert_cmd(ctx: Context, source: Path, output: Path) -> None:
 
 @cli.command("simulate")
 @click.argument("world", type=click.Path(path_type=Path, dir_okay=False))
-@click.option("-o", "--output", type=click.Path(path_type=Path), required=True, callback=_output_file,
+@click.option("-o", "--output", type=click.Path(path_type=Path), required=True,
               help="Output log: FILE.mcap, FILE.bag, or a folder for rosbag2.")
 @click.option("--scenario", default=None, help="A scenario name in configs/scenarios/ or a YAML path.")
 @click.option("--seed", type=click.IntRange(min=0), default=None, help="Random seed (default: the config's seed).")
@@ -175,14 +176,19 @@ def convert_cmd(ctx: Context, source: Path, output: Path) -> None:
 def simulate_cmd(ctx: Context, world: Path, output: Path, scenario: str | None, seed: int | None, fmt: str | None,
                  split_passes: bool) -> None:
     """Simulate a log with ground truth in WORLD (a YAML file of configs/worlds/)."""
+    from doorbatch.io.staged_dir import check_output_location
     from doorbatch.sim.simulate import run_simulation
 
-    by_suffix = {".mcap": "mcap", ".bag": "bag"}.get(output.suffix)
+    by_suffix = {".mcap": "mcap", ".bag": "bag"}.get(output.suffix.lower())
     if fmt is None:
         fmt = by_suffix or "rosbag2"
     elif (fmt in ("mcap", "bag") and by_suffix != fmt) or (fmt.startswith("rosbag2") and by_suffix is not None):
         raise UsageError(f"-o {output} does not fit --format {fmt} (.mcap for mcap, .bag for bag, a folder name "
                          f"without either suffix for rosbag2)")
+    bag_folder = fmt.startswith("rosbag2")
+    if bag_folder and output.is_dir() and any(output.iterdir()) and not (output / "metadata.yaml").is_file():
+        raise UsageError(f"-o {output}: exists and is a folder that is not a ROS 2 bag (it would be replaced)")
+    check_output_location(output, folder=bag_folder and output.is_dir())
 
     summary = run_simulation(world, output, scenario, ctx.config.seed if seed is None else seed, fmt,
                              split_passes=split_passes)

@@ -239,3 +239,21 @@ def test_a_few_malformed_scans_are_skipped_with_a_warning(write_log: Callable[..
     assert any("2 of 12 scans are unusable" in p["message"] for p in _problems(capsys, path))
     code, err = _run(capsys, "map", str(path), "-o", str(tmp_path / "map"), "--stages", "grid", "--json")
     assert code == 0 and "2 of 12 messages on /scan skipped" in err
+
+
+def test_an_output_file_where_a_folder_stands_is_refused_and_the_folder_kept(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    folder = tmp_path / "d.mcap"
+    folder.mkdir()
+    (folder / "notes.txt").write_text("precious")
+    code, err = _run(capsys, "convert", str(REPO / "datasets/sample/logs/map_pass1.mcap"), "-o", str(folder))
+    assert code == 2 and "is a folder" in _one_line(err)
+    assert (folder / "notes.txt").read_text() == "precious"
+
+
+def test_checking_an_output_creates_nothing(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The -o check runs before the config is read: when the command then fails, no folder is left behind."""
+    code, _ = _run(capsys, "map", str(REPO / "datasets/sample/logs/map_pass1.mcap"), "-o",
+                   str(tmp_path / "a" / "b" / "map"), "--set", "mapping.bogus=1")
+    assert code == 2 and not (tmp_path / "a").exists() and list(tmp_path.iterdir()) == []
+

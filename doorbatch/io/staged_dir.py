@@ -52,27 +52,27 @@ def staged_dir(dest: Path) -> Iterator[Path]:
 
 def check_output_location(dest: Path, folder: bool) -> None:
     """Fail early, before any work, where ``dest`` (an output folder, or file) could not be written: a file
-    where a folder must go or the other way round, a parent that is a file, or a parent folder (created here
-    when missing) in which nothing can be created.
+    where a folder must go or the other way round, an existing file among its parents, or a folder in which
+    nothing can be created: ``dest`` itself when it is an existing folder (commands write inside it), else its
+    nearest existing ancestor (where it, or its parent folders, will be created). Creates nothing: the probe
+    folder it makes is removed at once.
 
     Raises:
         UsageError: what is in the way, naming the path.
     """
-    dest = Path(dest)
+    dest = Path(dest).absolute()
     if dest.exists() and dest.is_dir() != folder:
         raise UsageError(f"-o {dest}: exists and is {'a file' if folder else 'a folder'}, not "
                          f"{'a folder' if folder else 'a file'}")
-    parent = dest.absolute().parent
-    blocking = next((a for a in (parent, *parent.parents) if a.exists() and not a.is_dir()), None)
-    if blocking is not None:
-        raise UsageError(f"-o {dest}: {blocking} is a file, not a folder")
+    where = dest if folder and dest.is_dir() else next(a for a in dest.parents if a.exists())
+    if not where.is_dir():
+        raise UsageError(f"-o {dest}: {where} is a file, not a folder")
     try:
-        parent.mkdir(parents=True, exist_ok=True)
-        probe = _sibling(dest.absolute(), TEMP_MARKER)
+        probe = where / f".{dest.name}.{secrets.token_hex(8)}{TEMP_MARKER}"
         probe.mkdir()
         probe.rmdir()
     except OSError as err:
-        raise UsageError(f"-o {dest}: cannot write in {parent}: {err.strerror or err}") from err
+        raise UsageError(f"-o {dest}: cannot write in {where}: {err.strerror or err}") from err
 
 
 def is_leftover(path: Path) -> bool:

@@ -11,7 +11,7 @@ import numpy as np
 import numpy.typing as npt
 
 from doorbatch.config import DoorbatchConfig
-from doorbatch.errors import UsageError
+from doorbatch.errors import InputDataError, UsageError
 from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.geometry.se2 import interpolate_poses
 from doorbatch.io.annotated_mcap import write_annotated_mcap
@@ -82,6 +82,20 @@ def _write_mapping_mcap(logs: Sequence[Path], recordings: Sequence[Recording], d
 OPTIONAL_MAP_FILES = ("walls.parquet", "classes.json", "annotated.mcap")
 
 
+def _remove_stale_map_files(out: Path, written: Sequence[Path], logs: Sequence[Path]) -> None:
+    """The optional files an earlier ``doorbatch map`` left in ``out`` that this run did not write: they would
+    pass for this map's. Only where ``out``'s manifest says a map was written there, and never an input."""
+    try:
+        earlier = Manifest.read(out / "manifest.json").extra.get("command") == "map"
+    except (OSError, InputDataError, ValueError):
+        earlier = False
+    inputs = {Path(p).resolve() for p in logs}
+    for name in OPTIONAL_MAP_FILES:
+        path = out / name
+        if earlier and path not in written and path.resolve() not in inputs:
+            path.unlink(missing_ok=True)
+
+
 def run_map(logs: Sequence[Path], out: Path, config: DoorbatchConfig, stages: Sequence[str] | None = ("grid",),
             progress: Callable[[int], object] | None = None, classes_file: Path | None = None,
             mcap: bool = False) -> tuple[DoorMap, MapRunSummary]:
@@ -133,9 +147,7 @@ def run_map(logs: Sequence[Path], out: Path, config: DoorbatchConfig, stages: Se
                                 "grid_doors": len(door_map.doors), "classes_given": classes is not None}
     if mcap and recordings is not None:
         files.append(_write_mapping_mcap(logs, recordings, door_map, em, out / "annotated.mcap", config))
-    for name in OPTIONAL_MAP_FILES:  # an earlier run's, into the same folder: not of this map
-        if out / name not in files:
-            (out / name).unlink(missing_ok=True)
+    _remove_stale_map_files(out, files, logs)
     manifest.extra["pose_source"] = door_map.pose_source
     for w in door_map.warnings:
         manifest.warn(w)

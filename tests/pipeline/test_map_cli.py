@@ -199,3 +199,16 @@ def test_map_with_mcap_writes_the_passes_with_map_doors_poses_and_map_to_odom(
     # the same folder again without --mcap: the old annotated.mcap is not left to pass for this map's
     assert main(["map", str(logs[0]), "-o", str(out), "--stages", "grid", "-q"]) == 0
     assert not (out / "annotated.mcap").exists() and (out / "map.yaml").is_file()
+
+
+def test_map_never_removes_a_file_it_did_not_write_there(tmp_path: Path) -> None:
+    """Only files an earlier doorbatch map left are cleared, and never an input: a log named annotated.mcap in
+    the output folder stays."""
+    out = tmp_path / "mapdir"
+    out.mkdir()
+    log = out / "annotated.mcap"
+    log.write_bytes((SAMPLE_LOGS / "map_pass1.mcap").read_bytes())
+    (out / "walls.parquet").write_text("a user's own file")
+    assert main(["map", str(log), "-o", str(out), "--stages", "grid", "-q"]) == 0
+    assert log.is_file() and (out / "walls.parquet").read_text() == "a user's own file"
+
