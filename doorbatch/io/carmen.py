@@ -43,6 +43,7 @@ import numpy.typing as npt
 
 from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import LogReadError
+from doorbatch.geometry.se2 import relative
 from doorbatch.io import ros_messages as rm
 from doorbatch.io.decode import LASERSCAN, ODOMETRY, TF_MESSAGE
 from doorbatch.io.reader import LogReader, RawMessage
@@ -71,6 +72,8 @@ _TIMED_RAW = frozenset({_ODOM, _RAWLASER1})  # a log without FLASER and ROBOTLAS
 # ROBOTLASER1 without offset PARAMs: its laser pose in its robot pose is the mount when it holds this still.
 _MOUNT_TOLERANCE_M = 1e-3
 _MOUNT_TOLERANCE_RAD = 1e-3
+_MOUNT_MIN_LINES = 10
+_MOUNT_MIN_TURN_RAD = math.radians(30.0)
 
 _NS = 1_000_000_000
 _MAX_STAMP_S = Decimal(2**62) / _NS  # beyond this a "stamp" is garbage, not a time
@@ -467,15 +470,6 @@ def _parse(parts: list[str]) -> _Laser | _Odom:
     return _parse_laser_with_header(parts, 11 if parts[0] == _ROBOTLASER1 else 0)
 
 
-def laser_in_robot(laser_pose: tuple[float, float, float],
-                   robot_pose: tuple[float, float, float]) -> tuple[float, float, float]:
-    """The laser pose in the robot's frame, (x, y, yaw): the mount, where both poses are of one instant."""
-    dx, dy = laser_pose[0] - robot_pose[0], laser_pose[1] - robot_pose[1]
-    c, s = math.cos(robot_pose[2]), math.sin(robot_pose[2])
-    dyaw = laser_pose[2] - robot_pose[2]
-    return c * dx + s * dy, -s * dx + c * dy, math.atan2(math.sin(dyaw), math.cos(dyaw))
-
-
 def base_from_laser(laser_pose: tuple[float, float, float],
                     offset: tuple[float, float, float]) -> tuple[float, float, float]:
     """The base_link pose whose laser (mounted at ``offset`` = x, y, yaw in base_link) is at ``laser_pose``."""
@@ -553,6 +547,8 @@ class CarmenReader(LogReader):
         ignored: Counter[str] = Counter()
         keywords: list[str] = []
         mounts: list[tuple[float, float, float]] = []  # ROBOTLASER1: laser pose in robot pose
+        robot_yaws: list[float] = []
+        raw_error: LogReadError | None = None  # a malformed RAWLASER1 line matters only if those are the scans
         largest = -math.inf
         band: Float32Array = np.empty(0, dtype=np.float32)  # distinct readings near the largest
         for lineno, parts in self._lines():
@@ -568,7 +564,11 @@ class CarmenReader(LogReader):
             try:
                 record = _parse(parts)
             except _MalformedError as err:
-                raise self._error(lineno, parts, str(err)) from err
+                if keyword != _RAWLASER1:
+                    raise self._error(lineno, parts, str(err)) from err
+                raw_error = raw_error or self._error(lineno, parts, str(err))
+                counts[keyword] += 1
+                continue
             counts[keyword] += 1
             keywords.append(keyword)
             stamps.append(record.stamp_ns)
@@ -576,10 +576,14 @@ class CarmenReader(LogReader):
             if keyword == _FLASER and isinstance(record, _Laser):
                 largest, band = _update_band(largest, band, record.ranges)
             elif isinstance(record, _Laser) and record.laser_pose is not None and record.robot_pose is not None:
-                mounts.append(laser_in_robot(record.laser_pose, record.robot_pose))
+                mx, my, myaw = relative(record.robot_pose, record.laser_pose).tolist()
+                mounts.append((mx, my, myaw))
+                robot_yaws.append(record.robot_pose[2])
         n_scans = counts[_FLASER] + counts[_ROBOTLASER1]
         if n_scans == 0 and counts[_RAWLASER1]:
             # Choice: the raw front laser only where no line carries it with poses (the logger writes both).
+            if raw_error is not None:
+                raise raw_error
             self._timed, n_scans = _TIMED_RAW, counts[_RAWLASER1]
             self._warn(f"scans from {n_scans} RAWLASER1 lines (no FLASER or ROBOTLASER1): they carry no pose, "
                        f"so the log has {'odometry from its ODOM lines' if counts[_ODOM] else 'no odometry'} "
@@ -593,15 +597,17 @@ class CarmenReader(LogReader):
         stamps = [t for t, k in zip(stamps, keep, strict=True) if k]
         is_scan = [v for v, k in zip(is_scan, keep, strict=True) if k]
         self.ignored_lines = dict(sorted(ignored.items()))
-        self._read_params(counts[_FLASER], largest, band, mounts)
+        self._read_params(counts[_FLASER], largest, band, mounts, robot_yaws)
         repair = repair_stamps(np.array(stamps, dtype=np.int64), np.array(is_scan, dtype=bool),
                                self.io_config.carmen_scan_period_s)
         self._stamps = repair.stamps_ns
         self.stamp_method = repair.method
         for message in repair.warnings:
             self._warn(message)
-        # Choice: re-stamped by file order, not dropped: they record motion just before or after the scan.
-        separation = separate_odom_from_scan_stamps(self._stamps, np.array(is_scan, dtype=bool))
+        # Choice: re-stamped by file order, not dropped: they record motion just before or after the scan. Not
+        # for RAWLASER1 scans: they carry no odometry of their own, so an ODOM line at their stamp is the only one.
+        scan_lines = np.array(is_scan, dtype=bool) & (self._timed is not _TIMED_RAW)
+        separation = separate_odom_from_scan_stamps(self._stamps, scan_lines)
         self._stamps, self._dropped = separation.stamps_ns, separation.dropped
         n_dropped = int(np.count_nonzero(self._dropped))
         if separation.n_restamped or n_dropped:
@@ -637,17 +643,20 @@ class CarmenReader(LogReader):
         return value
 
     def _read_params(self, n_flaser: int, largest: float, band: Float32Array,
-                     mounts: Sequence[tuple[float, float, float]] = ()) -> None:
+                     mounts: Sequence[tuple[float, float, float]] = (), robot_yaws: Sequence[float] = ()) -> None:
         """Laser offset, FLASER field of view and the no-return value, from PARAMs or the readings.
 
         The angular offset is in radians: CARMEN's simulator and robot module add it to the heading as it
         is (only the laser's field of view and resolution PARAMs are in degrees). Without any offset PARAM,
         ROBOTLASER1 lines give the mount as their laser pose in their robot pose, when that holds still
-        over the log (in a corrected log the laser pose is the corrected one and it does not)."""
+        over the log while the robot turned (``_MOUNT_MIN_LINES`` lines over ``_MOUNT_MIN_TURN_RAD`` of heading:
+        a rigid mount, not a coincidence); in a corrected log the laser pose is the corrected one and it does
+        not hold still."""
         offsets = [self._param_float(f"robot_frontlaser_{name}")
                    for name in ("offset", "side_offset", "angular_offset")]
         self.laser_offset = (offsets[0] or 0.0, offsets[1] or 0.0, offsets[2] or 0.0)
-        if all(v is None for v in offsets) and mounts:
+        turned = float(np.ptp(np.unwrap(np.asarray(robot_yaws)))) if len(robot_yaws) else 0.0
+        if all(v is None for v in offsets) and len(mounts) >= _MOUNT_MIN_LINES and turned >= _MOUNT_MIN_TURN_RAD:
             m = np.array(mounts)
             turn = np.arctan2(np.sin(m[:, 2] - m[0, 2]), np.cos(m[:, 2] - m[0, 2]))  # about the first (±π)
             if (np.ptp(m[:, :2], axis=0).max() <= _MOUNT_TOLERANCE_M

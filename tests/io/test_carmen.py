@@ -271,9 +271,11 @@ def _mounted(robot: tuple[float, float, float], mount: tuple[float, float, float
 
 def test_robotlaser1_without_offset_params_takes_the_mount_from_its_two_poses(tmp_path: Path) -> None:
     mount = (0.2, -0.05, math.pi)  # a laser looking backwards: its yaw wraps at ±π from line to line
-    robots = [(0.0, 0.0, 0.0), (0.5, 0.1, 0.4), (0.9, 0.4, -2.9)]
+    robots = [(0.1 * k, 0.05 * k * k, 0.5 * k - 2.9) for k in range(12)]  # turning through ±π
     lines = [robotlaser1(_mounted(r, mount), r, 3.0 + 0.1 * k) for k, r in enumerate(robots)]
     records = read_all(write_log(tmp_path / "a.clf", lines))
+    few = read_all(write_log(tmp_path / "few.clf", lines[:3]))  # three lines prove no rigid mount
+    np.testing.assert_allclose(next(t for t in only(Transform, few) if t.static).translation, 0.0)
     (static,) = [t for t in only(Transform, records) if t.static]
     np.testing.assert_allclose(static.translation, [0.2, -0.05, 0.0], atol=1e-6)
     assert abs(_wrap(_static_yaw(records) - math.pi)) < 1e-6
@@ -283,11 +285,11 @@ def test_robotlaser1_without_offset_params_takes_the_mount_from_its_two_poses(tm
 
 def test_robotlaser1_whose_laser_pose_was_corrected_keeps_a_zero_mount(tmp_path: Path) -> None:
     # A corrected log: the laser pose is the corrected one, the robot pose the odometry; no fixed mount.
-    lines = [robotlaser1((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 3.0), robotlaser1((1.0, 0.0, 0.0), (0.9, 0.05, 0.02), 3.1)]
+    lines = [robotlaser1((0.1 * k, 0.0, 0.1 * k), (0.09 * k, 0.005 * k, 0.098 * k), 3.0 + 0.1 * k) for k in range(12)]
     records = read_all(write_log(tmp_path / "a.clf", lines))
     (static,) = [t for t in only(Transform, records) if t.static]
     np.testing.assert_allclose(static.translation, 0.0)
-    assert only(Pose2D, records, Role.REFERENCE)[1].x == pytest.approx(1.0)
+    assert only(Pose2D, records, Role.REFERENCE)[10].x == pytest.approx(1.0)
 
 
 def rawlaser1(t: float, n: int = 5) -> str:
@@ -299,21 +301,23 @@ def test_rawlaser1_lines_are_the_scans_of_a_log_without_flaser_or_robotlaser1(tm
     lines = ["PARAM robot_frontlaser_offset 0.25 nohost 0"]
     for k in range(3):
         lines += [odom_line((0.1 * k, 0.0, 0.0), f"{10.0 + 0.2 * k:.6f}"), rawlaser1(10.1 + 0.2 * k)]
+    # an ODOM line on a raw scan's stamp is the only odometry there: kept, not moved off it
+    lines += [odom_line((0.3, 0.0, 0.0), "10.500000"), rawlaser1(10.5), odom_line((0.35, 0.0, 0.0), "10.6")]
     with CarmenReader(write_log(tmp_path / "raw.log", lines)) as reader:
         assert set(reader.topics) == {"/scan", "/odom", "/tf", "/tf_static"}  # no reference: no poses
-        assert reader.topics["/scan"].count == 3 and reader.topics["/odom"].count == 3
+        assert reader.topics["/scan"].count == 4 and reader.topics["/odom"].count == 5
         assert any("RAWLASER1" in w for w in reader.warnings)
         records = list(reader.messages())
     scans = only(Scan, records)
-    assert [s.stamp_ns for s in scans] == [10_100_000_000, 10_300_000_000, 10_500_000_000]
+    assert [s.stamp_ns for s in scans] == [10_100_000_000, 10_300_000_000, 10_500_000_000, 10_500_000_000]
     assert scans[0].angle_min == pytest.approx(-1.0) and scans[0].range_max == pytest.approx(30.0)
-    assert [p.x for p in only(Pose2D, records, Role.ODOMETRY)] == pytest.approx([0.0, 0.1, 0.2])
+    assert [p.x for p in only(Pose2D, records, Role.ODOMETRY)] == pytest.approx([0.0, 0.1, 0.2, 0.3, 0.35])
 
 
 def test_rawlaser1_lines_beside_flaser_lines_are_ignored_and_counted(tmp_path: Path) -> None:
-    lines = [*simple_log(n_scans=2), rawlaser1(100.05), rawlaser1(100.25)]
+    lines = [*simple_log(n_scans=2), rawlaser1(100.05), rawlaser1(100.25), rawlaser1(100.35)[:40]]  # one cut off
     with CarmenReader(write_log(tmp_path / "a.log", lines)) as reader:
-        assert reader.ignored_lines == {"RAWLASER1": 2}
+        assert reader.ignored_lines == {"RAWLASER1": 3}
         assert reader.topics["/scan"].count == 2
         assert len(only(Scan, reader.messages([Role.SCAN]))) == 2
 
