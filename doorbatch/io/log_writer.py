@@ -87,9 +87,11 @@ class LogWriter:
         elif self.fmt is LogFormat.BAG:
             self._bag = Bag1Writer(self.tmp)
             self._bag.open()
-        else:
+        else:  # in a temporary parent under its final name: rosbags names the storage (and records that name
+            # in metadata.yaml and in the storage itself) after the bag folder
             plugin = StoragePlugin.MCAP if self.fmt is LogFormat.ROSBAG2_MCAP else StoragePlugin.SQLITE3
-            self._bag = Bag2Writer(self.tmp, version=8, storage_plugin=plugin)
+            self.tmp.mkdir()
+            self._bag = Bag2Writer(self.tmp / self.path.name, version=8, storage_plugin=plugin)
             self._bag.open()
         return self
 
@@ -158,24 +160,14 @@ class LogWriter:
                 self._bag.close()
         finally:
             if exc_type is None:
-                if self.fmt in (LogFormat.ROSBAG2, LogFormat.ROSBAG2_MCAP):
-                    _name_storage_after(self.tmp, self.path.name)
                 _remove(self.path)
-                self.tmp.replace(self.path)
+                if self.fmt in (LogFormat.ROSBAG2, LogFormat.ROSBAG2_MCAP):
+                    (self.tmp / self.path.name).replace(self.path)
+                    self.tmp.rmdir()
+                else:
+                    self.tmp.replace(self.path)
             else:
                 _remove(self.tmp)
-
-
-def _name_storage_after(bag: Path, name: str) -> None:
-    """rosbags names a ROS 2 bag's storage files after the folder (here its temporary name): give them the
-    final name, ``<name>_0.db3`` as ros2 bag record does, in the folder and in ``metadata.yaml``."""
-    metadata = bag / "metadata.yaml"
-    text = metadata.read_text()
-    for k, file in enumerate(sorted(f for f in bag.iterdir() if f.name.startswith(bag.name))):
-        final = f"{name}_{k}{file.suffix}"
-        file.rename(bag / final)
-        text = text.replace(file.name, final)
-    metadata.write_text(text)
 
 
 def detections_to_ros1(msg: Any) -> Any:

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -44,7 +46,6 @@ def runs(tmp_path_factory: pytest.TempPathFactory, scenario_file: Path) -> dict[
         "other_seed": run_simulation(OFFICE, root / "c" / "run.mcap", scenario_file, seed=4, fmt="mcap"),
         "bag": run_simulation(OFFICE, root / "d" / "run.bag", scenario_file, seed=3, fmt="bag"),
         "rosbag2": run_simulation(OFFICE, root / "e" / "run", scenario_file, seed=3, fmt="rosbag2"),
-        "rosbag2_again": run_simulation(OFFICE, root / "f" / "run", scenario_file, seed=3, fmt="rosbag2"),
     }
 
 
@@ -59,10 +60,17 @@ def test_same_seed_gives_byte_identical_files(runs: dict[str, SimulationSummary]
         assert a.read_bytes() == b.read_bytes(), a.name
 
 
-def test_same_seed_gives_byte_identical_rosbag2_folders(runs: dict[str, SimulationSummary]) -> None:
-    a, b = runs["rosbag2"].log_path, runs["rosbag2_again"].log_path
+def test_same_seed_gives_byte_identical_rosbag2_folders(runs: dict[str, SimulationSummary], scenario_file: Path,
+                                                        tmp_path: Path) -> None:
+    """Also from another process: nothing of the writer's temporary names (its pid) may reach the files."""
+    other = tmp_path / "g" / "run"
+    code = (f"from pathlib import Path; from doorbatch.sim.simulate import run_simulation; "
+            f"run_simulation(Path({str(OFFICE)!r}), Path({str(other)!r}), Path({str(scenario_file)!r}), seed=3, "
+            f"fmt='rosbag2')")
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=Path(__file__).resolve().parents[2])
+    a, b = runs["rosbag2"].log_path, other
     names = sorted(p.name for p in a.iterdir())
-    assert names == sorted(p.name for p in b.iterdir()) == ["metadata.yaml", "run_0.db3"]  # not its temporary name
+    assert names == sorted(p.name for p in b.iterdir()) == ["metadata.yaml", "run.db3"]  # not its temporary name
     for name in names:
         assert (a / name).read_bytes() == (b / name).read_bytes(), name
 
