@@ -114,6 +114,7 @@ def run_point(point: SweepPoint, map_path: Path | None, run_dir: Path, config: D
     from doorbatch.pipeline.localize.run import (
         load_localization_map,
         localize,
+        map_input_files,
         truth_localization_map,
     )
 
@@ -122,9 +123,7 @@ def run_point(point: SweepPoint, map_path: Path | None, run_dir: Path, config: D
         inputs = [point.log, truth]
         lmap = truth_localization_map(truth, config.localize)
     else:
-        inputs = [point.log, map_path / "map.yaml" if map_path.is_dir() else map_path]
-        if map_path.is_dir() and (map_path / "doors.parquet").exists():
-            inputs.append(map_path / "doors.parquet")
+        inputs = [point.log, *map_input_files(map_path)]
         lmap = load_localization_map(map_path, config.localize)
     manifest = Manifest.start(config.as_dict(), inputs, command="evaluate --experiment", method=point.method,
                               init=point.init, params=point.params())

@@ -73,6 +73,20 @@ def is_map_log(map_path: Path) -> bool:
     return not (map_path / "map.yaml").is_file() and map_path.suffix not in (".yaml", ".yml")
 
 
+def map_doors_file(map_path: Path) -> Path | None:
+    """The doors.parquet of ``--map``: in a map directory, or beside its ``map.yaml`` named directly (a
+    doorbatch map directory's; another tool's YAML has no doors)."""
+    folder = map_path if map_path.is_dir() else map_path.parent if map_path.name == "map.yaml" else None
+    doors = folder / "doors.parquet" if folder is not None else None
+    return doors if doors is not None and doors.is_file() else None
+
+
+def map_input_files(map_path: Path) -> list[Path]:
+    """The files of ``--map`` a manifest lists: the map YAML (or the log holding the map) and its doors."""
+    doors = map_doors_file(map_path)
+    return [map_path / "map.yaml" if (map_path / "map.yaml").is_file() else map_path, *([doors] if doors else [])]
+
+
 def load_localization_map(map_path: Path, config: LocalizeConfig) -> LocalizationMap:
     """A map directory (map.yaml + doors.parquet), a map_server YAML file from any SLAM tool, or a log with a
     nav_msgs/OccupancyGrid topic (``config.map_topic``; :mod:`doorbatch.io.map_topic`), such as the bag of a Nav2
@@ -86,9 +100,8 @@ def load_localization_map(map_path: Path, config: LocalizeConfig) -> Localizatio
     else:
         yaml_path = map_path / "map.yaml" if map_path.is_dir() else map_path
         occ = read_map(yaml_path)
-        # a doorbatch map directory's map.yaml named directly keeps its doors; another tool's YAML has none
-        has_doors = (yaml_path.parent / "doors.parquet").is_file()
-        doors = read_door_set(yaml_path.parent) if has_doors else DoorSet.empty()
+        doors_path = map_doors_file(map_path)
+        doors = read_door_set(doors_path.parent) if doors_path is not None else DoorSet.empty()
     doors = with_closed_in_range(doors)
     return LocalizationMap(occ, localization_field(occ, config), free_cells(occ), doors)
 
@@ -369,9 +382,7 @@ def run_localize(log_path: Path, map_path: Path, out: Path, config: DoorbatchCon
     from doorbatch.io.manifest import Manifest, StageTimer
     from doorbatch.io.rundir import run_annotations, write_run_tables
 
-    inputs = [log_path, map_path / "map.yaml" if (map_path / "map.yaml").is_file() else map_path]
-    if map_path.is_dir() and (map_path / "doors.parquet").exists():
-        inputs.append(map_path / "doors.parquet")
+    inputs = [log_path, *map_input_files(map_path)]
     manifest = Manifest.start(config.as_dict(), inputs, command="localize", method=method, init=init)
     timer = StageTimer()
     with timer("map"):

@@ -243,6 +243,8 @@ def test_the_map_yaml_of_a_map_directory_keeps_its_doors(sample_map: Path, tmp_p
     states = read_table("door_states", run / "door_states.parquet")
     assert len(states) > 0 and set(states.column("door_id").to_pylist()) == set(
         read_table("doors", sample_map / "doors.parquet").column("door_id").to_pylist())
+    inputs = [Path(i["path"]).name for i in json.loads((run / "manifest.json").read_text())["inputs"]]
+    assert inputs == ["loc_open.mcap", "map.yaml", "doors.parquet"]  # every file the run used
 
 
 def test_a_folder_without_map_yaml_is_named_as_such(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
