@@ -32,6 +32,7 @@ import math
 from collections import defaultdict
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -111,6 +112,8 @@ def with_setups_told_apart(runs: Sequence[RunTables]) -> list[RunTables]:
     for run in runs:
         if not run.params:
             setups[(run.log, run.method)].add((run.init, run.map_path))
+    maps = {r.map_path for r in runs if r.map_path is not None}
+    label = _short_labels(maps)
     out = []
     for run in runs:
         seen = setups.get((run.log, run.method), set())
@@ -121,9 +124,21 @@ def with_setups_told_apart(runs: Sequence[RunTables]) -> list[RunTables]:
         if len({init for init, _ in seen}) > 1:
             params["init"] = run.init
         if len({m for _, m in seen}) > 1:
-            params["map"] = run.map_path
+            params["map"] = label.get(run.map_path) if run.map_path is not None else None
         out.append(replace(run, params=params))
     return out
+
+
+def _short_labels(paths: set[str]) -> dict[str, str]:
+    """A name for each map in the report: its folder (``.../site_a/map/map.yaml`` → ``map``), with parent folders
+    added until the names differ (``site_a/map``), so that labels do not depend on where the files live."""
+    parts = {p: Path(p).parent.parts if Path(p).name == "map.yaml" else Path(p).parts for p in paths}
+    depth = 1
+    while True:
+        names = {p: "/".join(parts[p][-depth:]) for p in paths}
+        if len(set(names.values())) == len(paths) or depth >= max((len(v) for v in parts.values()), default=1):
+            return names
+        depth += 1
 
 
 def run_tables_from_result(result: LocalizationResult, *, name: str | None = None, init: str = "reference",
