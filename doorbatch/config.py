@@ -874,6 +874,7 @@ def load_config(
             tree = deep_merge(translate_ros2_parameter_file(tree, source).tree, own)
         else:
             refuse_ros1_amcl_file(tree, source)
+    overrides = list(overrides)
     if extra:
         tree = deep_merge(tree, extra)
     for text in overrides:

@@ -23,7 +23,7 @@ from doorbatch.io.decode import decode_scan, decode_transforms, stamp_to_ns
 from doorbatch.io.map_topic import OCCUPANCY_GRID
 from doorbatch.io.pose_topic import POSE_TYPES
 from doorbatch.io.reader import open_log
-from doorbatch.io.recording import missing_laser_tf_hint, odometry_frame, odometry_frame_note
+from doorbatch.io.recording import clock_lags_s, missing_laser_tf_hint, odometry_frame, odometry_frame_note
 from doorbatch.io.roles import TopicInfo
 from doorbatch.records import Role
 
@@ -102,7 +102,8 @@ class _TopicStats:
     first_backwards: str = ""
     periods: list[int] = field(default_factory=list)
     unset_stamps: int = 0  # header stamps of 0
-    lags: list[int] = field(default_factory=list)  # header stamp − log time, scan and odometry topics only
+    stamps: list[int] = field(default_factory=list)  # header stamps and log times of scan and odometry topics
+    log_times: list[int] = field(default_factory=list)
 
 
 def _size(path: Path) -> int:
@@ -148,8 +149,9 @@ def inspect_log(path: Path, config: DoorbatchConfig | None = None,
             stamp = _header_stamp(raw.msg)
             if stamp == 0:
                 st.unset_stamps += 1
-            elif stamp is not None and role_of.get(raw.topic) in (Role.SCAN, Role.ODOMETRY):
-                st.lags.append(stamp - raw.log_time_ns)
+            if stamp is not None and role_of.get(raw.topic) in (Role.SCAN, Role.ODOMETRY):
+                st.stamps.append(stamp)
+                st.log_times.append(raw.log_time_ns)
             if stamp is not None:
                 if st.last_stamp_ns is not None and stamp < st.last_stamp_ns:
                     st.backwards += 1
@@ -251,10 +253,12 @@ def _check_stamps(report: LogReport, stats: dict[str, _TopicStats], role_of: dic
 def _check_clocks(report: LogReport, stats: dict[str, _TopicStats], role_of: dict[str, Role],
                   mismatch_s: float) -> None:
     """Scan and odometry header stamps on two clocks (:func:`doorbatch.io.recording.on_one_clock`)."""
-    lag = {role: float(np.median(st.lags)) / 1e9 for name, st in stats.items()
-           if st.lags and (role := role_of.get(name)) in (Role.SCAN, Role.ODOMETRY)}
-    if len(lag) == 2 and abs(lag[Role.SCAN] - lag[Role.ODOMETRY]) > mismatch_s:
+    of = {role_of.get(name): st for name, st in stats.items() if st.stamps}
+    scan, odom = of.get(Role.SCAN), of.get(Role.ODOMETRY)
+    lags = None if scan is None or odom is None else clock_lags_s(scan.stamps, scan.log_times, odom.stamps,
+                                                                  odom.log_times, mismatch_s)
+    if lags is not None:
         report.problems.append(Problem(
             Severity.WARNING, None, f"scan and odometry header stamps are on different clocks (median stamp − log "
-                                    f"time {lag[Role.SCAN]:+.3f} s and {lag[Role.ODOMETRY]:+.3f} s): map and "
-                                    f"localize time them by their log times"))
+                                    f"time {lags[0]:+.3f} s and {lags[1]:+.3f} s): map and localize time them by "
+                                    f"their log times"))

@@ -127,6 +127,10 @@ class LogReader(ABC):
                  stop_ns: int | None = None) -> Iterator[RoleMessage]:
         """Records of the requested roles (all assigned roles when None) in log-time order.
 
+        A message that cannot be decoded (:class:`~doorbatch.errors.LogContentError`) is skipped; once the
+        iteration is complete, a topic with such messages gets a warning in ``warnings``, or, when they are
+        most of its messages, the first one's error is raised. A caller that stops early gets neither.
+
         A log without an odometry topic has none here: :func:`~doorbatch.io.recording.tf_odometry` derives it
         from the whole TF tree (DESIGN.md, Inputs: TF odom→base_link).
         """

@@ -7,6 +7,7 @@ Images are never loaded here; stages that need them stream the log themselves.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -232,6 +233,19 @@ class OneClock:
     notes: list[str]
 
 
+def clock_lags_s(scan_stamps_ns: Sequence[int], scan_log_ns: Sequence[int], odom_stamps_ns: Sequence[int],
+                 odom_log_ns: Sequence[int], mismatch_s: float) -> tuple[float, float] | None:
+    """The median (header stamp − log time) of scans and of odometry, in s, when they differ by more than
+    ``mismatch_s`` (two clocks), else None. Unset stamps (0) are left out. Odometry only from TF (no log
+    times here) is not compared: a known gap."""
+    def lag(stamps: Sequence[int], logged: Sequence[int]) -> float | None:
+        d = [t - g for t, g in zip(stamps, logged, strict=True) if t != 0]
+        return float(np.median(d)) / 1e9 if d else None
+
+    a, b = lag(scan_stamps_ns, scan_log_ns), lag(odom_stamps_ns, odom_log_ns)
+    return (a, b) if a is not None and b is not None and abs(a - b) > mismatch_s else None
+
+
 def on_one_clock(scans: list[Scan], odom: list[Pose2D], ref: list[Pose2D], mismatch_s: float) -> OneClock:
     """Scans and poses whose header stamps can be put on one time line, in stamp order, and notes saying what
     was done. A header stamp of 0 is unset: the message's log time stands in. Scans and odometry whose median
@@ -241,6 +255,8 @@ def on_one_clock(scans: list[Scan], odom: list[Pose2D], ref: list[Pose2D], misma
     """
     notes: list[str] = []
     header = [s.stamp_ns for s in scans]
+    lags = clock_lags_s([s.stamp_ns for s in scans], [s.log_time_ns for s in scans],
+                        [p.stamp_ns for p in odom], [p.log_time_ns for p in odom], mismatch_s)
     for name, records in (("scans", scans), ("odometry poses", odom), ("reference poses", ref)):
         unset = sum(r.stamp_ns == 0 for r in records)
         if unset:
@@ -248,15 +264,12 @@ def on_one_clock(scans: list[Scan], odom: list[Pose2D], ref: list[Pose2D], misma
     scans = [replace(s, stamp_ns=s.log_time_ns) if s.stamp_ns == 0 else s for s in scans]
     odom = [replace(p, stamp_ns=p.log_time_ns) if p.stamp_ns == 0 else p for p in odom]
     ref = [replace(p, stamp_ns=p.log_time_ns) if p.stamp_ns == 0 else p for p in ref]
-    if scans and odom:
-        lag_scan = float(np.median([s.stamp_ns - s.log_time_ns for s in scans])) / 1e9
-        lag_odom = float(np.median([p.stamp_ns - p.log_time_ns for p in odom])) / 1e9
-        if abs(lag_scan - lag_odom) > mismatch_s:
-            notes.append(f"scan and odometry header stamps are on different clocks (median stamp − log time "
-                         f"{lag_scan:+.3f} s and {lag_odom:+.3f} s): every scan and pose is timed by its log time")
-            scans = [replace(s, stamp_ns=s.log_time_ns) for s in scans]
-            odom = [replace(p, stamp_ns=p.log_time_ns) for p in odom]
-            ref = [replace(p, stamp_ns=p.log_time_ns) for p in ref]
+    if lags is not None:
+        notes.append(f"scan and odometry header stamps are on different clocks (median stamp − log time "
+                     f"{lags[0]:+.3f} s and {lags[1]:+.3f} s): every scan and pose is timed by its log time")
+        scans = [replace(s, stamp_ns=s.log_time_ns) for s in scans]
+        odom = [replace(p, stamp_ns=p.log_time_ns) for p in odom]
+        ref = [replace(p, stamp_ns=p.log_time_ns) for p in ref]
     stamps = np.array([s.stamp_ns for s in scans], dtype=np.int64)
     back = int(np.count_nonzero(np.diff(stamps) < 0))
     if back:
@@ -264,6 +277,23 @@ def on_one_clock(scans: list[Scan], odom: list[Pose2D], ref: list[Pose2D], misma
         scans, header = [scans[i] for i in order], [header[i] for i in order]
         notes.append(f"scan header stamps go backwards {back} time(s) in log order: scans sorted by stamp")
     return OneClock(scans, odom, ref, header, notes)
+
+
+def scan_colors(colors: Sequence[BeamColors], header_stamps_ns: Sequence[int], log_times_ns: Sequence[int],
+                tolerance_ns: int) -> list[BeamColors | None]:
+    """Each scan's colours: the message with the scan's header stamp; for a scan with header stamp 0 (unset),
+    the unstamped colour message logged nearest to it within ``tolerance_ns``."""
+    by_stamp = {c.stamp_ns: c for c in colors if c.stamp_ns != 0}
+    unset = sorted((c for c in colors if c.stamp_ns == 0), key=lambda c: c.log_time_ns)
+    times = np.array([c.log_time_ns for c in unset], dtype=np.int64)
+    out: list[BeamColors | None] = []
+    for stamp, logged in zip(header_stamps_ns, log_times_ns, strict=True):
+        if stamp != 0 or not unset:
+            out.append(by_stamp.get(stamp) if stamp != 0 else None)
+            continue
+        k = int(np.argmin(np.abs(times - logged)))
+        out.append(unset[k] if abs(int(times[k]) - logged) <= tolerance_ns else None)
+    return out
 
 
 def load_recording(path: Path, config: DoorbatchConfig | None = None, with_colors: bool = False) -> Recording:
@@ -281,7 +311,7 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
     scans: list[Scan] = []
     odom: list[Pose2D] = []
     ref: list[Pose2D] = []
-    colors: dict[int, BeamColors] = {}
+    colors: list[BeamColors] = []
     with open_log(path, config) as reader:
         tf = read_transforms(reader, config)
         scan_topic = reader.roles.topic(Role.SCAN)
@@ -296,7 +326,7 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
             elif item.role is Role.REFERENCE and isinstance(rec, Pose2D):
                 ref.append(rec)
             elif item.role is Role.COLORS and isinstance(rec, BeamColors):
-                colors[rec.stamp_ns] = rec
+                colors.append(rec)
         timed = on_one_clock(scans, odom, ref, config.io.clock_mismatch_s)
         scans = timed.scans
         odometry, reference, notes = robot_pose_series(timed.odom, timed.ref, tf,
@@ -328,9 +358,10 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
     )
     aligned = None
     valid = None
-    if with_colors and colors:  # a scan's colours carry its header stamp as logged
-        aligned = [_aligned_colors(colors.get(t), s.ranges.shape[0]) for s, t in zip(scans, timed.header_stamps_ns,
-                                                                                      strict=True)]
+    if with_colors and colors:
+        found = scan_colors(colors, timed.header_stamps_ns, [s.log_time_ns for s in scans],
+                            int(config.io.stamp_tolerance_s * 1e9))
+        aligned = [_aligned_colors(c, s.ranges.shape[0]) for s, c in zip(scans, found, strict=True)]
     elif with_colors and camera:  # no /scan_colors: project the scan into the camera images
         from doorbatch.io.camera_colors import camera_beam_colors
 

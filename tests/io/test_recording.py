@@ -170,3 +170,15 @@ def test_scans_logged_out_of_stamp_order_are_sorted(write_log: Callable[..., Pat
     assert np.all(np.diff(rec.scans.stamps_ns) > 0)
     np.testing.assert_array_equal(rec.scans.ranges[2], scans[3].ranges)  # the ranges follow their stamp
     assert any("go backwards 1 time(s)" in w for w in rec.warnings)
+
+
+def test_unstamped_colours_go_to_the_unstamped_scan_logged_with_them(write_log: Callable[..., Path]) -> None:
+    messages = _restamped(_restamped(sample_messages(6, beams=91), "/scan", lambda k, t: 0),
+                          "/scan_colors", lambda k, t: 0)
+    rec = load_recording(write_log("zero_colours.mcap", messages), with_colors=True)
+    clouds = [msg for name, _, _, msg in messages if name == "/scan_colors"]
+    stamped = load_recording(write_log("stamped.mcap", sample_messages(6, beams=91)), with_colors=True)
+    assert rec.colors is not None and stamped.colors is not None and len(clouds) == 6
+    for k in range(6):  # the same colours as when every message carries its stamp, not the last cloud's
+        np.testing.assert_array_equal(rec.colors[k], stamped.colors[k])
+    assert not np.array_equal(rec.colors[0], rec.colors[5])
