@@ -69,7 +69,7 @@ def read_reference(path: Path, config: DoorbatchConfig) -> ReferenceTrajectory:
     rec = load_recording(path, config)
     if rec.reference is None:
         raise InputDataError("--reference: the log has no reference pose topic", path=path)
-    return ReferenceTrajectory(rec.reference.stamps_ns, rec.reference.poses)
+    return ReferenceTrajectory(rec.reference.stamps_ns, rec.reference.poses, tuple(rec.warnings))
 
 
 def _sibling(log_path: Path, kind: str) -> Path:

@@ -576,3 +576,13 @@ def test_real_log_roles_and_time_order(name: str) -> None:
         assert times[0] == reader.start_ns and times[-1] == reader.end_ns
         # these logs have zero or garbage stamps in places: the reader says so
         assert reader.warnings
+
+
+def test_a_reference_read_from_a_repaired_log_carries_the_repair_warning(tmp_path: Path) -> None:
+    """evaluate --reference LOG (or the log beside a run) records the reader's repairs in its manifest."""
+    from doorbatch.io.run_reader import read_reference
+
+    lines = simple_log(n_scans=10, t0=100.0)
+    lines[6] = lines[6].replace("100.500000", "99.000000")
+    reference = read_reference(write_log(tmp_path / "a.log", lines), DoorbatchConfig())
+    assert len(reference.stamps_ns) == 10 and any("out of order" in w for w in reference.warnings)

@@ -59,10 +59,12 @@ Int64Array = npt.NDArray[np.int64]
 
 @dataclass(frozen=True)
 class ReferenceTrajectory:
-    """Reference poses (ground truth or SLAM): (N,) stamps in ns, (N, 3) x, y, yaw in the map frame."""
+    """Reference poses (ground truth or SLAM): (N,) stamps in ns, (N, 3) x, y, yaw in the map frame; the
+    warnings of reading them from their log (e.g. repaired CARMEN stamps)."""
 
     stamps_ns: Int64Array
     pose: FloatArray
+    warnings: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,6 @@ manifest.json into ``out_dir``.
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -36,8 +35,6 @@ from doorbatch.io.run_reader import (
 )
 from doorbatch.io.sim_truth import read_truth
 from doorbatch.pipeline.evaluate.report import Evaluation, MapTables, RunTables, evaluate_runs
-
-log = logging.getLogger(__name__)
 
 
 def _names(dirs: Sequence[Path]) -> list[str]:
@@ -91,12 +88,14 @@ def evaluate_run_dirs(run_dirs: Sequence[Path], out_dir: Path, config: Doorbatch
         UsageError: another localizer's trajectory without ``reference``.
         PipelineError: a run whose stamps match none of its reference's.
     """
-    unique = list(dict.fromkeys(str(d) if ":/" in str(d) else str(Path(d).resolve()) for d in run_dirs))
-    if len(unique) < len(run_dirs):  # the same run twice would count twice in every mean
-        log.warning("%d argument(s) named a run already given: each is evaluated once", len(run_dirs) - len(unique))
+    # LOG:/TOPIC stays as written (split_pose_topic_run); a path is resolved, so two spellings are one run
+    unique = list(dict.fromkeys(str(d) if split_pose_topic_run(Path(d)) else str(Path(d).resolve())
+                                for d in run_dirs))
     items = [_classify(Path(d), reference) for d in unique]
     manifest = Manifest.start(config.as_dict(), [*(i.file for i in items), *(p for p in (reference, truth) if p)],
                               command="evaluate")
+    if len(unique) < len(run_dirs):  # the same run twice would count twice in every mean
+        manifest.warn(f"{len(run_dirs) - len(unique)} argument(s) named a run already given: each is evaluated once")
     labelled = list(zip(items, _names([i.path for i in items]), strict=True))
     run_dirs_read = iter(read_run_dirs([i.path for i, _ in labelled if i.kind == "run"], config,
                                        [n for i, n in labelled if i.kind == "run"], find_reference=reference is None))
@@ -120,6 +119,9 @@ def evaluate_run_dirs(run_dirs: Sequence[Path], out_dir: Path, config: Doorbatch
         if ref is None and run.reference is None:
             manifest.warn(f"run {run.name}: no reference trajectory (none beside its log, no --reference): "
                           f"convergence metrics only")
+    references = [r for r in (ref, *(run.reference for run in runs)) if r is not None]
+    for warning in dict.fromkeys(w for r in references for w in r.warnings):  # once each, in order
+        manifest.warn(warning)
     manifest.extra.update({"runs": len(runs), "maps": len(maps)})
     manifest.finish(timer)
     manifest.write(out_dir / "manifest.json")
