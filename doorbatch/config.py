@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from doorbatch.amcl_params import is_ros2_parameter_file, refuse_ros1_amcl_file, translate_ros2_parameter_file
 from doorbatch.errors import ConfigError, UsageError
@@ -663,6 +663,12 @@ class DoorPoseConfig(Section):
     class_names: list[str] = ["door", "handle"]
     door_class: str = "door"
     handle_class: str = "handle"
+
+    @field_validator("door_class", "handle_class", mode="before")
+    @classmethod
+    def _class_as_text(cls, value: object) -> object:
+        """``door_class: 0`` in YAML is the class id 0 (vision_msgs ids are text or integers)."""
+        return str(value) if isinstance(value, int) and not isinstance(value, bool) else value
     # YOLO inference: square letterbox input, score threshold (v5: objectness × class), NMS IoU threshold.
     input_size_px: int = Field(640, ge=32)
     confidence_threshold: float = Field(0.25, ge=0.0, le=1.0)
@@ -711,7 +717,8 @@ class DoorPoseConfig(Section):
     def _stable_gains(self) -> DoorPoseConfig:
         if self.k_alpha - self.k_rho <= 0.0:
             raise ValueError("k_alpha - k_rho must be > 0 (stability of the polar control law)")
-        if self.door_class not in self.class_names and self.detector != "topic":
+        index = self.door_class.isdigit() and int(self.door_class) < len(self.class_names)
+        if self.door_class not in self.class_names and not index and self.detector != "topic":
             raise ValueError(f"door_class {self.door_class!r} is not in class_names {self.class_names}")
         return self
 

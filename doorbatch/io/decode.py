@@ -246,21 +246,20 @@ def decode_camera_info(msg: Any, log_time_ns: int) -> CameraInfo:
 ROS1_CLASS_NAMES = ("door", "handle")
 
 
-def ros1_class_name(class_id: int) -> str:
-    """Class name of a ROS 1 integer class id (its index in :data:`ROS1_CLASS_NAMES`, else the number)."""
-    return ROS1_CLASS_NAMES[class_id] if 0 <= class_id < len(ROS1_CLASS_NAMES) else str(class_id)
-
-
 def ros1_class_id(name: str) -> int:
-    """Inverse of :func:`ros1_class_name`."""
+    """The ROS 1 integer class id doorbatch writes for a class name: its index in :data:`ROS1_CLASS_NAMES`
+    (the default ``doorpose.class_names``, which reads it back), a number as it is."""
     return ROS1_CLASS_NAMES.index(name) if name in ROS1_CLASS_NAMES else int(name)
 
 
 def _detection(det: Any) -> Detection:
+    """One box with its best hypothesis. The class id is kept as the log gives it, as text: Humble's
+    ``hypothesis.class_id``, Foxy's string ``id``, Noetic's int64 ``id`` ("0"); a numeric id is an index
+    into the detector's label list (``doorpose.class_names``), resolved where the classes are used."""
     best_id, best_score = "", 0.0
     for hyp in det.results:
-        inner = getattr(hyp, "hypothesis", None)  # ROS 2: results[i].hypothesis.class_id
-        class_id = str(inner.class_id) if inner is not None else ros1_class_name(int(hyp.id))
+        inner = getattr(hyp, "hypothesis", None)  # ROS 2 Galactic on: results[i].hypothesis.class_id
+        class_id = str(inner.class_id if inner is not None else hyp.id)
         score = float(inner.score if inner is not None else hyp.score)
         if score >= best_score:
             best_id, best_score = class_id, score

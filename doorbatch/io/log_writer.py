@@ -49,14 +49,14 @@ def to_ros2(raw: RawMessage, cache: dict[str, object], target: Typestore) -> tup
     into it from its ROS 1 definition, with the ROS 2 layouts of the types it uses.
     """
     if not raw.ros1:
-        if raw.msgtype in target.types or raw.store is None:
+        if raw.store is None or _same_layout(raw.store, target, raw.msgtype, cache):
             return raw.msg, target
-        return raw.msg, raw.store
+        if raw.msgtype == DETECTION2D_ARRAY:  # vision_msgs 2.x/3.x (Foxy, Galactic): into Humble's layout
+            return _humble_detections(raw), target
+        return raw.msg, raw.store  # another ROS 2 layout of a type: written with its own definition
     src = raw.store or ros1_typestore()
     if raw.msgtype == DETECTION2D_ARRAY:  # layouts differ beyond renames; keeps each box's best hypothesis
-        rec = decode_detections(raw.msg, raw.log_time_ns)
-        boxes = [(d.class_id, d.score, d.center_x, d.center_y, d.size_x, d.size_y) for d in rec.detections]
-        return detection_array(rec.stamp_ns, rec.frame_id, boxes), target
+        return _humble_detections(raw), target
     if raw.msgtype not in target.types:
         register_ros1_type(target, src, raw.msgtype)
     return migrate_message(src, target, raw.msgtype, raw.msgtype, cache, raw.msg), target
@@ -168,6 +168,23 @@ class LogWriter:
                     self.tmp.replace(self.path)
             else:
                 _remove(self.tmp)
+
+
+def _same_layout(source: Typestore, target: Typestore, msgtype: str, cache: dict[str, object]) -> bool:
+    """Whether ``target`` defines ``msgtype`` as ``source`` does (a log's own schema may be an older layout:
+    vision_msgs' Detection2D changed between Foxy, Galactic and Humble). Cached per type."""
+    key = f"same layout:{msgtype}"
+    if key not in cache:
+        cache[key] = msgtype in target.types and (
+            source.generate_msgdef(msgtype, ros_version=2)[0] == target.generate_msgdef(msgtype, ros_version=2)[0])
+    return bool(cache[key])
+
+
+def _humble_detections(raw: RawMessage) -> Any:
+    """A Detection2DArray of any layout as Humble's (each box with its best hypothesis)."""
+    rec = decode_detections(raw.msg, raw.log_time_ns)
+    boxes = [(d.class_id, d.score, d.center_x, d.center_y, d.size_x, d.size_y) for d in rec.detections]
+    return detection_array(rec.stamp_ns, rec.frame_id, boxes)
 
 
 def detections_to_ros1(msg: Any) -> Any:

@@ -16,7 +16,7 @@ In the camera's horizontal plane (optical x right, z forward; the paper's 2D ass
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from enum import StrEnum
 
 import numpy as np
@@ -42,6 +42,22 @@ class HandleSide(StrEnum):
 def box_edges_px(box: Detection) -> tuple[float, float]:
     """Left and right edge columns (u_min, u_max) of a box given by centre and size."""
     return box.center_x - box.size_x / 2, box.center_x + box.size_x / 2
+
+
+def class_name(class_id: str, class_names: Sequence[str]) -> str:
+    """A box's class: its id when that is a name, else the name at that index of the detector's label list
+    (vision_msgs ids are indices a label map resolves: Isaac ROS publishes "0", Noetic int64 0). The config's
+    ``door_class`` and ``handle_class`` are resolved the same way, so either a name or an id may name them."""
+    if class_id in class_names or not class_id.isdigit() or int(class_id) >= len(class_names):
+        return class_id
+    return class_names[int(class_id)]
+
+
+def usable_detections(detections: Sequence[Detection], config: DoorPoseConfig) -> list[Detection]:
+    """The boxes at or above ``confidence_threshold`` (a detector may publish everything above 0.01), with
+    their classes resolved by :func:`class_name`."""
+    return [replace(d, class_id=class_name(d.class_id, config.class_names)) for d in detections
+            if d.score >= config.confidence_threshold]
 
 
 def select_door_box(detections: Sequence[Detection], image_width_px: int, door_class: str,
@@ -107,7 +123,9 @@ def estimate_door(camera: PinholeCamera, detections: Sequence[Detection], points
     """One door estimate from one image's boxes and one scan's points in the camera frame (module docstring);
     None when no door box is usable, too few points fall between the rays, the rays miss the line, or the
     width is not a door's."""
-    box = select_door_box(detections, camera.width, config.door_class, config.border_margin_px)
+    detections = usable_detections(detections, config)
+    door_class, handle_class = (class_name(c, config.class_names) for c in (config.door_class, config.handle_class))
+    box = select_door_box(detections, camera.width, door_class, config.border_margin_px)
     if box is None:
         return None
     beta_l, beta_r = column_bearings(camera, box_edges_px(box))
@@ -130,7 +148,7 @@ def estimate_door(camera: PinholeCamera, detections: Sequence[Detection], points
     if normal @ center > 0.0:  # point from the door toward the camera at the origin
         normal = -normal
     return CameraDoor(left, right, center, normal, width, center + config.goal_offset_m * normal,
-                      handle_side(box, detections, config.handle_class), box, pts, line)
+                      handle_side(box, detections, handle_class), box, pts, line)
 
 
 @dataclass(frozen=True)

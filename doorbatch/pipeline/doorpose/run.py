@@ -27,7 +27,7 @@ from doorbatch.io.doorpose_inputs import DoorPoseInputs
 from doorbatch.io.recording import PoseSeries
 from doorbatch.maps import DoorSet
 from doorbatch.pipeline.doorpose.association import associate
-from doorbatch.pipeline.doorpose.fusion import estimate_door, to_planar
+from doorbatch.pipeline.doorpose.fusion import class_name, estimate_door, to_planar
 from doorbatch.pipeline.doorpose.line_fit import LineFit
 from doorbatch.records import Detection
 
@@ -107,9 +107,11 @@ def estimate_door_poses(inputs: DoorPoseInputs, config: DoorbatchConfig, doors: 
     warnings: list[str] = []
     out: list[DoorPoseEstimate] = []
     paired = 0
+    classes: set[str] = set()  # the box classes seen, as resolved (for the warning when none is a door)
     for boxes in inputs.detections:
         if progress is not None:
             progress(1)
+        classes.update(class_name(d.class_id, dc.class_names) for d in boxes.detections)
         i = nearest_scan(scan_stamps, boxes.stamp_ns, tol)
         if i is None or not boxes.detections:
             continue
@@ -138,6 +140,13 @@ def estimate_door_poses(inputs: DoorPoseInputs, config: DoorbatchConfig, doors: 
                                     door.box, camera.frame_id))
     if len(warnings) > 3:
         warnings = [*warnings[:3], f"... and {len(warnings) - 3} more images skipped for missing transforms"]
+    door_class = class_name(dc.door_class, dc.class_names)
+    if classes and door_class not in classes:
+        warnings.append(f"no box of class {door_class!r} in {len(inputs.detections)} detection messages; classes "
+                        f"seen: {', '.join(sorted(classes))} (doorpose.door_class, doorpose.class_names)")
+    if inputs.detections and paired == 0:
+        warnings.append(f"none of {len(inputs.detections)} detection messages has a scan within "
+                        f"{config.io.stamp_tolerance_s} s of its stamp (io.stamp_tolerance_s; unset stamps?)")
     return DoorPoses(Path(inputs.path).name, method.value, frame, out, len(inputs.detections), paired,
                      [*inputs.warnings, *warnings])
 

@@ -67,6 +67,11 @@ def test_doorpose_writes_door_poses_matched_to_the_map(tmp_path: Path, capsys: p
     assert topics.count("/scan") == 8  # the input is kept
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["extra"]["matched"] == n
+    # the same log with another detector's label order: no door box at all, and the manifest says why
+    other = tmp_path / "run_labels"
+    assert main(["doorpose", str(log), "-o", str(other), "--set", "doorpose.door_class=window", "-q"]) == 0
+    warnings = json.loads((other / "manifest.json").read_text())["warnings"]
+    assert any("no box of class 'window'" in w and "classes seen: door" in w for w in warnings)
 
 
 def test_doorpose_without_camera_info_is_bad_input(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

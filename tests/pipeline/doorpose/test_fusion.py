@@ -100,3 +100,25 @@ def test_too_few_points_between_the_rays_give_no_estimate() -> None:
     edges, points = _door((0.0, 2.0), 0.0)
     far_right = points[points[:, 0] > 1.0]
     assert estimate_door(CAMERA, [_box(edges)], far_right, DoorPoseConfig(), np.random.default_rng(0)) is None
+
+
+def test_numeric_class_ids_are_indices_into_the_label_list() -> None:
+    """vision_msgs ids are indices a label map resolves (Isaac ROS publishes "0", Noetic int64 0)."""
+    edges, points = _door((0.1, 2.5), 0.2)
+    other, _ = _door((-0.6, 3.0), 0.0, width=0.6)  # a wrong box: a door-sized box of another class
+    boxes = [_box(edges, 0.8, "1"), _box(other, 0.9, "0")]
+    labels = DoorPoseConfig(class_names=["person", "door", "handle"])  # door is class 1 of this model
+    door = estimate_door(CAMERA, boxes, points, labels, np.random.default_rng(0))
+    assert door is not None and door.center_xz == pytest.approx([0.1, 2.5], abs=1e-6)
+    numeric = DoorPoseConfig.model_validate({"door_class": 1, "handle_class": 2, "class_names": ["a", "b", "c"]})
+    assert numeric.door_class == "1"  # a YAML integer names the class id
+    assert estimate_door(CAMERA, boxes, points, numeric, np.random.default_rng(0)) is not None
+
+
+def test_boxes_below_the_confidence_threshold_are_not_doors() -> None:
+    edges, points = _door((0.1, 2.5), 0.2)
+    weak, _ = _door((-0.5, 2.5), 0.0)
+    boxes = [_box(weak, 0.08), _box(edges, 0.5)]  # a detector that publishes everything above 0.05
+    door = estimate_door(CAMERA, boxes, points, DoorPoseConfig(), np.random.default_rng(0))
+    assert door is not None and door.center_xz == pytest.approx([0.1, 2.5], abs=1e-6)
+    assert estimate_door(CAMERA, boxes[:1], points, DoorPoseConfig(), np.random.default_rng(0)) is None
