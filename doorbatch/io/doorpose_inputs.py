@@ -11,7 +11,8 @@ from pathlib import Path
 from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import LogContentError
 from doorbatch.geometry.tf_buffer import TfBuffer
-from doorbatch.io.reader import open_log
+from doorbatch.io.decode import CAMERA_INFO, decode_camera_info
+from doorbatch.io.reader import LogReader, open_log
 from doorbatch.io.recording import PoseSeries, read_transforms, robot_pose_series
 from doorbatch.records import CameraInfo, Detection, Detections, Image, Pose2D, Role, Scan
 
@@ -56,7 +57,12 @@ def read_doorpose_inputs(path: Path, config: DoorbatchConfig, detector: ImageDet
                             "a vision_msgs/Detection2DArray topic (or give --detector MODEL)")):
             if reader.roles.topic(role) is None:
                 raise LogContentError(f"doorpose needs {what}", path=path)
-        for item in reader.messages(roles):
+        info_topic, note = _camera_info_of_boxes(reader, box_role, config)
+        warnings_pre = [note] if note else []
+        if info_topic is not None:
+            info = next((decode_camera_info(raw.msg, raw.log_time_ns) for raw in reader.raw_messages([info_topic])),
+                        None)
+        for item in reader.messages([r for r in roles if r is not Role.CAMERA_INFO or info_topic is None]):
             rec = item.record
             if isinstance(rec, Scan):
                 scans.append(rec)
@@ -70,10 +76,35 @@ def read_doorpose_inputs(path: Path, config: DoorbatchConfig, detector: ImageDet
                 boxes.append(Detections(rec.stamp_ns, rec.log_time_ns, rec.frame_id, detector(rec)))
         odometry, reference, notes = robot_pose_series(odom, ref, tf, reader.roles.topic(Role.ODOMETRY) is not None,
                                                        config.frames)
-        warnings = list(reader.warnings) + notes
+        warnings = [*reader.warnings, *warnings_pre, *notes]
     if info is None:
         raise LogContentError("camera_info topic has no messages", path=path)
     if not scans:
         raise LogContentError("scan topic has no messages", path=path)
     return DoorPoseInputs(str(path), tf, info, sorted(scans, key=lambda s: s.stamp_ns),
                           sorted(boxes, key=lambda d: d.stamp_ns), reference, odometry, warnings)
+
+
+def _camera_info_of_boxes(reader: LogReader, box_role: Role, config: DoorbatchConfig) -> tuple[str | None, str | None]:
+    """The CameraInfo topic of the camera the boxes (or images) come from, in a log with several cameras
+    (a RealSense publishes colour, depth and infrared CameraInfo): the one whose ``frame_id`` is the boxes'
+    frame, else the one beside the boxes' topic (image_transport: ``.../camera_info`` next to ``.../image*``).
+    None (with no note) when the log has one CameraInfo topic or the config names it; then the role's topic is
+    used. The note says when the choice was a guess."""
+    infos = sorted(t.name for t in reader.topics.values() if t.msgtype == CAMERA_INFO)
+    box_topic = reader.roles.topic(box_role)
+    if len(infos) < 2 or config.topics.camera_info is not None or box_topic is None:
+        return None, None
+    box_frame = next((str(raw.msg.header.frame_id).lstrip("/") for raw in reader.raw_messages([box_topic])), None)
+    frames = {name: next((str(raw.msg.header.frame_id).lstrip("/") for raw in reader.raw_messages([name])), "")
+              for name in infos}
+    same_frame = [name for name in infos if box_frame and frames[name] == box_frame]
+    if len(same_frame) == 1:
+        return same_frame[0], None
+    namespace = box_topic.rsplit("/", 1)[0]
+    beside = [name for name in (same_frame or infos) if name.rsplit("/", 1)[0] == namespace]
+    if len(beside) == 1:
+        return beside[0], None
+    chosen = reader.roles.topic(Role.CAMERA_INFO)
+    return chosen, (f"{len(infos)} CameraInfo topics and none matches the frame {box_frame!r} of {box_topic}: "
+                    f"using {chosen} (set topics.camera_info)")

@@ -14,9 +14,11 @@ from tests.conftest import T0, write_messages
 STEP_NS = 200_000_000
 
 
-def door_log(path: Path, scene: DoorScene, poses: np.ndarray, rng: np.random.Generator, images: bool = False) -> Path:
+def door_log(path: Path, scene: DoorScene, poses: np.ndarray, rng: np.random.Generator, images: bool = False,
+             other_cameras: tuple[tuple[str, str, float], ...] = (), info_topic: str = "/camera/camera_info") -> Path:
     """A log of the robot at ``poses`` in a door scene: static TF, camera_info, and per pose ground truth, a
-    scan, the detector's boxes (5 ms later) and, with ``images``, the rendered image."""
+    scan, the detector's boxes (5 ms later) and, with ``images``, the rendered image. ``other_cameras``: more
+    CameraInfo topics (topic, frame, focal length in px), as a RealSense publishes for depth and infrared."""
     cam = scene.camera_model
     lm = scene.laser
     msgs: list[tuple[str, str, int, object]] = [
@@ -24,8 +26,10 @@ def door_log(path: Path, scene: DoorScene, poses: np.ndarray, rng: np.random.Gen
             m.planar_transform(T0, "base_link", LASER_FRAME, lm.mount_xy_m[0], lm.mount_xy_m[1], 0.0, z=lm.mount_z_m),
             m.transform_stamped(T0, "base_link", CAMERA_FRAME, (*cam.mount_xy_m, cam.mount_z_m),
                                 tuple(camera_rotation_xyzw(cam.mount_yaw_rad)))])),
-        ("/camera/camera_info", "sensor_msgs/msg/CameraInfo", T0,
-         m.camera_info(T0, CAMERA_FRAME, cam.width, cam.height, cam.k)),
+        (info_topic, "sensor_msgs/msg/CameraInfo", T0, m.camera_info(T0, CAMERA_FRAME, cam.width, cam.height, cam.k)),
+        *((topic, "sensor_msgs/msg/CameraInfo", T0,
+           m.camera_info(T0, frame, cam.width, cam.height, [[f, 0, cam.width / 2], [0, f, cam.height / 2], [0, 0, 1]]))
+          for topic, frame, f in other_cameras),
     ]
     for i, pose in enumerate(poses):
         t = T0 + STEP_NS * (i + 1)

@@ -74,6 +74,20 @@ def test_doorpose_writes_door_poses_matched_to_the_map(tmp_path: Path, capsys: p
     assert any("no box of class 'window'" in w and "classes seen: door" in w for w in warnings)
 
 
+def test_in_a_log_with_several_cameras_the_boxes_camera_intrinsics_are_used(tmp_path: Path) -> None:
+    """A RealSense log has colour, depth and infrared CameraInfo at one rate; the detections' frame names the
+    camera (the infrared topic sorts last, the rule that picked it before)."""
+    rng = np.random.default_rng(11)
+    scene = make_door_scene(rng, DoorSceneSpec(obstacles_per_scene=(1, 1)))
+    poses = np.array([[0.1 * k - 0.3, -2.6 + 0.15 * k, math.pi / 2 + 0.03 * k] for k in range(6)])
+    log = door_log(tmp_path / "rs.mcap", scene, poses, rng, info_topic="/camera/color/camera_info",
+                   other_cameras=(("/camera/infra1/camera_info", "infra1_optical", 380.0),
+                                  ("/camera/depth/camera_info", "depth_optical", 390.0)))
+    inputs = read_doorpose_inputs(log, DoorbatchConfig())
+    np.testing.assert_allclose(inputs.camera_info.k, scene.camera_model.k)
+    assert not any("CameraInfo topics" in w for w in inputs.warnings)
+
+
 def test_doorpose_without_camera_info_is_bad_input(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     rng = np.random.default_rng(2)
     scene = make_door_scene(rng)
