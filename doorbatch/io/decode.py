@@ -222,23 +222,36 @@ def decode_image(msg: Any, msgtype: str, log_time_ns: int, topic: str) -> Image:
 
 
 def decode_camera_info(msg: Any, log_time_ns: int) -> CameraInfo:
-    """sensor_msgs/CameraInfo (ROS 1 ``K``/``D``/``P`` or ROS 2 ``k``/``d``/``p``) → :class:`CameraInfo`."""
+    """sensor_msgs/CameraInfo (ROS 1 ``K``/``D``/``P`` or ROS 2 ``k``/``d``/``p``) → :class:`CameraInfo` of the
+    images as published. K, P, width and height describe the full-resolution sensor; with a region of interest
+    (``roi``) and binning (``binning_x/y`` > 1) the image pixels are (full − roi offset) / binning, so the
+    intrinsics are shifted and scaled the same way (CameraInfo message documentation)."""
     k = getattr(msg, "k", None)
-    k = k if k is not None else msg.K
+    k = np.asarray(k if k is not None else msg.K, dtype=np.float64).reshape(3, 3)
     d = getattr(msg, "d", None)
     d = d if d is not None else msg.D
     p = getattr(msg, "p", None)
-    p = p if p is not None else msg.P
+    p = np.asarray(p if p is not None else msg.P, dtype=np.float64).reshape(3, 4)
+    width, height = int(msg.width), int(msg.height)
+    roi = getattr(msg, "roi", None)
+    x0, y0 = (int(roi.x_offset), int(roi.y_offset)) if roi is not None and roi.width and roi.height else (0, 0)
+    if roi is not None and roi.width and roi.height:
+        width, height = int(roi.width), int(roi.height)
+    bx, by = max(int(getattr(msg, "binning_x", 0)), 1), max(int(getattr(msg, "binning_y", 0)), 1)
+    if (x0, y0, bx, by) != (0, 0, 1, 1):
+        to_image = np.array([[1.0 / bx, 0.0, -x0 / bx], [0.0, 1.0 / by, -y0 / by], [0.0, 0.0, 1.0]])
+        k, p = to_image @ k, to_image @ p
+        width, height = width // bx, height // by
     return CameraInfo(
         stamp_ns=stamp_to_ns(msg.header.stamp),
         log_time_ns=log_time_ns,
         frame_id=msg.header.frame_id.lstrip("/"),
-        width=int(msg.width),
-        height=int(msg.height),
+        width=width,
+        height=height,
         distortion_model=str(msg.distortion_model),
         d=np.asarray(d, dtype=np.float64),
-        k=np.asarray(k, dtype=np.float64).reshape(3, 3),
-        p=np.asarray(p, dtype=np.float64).reshape(3, 4),
+        k=k,
+        p=p,
     )
 
 

@@ -5,7 +5,7 @@ so that no log of images is ever held in memory)."""
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from doorbatch.config import DoorbatchConfig
@@ -59,6 +59,7 @@ def read_doorpose_inputs(path: Path, config: DoorbatchConfig, detector: ImageDet
                 raise LogContentError(f"doorpose needs {what}", path=path)
         info_topic, note = _camera_info_of_boxes(reader, box_role, config)
         warnings_pre = [note] if note else []
+        unset = 0
         if info_topic is not None:
             info = next((decode_camera_info(raw.msg, raw.log_time_ns) for raw in reader.raw_messages([info_topic])),
                         None)
@@ -70,13 +71,17 @@ def read_doorpose_inputs(path: Path, config: DoorbatchConfig, detector: ImageDet
                 (ref if item.role is Role.REFERENCE else odom).append(rec)
             elif isinstance(rec, CameraInfo):
                 info = info or rec
-            elif isinstance(rec, Detections):
-                boxes.append(rec)
+            elif isinstance(rec, Detections):  # an unset stamp (0): its log time, the nearest we know
+                unset += rec.stamp_ns == 0
+                boxes.append(replace(rec, stamp_ns=rec.log_time_ns) if rec.stamp_ns == 0 else rec)
             elif isinstance(rec, Image) and detector is not None:
                 boxes.append(Detections(rec.stamp_ns, rec.log_time_ns, rec.frame_id, detector(rec)))
         odometry, reference, notes = robot_pose_series(odom, ref, tf, reader.roles.topic(Role.ODOMETRY) is not None,
                                                        config.frames)
         warnings = [*reader.warnings, *warnings_pre, *notes]
+        if unset:
+            warnings.append(f"{unset} of {len(boxes)} detection messages have header stamp 0 (unset): timed by "
+                            f"their log time")
     if info is None:
         raise LogContentError("camera_info topic has no messages", path=path)
     if not scans:

@@ -12,6 +12,7 @@ The stage in outline::
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -94,6 +95,18 @@ def nearest_scan(scan_stamps_ns: npt.NDArray[np.int64], stamp_ns: int, tolerance
     return best if abs(int(scan_stamps_ns[best]) - stamp_ns) <= tolerance_ns else None
 
 
+def camera_tilt_deg(inputs: DoorPoseInputs, base_link: str, camera_frame: str) -> float | None:
+    """Elevation of the camera's optical axis (its frame's z) above base_link's horizontal plane, at the first
+    detection; None without boxes or a transform."""
+    if not inputs.detections:
+        return None
+    try:
+        mat = inputs.tf.lookup(base_link, camera_frame, inputs.detections[0].stamp_ns)
+    except TransformError:
+        return None
+    return math.degrees(math.asin(max(-1.0, min(1.0, float(mat[2, 2])))))
+
+
 def estimate_door_poses(inputs: DoorPoseInputs, config: DoorbatchConfig, doors: DoorSet | None = None,
                         fit: LineFit | None = None, progress: Callable[[int], object] | None = None) -> DoorPoses:
     """Door poses of every image with a usable door box (module docstring)."""
@@ -140,6 +153,11 @@ def estimate_door_poses(inputs: DoorPoseInputs, config: DoorbatchConfig, doors: 
                                     door.box, camera.frame_id))
     if len(warnings) > 3:
         warnings = [*warnings[:3], f"... and {len(warnings) - 3} more images skipped for missing transforms"]
+    tilt = camera_tilt_deg(inputs, config.frames.base_link, camera.frame_id)
+    if tilt is not None and abs(tilt) > dc.max_camera_tilt_deg:
+        warnings.append(f"the camera's optical axis (z of frame {camera.frame_id!r}) points {abs(tilt):.1f} deg "
+                        f"{'above' if tilt > 0 else 'below'} the horizontal: the fusion assumes a level camera, "
+                        f"so door poses are off; is {camera.frame_id!r} the optical frame (z forward)?")
     door_class = class_name(dc.door_class, dc.class_names)
     if classes and door_class not in classes:
         warnings.append(f"no box of class {door_class!r} in {len(inputs.detections)} detection messages; classes "

@@ -15,17 +15,19 @@ STEP_NS = 200_000_000
 
 
 def door_log(path: Path, scene: DoorScene, poses: np.ndarray, rng: np.random.Generator, images: bool = False,
-             other_cameras: tuple[tuple[str, str, float], ...] = (), info_topic: str = "/camera/camera_info") -> Path:
+             other_cameras: tuple[tuple[str, str, float], ...] = (), info_topic: str = "/camera/camera_info",
+             camera_xyzw: tuple[float, float, float, float] | None = None, unset_box_stamps: bool = False) -> Path:
     """A log of the robot at ``poses`` in a door scene: static TF, camera_info, and per pose ground truth, a
     scan, the detector's boxes (5 ms later) and, with ``images``, the rendered image. ``other_cameras``: more
-    CameraInfo topics (topic, frame, focal length in px), as a RealSense publishes for depth and infrared."""
+    CameraInfo topics (topic, frame, focal length in px), as a RealSense publishes for depth and infrared;
+    ``camera_xyzw``: another camera mount rotation; ``unset_box_stamps``: detections with header stamp 0."""
     cam = scene.camera_model
     lm = scene.laser
     msgs: list[tuple[str, str, int, object]] = [
         ("/tf_static", "tf2_msgs/msg/TFMessage", T0, m.tf_message([
             m.planar_transform(T0, "base_link", LASER_FRAME, lm.mount_xy_m[0], lm.mount_xy_m[1], 0.0, z=lm.mount_z_m),
             m.transform_stamped(T0, "base_link", CAMERA_FRAME, (*cam.mount_xy_m, cam.mount_z_m),
-                                tuple(camera_rotation_xyzw(cam.mount_yaw_rad)))])),
+                                camera_xyzw or tuple(camera_rotation_xyzw(cam.mount_yaw_rad)))])),
         (info_topic, "sensor_msgs/msg/CameraInfo", T0, m.camera_info(T0, CAMERA_FRAME, cam.width, cam.height, cam.k)),
         *((topic, "sensor_msgs/msg/CameraInfo", T0,
            m.camera_info(T0, frame, cam.width, cam.height, [[f, 0, cam.width / 2], [0, f, cam.height / 2], [0, 0, 1]]))
@@ -43,7 +45,7 @@ def door_log(path: Path, scene: DoorScene, poses: np.ndarray, rng: np.random.Gen
              m.laser_scan(t, LASER_FRAME, lm.angle_min_rad, lm.angle_increment_rad, lm.range_min_m, lm.range_max_m,
                           ranges)),
             ("/detections", "vision_msgs/msg/Detection2DArray", t + 5_000_000,
-             m.detection_array(t + 5_000_000, CAMERA_FRAME, boxes)),
+             m.detection_array(0 if unset_box_stamps else t + 5_000_000, CAMERA_FRAME, boxes)),
         ]
         if images:
             msgs.append(("/camera/image_raw", "sensor_msgs/msg/Image", t + 5_000_000,

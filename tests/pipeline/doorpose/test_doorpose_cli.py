@@ -21,6 +21,7 @@ from doorbatch.io.parquet import read_table, write_table
 from doorbatch.io.reader import open_log
 from doorbatch.maps import DoorSet
 from doorbatch.pipeline.doorpose.association import associate
+from doorbatch.pipeline.doorpose.run import estimate_door_poses
 from doorbatch.records import Detection, Image
 from doorbatch.sim.door_scene import DoorScene, DoorSceneSpec, make_door_scene
 
@@ -86,6 +87,22 @@ def test_in_a_log_with_several_cameras_the_boxes_camera_intrinsics_are_used(tmp_
     inputs = read_doorpose_inputs(log, DoorbatchConfig())
     np.testing.assert_allclose(inputs.camera_info.k, scene.camera_model.k)
     assert not any("CameraInfo topics" in w for w in inputs.warnings)
+
+
+def test_unset_box_stamps_and_a_camera_that_is_not_level_are_reported(tmp_path: Path) -> None:
+    rng = np.random.default_rng(11)
+    scene = make_door_scene(rng, DoorSceneSpec(obstacles_per_scene=(1, 1)))
+    poses = np.array([[0.1 * k - 0.3, -2.6 + 0.15 * k, math.pi / 2] for k in range(4)])
+    unset = read_doorpose_inputs(door_log(tmp_path / "zero.mcap", scene, poses, rng, unset_box_stamps=True),
+                                 DoorbatchConfig())
+    assert any("4 of 4 detection messages have header stamp 0" in w for w in unset.warnings)
+    found = estimate_door_poses(unset, DoorbatchConfig())
+    assert found.paired == 4 and len(found) >= 3  # timed by their log time, 5 ms after their scans
+    # CameraInfo's frame left as the camera body (x forward, z up), not its optical frame: z points up
+    level = read_doorpose_inputs(door_log(tmp_path / "body.mcap", scene, poses, rng, camera_xyzw=(0.0, 0.0, 0.0, 1.0)),
+                                 DoorbatchConfig())
+    assert any("90.0 deg above the horizontal" in w for w in estimate_door_poses(level, DoorbatchConfig()).warnings)
+    assert not any("horizontal" in w for w in found.warnings)
 
 
 def test_doorpose_without_camera_info_is_bad_input(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
