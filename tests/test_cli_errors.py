@@ -257,3 +257,18 @@ def test_checking_an_output_creates_nothing(tmp_path: Path, capsys: pytest.Captu
                    str(tmp_path / "a" / "b" / "map"), "--set", "mapping.bogus=1")
     assert code == 2 and not (tmp_path / "a").exists() and list(tmp_path.iterdir()) == []
 
+
+
+def test_a_message_that_does_not_decode_names_its_own_topic(write_log: Callable[..., Path],
+                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    """A rosbag2 folder whose /detections payloads do not fit the definition: the error names /detections, not
+    the topic of the message read before it."""
+    import sqlite3
+
+    bag = write_log("bad.rosbag2", fmt="rosbag2")
+    (db,) = bag.glob("*.db3")
+    with sqlite3.connect(db) as con:
+        con.execute("UPDATE messages SET data = x'000100' WHERE topic_id = "
+                    "(SELECT id FROM topics WHERE name = '/detections')")
+    code, err = _run(capsys, "inspect", str(bag))
+    assert code == 3 and "topic /detections" in _one_line(err)

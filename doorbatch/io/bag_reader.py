@@ -60,7 +60,12 @@ class _AnyBagReader(LogReader):
         if not conns:
             return
         for conn, log_time, data in reader.messages(connections=conns, start=start_ns, stop=stop_ns):
-            msg: Any = reader.deserialize(data, conn.msgtype)
+            try:
+                msg: Any = reader.deserialize(data, conn.msgtype)
+            except Exception as err:  # a layout the bag does not define (Foxy-era rosbag2 folders carry none)
+                raise LogReadError(f"cannot decode a {conn.msgtype} message ({type(err).__name__}: {err}); its "
+                                   f"definition may differ from ROS 2 Humble's", path=self.path,
+                                   topic=conn.topic) from err
             yield RawMessage(conn.topic, normalize_msgtype(conn.msgtype), int(log_time), msg, self._ros1,
                              reader.typestore)
 

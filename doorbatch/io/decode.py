@@ -183,8 +183,23 @@ def decode_pointcloud_colors(msg: Any, log_time_ns: int, topic: str) -> BeamColo
     )
 
 
+# 8-bit Bayer mosaics and packed YUV: bytes per pixel and the OpenCV conversion to RGB. OpenCV names a Bayer
+# pattern by the 2x2 block's second row (its RG is ROS's bayer_bggr8), hence the apparent swap.
+_TO_RGB = {
+    "bayer_rggb8": (1, cv2.COLOR_BayerBG2RGB),
+    "bayer_bggr8": (1, cv2.COLOR_BayerRG2RGB),
+    "bayer_gbrg8": (1, cv2.COLOR_BayerGR2RGB),
+    "bayer_grbg8": (1, cv2.COLOR_BayerGB2RGB),
+    "yuv422": (2, cv2.COLOR_YUV2RGB_UYVY),  # ROS yuv422 is UYVY
+    "uyvy": (2, cv2.COLOR_YUV2RGB_UYVY),
+    "yuv422_yuy2": (2, cv2.COLOR_YUV2RGB_YUY2),
+    "yuyv": (2, cv2.COLOR_YUV2RGB_YUY2),
+}
+
+
 def decode_image(msg: Any, msgtype: str, log_time_ns: int, topic: str) -> Image:
-    """sensor_msgs/Image (mono8, rgb8, bgr8, rgba8, bgra8) or CompressedImage → RGB or mono array.
+    """sensor_msgs/Image (mono8, rgb8, bgr8, rgba8, bgra8, 8-bit Bayer, yuv422/uyvy, yuyv) or CompressedImage →
+    RGB or mono array.
 
     Raises:
         LogContentError: an encoding we do not read, or a compressed image OpenCV cannot decode.
@@ -195,6 +210,11 @@ def decode_image(msg: Any, msgtype: str, log_time_ns: int, topic: str) -> Image:
         if decoded is None:
             raise LogContentError(f"cannot decode compressed image ({msg.format})", topic=topic)
         pixels = cv2.cvtColor(decoded, cv2.COLOR_BGR2RGB)
+        encoding = "rgb8"
+    elif msg.encoding in _TO_RGB:  # raw sensor layouts (sensor_msgs/image_encodings), converted as cv_bridge does
+        cells, code = _TO_RGB[msg.encoding]
+        rows = data.reshape(msg.height, msg.step)[:, : msg.width * cells]
+        pixels = cv2.cvtColor(rows.reshape(msg.height, msg.width, cells) if cells > 1 else rows, code)
         encoding = "rgb8"
     else:
         encoding = msg.encoding

@@ -23,3 +23,23 @@ def test_binning_and_roi_map_full_resolution_intrinsics_onto_the_image() -> None
     want = (project_points(camera_from_info(full), POINTS) - [100, 40]) / 2
     np.testing.assert_allclose(project_points(camera_from_info(cropped), POINTS), want, atol=1e-9)
     assert decode_camera_info(m.camera_info(0, "cam", 640, 480, K), 0).width == 640  # no binning: as it is
+
+
+def _raw_image(encoding: str, data: np.ndarray, width: int, height: int, step: int) -> object:
+    msg = m.image_rgb8(0, "cam", np.zeros((height, width), np.uint8))
+    msg.encoding, msg.step, msg.data = encoding, step, np.ascontiguousarray(data, dtype=np.uint8).ravel()
+    return msg
+
+
+def test_bayer_and_yuv422_images_decode_to_rgb() -> None:
+    """8-bit Bayer (ROS bayer_rggb8: R at even rows and columns, B at odd ones) and yuv422 (UYVY) images, as
+    sensor_msgs/image_encodings lays them out, decode to their colours (interior pixels, away from the edge)."""
+    from doorbatch.io.decode import decode_image
+
+    mosaic = np.full((8, 8), 60, np.uint8)  # green everywhere but the R and B sites
+    mosaic[0::2, 0::2], mosaic[1::2, 1::2] = 200, 10
+    rgb = decode_image(_raw_image("bayer_rggb8", mosaic, 8, 8, 8), "sensor_msgs/msg/Image", 0, "/img").pixels
+    np.testing.assert_allclose(rgb[2:6, 2:6].reshape(-1, 3).mean(axis=0), [200, 60, 10], atol=3)
+    grey = np.tile(np.array([128, 150, 128, 150], np.uint8), (4, 4))  # U Y V Y: colourless, Y = 150
+    rgb = decode_image(_raw_image("yuv422", grey, 8, 4, 16), "sensor_msgs/msg/Image", 0, "/img").pixels
+    assert rgb.shape == (4, 8, 3) and np.ptp(rgb) <= 2 and abs(int(rgb.mean()) - 150) <= 25
