@@ -11,7 +11,7 @@ from pathlib import Path
 from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import LogContentError
 from doorbatch.geometry.tf_buffer import TfBuffer
-from doorbatch.io.decode import CAMERA_INFO, decode_camera_info
+from doorbatch.io.decode import CAMERA_INFO, COMPRESSED_IMAGE, IMAGE, decode_camera_info, decode_image
 from doorbatch.io.reader import LogReader, open_log
 from doorbatch.io.recording import PoseSeries, read_transforms, robot_pose_series
 from doorbatch.records import CameraInfo, Detection, Detections, Image, Pose2D, Role, Scan
@@ -63,7 +63,14 @@ def read_doorpose_inputs(path: Path, config: DoorbatchConfig, detector: ImageDet
         if info_topic is not None:
             info = next((decode_camera_info(raw.msg, raw.log_time_ns) for raw in reader.raw_messages([info_topic])),
                         None)
-        for item in reader.messages([r for r in roles if r is not Role.CAMERA_INFO or info_topic is None]):
+        image_topic = _colour_image_topic(reader, config) if detector is not None else None
+        if image_topic is not None and detector is not None:
+            for raw in reader.raw_messages([image_topic]):
+                image = decode_image(raw.msg, raw.msgtype, raw.log_time_ns, raw.topic)
+                boxes.append(Detections(image.stamp_ns, image.log_time_ns, image.frame_id, detector(image)))
+        skip = {Role.CAMERA_INFO} if info_topic is not None else set()
+        skip |= {Role.IMAGE} if image_topic is not None else set()
+        for item in reader.messages([r for r in roles if r not in skip]):
             rec = item.record
             if isinstance(rec, Scan):
                 scans.append(rec)
@@ -113,3 +120,29 @@ def _camera_info_of_boxes(reader: LogReader, box_role: Role, config: DoorbatchCo
     chosen = reader.roles.topic(Role.CAMERA_INFO)
     return chosen, (f"{len(infos)} CameraInfo topics and none matches the frame {box_frame!r} of {box_topic}: "
                     f"using {chosen} (set topics.camera_info)")
+
+
+# Encodings a detector cannot see a door in: depth and other non-visual images (sensor_msgs/image_encodings).
+_NOT_VISUAL = ("16UC1", "32FC1", "16SC1", "32SC1", "64FC1", "mono16")
+
+
+def _colour_image_topic(reader: LogReader, config: DoorbatchConfig) -> str | None:
+    """For ``--detector`` in a log with several image topics (a RealSense's colour, depth and infrared): a colour
+    one (an rgb/bgr/Bayer/YUV encoding, or a compressed image that is not ``compressedDepth``), else a visual
+    one. None when the log has one image topic or the config names it (the role's topic is used)."""
+    names = sorted(t.name for t in reader.topics.values() if t.msgtype in (IMAGE, COMPRESSED_IMAGE))
+    if len(names) < 2 or config.topics.image is not None:
+        return None
+
+    def rank(name: str) -> int:
+        raw = next(iter(reader.raw_messages([name])), None)
+        if raw is None:
+            return 3
+        if raw.msgtype == COMPRESSED_IMAGE:
+            return 2 if "depth" in str(raw.msg.format).lower() else 0
+        encoding = str(raw.msg.encoding)
+        return 2 if encoding in _NOT_VISUAL else 1 if encoding in ("mono8", "8UC1") else 0
+
+    ranks = {name: rank(name) for name in names}
+    best = min(names, key=lambda n: (ranks[n], n != reader.roles.topic(Role.IMAGE)))
+    return best if ranks[best] < 2 else None

@@ -16,11 +16,13 @@ STEP_NS = 200_000_000
 
 def door_log(path: Path, scene: DoorScene, poses: np.ndarray, rng: np.random.Generator, images: bool = False,
              other_cameras: tuple[tuple[str, str, float], ...] = (), info_topic: str = "/camera/camera_info",
-             camera_xyzw: tuple[float, float, float, float] | None = None, unset_box_stamps: bool = False) -> Path:
+             camera_xyzw: tuple[float, float, float, float] | None = None, unset_box_stamps: bool = False,
+             image_topic: str = "/camera/image_raw", depth_topic: str | None = None) -> Path:
     """A log of the robot at ``poses`` in a door scene: static TF, camera_info, and per pose ground truth, a
     scan, the detector's boxes (5 ms later) and, with ``images``, the rendered image. ``other_cameras``: more
     CameraInfo topics (topic, frame, focal length in px), as a RealSense publishes for depth and infrared;
-    ``camera_xyzw``: another camera mount rotation; ``unset_box_stamps``: detections with header stamp 0."""
+    ``camera_xyzw``: another camera mount rotation; ``unset_box_stamps``: detections with header stamp 0;
+    ``depth_topic``: also a 16UC1 depth image per pose there."""
     cam = scene.camera_model
     lm = scene.laser
     msgs: list[tuple[str, str, int, object]] = [
@@ -48,6 +50,10 @@ def door_log(path: Path, scene: DoorScene, poses: np.ndarray, rng: np.random.Gen
              m.detection_array(0 if unset_box_stamps else t + 5_000_000, CAMERA_FRAME, boxes)),
         ]
         if images:
-            msgs.append(("/camera/image_raw", "sensor_msgs/msg/Image", t + 5_000_000,
+            msgs.append((image_topic, "sensor_msgs/msg/Image", t + 5_000_000,
                          m.image_rgb8(t + 5_000_000, CAMERA_FRAME, obs.image)))
+        if images and depth_topic is not None:
+            depth = m.image_rgb8(t + 5_000_000, "depth_optical", np.zeros((4, 4), np.uint8))
+            depth.encoding, depth.step, depth.data = "16UC1", 8, np.zeros(32, np.uint8)
+            msgs.append((depth_topic, "sensor_msgs/msg/Image", t + 5_000_000, depth))
     return write_messages(path, sorted(msgs, key=lambda msg: msg[2]))

@@ -105,6 +105,17 @@ def test_unset_box_stamps_and_a_camera_that_is_not_level_are_reported(tmp_path: 
     assert not any("horizontal" in w for w in found.warnings)
 
 
+def test_a_detector_gets_the_colour_images_of_a_log_with_a_depth_camera_too(tmp_path: Path) -> None:
+    rng = np.random.default_rng(11)
+    scene = make_door_scene(rng, DoorSceneSpec(obstacles_per_scene=(1, 1)))
+    poses = np.array([[0.1 * k - 0.3, -2.6 + 0.15 * k, math.pi / 2] for k in range(4)])
+    log = door_log(tmp_path / "rgbd.mcap", scene, poses, rng, images=True, image_topic="/camera/color/image_raw",
+                   depth_topic="/camera/depth/image_rect_raw")
+    seen: list[str] = []
+    read_doorpose_inputs(log, DoorbatchConfig(), lambda image: seen.append(image.encoding) or [])
+    assert seen == ["rgb8"] * 4  # not the depth images, which no detector can use (16UC1 was exit 3)
+
+
 def test_doorpose_without_camera_info_is_bad_input(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     rng = np.random.default_rng(2)
     scene = make_door_scene(rng)
