@@ -690,6 +690,9 @@ class DoorPoseConfig(Section):
     # leaves are 0.6-1.25 m) is not one (a false box, or a line fitted to an obstacle); 0 and inf disable it.
     door_width_min_m: float = Field(0.5, ge=0.0)
     door_width_max_m: float = Field(1.4, gt=0.0)
+    # A detection message whose stamp is no image's takes the latest image stamp of its frame up to this much
+    # before it (detectors that stamp on publishing); 0 disables.
+    max_detection_latency_s: float = Field(0.5, ge=0.0)
     # The fusion intersects horizontal rays (paper 003 assumes a level camera): an optical axis tilted more than
     # this from horizontal (or a CameraInfo frame that is not the optical one, z forward) gets a warning.
     max_camera_tilt_deg: float = Field(5.0, gt=0.0, le=90.0)

@@ -8,10 +8,19 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+import numpy as np
+
 from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import LogContentError
 from doorbatch.geometry.tf_buffer import TfBuffer
-from doorbatch.io.decode import CAMERA_INFO, COMPRESSED_IMAGE, IMAGE, decode_camera_info, decode_image
+from doorbatch.io.decode import (
+    CAMERA_INFO,
+    COMPRESSED_IMAGE,
+    IMAGE,
+    decode_camera_info,
+    decode_image,
+    stamp_to_ns,
+)
 from doorbatch.io.reader import LogReader, open_log
 from doorbatch.io.recording import PoseSeries, read_transforms, robot_pose_series
 from doorbatch.records import CameraInfo, Detection, Detections, Image, Pose2D, Role, Scan
@@ -89,6 +98,9 @@ def read_doorpose_inputs(path: Path, config: DoorbatchConfig, detector: ImageDet
         if unset:
             warnings.append(f"{unset} of {len(boxes)} detection messages have header stamp 0 (unset): timed by "
                             f"their log time")
+        if detector is None and reader.roles.topic(Role.IMAGE) is not None:
+            boxes, note = _on_image_stamps(boxes, reader, config)
+            warnings += [note] if note else []
     if info is None:
         raise LogContentError("camera_info topic has no messages", path=path)
     if not scans:
@@ -146,3 +158,34 @@ def _colour_image_topic(reader: LogReader, config: DoorbatchConfig) -> str | Non
     ranks = {name: rank(name) for name in names}
     best = min(names, key=lambda n: (ranks[n], n != reader.roles.topic(Role.IMAGE)))
     return best if ranks[best] < 2 else None
+
+
+def _on_image_stamps(boxes: list[Detections], reader: LogReader, config: DoorbatchConfig
+                     ) -> tuple[list[Detections], str | None]:
+    """Detections stamped when they were published rather than with their image's stamp (a node stamping with
+    ``now()``): where the log has the images and a box message's stamp is no image's, it takes the stamp of
+    the latest image of its frame before it (within ``doorpose.max_detection_latency_s``), with a note."""
+    topic = reader.roles.topic(Role.IMAGE)
+    stamps: dict[str, list[int]] = {}
+    for raw in reader.raw_messages([topic] if topic else []):
+        header = raw.msg.header
+        stamps.setdefault(str(header.frame_id).lstrip("/"), []).append(stamp_to_ns(header.stamp))
+    if not stamps:
+        return boxes, None
+    latency = int(config.doorpose.max_detection_latency_s * 1e9)
+    ordered = {frame: np.array(sorted(v), dtype=np.int64) for frame, v in stamps.items()}
+    out, moved = [], 0
+    for b in boxes:
+        images = ordered.get(b.frame_id)
+        if images is None or images.size == 0:
+            out.append(b)
+            continue
+        k = int(np.searchsorted(images, b.stamp_ns, side="right")) - 1
+        if k >= 0 and images[k] != b.stamp_ns and b.stamp_ns - int(images[k]) <= latency:
+            out.append(replace(b, stamp_ns=int(images[k])))
+            moved += 1
+        else:
+            out.append(b)
+    note = (f"{moved} of {len(boxes)} detection messages carry no image's stamp: given the stamp of the latest image "
+            f"before them (detections stamped on publishing?)") if moved else None
+    return out, note

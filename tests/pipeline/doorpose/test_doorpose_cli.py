@@ -24,6 +24,7 @@ from doorbatch.pipeline.doorpose.association import associate
 from doorbatch.pipeline.doorpose.run import estimate_door_poses
 from doorbatch.records import Detection, Image
 from doorbatch.sim.door_scene import DoorScene, DoorSceneSpec, make_door_scene
+from tests.conftest import T0
 
 
 def _map_dir(path: Path, scene: DoorScene) -> Path:
@@ -114,6 +115,16 @@ def test_a_detector_gets_the_colour_images_of_a_log_with_a_depth_camera_too(tmp_
     seen: list[str] = []
     read_doorpose_inputs(log, DoorbatchConfig(), lambda image: seen.append(image.encoding) or [])
     assert seen == ["rgb8"] * 4  # not the depth images, which no detector can use (16UC1 was exit 3)
+
+
+def test_boxes_stamped_on_publishing_take_their_images_stamp(tmp_path: Path) -> None:
+    rng = np.random.default_rng(11)
+    scene = make_door_scene(rng, DoorSceneSpec(obstacles_per_scene=(1, 1)))
+    poses = np.array([[0.1 * k - 0.3, -2.6 + 0.15 * k, math.pi / 2] for k in range(4)])
+    log = door_log(tmp_path / "late.mcap", scene, poses, rng, images=True, box_delay_ns=80_000_000)
+    inputs = read_doorpose_inputs(log, DoorbatchConfig())
+    assert [b.stamp_ns for b in inputs.detections] == [T0 + 200_000_000 * (k + 1) + 5_000_000 for k in range(4)]
+    assert any("4 of 4 detection messages carry no image's stamp" in w for w in inputs.warnings)
 
 
 def test_doorpose_without_camera_info_is_bad_input(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
