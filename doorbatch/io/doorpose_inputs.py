@@ -66,13 +66,14 @@ def read_doorpose_inputs(path: Path, config: DoorbatchConfig, detector: ImageDet
                             "a vision_msgs/Detection2DArray topic (or give --detector MODEL)")):
             if reader.roles.topic(role) is None:
                 raise LogContentError(f"doorpose needs {what}", path=path)
-        info_topic, note = _camera_info_of_boxes(reader, box_role, config)
+        image_topic = _colour_image_topic(reader, config) if detector is not None else None
+        box_topic = image_topic or reader.roles.topic(box_role)
+        info_topic, note = _camera_info_of_boxes(reader, box_topic, config)
         warnings_pre = [note] if note else []
         unset = 0
         if info_topic is not None:
             info = next((decode_camera_info(raw.msg, raw.log_time_ns) for raw in reader.raw_messages([info_topic])),
                         None)
-        image_topic = _colour_image_topic(reader, config) if detector is not None else None
         if image_topic is not None and detector is not None:
             for raw in reader.raw_messages([image_topic]):
                 image = decode_image(raw.msg, raw.msgtype, raw.log_time_ns, raw.topic)
@@ -109,14 +110,18 @@ def read_doorpose_inputs(path: Path, config: DoorbatchConfig, detector: ImageDet
                           sorted(boxes, key=lambda d: d.stamp_ns), reference, odometry, warnings)
 
 
-def _camera_info_of_boxes(reader: LogReader, box_role: Role, config: DoorbatchConfig) -> tuple[str | None, str | None]:
+# image_transport's sub-topics of an image topic (``.../image_raw/compressed``).
+_TRANSPORTS = frozenset({"compressed", "compressedDepth", "theora", "zstd", "ffmpeg"})
+
+
+def _camera_info_of_boxes(reader: LogReader, box_topic: str | None, config: DoorbatchConfig
+                          ) -> tuple[str | None, str | None]:
     """The CameraInfo topic of the camera the boxes (or images) come from, in a log with several cameras
     (a RealSense publishes colour, depth and infrared CameraInfo): the one whose ``frame_id`` is the boxes'
     frame, else the one beside the boxes' topic (image_transport: ``.../camera_info`` next to ``.../image*``).
     None (with no note) when the log has one CameraInfo topic or the config names it; then the role's topic is
     used. The note says when the choice was a guess."""
     infos = sorted(t.name for t in reader.topics.values() if t.msgtype == CAMERA_INFO)
-    box_topic = reader.roles.topic(box_role)
     if len(infos) < 2 or config.topics.camera_info is not None or box_topic is None:
         return None, None
     box_frame = next((str(raw.msg.header.frame_id).lstrip("/") for raw in reader.raw_messages([box_topic])), None)
@@ -125,7 +130,8 @@ def _camera_info_of_boxes(reader: LogReader, box_role: Role, config: DoorbatchCo
     same_frame = [name for name in infos if box_frame and frames[name] == box_frame]
     if len(same_frame) == 1:
         return same_frame[0], None
-    namespace = box_topic.rsplit("/", 1)[0]
+    base = box_topic.rsplit("/", 1)[0] if box_topic.rsplit("/", 1)[-1] in _TRANSPORTS else box_topic
+    namespace = base.rsplit("/", 1)[0]
     beside = [name for name in (same_frame or infos) if name.rsplit("/", 1)[0] == namespace]
     if len(beside) == 1:
         return beside[0], None

@@ -111,10 +111,12 @@ def test_a_detector_gets_the_colour_images_of_a_log_with_a_depth_camera_too(tmp_
     scene = make_door_scene(rng, DoorSceneSpec(obstacles_per_scene=(1, 1)))
     poses = np.array([[0.1 * k - 0.3, -2.6 + 0.15 * k, math.pi / 2] for k in range(4)])
     log = door_log(tmp_path / "rgbd.mcap", scene, poses, rng, images=True, image_topic="/camera/color/image_raw",
-                   depth_topic="/camera/depth/image_rect_raw")
+                   depth_topic="/camera/depth/image_rect_raw", info_topic="/camera/color/camera_info",
+                   other_cameras=(("/camera/depth/camera_info", "depth_optical", 380.0),))
     seen: list[str] = []
-    read_doorpose_inputs(log, DoorbatchConfig(), lambda image: seen.append(image.encoding) or [])
+    inputs = read_doorpose_inputs(log, DoorbatchConfig(), lambda image: seen.append(image.encoding) or [])
     assert seen == ["rgb8"] * 4  # not the depth images, which no detector can use (16UC1 was exit 3)
+    np.testing.assert_allclose(inputs.camera_info.k, scene.camera_model.k)  # and the colour camera's intrinsics
 
 
 def test_boxes_stamped_on_publishing_take_their_images_stamp(tmp_path: Path) -> None:
