@@ -69,8 +69,9 @@ class LogWriter:
         self.path = Path(path)
         self.fmt = LogFormat(fmt)
         self.tmp = self.path.parent / f".{self.path.name}.tmp{os.getpid()}"
-        self._channels: dict[tuple[str, str], Any] = {}
-        self._schemas: dict[str, int] = {}
+        self._channels: dict[tuple[str, ...], Any] = {}
+        self._schemas: dict[tuple[str, str], int] = {}
+        self._definitions: dict[tuple[int, str], tuple[Typestore, str]] = {}
         self._migrate_cache: dict[str, object] = {}
         self._ros2_store: Typestore | None = None  # ROS 2 types plus the ROS 1-only ones copied so far
         self._file: IO[bytes] | None = None
@@ -99,9 +100,10 @@ class LogWriter:
         """Append one message; ``store`` is the typestore of ``msg`` (default ROS 2 Humble + vision_msgs)."""
         store = store or ros2_typestore()
         if self._mcap is not None:
-            channel = self._channels.get((topic, msgtype))
+            definition = self._definition(msgtype, store)
+            channel = self._channels.get((topic, msgtype, definition))
             if channel is None:
-                channel = self._mcap_channel(topic, msgtype, store)
+                channel = self._mcap_channel(topic, msgtype, definition)
             data = bytes(store.serialize_cdr(msg, msgtype))
             self._mcap.add_message(channel, log_time=log_time_ns, publish_time=log_time_ns, data=data)
             return
@@ -136,19 +138,29 @@ class LogWriter:
         msg, store = to_ros2(raw, self._migrate_cache, self._ros2_store)
         self.write(raw.topic, raw.msgtype, raw.log_time_ns, msg, store)
 
-    def _mcap_channel(self, topic: str, msgtype: str, store: Typestore) -> int:
+    def _definition(self, msgtype: str, store: Typestore) -> str:
+        """``msgtype``'s ROS 2 definition in ``store`` (cached per store: one per source log)."""
+        cached = self._definitions.get((id(store), msgtype))
+        if cached is None or cached[0] is not store:
+            cached = (store, store.generate_msgdef(msgtype, ros_version=2)[0])
+            self._definitions[(id(store), msgtype)] = cached
+        return cached[1]
+
+    def _mcap_channel(self, topic: str, msgtype: str, definition: str) -> int:
+        """A channel per topic, type and definition: two logs may lay one type out differently (vision_msgs
+        before and after Humble), and each message must be written with the schema that decodes it."""
         assert self._mcap is not None
-        schema_id = self._schemas.get(msgtype)
+        schema_id = self._schemas.get((msgtype, definition))
         if schema_id is None:
-            text, _ = store.generate_msgdef(msgtype, ros_version=2)
-            schema_id = self._mcap.register_schema(name=msgtype, encoding="ros2msg", data=text.encode())
-            self._schemas[msgtype] = schema_id
+            schema_id = self._mcap.register_schema(name=msgtype, encoding="ros2msg", data=definition.encode())
+            self._schemas[(msgtype, definition)] = schema_id
         channel_id = self._mcap.register_channel(topic=topic, message_encoding="cdr", schema_id=schema_id)
-        self._channels[(topic, msgtype)] = channel_id
+        self._channels[(topic, msgtype, definition)] = channel_id
         return channel_id
 
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
                  tb: TracebackType | None) -> None:
+        closed = False
         try:
             if self._mcap is not None:
                 self._mcap.finish()  # type: ignore[no-untyped-call]
@@ -158,8 +170,9 @@ class LogWriter:
                 self._file.close()
             if self._bag is not None:
                 self._bag.close()
+            closed = True
         finally:
-            if exc_type is None:
+            if exc_type is None and closed:  # a file that could not be finished never replaces the old one
                 _remove(self.path)
                 if self.fmt in (LogFormat.ROSBAG2, LogFormat.ROSBAG2_MCAP):
                     (self.tmp / self.path.name).replace(self.path)
@@ -173,11 +186,13 @@ class LogWriter:
 def _same_layout(source: Typestore, target: Typestore, msgtype: str, cache: dict[str, object]) -> bool:
     """Whether ``target`` defines ``msgtype`` as ``source`` does (a log's own schema may be an older layout:
     vision_msgs' Detection2D changed between Foxy, Galactic and Humble). Cached per type."""
-    key = f"same layout:{msgtype}"
-    if key not in cache:
-        cache[key] = msgtype in target.types and (
+    key = f"same layout:{id(source)}:{msgtype}"  # per source store: the logs of one output may differ
+    held = cache.get(key)
+    if not (isinstance(held, tuple) and held[0] is source):
+        same = msgtype in target.types and (
             source.generate_msgdef(msgtype, ros_version=2)[0] == target.generate_msgdef(msgtype, ros_version=2)[0])
-    return bool(cache[key])
+        held = cache[key] = (source, same)
+    return bool(held[1])
 
 
 def _humble_detections(raw: RawMessage) -> Any:

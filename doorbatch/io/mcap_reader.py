@@ -43,6 +43,8 @@ class McapLogReader(LogReader):
         except McapError:  # a footer cut off, or summary offsets pointing past the end
             summary = None
         self._stores = {False: get_typestore(Stores.EMPTY), True: get_typestore(Stores.EMPTY)}
+        self._other_stores: dict[tuple[bool, str, str], Typestore] = {}  # a second definition of a name
+        self._store_of: dict[int, Typestore] = {}
         self._msgtype: dict[int, str] = {}
         self._ros1: dict[int, bool] = {}
         if summary is None:
@@ -60,7 +62,8 @@ class McapLogReader(LogReader):
             name = normalize_msgtype(schema.name) if schema else ""
             if channel.message_encoding in _ROS_ENCODINGS and schema is not None:
                 ros1 = _ROS_ENCODINGS[channel.message_encoding]
-                self._register_schema(ros1, name, schema.data.decode("utf-8", "replace"), schema.encoding)
+                self._store_of[cid] = self._register_schema(ros1, name, schema.data.decode("utf-8", "replace"),
+                                                            schema.encoding)
                 self._msgtype[cid] = name
                 self._ros1[cid] = ros1
             prev = topics.get(channel.topic)
@@ -124,10 +127,20 @@ class McapLogReader(LogReader):
                              f"{(end - start) / 1e9:.1f} s{cut}")
         return schemas, channels, counts, start, end
 
-    def _register_schema(self, ros1: bool, name: str, text: str, encoding: str) -> None:
+    def _register_schema(self, ros1: bool, name: str, text: str, encoding: str) -> Typestore:
+        """The store that decodes a schema's messages. One MCAP may hold two schemas of one name (logs of two
+        ROS distributions written into one file): the second definition gets a store of its own."""
         store = self._stores[ros1]
         if name in store.types:
-            return
+            if not text.strip() or _same_definition(store, name, text, ros1, encoding):
+                return store
+            key = (ros1, name, text)
+            if key not in self._other_stores:
+                other = get_typestore(Stores.EMPTY)
+                types = types_from_schema(text, name, encoding)
+                other.register(types)
+                self._other_stores[key] = other
+            return self._other_stores[key]
         base: Typestore = ros1_typestore() if ros1 else ros2_typestore()
         if text.strip():
             types = types_from_schema(text, name, encoding)
@@ -136,6 +149,7 @@ class McapLogReader(LogReader):
         else:
             raise LogReadError(f"channel of type {name} has an empty schema", path=self.path)
         store.register({k: v for k, v in types.items() if k not in store.types})
+        return store
 
     def close(self) -> None:
         f = getattr(self, "_file", None)
@@ -157,8 +171,6 @@ class McapLogReader(LogReader):
 
     def _raw(self, topics: Collection[str] | None, start_ns: int | None, stop_ns: int | None
              ) -> Iterator[RawMessage]:
-        stores = self._stores
-        deser = {False: stores[False].deserialize_cdr, True: stores[True].deserialize_ros1}
         wanted = None if topics is None else list(topics)
         if self._unindexed:  # linearly from the start: the summary the seeking reader looks for is not there
             messages = self._linear_messages(wanted, start_ns, stop_ns)
@@ -170,6 +182,20 @@ class McapLogReader(LogReader):
             msgtype = self._msgtype.get(cid)
             if msgtype is None:
                 continue
-            ros1 = self._ros1[cid]
-            msg: Any = deser[ros1](message.data, msgtype)
-            yield RawMessage(channel.topic, msgtype, message.log_time, msg, ros1, stores[ros1])
+            ros1, store = self._ros1[cid], self._store_of[cid]
+            msg: Any = (store.deserialize_ros1 if ros1 else store.deserialize_cdr)(message.data, msgtype)
+            yield RawMessage(channel.topic, msgtype, message.log_time, msg, ros1, store)
+
+
+def _same_definition(store: Typestore, name: str, text: str, ros1: bool, encoding: str) -> bool:
+    """Whether a schema's text decodes as ``store`` already defines ``name``: the same text, or the same field
+    layout once parsed (writers format definitions differently)."""
+    own = store.generate_msgdef(name, ros_version=1 if ros1 else 2)[0]
+    if own.strip() == text.strip():
+        return True
+    try:
+        theirs = get_typestore(Stores.EMPTY)
+        theirs.register(types_from_schema(text, name, encoding))
+        return bool(theirs.generate_msgdef(name, ros_version=1 if ros1 else 2)[0] == own)
+    except Exception:  # a schema rosbags cannot parse again here: decode it with a store of its own
+        return False

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -82,3 +83,31 @@ def test_older_layouts_read_and_write_back_as_humble(layout: str) -> None:
     data = out_store.serialize_cdr(out, "vision_msgs/msg/Detection2DArray")
     back = target.deserialize_cdr(data, "vision_msgs/msg/Detection2DArray")
     assert decode_detections(back, 0).detections == want
+
+
+def test_one_output_of_two_logs_with_two_layouts_keeps_every_message_decodable(tmp_path: Path) -> None:
+    """doorbatch map --mcap writes the passes of several logs into one MCAP: a Humble log and a Foxy-era one
+    must both read back. The arrays become Humble's layout; a single Detection2D, whose Foxy wire layout differs
+    (source_img, is_tracking, tracking_id), keeps its own schema beside Humble's."""
+    from doorbatch.io.log_writer import LogWriter
+    from doorbatch.io.reader import open_log
+    from doorbatch.io.ros_messages import detection_array
+
+    humble, foxy = new_ros2_typestore(), _store("foxy")
+    logs = [(humble, "humble"), (foxy, "foxy"), (humble, "humble")]  # no answer may carry over between logs
+    out = tmp_path / "out.mcap"
+    array_type, one_type = "vision_msgs/msg/Detection2DArray", "vision_msgs/msg/Detection2D"
+    with LogWriter(out) as writer:
+        for k, (store, layout) in enumerate(logs):
+            msg = _array(store, layout) if layout == "foxy" else detection_array(5_000_000_000, "cam", BOXES)
+            msg = store.deserialize_cdr(store.serialize_cdr(msg, array_type), array_type)
+            writer.write_raw(RawMessage("/detections", array_type, k + 1, msg, False, store))
+            writer.write_raw(RawMessage("/one", one_type, k + 1, msg.detections[0], False, store))
+    with open_log(out) as reader:
+        raws = list(reader.raw_messages())
+    assert [r.topic for r in raws] == ["/detections", "/one"] * 3
+    for raw in raws:
+        if raw.topic == "/detections":
+            assert decode_detections(raw.msg, 0).detections == tuple(Detection(*b) for b in BOXES)
+        else:
+            assert raw.msg.bbox.size_x == 200.0 and len(raw.msg.results) == 1
