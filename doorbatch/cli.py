@@ -188,7 +188,7 @@ def simulate_cmd(ctx: Context, world: Path, output: Path, scenario: str | None, 
     bag_folder = fmt.startswith("rosbag2")
     if bag_folder and output.is_dir() and any(output.iterdir()) and not (output / "metadata.yaml").is_file():
         raise UsageError(f"-o {output}: exists and is a folder that is not a ROS 2 bag (it would be replaced)")
-    check_output_location(output, folder=bag_folder and output.is_dir())
+    check_output_location(output, folder=bag_folder)  # a rosbag2 bag is a folder: never over a file
 
     summary = run_simulation(world, output, scenario, ctx.config.seed if seed is None else seed, fmt,
                              split_passes=split_passes)

@@ -83,16 +83,16 @@ OPTIONAL_MAP_FILES = ("walls.parquet", "classes.json", "annotated.mcap")
 
 
 def _remove_stale_map_files(out: Path, written: Sequence[Path], logs: Sequence[Path]) -> None:
-    """The optional files an earlier ``doorbatch map`` left in ``out`` that this run did not write: they would
-    pass for this map's. Only where ``out``'s manifest says a map was written there, and never an input."""
+    """The optional files the last ``doorbatch map`` into ``out`` wrote (its manifest's ``optional_files``) that
+    this run did not: they would pass for this map's. Never a file the user put there, never an input."""
     try:
-        earlier = Manifest.read(out / "manifest.json").extra.get("command") == "map"
+        earlier = Manifest.read(out / "manifest.json").extra.get("optional_files", [])
     except (OSError, InputDataError, ValueError):
-        earlier = False
+        earlier = []
     inputs = {Path(p).resolve() for p in logs}
     for name in OPTIONAL_MAP_FILES:
         path = out / name
-        if earlier and path not in written and path.resolve() not in inputs:
+        if name in earlier and path not in written and path.resolve() not in inputs:
             path.unlink(missing_ok=True)
 
 
@@ -113,6 +113,8 @@ def run_map(logs: Sequence[Path], out: Path, config: DoorbatchConfig, stages: Se
     unknown = [s for s in (stages or ()) if s not in STAGES]
     if unknown:
         raise UsageError(f"--stages {','.join(unknown)} is not available (stages: {', '.join(STAGES)})")
+    if mcap and (out / "annotated.mcap").resolve() in {Path(p).resolve() for p in logs}:
+        raise UsageError(f"--mcap would write {out / 'annotated.mcap'}, which is one of the logs: choose another -o")
     classes = read_classes(classes_file) if classes_file is not None else None
     recordings = None
     if stages is None or "em" in stages:
@@ -148,6 +150,7 @@ def run_map(logs: Sequence[Path], out: Path, config: DoorbatchConfig, stages: Se
     if mcap and recordings is not None:
         files.append(_write_mapping_mcap(logs, recordings, door_map, em, out / "annotated.mcap", config))
     _remove_stale_map_files(out, files, logs)
+    manifest.extra["optional_files"] = [f.name for f in files if f.name in OPTIONAL_MAP_FILES]
     manifest.extra["pose_source"] = door_map.pose_source
     for w in door_map.warnings:
         manifest.warn(w)

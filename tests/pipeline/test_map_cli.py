@@ -209,6 +209,9 @@ def test_map_never_removes_a_file_it_did_not_write_there(tmp_path: Path) -> None
     log = out / "annotated.mcap"
     log.write_bytes((SAMPLE_LOGS / "map_pass1.mcap").read_bytes())
     (out / "walls.parquet").write_text("a user's own file")
-    assert main(["map", str(log), "-o", str(out), "--stages", "grid", "-q"]) == 0
-    assert log.is_file() and (out / "walls.parquet").read_text() == "a user's own file"
+    for _ in range(2):  # the second run reads the first's manifest: still not its file
+        assert main(["map", str(log), "-o", str(out), "--stages", "grid", "-q"]) == 0
+        assert log.is_file() and (out / "walls.parquet").read_text() == "a user's own file"
+    assert main(["map", str(log), "-o", str(out), "--stages", "grid", "--mcap", "-q"]) == 2  # over its input
+    assert log.read_bytes() == (SAMPLE_LOGS / "map_pass1.mcap").read_bytes()
 

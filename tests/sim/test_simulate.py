@@ -291,3 +291,10 @@ def test_an_output_name_that_does_not_fit_the_format_is_a_usage_error(tmp_path: 
 def test_the_format_follows_the_output_suffix(tmp_path: Path, scenario_file: Path) -> None:
     assert main(["simulate", str(OFFICE), "--scenario", str(scenario_file), "-o", str(tmp_path / "x.bag"), "-q"]) == 0
     assert (tmp_path / "x.bag").read_bytes().startswith(b"#ROSBAG V2.0")
+
+
+def test_a_rosbag2_output_never_replaces_a_file(tmp_path: Path, scenario_file: Path) -> None:
+    notes = tmp_path / "notes"
+    notes.write_text("precious")
+    assert main(["simulate", str(OFFICE), "--scenario", str(scenario_file), "-o", str(notes), "-q"]) == 2
+    assert notes.read_text() == "precious"
