@@ -197,12 +197,36 @@ _TO_RGB = {
 }
 
 
+def _raw_pixels(msg: Any, data: npt.NDArray[np.uint8], topic: str) -> tuple[npt.NDArray[np.uint8], str]:
+    """A raw sensor_msgs/Image's pixels as RGB (or mono8), and that encoding."""
+    if msg.encoding in _TO_RGB:  # raw sensor layouts (sensor_msgs/image_encodings), converted as cv_bridge does
+        cells, code = _TO_RGB[msg.encoding]
+        rows = data.reshape(msg.height, msg.step)[:, : msg.width * cells]
+        return np.asarray(cv2.cvtColor(rows.reshape(msg.height, msg.width, cells) if cells > 1 else rows, code),
+                          dtype=np.uint8), "rgb8"
+    encoding = msg.encoding
+    channels = {"mono8": 1, "8UC1": 1, "rgb8": 3, "bgr8": 3, "rgba8": 4, "bgra8": 4, "8UC3": 3}
+    if encoding not in channels:
+        raise LogContentError(f"image encoding {encoding!r} is not supported", topic=topic)
+    c = channels[encoding]
+    rows = data.reshape(msg.height, msg.step)[:, : msg.width * c]
+    pixels = rows.reshape(msg.height, msg.width, c) if c > 1 else rows.reshape(msg.height, msg.width)
+    if encoding in ("bgr8", "8UC3"):
+        pixels = pixels[:, :, ::-1]
+    elif encoding == "rgba8":
+        pixels = pixels[:, :, :3]
+    elif encoding == "bgra8":
+        pixels = pixels[:, :, 2::-1]
+    return np.ascontiguousarray(pixels), "mono8" if c == 1 else "rgb8"
+
+
 def decode_image(msg: Any, msgtype: str, log_time_ns: int, topic: str) -> Image:
     """sensor_msgs/Image (mono8, rgb8, bgr8, rgba8, bgra8, 8-bit Bayer, yuv422/uyvy, yuyv) or CompressedImage →
     RGB or mono array.
 
     Raises:
-        LogContentError: an encoding we do not read, or a compressed image OpenCV cannot decode.
+        LogContentError: an encoding we do not read, data that does not fit the image's size, or a compressed
+            image OpenCV cannot decode.
     """
     data = np.asarray(msg.data, dtype=np.uint8)
     if msgtype == COMPRESSED_IMAGE:
@@ -211,27 +235,13 @@ def decode_image(msg: Any, msgtype: str, log_time_ns: int, topic: str) -> Image:
             raise LogContentError(f"cannot decode compressed image ({msg.format})", topic=topic)
         pixels = cv2.cvtColor(decoded, cv2.COLOR_BGR2RGB)
         encoding = "rgb8"
-    elif msg.encoding in _TO_RGB:  # raw sensor layouts (sensor_msgs/image_encodings), converted as cv_bridge does
-        cells, code = _TO_RGB[msg.encoding]
-        rows = data.reshape(msg.height, msg.step)[:, : msg.width * cells]
-        pixels = cv2.cvtColor(rows.reshape(msg.height, msg.width, cells) if cells > 1 else rows, code)
-        encoding = "rgb8"
     else:
-        encoding = msg.encoding
-        channels = {"mono8": 1, "8UC1": 1, "rgb8": 3, "bgr8": 3, "rgba8": 4, "bgra8": 4, "8UC3": 3}
-        if encoding not in channels:
-            raise LogContentError(f"image encoding {encoding!r} is not supported", topic=topic)
-        c = channels[encoding]
-        rows = data.reshape(msg.height, msg.step)[:, : msg.width * c]
-        pixels = rows.reshape(msg.height, msg.width, c) if c > 1 else rows.reshape(msg.height, msg.width)
-        if encoding in ("bgr8", "8UC3"):
-            pixels = pixels[:, :, ::-1]
-        elif encoding == "rgba8":
-            pixels = pixels[:, :, :3]
-        elif encoding == "bgra8":
-            pixels = pixels[:, :, 2::-1]
-        pixels = np.ascontiguousarray(pixels)
-        encoding = "mono8" if c == 1 else "rgb8"
+        try:
+            pixels, encoding = _raw_pixels(msg, data, topic)
+        except (ValueError, cv2.error) as err:  # data shorter than height × step, or a size OpenCV refuses
+            raise LogContentError(f"{msg.encoding} image data ({data.size} bytes) does not fit {msg.width}×"
+                                  f"{msg.height} at step {msg.step}: {' '.join(str(err).split())}",
+                                  topic=topic) from err
     return Image(
         stamp_ns=stamp_to_ns(msg.header.stamp),
         log_time_ns=log_time_ns,

@@ -44,8 +44,8 @@ class DoorPoseInputs:
 
 def read_doorpose_inputs(path: Path, config: DoorbatchConfig, detector: ImageDetector | None = None
                          ) -> DoorPoseInputs:
-    """Read the log once for TF, once for the rest; with ``detector`` the images are run through it one
-    by one, else the detections topic is read.
+    """Read the log for TF, then for the rest; with ``detector`` the images are run through it one by one, else
+    the detections topic is read (and, where the log has images, their stamps: :func:`_on_image_stamps`).
 
     Raises:
         LogContentError: no scan, no camera_info, or no detections topic (and no detector).
@@ -99,7 +99,7 @@ def read_doorpose_inputs(path: Path, config: DoorbatchConfig, detector: ImageDet
         if unset:
             warnings.append(f"{unset} of {len(boxes)} detection messages have header stamp 0 (unset): timed by "
                             f"their log time")
-        if detector is None and reader.roles.topic(Role.IMAGE) is not None:
+        if detector is None and reader.roles.topic(Role.IMAGE) is not None and config.doorpose.max_detection_latency_s:
             boxes, note = _on_image_stamps(boxes, reader, config)
             warnings += [note] if note else []
     if info is None:
@@ -169,25 +169,24 @@ def _colour_image_topic(reader: LogReader, config: DoorbatchConfig) -> str | Non
 def _on_image_stamps(boxes: list[Detections], reader: LogReader, config: DoorbatchConfig
                      ) -> tuple[list[Detections], str | None]:
     """Detections stamped when they were published rather than with their image's stamp (a node stamping with
-    ``now()``): where the log has the images and a box message's stamp is no image's, it takes the stamp of
-    the latest image of its frame before it (within ``doorpose.max_detection_latency_s``), with a note."""
-    topic = reader.roles.topic(Role.IMAGE)
-    stamps: dict[str, list[int]] = {}
-    for raw in reader.raw_messages([topic] if topic else []):
+    ``now()``): where the log has images of the boxes' frame (any image topic) and hardly any box message
+    carries an image's stamp (under a tenth: a log with dropped images keeps its stamps), each takes the stamp
+    of the latest image of its frame before it (within ``doorpose.max_detection_latency_s``), with a note."""
+    names = [t.name for t in reader.topics.values() if t.msgtype in (IMAGE, COMPRESSED_IMAGE)]
+    stamps: dict[str, set[int]] = {}
+    for raw in reader.raw_messages(names):
         header = raw.msg.header
-        stamps.setdefault(str(header.frame_id).lstrip("/"), []).append(stamp_to_ns(header.stamp))
-    if not stamps:
+        stamps.setdefault(str(header.frame_id).lstrip("/"), set()).add(stamp_to_ns(header.stamp))
+    own = sum(b.stamp_ns in stamps.get(b.frame_id, ()) for b in boxes)
+    if not stamps or not boxes or 10 * own >= len(boxes):
         return boxes, None
     latency = int(config.doorpose.max_detection_latency_s * 1e9)
     ordered = {frame: np.array(sorted(v), dtype=np.int64) for frame, v in stamps.items()}
     out, moved = [], 0
     for b in boxes:
         images = ordered.get(b.frame_id)
-        if images is None or images.size == 0:
-            out.append(b)
-            continue
-        k = int(np.searchsorted(images, b.stamp_ns, side="right")) - 1
-        if k >= 0 and images[k] != b.stamp_ns and b.stamp_ns - int(images[k]) <= latency:
+        k = -1 if images is None else int(np.searchsorted(images, b.stamp_ns, side="right")) - 1
+        if images is not None and k >= 0 and images[k] != b.stamp_ns and b.stamp_ns - int(images[k]) <= latency:
             out.append(replace(b, stamp_ns=int(images[k])))
             moved += 1
         else:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from doorbatch.geometry.camera import camera_from_info, project_points
 from doorbatch.io import ros_messages as m
@@ -43,3 +44,15 @@ def test_bayer_and_yuv422_images_decode_to_rgb() -> None:
     grey = np.tile(np.array([128, 150, 128, 150], np.uint8), (4, 4))  # U Y V Y: colourless, Y = 150
     rgb = decode_image(_raw_image("yuv422", grey, 8, 4, 16), "sensor_msgs/msg/Image", 0, "/img").pixels
     assert rgb.shape == (4, 8, 3) and np.ptp(rgb) <= 2 and abs(int(rgb.mean()) - 150) <= 25
+
+
+def test_image_data_that_does_not_fit_its_size_is_bad_input_naming_the_topic() -> None:
+    from doorbatch.errors import LogContentError
+    from doorbatch.io.decode import decode_image
+
+    for encoding, data, width in (("bayer_rggb8", np.zeros(10, np.uint8), 8), ("rgb8", np.zeros(10, np.uint8), 8),
+                                  ("yuv422", np.zeros(4 * 14, np.uint8), 7)):  # short buffers; an odd YUV width
+        with pytest.raises(LogContentError, match="/img") as err:
+            decode_image(_raw_image(encoding, data, width, 4, 2 * width if encoding == "yuv422" else width * 3),
+                         "sensor_msgs/msg/Image", 0, "/img")
+        assert "does not fit" in str(err.value)

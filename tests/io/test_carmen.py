@@ -586,3 +586,20 @@ def test_a_reference_read_from_a_repaired_log_carries_the_repair_warning(tmp_pat
     lines[6] = lines[6].replace("100.500000", "99.000000")
     reference = read_reference(write_log(tmp_path / "a.log", lines), DoorbatchConfig())
     assert len(reference.stamps_ns) == 10 and any("out of order" in w for w in reference.warnings)
+
+
+def test_a_malformed_rawlaser1_line_in_a_raw_only_log_names_its_line(tmp_path: Path) -> None:
+    lines = [odom_line((0.0, 0.0, 0.0), "10.0"), rawlaser1(10.1), rawlaser1(10.3)[:40], rawlaser1(10.5)]
+    path = write_log(tmp_path / "raw.log", lines)
+    with pytest.raises(LogReadError, match="line 3"), CarmenReader(path):  # on opening: later stamps would shift
+        pass
+
+
+def test_a_mount_needs_the_robot_to_have_turned(tmp_path: Path) -> None:
+    """Driving straight, a corrected laser pose can keep a fixed offset from the odometry by chance; only over
+    30 deg of turning does a fixed relative pose show a rigid mount."""
+    mount = (0.2, 0.0, 0.0)
+    straight = [(0.1 * k, 0.0, 0.0) for k in range(12)]
+    lines = [robotlaser1(_mounted(r, mount), r, 3.0 + 0.1 * k) for k, r in enumerate(straight)]
+    records = read_all(write_log(tmp_path / "straight.clf", lines))
+    np.testing.assert_allclose(next(t for t in only(Transform, records) if t.static).translation, 0.0)

@@ -121,10 +121,13 @@ def estimate_door_poses(inputs: DoorPoseInputs, config: DoorbatchConfig, doors: 
     out: list[DoorPoseEstimate] = []
     paired = 0
     classes: set[str] = set()  # the box classes seen, as resolved (for the warning when none is a door)
+    door_class = class_name(dc.door_class, dc.class_names)
+    door_scores: list[float] = []
     for boxes in inputs.detections:
         if progress is not None:
             progress(1)
         classes.update(class_name(d.class_id, dc.class_names) for d in boxes.detections)
+        door_scores += [d.score for d in boxes.detections if class_name(d.class_id, dc.class_names) == door_class]
         i = nearest_scan(scan_stamps, boxes.stamp_ns, tol)
         if i is None or not boxes.detections:
             continue
@@ -158,7 +161,9 @@ def estimate_door_poses(inputs: DoorPoseInputs, config: DoorbatchConfig, doors: 
         warnings.append(f"the camera's optical axis (z of frame {camera.frame_id!r}) points {abs(tilt):.1f} deg "
                         f"{'above' if tilt > 0 else 'below'} the horizontal: the fusion assumes a level camera, "
                         f"so door poses are off; is {camera.frame_id!r} the optical frame (z forward)?")
-    door_class = class_name(dc.door_class, dc.class_names)
+    if door_scores and max(door_scores) < dc.confidence_threshold:
+        warnings.append(f"all {len(door_scores)} boxes of class {door_class!r} score below "
+                        f"doorpose.confidence_threshold {dc.confidence_threshold} (best {max(door_scores):.3f})")
     if classes and door_class not in classes:
         warnings.append(f"no box of class {door_class!r} in {len(inputs.detections)} detection messages; classes "
                         f"seen: {', '.join(sorted(classes))} (doorpose.door_class, doorpose.class_names)")

@@ -127,6 +127,10 @@ def test_boxes_stamped_on_publishing_take_their_images_stamp(tmp_path: Path) -> 
     inputs = read_doorpose_inputs(log, DoorbatchConfig())
     assert [b.stamp_ns for b in inputs.detections] == [T0 + 200_000_000 * (k + 1) + 5_000_000 for k in range(4)]
     assert any("4 of 4 detection messages carry no image's stamp" in w for w in inputs.warnings)
+    # on-time boxes in a recording that dropped every second image keep their own stamps
+    sparse = read_doorpose_inputs(door_log(tmp_path / "sparse.mcap", scene, poses, rng, images=True, image_every=2),
+                                  DoorbatchConfig())
+    assert [b.stamp_ns for b in sparse.detections] == [T0 + 200_000_000 * (k + 1) + 5_000_000 for k in range(4)]
 
 
 def test_doorpose_without_camera_info_is_bad_input(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
