@@ -11,6 +11,7 @@ the output is in use, retry later).
 
 from __future__ import annotations
 
+import fcntl
 import json
 import logging
 import os
@@ -105,6 +106,18 @@ def _try_create(path: Path, info: LockInfo) -> bool:
         tmp.unlink(missing_ok=True)
 
 
+@contextmanager
+def _takeover_guard(folder: Path) -> Iterator[None]:
+    """An exclusive ``flock`` on ``folder``/.doorbatch.lock.guard for the read-check-remove of a stale lock: two
+    runs that both found it stale cannot both remove it (the second would remove the first's new lock)."""
+    fd = os.open(folder / f"{LOCK_NAME}.guard", os.O_CREAT | os.O_RDWR, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)  # releases the flock
+
+
 def acquire_lock(folder: Path) -> tuple[LockInfo, LockInfo | None]:
     """Take ``folder``/.doorbatch.lock for this process.
 
@@ -127,7 +140,9 @@ def acquire_lock(folder: Path) -> tuple[LockInfo, LockInfo | None]:
                                     f"if that run is gone, remove {path}")
         stale = held or UNREADABLE
         log.debug("taking over the stale lock %s (%s: not running)", path, stale.describe())  # run.log says so
-        path.unlink(missing_ok=True)
+        with _takeover_guard(folder):  # another run taking over too: only one removes it, and only the stale one
+            if read_lock(path) == held:
+                path.unlink(missing_ok=True)
     raise OutputLockedError(f"{folder}: could not take the lock {path} (another run keeps taking it)")
 
 

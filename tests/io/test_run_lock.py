@@ -86,3 +86,42 @@ def test_release_leaves_a_lock_that_is_not_ours(tmp_path: Path) -> None:
     with run_lock(tmp_path):
         write_lock(tmp_path, os.getppid())  # someone replaced it meanwhile
     assert read_lock(tmp_path / LOCK_NAME) is not None
+
+
+def test_two_runs_taking_over_one_stale_lock_never_both_hold_it(tmp_path: Path,
+                                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    """Run B reads the stale lock, then is slow; run A takes the lock over meanwhile. B must not remove A's new
+    lock and take it too (it did: two runs wrote one OUT)."""
+    import threading
+    import time
+
+    from doorbatch.io import run_lock as rl
+
+    write_lock(tmp_path, dead_pid())
+    slow = threading.local()
+    original = rl.read_lock
+
+    def read_lock_slowly(path: Path) -> LockInfo | None:
+        info = original(path)
+        time.sleep(getattr(slow, "delay", 0.0))
+        return info
+
+    monkeypatch.setattr(rl, "read_lock", read_lock_slowly)
+    outcome: dict[str, object] = {}
+
+    def take(name: str, delay: float) -> None:
+        slow.delay = delay
+        try:
+            outcome[name] = acquire_lock(tmp_path)[0]
+        except OutputLockedError as err:
+            outcome[name] = err
+
+    b = threading.Thread(target=take, args=("b", 0.4))
+    a = threading.Thread(target=take, args=("a", 0.0))
+    b.start()
+    time.sleep(0.1)
+    a.start()
+    a.join()
+    b.join()
+    assert isinstance(outcome["a"], LockInfo) and isinstance(outcome["b"], OutputLockedError)
+    assert original(tmp_path / LOCK_NAME) == outcome["a"]
