@@ -32,7 +32,7 @@ from doorbatch.io.tum import read_tum
 from doorbatch.pipeline.evaluate.report import DoorStateTable, MapTables, ReferenceTrajectory, RunTables
 
 log = logging.getLogger(__name__)
-TUM_SUFFIXES = (".tum", ".txt")
+TUM_SUFFIXES = (".tum", ".txt", ".csv")  # .csv: the TUM columns comma-separated
 FloatArray = npt.NDArray[np.float64]
 
 

@@ -95,8 +95,8 @@ def write_tum(path: Path, stamp_ns: npt.ArrayLike, x: npt.ArrayLike, y: npt.Arra
 
 
 def _parse_line(line: str) -> tuple[int, list[float]]:
-    """Stamp (ns) and the seven floats of one pose line."""
-    fields = line.split()
+    """Stamp (ns) and the seven floats of one pose line (space- or comma-separated: some tools write CSV)."""
+    fields = line.replace(",", " ").split()
     if len(fields) != 8:
         raise ValueError(f"expected 8 fields (timestamp x y z qx qy qz qw), got {len(fields)}")
     values = [float(v) for v in fields[1:]]

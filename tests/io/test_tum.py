@@ -79,6 +79,10 @@ def test_read_yaw_of_3d_quaternions_and_skips_comments(tmp_path: Path) -> None:
     assert back.stamp_ns.tolist() == [500_000_000, 1_000_000_000]
     assert back.x.tolist() == [1.0, 0.0]
     assert np.allclose(back.yaw, [0.3, 0.0])
+    csv = tmp_path / "t.csv"  # the same poses comma-separated, as some tools export them
+    csv.write_text(f"#timestamp,x,y,z,qx,qy,qz,qw\n0.5,1,2,3,0,0,{qz},{qw}\n1.0, 0, 0, 0, 1, 0, 0, 0\n")
+    again = read_tum(csv)
+    assert again.stamp_ns.tolist() == back.stamp_ns.tolist() and np.allclose(again.yaw, back.yaw)
 
 
 @pytest.mark.parametrize(

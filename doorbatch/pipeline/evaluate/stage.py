@@ -71,7 +71,7 @@ def _classify(path: Path, reference: Path | None) -> _Input:
             _Input(path, "tum") if is_trajectory_file(path) else _Input(path, "topic", topic) if topic else None)
     if item is None:
         raise InputDataError("neither a run directory (trajectory.parquet), a map directory (map.yaml, "
-                             "doors.parquet), a TUM trajectory (.tum, .txt) nor LOG:/POSE_TOPIC", path=path)
+                             "doors.parquet), a TUM trajectory (.tum, .txt, .csv) nor LOG:/POSE_TOPIC", path=path)
     if item.kind in ("tum", "topic") and reference is None:
         raise UsageError(f"evaluate {path}: another localizer's trajectory has no reference of its own; "
                          "give --reference LOG|TUM")
