@@ -58,23 +58,19 @@ def _setup_logging(verbosity: int) -> None:
     root.setLevel(max(logging.DEBUG, min(logging.ERROR, level)))
 
 
-def _output_folder(_: click.Context, __: click.Parameter, value: Path | None) -> Path | None:
-    """``-o`` of a command that writes a folder: checked before any work (:func:`check_output_location`)."""
-    from doorbatch.io.staged_dir import check_output_location
+def _output(folder: bool) -> Callable[[click.Context, click.Parameter, Path | None], Path | None]:
+    """The ``-o`` callback of a command that writes a folder (``folder``) or one file: the location is checked
+    before any work (:func:`~doorbatch.io.staged_dir.check_output_location`; an existing file or folder of the
+    other kind is an error, never replaced)."""
 
-    if value is not None:
-        check_output_location(value, folder=True)
-    return value
+    def check(_: click.Context, __: click.Parameter, value: Path | None) -> Path | None:
+        from doorbatch.io.staged_dir import check_output_location
 
+        if value is not None:
+            check_output_location(value, folder=folder)
+        return value
 
-def _output_file(_: click.Context, __: click.Parameter, value: Path | None) -> Path | None:
-    """``-o`` of a command that writes one file, checked before any work (an existing folder there is an
-    error, never replaced)."""
-    from doorbatch.io.staged_dir import check_output_location
-
-    if value is not None:
-        check_output_location(value, folder=False)
-    return value
+    return check
 
 
 def common_options(func: F) -> F:
@@ -147,7 +143,7 @@ def _format_report(report: Any) -> str:
 
 @cli.command("convert")
 @click.argument("source", metavar="IN", type=click.Path(path_type=Path))
-@click.option("-o", "--output", type=click.Path(path_type=Path), required=True, callback=_output_file,
+@click.option("-o", "--output", type=click.Path(path_type=Path), required=True, callback=_output(folder=False),
               help="Output .mcap file.")
 @common_options
 def convert_cmd(ctx: Context, source: Path, output: Path) -> None:
@@ -201,7 +197,7 @@ def simulate_cmd(ctx: Context, world: Path, output: Path, scenario: str | None, 
 @cli.command("map")
 @click.argument("logs", metavar="LOG...", nargs=-1, required=True, type=click.Path(path_type=Path))
 @click.option("-o", "--output", type=click.Path(path_type=Path, file_okay=False), required=True,
-              callback=_output_folder,
+              callback=_output(folder=True),
               help="Map directory to write.")
 @click.option("--pose-source", type=click.Choice(["reference", "odometry", "scanmatch"]), default=None,
               help="Where robot poses come from (default: reference if every log has one, else scanmatch).")
@@ -236,7 +232,7 @@ def map_cmd(ctx: Context, logs: tuple[Path, ...], output: Path, pose_source: str
 @click.option("--map", "map_path", type=click.Path(path_type=Path), required=True,
               help="Map directory of doorbatch map, any map_server YAML, or a log with a /map OccupancyGrid.")
 @click.option("-o", "--output", type=click.Path(path_type=Path, file_okay=False), required=True,
-              callback=_output_folder,
+              callback=_output(folder=True),
               help="Run directory to write.")
 @click.option("--method", type=click.Choice(["rbpf", "mcl"]), default=None, help="Default: localize.method.")
 @click.option("--particles", type=click.IntRange(min=1), default=None,
@@ -264,7 +260,7 @@ def localize_cmd(ctx: Context, log_path: Path, map_path: Path, output: Path, met
 @cli.command("evaluate")
 @click.argument("run_dirs", metavar="RUNDIR...", nargs=-1, type=click.Path(path_type=Path))
 @click.option("-o", "--output", type=click.Path(path_type=Path, file_okay=False), required=True,
-              callback=_output_folder,
+              callback=_output(folder=True),
               help="Report directory to write.")
 @click.option("--reference", type=click.Path(path_type=Path), default=None,
               help="Reference trajectory: a TUM file or a log with a reference pose topic.")
@@ -307,7 +303,7 @@ def evaluate_cmd(ctx: Context, run_dirs: tuple[Path, ...], output: Path, referen
 @cli.command("doorpose")
 @click.argument("log_path", metavar="LOG", type=click.Path(path_type=Path), required=False)
 @click.option("-o", "--output", type=click.Path(path_type=Path, file_okay=False), required=True,
-              callback=_output_folder,
+              callback=_output(folder=True),
               help="Run directory to write.")
 @click.option("--map", "map_path", type=click.Path(path_type=Path), default=None,
               help="Map directory: match each door pose to a mapped door and report its angle.")
@@ -342,7 +338,7 @@ def doorpose_cmd(ctx: Context, log_path: Path | None, output: Path, map_path: Pa
 @cli.command("run")
 @click.argument("dataset", type=click.Path(path_type=Path, file_okay=False))
 @click.option("-o", "--output", type=click.Path(path_type=Path, file_okay=False), required=True,
-              callback=_output_folder,
+              callback=_output(folder=True),
               help="Output folder (maps, runs, reports, dataset tables, run.log).")
 @click.option("--workers", type=click.IntRange(min=0), default=0, show_default=True,
               help="Parallel steps (0: one per CPU).")

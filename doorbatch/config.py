@@ -21,6 +21,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from doorbatch.amcl_params import is_ros2_parameter_file, refuse_ros1_amcl_file, translate_ros2_parameter_file
 from doorbatch.errors import ConfigError, UsageError
+from doorbatch.records import class_name
 
 
 class Section(BaseModel):
@@ -723,8 +724,7 @@ class DoorPoseConfig(Section):
     def _stable_gains(self) -> DoorPoseConfig:
         if self.k_alpha - self.k_rho <= 0.0:
             raise ValueError("k_alpha - k_rho must be > 0 (stability of the polar control law)")
-        index = self.door_class.isdigit() and int(self.door_class) < len(self.class_names)
-        if self.door_class not in self.class_names and not index and self.detector != "topic":
+        if class_name(self.door_class, self.class_names) not in self.class_names and self.detector != "topic":
             raise ValueError(f"door_class {self.door_class!r} is not in class_names {self.class_names}")
         return self
 

@@ -131,6 +131,15 @@ class Detection:
     size_y: float
 
 
+def class_name(class_id: str, class_names: list[str] | tuple[str, ...]) -> str:
+    """A box's class: its id when that is a name, else the name at that index of the detector's label list
+    (vision_msgs ids are indices a label map resolves: Isaac ROS publishes "0", Noetic int64 0). The config's
+    ``doorpose.door_class`` and ``handle_class`` are resolved the same way, so a name or an id may name them."""
+    if class_id in class_names or not class_id.isdigit() or int(class_id) >= len(class_names):
+        return class_id
+    return class_names[int(class_id)]
+
+
 @dataclass(frozen=True, slots=True)
 class Detections:
     """All detections of one image (vision_msgs/Detection2DArray)."""

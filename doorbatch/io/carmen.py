@@ -43,6 +43,7 @@ import numpy.typing as npt
 
 from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import LogReadError
+from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.geometry.se2 import relative
 from doorbatch.io import ros_messages as rm
 from doorbatch.io.decode import LASERSCAN, ODOMETRY, TF_MESSAGE
@@ -658,12 +659,12 @@ class CarmenReader(LogReader):
         turned = float(np.ptp(np.unwrap(np.asarray(robot_yaws)))) if len(robot_yaws) else 0.0
         if all(v is None for v in offsets) and len(mounts) >= _MOUNT_MIN_LINES and turned >= _MOUNT_MIN_TURN_RAD:
             m = np.array(mounts)
-            turn = np.arctan2(np.sin(m[:, 2] - m[0, 2]), np.cos(m[:, 2] - m[0, 2]))  # about the first (±π)
+            turn = wrap_angle(m[:, 2] - m[0, 2])  # about the first (±π)
             if (np.ptp(m[:, :2], axis=0).max() <= _MOUNT_TOLERANCE_M
                     and np.ptp(turn) <= _MOUNT_TOLERANCE_RAD):
                 x, y = np.median(m[:, :2], axis=0).tolist()
                 yaw = float(m[0, 2] + np.median(turn))
-                self.laser_offset = (float(x), float(y), math.atan2(math.sin(yaw), math.cos(yaw)))
+                self.laser_offset = (float(x), float(y), float(wrap_angle(yaw)))
                 if any(abs(v) > 0 for v in self.laser_offset):
                     log.info("%s: laser mount (%.3f m, %.3f m, %.4f rad) from the ROBOTLASER1 poses",
                              self.path, *self.laser_offset)

@@ -21,7 +21,7 @@ from doorbatch.io.decode import (
     decode_image,
     stamp_to_ns,
 )
-from doorbatch.io.reader import LogReader, open_log
+from doorbatch.io.reader import LogReader, RawMessage, open_log
 from doorbatch.io.recording import PoseSeries, read_transforms, robot_pose_series
 from doorbatch.records import CameraInfo, Detection, Detections, Image, Pose2D, Role, Scan
 
@@ -71,9 +71,9 @@ def read_doorpose_inputs(path: Path, config: DoorbatchConfig, detector: ImageDet
         info_topic, note = _camera_info_of_boxes(reader, box_topic, config)
         warnings_pre = [note] if note else []
         unset = 0
-        if info_topic is not None:
-            info = next((decode_camera_info(raw.msg, raw.log_time_ns) for raw in reader.raw_messages([info_topic])),
-                        None)
+        first_info = _first_message(reader, info_topic) if info_topic is not None else None
+        if first_info is not None:
+            info = decode_camera_info(first_info.msg, first_info.log_time_ns)
         if image_topic is not None and detector is not None:
             for raw in reader.raw_messages([image_topic]):
                 image = decode_image(raw.msg, raw.msgtype, raw.log_time_ns, raw.topic)
@@ -110,6 +110,11 @@ def read_doorpose_inputs(path: Path, config: DoorbatchConfig, detector: ImageDet
                           sorted(boxes, key=lambda d: d.stamp_ns), reference, odometry, warnings)
 
 
+def _first_message(reader: LogReader, topic: str) -> RawMessage | None:
+    """The first message of ``topic`` (None when it has none); the rest of the topic is not read."""
+    return next(iter(reader.raw_messages([topic])), None)
+
+
 # image_transport's sub-topics of an image topic (``.../image_raw/compressed``).
 _TRANSPORTS = frozenset({"compressed", "compressedDepth", "theora", "zstd", "ffmpeg"})
 
@@ -124,9 +129,12 @@ def _camera_info_of_boxes(reader: LogReader, box_topic: str | None, config: Door
     infos = sorted(t.name for t in reader.topics.values() if t.msgtype == CAMERA_INFO)
     if len(infos) < 2 or config.topics.camera_info is not None or box_topic is None:
         return None, None
-    box_frame = next((str(raw.msg.header.frame_id).lstrip("/") for raw in reader.raw_messages([box_topic])), None)
-    frames = {name: next((str(raw.msg.header.frame_id).lstrip("/") for raw in reader.raw_messages([name])), "")
-              for name in infos}
+    def frame_of(topic: str) -> str:
+        raw = _first_message(reader, topic)
+        return str(raw.msg.header.frame_id).lstrip("/") if raw is not None else ""
+
+    box_frame = frame_of(box_topic)
+    frames = {name: frame_of(name) for name in infos}
     same_frame = [name for name in infos if box_frame and frames[name] == box_frame]
     if len(same_frame) == 1:
         return same_frame[0], None
@@ -153,7 +161,7 @@ def _colour_image_topic(reader: LogReader, config: DoorbatchConfig) -> str | Non
         return None
 
     def rank(name: str) -> int:
-        raw = next(iter(reader.raw_messages([name])), None)
+        raw = _first_message(reader, name)
         if raw is None:
             return 3
         if raw.msgtype == COMPRESSED_IMAGE:

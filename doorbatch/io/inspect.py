@@ -22,7 +22,7 @@ from doorbatch.geometry.tf_buffer import TfBuffer
 from doorbatch.io.decode import decode_scan, decode_transforms, stamp_to_ns
 from doorbatch.io.map_topic import OCCUPANCY_GRID
 from doorbatch.io.pose_topic import POSE_TYPES
-from doorbatch.io.reader import open_log
+from doorbatch.io.reader import most_are_bad, open_log
 from doorbatch.io.recording import clock_lags_s, missing_laser_tf_hint, odometry_frame, odometry_frame_note
 from doorbatch.io.roles import TopicInfo
 from doorbatch.records import Role
@@ -168,7 +168,7 @@ def inspect_log(path: Path, config: DoorbatchConfig | None = None,
                 progress(1)
         if bad_scans and scan_topic is not None:  # as LogReader.messages: skipped unless most are bad
             n_scans = stats[scan_topic].count
-            most = 2 * len(bad_scans) > n_scans
+            most = most_are_bad(len(bad_scans), n_scans)
             problems.append(Problem(Severity.ERROR if most else Severity.WARNING, scan_topic,
                                     bad_scans[0] if most else f"{len(bad_scans)} of {n_scans} scans are unusable and "
                                                               f"skipped (first: {bad_scans[0]})"))

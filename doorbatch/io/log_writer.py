@@ -71,8 +71,7 @@ class LogWriter:
         self.tmp = self.path.parent / f".{self.path.name}.tmp{os.getpid()}"
         self._channels: dict[tuple[str, ...], Any] = {}
         self._schemas: dict[tuple[str, str], int] = {}
-        self._definitions: dict[tuple[int, str], tuple[Typestore, str]] = {}
-        self._migrate_cache: dict[str, object] = {}
+        self._type_cache: dict[str, object] = {}  # migration plans and definitions, per type and store
         self._ros2_store: Typestore | None = None  # ROS 2 types plus the ROS 1-only ones copied so far
         self._file: IO[bytes] | None = None
         self._mcap: McapWriter | None = None
@@ -100,7 +99,7 @@ class LogWriter:
         """Append one message; ``store`` is the typestore of ``msg`` (default ROS 2 Humble + vision_msgs)."""
         store = store or ros2_typestore()
         if self._mcap is not None:
-            definition = self._definition(msgtype, store)
+            definition = _msgdef(store, msgtype, self._type_cache)
             channel = self._channels.get((topic, msgtype, definition))
             if channel is None:
                 channel = self._mcap_channel(topic, msgtype, definition)
@@ -115,7 +114,7 @@ class LogWriter:
             if msgtype == DETECTION2D_ARRAY:
                 msg = detections_to_ros1(msg)
             elif msgtype in dst.types:
-                msg = migrate_message(store, dst, msgtype, msgtype, self._migrate_cache, msg)
+                msg = migrate_message(store, dst, msgtype, msgtype, self._type_cache, msg)
             else:
                 dst = store
             conn = self._channels.get((topic, msgtype))
@@ -135,16 +134,8 @@ class LogWriter:
         """Copy a message read from any log, converting ROS 1 messages to ROS 2 first."""
         if self._ros2_store is None:
             self._ros2_store = new_ros2_typestore()
-        msg, store = to_ros2(raw, self._migrate_cache, self._ros2_store)
+        msg, store = to_ros2(raw, self._type_cache, self._ros2_store)
         self.write(raw.topic, raw.msgtype, raw.log_time_ns, msg, store)
-
-    def _definition(self, msgtype: str, store: Typestore) -> str:
-        """``msgtype``'s ROS 2 definition in ``store`` (cached per store: one per source log)."""
-        cached = self._definitions.get((id(store), msgtype))
-        if cached is None or cached[0] is not store:
-            cached = (store, store.generate_msgdef(msgtype, ros_version=2)[0])
-            self._definitions[(id(store), msgtype)] = cached
-        return cached[1]
 
     def _mcap_channel(self, topic: str, msgtype: str, definition: str) -> int:
         """A channel per topic, type and definition: two logs may lay one type out differently (vision_msgs
@@ -183,16 +174,19 @@ class LogWriter:
                 _remove(self.tmp)
 
 
+def _msgdef(store: Typestore, msgtype: str, cache: dict[str, object]) -> str:
+    """``msgtype``'s ROS 2 definition in ``store``, cached per store (one per source log, and the writer's own)."""
+    key = f"msgdef:{id(store)}:{msgtype}"
+    held = cache.get(key)
+    if not (isinstance(held, tuple) and held[0] is store):
+        held = cache[key] = (store, store.generate_msgdef(msgtype, ros_version=2)[0])
+    return str(held[1])
+
+
 def _same_layout(source: Typestore, target: Typestore, msgtype: str, cache: dict[str, object]) -> bool:
     """Whether ``target`` defines ``msgtype`` as ``source`` does (a log's own schema may be an older layout:
-    vision_msgs' Detection2D changed between Foxy, Galactic and Humble). Cached per type."""
-    key = f"same layout:{id(source)}:{msgtype}"  # per source store: the logs of one output may differ
-    held = cache.get(key)
-    if not (isinstance(held, tuple) and held[0] is source):
-        same = msgtype in target.types and (
-            source.generate_msgdef(msgtype, ros_version=2)[0] == target.generate_msgdef(msgtype, ros_version=2)[0])
-        held = cache[key] = (source, same)
-    return bool(held[1])
+    vision_msgs' Detection2D changed between Foxy, Galactic and Humble)."""
+    return msgtype in target.types and _msgdef(source, msgtype, cache) == _msgdef(target, msgtype, cache)
 
 
 def _humble_detections(raw: RawMessage) -> Any:

@@ -45,6 +45,12 @@ class RawMessage:
     store: Typestore | None = None  # the typestore whose classes built ``msg`` (None: ROS 2 Humble's)
 
 
+def most_are_bad(n_bad: int, n: int) -> bool:
+    """Whether a topic whose ``n_bad`` of ``n`` messages cannot be decoded is unusable (an error) rather than
+    usable with those skipped (a warning)."""
+    return 2 * n_bad > n
+
+
 class LogReader(ABC):
     """A context manager over one log: topics, time span, and streaming access to its messages."""
 
@@ -153,7 +159,7 @@ class LogReader(ABC):
             for record in records:
                 yield RoleMessage(role, raw.topic, record)
         for topic, errors in bad.items():
-            if 2 * len(errors) > seen[topic]:
+            if most_are_bad(len(errors), seen[topic]):
                 raise errors[0]
             self.warnings.append(f"{self.path}: {len(errors)} of {seen[topic]} messages on {topic} skipped, "
                                  f"unusable (first: {errors[0].reason})")

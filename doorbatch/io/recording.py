@@ -10,6 +10,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -23,6 +24,7 @@ from doorbatch.io.reader import LogReader, open_log
 from doorbatch.records import BeamColors, Pose2D, Role, Scan, Transform
 
 FloatArray = npt.NDArray[np.float64]
+R = TypeVar("R", Scan, Pose2D)
 Int64Array = npt.NDArray[np.int64]
 
 
@@ -246,6 +248,11 @@ def clock_lags_s(scan_stamps_ns: Sequence[int], scan_log_ns: Sequence[int], odom
     return (a, b) if a is not None and b is not None and abs(a - b) > mismatch_s else None
 
 
+def _log_timed(records: list[R], every: bool) -> list[R]:
+    """The records with their log time as stamp: ``every`` one, else those whose stamp is unset (0)."""
+    return [replace(r, stamp_ns=r.log_time_ns) if every or r.stamp_ns == 0 else r for r in records]
+
+
 def on_one_clock(scans: list[Scan], odom: list[Pose2D], ref: list[Pose2D], mismatch_s: float) -> OneClock:
     """Scans and poses whose header stamps can be put on one time line, in stamp order, and notes saying what
     was done. A header stamp of 0 is unset: the message's log time stands in. Scans and odometry whose median
@@ -261,15 +268,11 @@ def on_one_clock(scans: list[Scan], odom: list[Pose2D], ref: list[Pose2D], misma
         unset = sum(r.stamp_ns == 0 for r in records)
         if unset:
             notes.append(f"{unset} of {len(records)} {name} have header stamp 0 (unset): timed by their log time")
-    scans = [replace(s, stamp_ns=s.log_time_ns) if s.stamp_ns == 0 else s for s in scans]
-    odom = [replace(p, stamp_ns=p.log_time_ns) if p.stamp_ns == 0 else p for p in odom]
-    ref = [replace(p, stamp_ns=p.log_time_ns) if p.stamp_ns == 0 else p for p in ref]
     if lags is not None:
         notes.append(f"scan and odometry header stamps are on different clocks (median stamp − log time "
                      f"{lags[0]:+.3f} s and {lags[1]:+.3f} s): every scan and pose is timed by its log time")
-        scans = [replace(s, stamp_ns=s.log_time_ns) for s in scans]
-        odom = [replace(p, stamp_ns=p.log_time_ns) for p in odom]
-        ref = [replace(p, stamp_ns=p.log_time_ns) for p in ref]
+    every = lags is not None
+    scans, odom, ref = _log_timed(scans, every), _log_timed(odom, every), _log_timed(ref, every)
     stamps = np.array([s.stamp_ns for s in scans], dtype=np.int64)
     back = int(np.count_nonzero(np.diff(stamps) < 0))
     if back:

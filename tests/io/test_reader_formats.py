@@ -15,8 +15,7 @@ from doorbatch.io.annotated_mcap import Annotation, write_annotated_mcap
 from doorbatch.io.convert import convert_log
 from doorbatch.io.reader import RawMessage, open_log
 from doorbatch.io.typestore import ros1_typestore
-from doorbatch.pipeline.doorpose.fusion import class_name
-from doorbatch.records import Role, RoleMessage
+from doorbatch.records import Role, RoleMessage, class_name
 from tests.conftest import REPO, sample_messages
 
 FORMATS = {"mcap": "log.mcap", "bag": "log.bag", "rosbag2": "log_sqlite3", "rosbag2-mcap": "log_mcapstore"}

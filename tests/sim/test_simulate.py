@@ -19,8 +19,7 @@ from doorbatch.io.map_server import read_map
 from doorbatch.io.reader import open_log
 from doorbatch.io.sim_truth import read_truth
 from doorbatch.io.tum import read_tum
-from doorbatch.pipeline.doorpose.fusion import class_name
-from doorbatch.records import BeamColors, Detections, Pose2D, Role, Scan, Transform
+from doorbatch.records import BeamColors, Detections, Pose2D, Role, Scan, Transform, class_name
 from doorbatch.sim.scenario import configs_dir, load_scenario, resolve_scenario
 from doorbatch.sim.simulate import SimulationSummary, output_paths, random_streams, run_simulation, simulate
 from doorbatch.sim.timeline import plan_scenario

@@ -30,13 +30,7 @@ from doorbatch.config import DoorbatchConfig, deep_merge, read_yaml_mapping
 from doorbatch.errors import ConfigError, PipelineError
 from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.pipeline.doorpose.approach import GoalUpdating, simulate_approach, summed_pose_error
-from doorbatch.pipeline.doorpose.fusion import (
-    class_name,
-    estimate_door,
-    select_door_box,
-    to_planar,
-    usable_detections,
-)
+from doorbatch.pipeline.doorpose.fusion import door_box, estimate_door, to_planar, usable_detections
 from doorbatch.pipeline.doorpose.line_fit import LineFit
 from doorbatch.pipeline.evaluate.report import MetricRow
 from doorbatch.sim.door_scene import CAMERA_FRAME, PAPER_DETECTIONS, DoorSceneSpec, make_door_scene, observe
@@ -117,8 +111,7 @@ def compare_fits(exp: DoorPoseExperiment, config: DoorbatchConfig) -> FitCompari
         scene = make_door_scene(rng, spec)
         pose = _start_pose(rng, exp)
         obs = observe(scene, pose, rng)
-        if select_door_box(usable_detections(obs.detections, cfg), scene.camera.width,
-                           class_name(cfg.door_class, cfg.class_names), cfg.border_margin_px) is None:
+        if door_box(usable_detections(obs.detections, cfg), scene.camera.width, cfg) is None:
             continue
         cam_to_base = scene.tf.lookup("base_link", CAMERA_FRAME, 0)
         truth = np.array([*scene.true_center, scene.true_yaw])

@@ -26,7 +26,7 @@ from doorbatch.config import DoorPoseConfig
 from doorbatch.geometry.camera import PinholeCamera, column_bearings
 from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.pipeline.doorpose.line_fit import DepthLine, LineFit, fit_line
-from doorbatch.records import Detection
+from doorbatch.records import Detection, class_name
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -44,20 +44,18 @@ def box_edges_px(box: Detection) -> tuple[float, float]:
     return box.center_x - box.size_x / 2, box.center_x + box.size_x / 2
 
 
-def class_name(class_id: str, class_names: Sequence[str]) -> str:
-    """A box's class: its id when that is a name, else the name at that index of the detector's label list
-    (vision_msgs ids are indices a label map resolves: Isaac ROS publishes "0", Noetic int64 0). The config's
-    ``door_class`` and ``handle_class`` are resolved the same way, so either a name or an id may name them."""
-    if class_id in class_names or not class_id.isdigit() or int(class_id) >= len(class_names):
-        return class_id
-    return class_names[int(class_id)]
-
-
 def usable_detections(detections: Sequence[Detection], config: DoorPoseConfig) -> list[Detection]:
     """The boxes at or above ``confidence_threshold`` (a detector may publish everything above 0.01), with
     their classes resolved by :func:`class_name`."""
     return [replace(d, class_id=class_name(d.class_id, config.class_names)) for d in detections
             if d.score >= config.confidence_threshold]
+
+
+def door_box(usable: Sequence[Detection], image_width_px: int, config: DoorPoseConfig) -> Detection | None:
+    """The door box among one image's :func:`usable_detections` (:func:`select_door_box`, ``door_class``
+    resolved by :func:`~doorbatch.records.class_name`)."""
+    return select_door_box(usable, image_width_px, class_name(config.door_class, config.class_names),
+                           config.border_margin_px)
 
 
 def select_door_box(detections: Sequence[Detection], image_width_px: int, door_class: str,
@@ -123,9 +121,8 @@ def estimate_door(camera: PinholeCamera, detections: Sequence[Detection], points
     """One door estimate from one image's boxes and one scan's points in the camera frame (module docstring);
     None when no door box is usable, too few points fall between the rays, the rays miss the line, or the
     width is not a door's."""
-    detections = usable_detections(detections, config)
-    door_class, handle_class = (class_name(c, config.class_names) for c in (config.door_class, config.handle_class))
-    box = select_door_box(detections, camera.width, door_class, config.border_margin_px)
+    usable = usable_detections(detections, config)
+    box = door_box(usable, camera.width, config)
     if box is None:
         return None
     beta_l, beta_r = column_bearings(camera, box_edges_px(box))
@@ -148,7 +145,7 @@ def estimate_door(camera: PinholeCamera, detections: Sequence[Detection], points
     if normal @ center > 0.0:  # point from the door toward the camera at the origin
         normal = -normal
     return CameraDoor(left, right, center, normal, width, center + config.goal_offset_m * normal,
-                      handle_side(box, detections, handle_class), box, pts, line)
+                      handle_side(box, usable, class_name(config.handle_class, config.class_names)), box, pts, line)
 
 
 @dataclass(frozen=True)

@@ -28,9 +28,9 @@ from doorbatch.io.doorpose_inputs import DoorPoseInputs
 from doorbatch.io.recording import PoseSeries
 from doorbatch.maps import DoorSet
 from doorbatch.pipeline.doorpose.association import associate
-from doorbatch.pipeline.doorpose.fusion import class_name, estimate_door, to_planar
+from doorbatch.pipeline.doorpose.fusion import estimate_door, to_planar
 from doorbatch.pipeline.doorpose.line_fit import LineFit
-from doorbatch.records import Detection
+from doorbatch.records import Detection, class_name
 
 log = logging.getLogger(__name__)
 FloatArray = npt.NDArray[np.float64]
@@ -126,8 +126,9 @@ def estimate_door_poses(inputs: DoorPoseInputs, config: DoorbatchConfig, doors: 
     for boxes in inputs.detections:
         if progress is not None:
             progress(1)
-        classes.update(class_name(d.class_id, dc.class_names) for d in boxes.detections)
-        door_scores += [d.score for d in boxes.detections if class_name(d.class_id, dc.class_names) == door_class]
+        named = [(class_name(d.class_id, dc.class_names), d.score) for d in boxes.detections]
+        classes.update(name for name, _ in named)
+        door_scores += [score for name, score in named if name == door_class]
         i = nearest_scan(scan_stamps, boxes.stamp_ns, tol)
         if i is None or not boxes.detections:
             continue
