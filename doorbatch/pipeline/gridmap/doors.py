@@ -323,9 +323,20 @@ def _when(leaves: Leaves) -> FloatArray:
     return np.asarray(np.where(leaves.source == SOURCE_STATIC, np.nan, t), dtype=np.float64)
 
 
+def _densest_end(ends: FloatArray, radius: float) -> FloatArray:
+    """The end point with the most others within ``radius``: where leaves share an end (the hinge), not
+    where their free ends spread along an arc."""
+    if ends.shape[0] <= 2:
+        return np.asarray(ends[0], dtype=np.float64)
+    counts = cKDTree(ends).query_ball_point(ends, radius, return_length=True)
+    return np.asarray(ends[int(np.argmax(counts))], dtype=np.float64)
+
+
 def _hinge_groups(leaves: Leaves, config: DoorDetectionConfig) -> list[_Hinged]:
     """Connected components of leaf end points closer than ``hinge_distance_m`` (each leaf counted once per
-    component, by its end in the component)."""
+    component, by its end in the component). Where both ends of a leaf are in one component (single linkage
+    chains a door's hinge to its free ends once many passes and partial leaves fill the sector between), the
+    end nearer the component's densest end point (:func:`_densest_end`) is the hinge-side one."""
     n = len(leaves)
     ends = np.concatenate([leaves.p0, leaves.p1])
     labels = cluster_points(ends, config.hinge_distance_m)
@@ -334,8 +345,13 @@ def _hinge_groups(leaves: Leaves, config: DoorDetectionConfig) -> list[_Hinged]:
     groups = []
     for label in np.unique(labels):
         members = np.flatnonzero(labels == label)
-        leaf, first = np.unique(owner[members], return_index=True)
+        leaf, first, count = np.unique(owner[members], return_index=True, return_counts=True)
         end = members[first]
+        if (count > 1).any():
+            hinge = _densest_end(ends[members], config.hinge_distance_m)
+            other = np.where(end < n, end + n, end - n)
+            swap = (count > 1) & (np.hypot(*(ends[other] - hinge).T) < np.hypot(*(ends[end] - hinge).T))
+            end = np.where(swap, other, end)
         near = ends[end]
         far = ends[np.where(end < n, end + n, end - n)]
         yaw = np.arctan2(far[:, 1] - near[:, 1], far[:, 0] - near[:, 0])

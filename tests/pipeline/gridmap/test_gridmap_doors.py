@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from doorbatch.config import DoorDetectionConfig, GridConfig
 from doorbatch.pipeline.gridmap.doors import (
@@ -185,3 +187,27 @@ def test_a_cluster_cut_short_is_completed_along_its_line_by_support_points() -> 
                        *extract_leaves(dynamic, CFG, support=support).p1[:1]])[None]
     xs = sorted(seg[:, 0].tolist())
     assert xs[0] == pytest.approx(0.0, abs=0.02) and xs[1] == pytest.approx(0.9, abs=0.02)
+
+
+def _chained_door_leaves(swap: list[bool]) -> Leaves:
+    """A door at the origin seen at 0°, 10°, …, 90° (one pass each) whose free ends lie 0.16 m apart on an
+    arc, two short pieces along 30° that bridge hinge and arc (ends within ``hinge_distance_m`` of each
+    other: single linkage joins them all), and the leaf at 60° once more from pass 10, written free end
+    first (as a set-2 leaf may be). ``swap``: which leaves have their end points exchanged."""
+    segs = [_leaf((0.0, 0.0), 0.9, math.radians(a), cut=0.05) for a in range(0, 100, 10)]
+    u = np.array([math.cos(math.radians(30)), math.sin(math.radians(30))])
+    segs += [(0.2 * u, 0.4 * u), (0.6 * u, 0.8 * u)]
+    near, far = _leaf((0.0, 0.0), 0.88, math.radians(60), cut=0.2)
+    segs.append((far, near))
+    segs = [(b, a) if s else (a, b) for (a, b), s in zip(segs, swap, strict=True)]
+    return _leaves(segs, [*range(10), 3, 3, 10])
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.booleans(), min_size=13, max_size=13))
+def test_a_door_does_not_depend_on_which_end_of_a_leaf_comes_first(swap: list[bool]) -> None:
+    assert group_doors(_chained_door_leaves([False] * 13), CFG) == group_doors(_chained_door_leaves(swap), CFG)
+    (door,) = group_doors(_chained_door_leaves(swap), CFG)
+    assert math.hypot(door.hinge_x, door.hinge_y) < 0.05
+    assert math.degrees(door.closed_yaw + door.angle_min) == pytest.approx(0.0, abs=1.0)
+    assert math.degrees(door.angle_max - door.angle_min) == pytest.approx(90.0, abs=1.0)
