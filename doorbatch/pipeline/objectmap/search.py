@@ -409,10 +409,19 @@ def _walls_behind(beams: BeamSet, obj_map: ObjectMap, idx: IntArray, first: Firs
     return replace(obj_map, walls=walls), (np.concatenate(extra) if extra else np.zeros(0, dtype=np.int64))
 
 
-def try_door(beams: BeamSet, state: MapState, c: DoorCandidate, config: ObjectMapConfig
-             ) -> tuple[float, ObjectMap]:
-    """Fit a door at candidate ``c`` (with the walls seen through its doorway) and return (log-posterior
-    change, new map)."""
+@dataclass(frozen=True)
+class DoorTrial:
+    """A door fitted at a candidate: the local log-posterior change of the map with it (``gain``), the
+    margin by which it beats the better of no door and its leaf as a static segment (``margin``; Sec. VI
+    adopts a door when this is positive), and the map with it."""
+
+    gain: float
+    margin: float
+    obj_map: ObjectMap
+
+
+def try_door(beams: BeamSet, state: MapState, c: DoorCandidate, config: ObjectMapConfig) -> DoorTrial:
+    """Fit a door at candidate ``c`` (with the walls seen through its doorway) and score it."""
     obj_map = state.obj_map
     width = obj_map.classes.door_width_m
     door = _door_fit(beams, c, width, config)
@@ -428,7 +437,7 @@ def try_door(beams: BeamSet, state: MapState, c: DoorCandidate, config: ObjectMa
     # Sec. VI: the door is adopted only if it scores higher than the map without it, "i.e. when the segment
     # is static": the same leaf (first pass's direction) as a wall of its own
     gain_static = _local_log_posterior(beams, idx, _as_static_segment(new_map, len(new_map.doors) - 1), config) - before
-    return min(gain, gain - gain_static), new_map
+    return DoorTrial(gain, min(gain, gain - gain_static), new_map)
 
 
 def _local_log_posterior(beams: BeamSet, idx: IntArray, obj_map: ObjectMap, config: ObjectMapConfig) -> float:
@@ -473,8 +482,11 @@ def _as_static_segment(obj_map: ObjectMap, i: int) -> ObjectMap:
 
 def add_doors(beams: BeamSet, state: MapState, candidates: list[DoorCandidate], config: ObjectMapConfig
               ) -> tuple[MapState, int]:
-    """Try the candidates, strongest first, in pairs (both ends of one piece); keep the better end when it
-    raises the log posterior."""
+    """Try the candidates, strongest first, in pairs (both ends of one piece). Of the two ends, the one whose
+    map explains the data better (the larger ``gain``) is the door's hinge; it is kept when it beats both the
+    map without it and its leaf as a static segment (``margin`` > 0). (The margin does not choose the end: a
+    wrong end's static alternative, a segment across the doorway, is so poor that its margin is its whole
+    gain, while the right end's leaf, static, already explains the pass it was taken from.)"""
     added = 0
     order = sorted(range(0, len(candidates), 2), key=lambda k: -candidates[k].support)
     kept: list[list[DoorCandidate]] = []
@@ -486,10 +498,9 @@ def add_doors(beams: BeamSet, state: MapState, candidates: list[DoorCandidate], 
     for pair in kept[: config.max_door_candidates]:
         if any(_near_existing(c, state.obj_map, config.existing_door_radius_m) for c in pair):
             continue
-        results = [try_door(beams, state, c, config) for c in pair]
-        gain, new_map = max(results, key=lambda r: r[0])
-        if gain > 0.0:
-            state = evaluate(beams, new_map, config)
+        best = max((try_door(beams, state, c, config) for c in pair), key=lambda trial: trial.gain)
+        if best.margin > 0.0:
+            state = evaluate(beams, best.obj_map, config)
             added += 1
     return state, added
 

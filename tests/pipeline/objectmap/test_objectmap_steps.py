@@ -4,6 +4,7 @@ angles (eq. 10), width, sensor model and E-step, Hough proposals."""
 from __future__ import annotations
 
 import itertools
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -12,13 +13,20 @@ from hypothesis import strategies as st
 from scipy.integrate import quad
 
 from doorbatch.config import DoorbatchConfig
+from doorbatch.pipeline.objectmap import search
 from doorbatch.pipeline.objectmap.beams import BeamSet
 from doorbatch.pipeline.objectmap.colors import two_gaussian_mixture
 from doorbatch.pipeline.objectmap.doors import best_width, fit_hinge_angles
 from doorbatch.pipeline.objectmap.em import evaluate
 from doorbatch.pipeline.objectmap.hough import hough_lines
 from doorbatch.pipeline.objectmap.model import DOOR, WALL, ClassParams, Door, ObjectMap, Wall
-from doorbatch.pipeline.objectmap.search import final_walls, terminate_doors
+from doorbatch.pipeline.objectmap.search import (
+    DoorCandidate,
+    DoorTrial,
+    add_doors,
+    final_walls,
+    terminate_doors,
+)
 from doorbatch.pipeline.objectmap.sensor import cast_segments, e_step, first_objects, range_loglik_valid
 from doorbatch.pipeline.objectmap.walls import fit_line, segment_dp, wall_segments
 
@@ -274,3 +282,28 @@ def test_a_wall_bridged_across_a_doorway_is_cut_once_the_room_wall_behind_is_rea
     np.testing.assert_allclose(gaps[0], [3.0, 3.9], atol=config.sigma_m)
     seen = behind[0].segments
     assert np.any((seen[:, 0] < 3.0) & (seen[:, 1] > 3.9))  # the room wall behind the doorway is drawn
+
+
+def test_of_a_pairs_two_ends_the_one_that_explains_more_is_the_hinge(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Both ends of a crossed wall piece are tried as the hinge. The end whose map explains the data better (the
+    larger gain) is the door; it is adopted when it beats no door and its leaf as a static segment (margin > 0).
+    The margin must not choose the end: the wrong end's static alternative, a segment across the doorway, is so
+    poor that its margin is its whole gain, while the right end's leaf, static, already explains one pass."""
+    config = DoorbatchConfig().em
+    wall = Wall(np.array([0.0, -1.0]), -2.0, np.array([[-3.0, 0.5], [1.4, 4.0]]))  # y = 2, doorway x ∈ [0.5, 1.4]
+    beams = _beams_to(np.array([1.0, 0.0]), np.stack([np.arange(-2.0, 3.0, 0.05), np.full(100, 2.0)], 1))
+    right, wrong = (DoorCandidate(np.array([0.5, 2.0]), 0.0, "motion", 90),
+                    DoorCandidate(np.array([1.4, 2.0]), np.pi, "motion", 90))
+    state = evaluate(beams, ObjectMap([wall], [], ClassParams(0.9), 1), config)
+
+    def trials(right_margin: float) -> dict[float, DoorTrial]:
+        scores = ((right, 30_000.0, right_margin), (wrong, 9_000.0, 6_000.0))
+        return {float(c.hinge[0]): DoorTrial(g, m, replace(state.obj_map, doors=[Door(c.hinge, np.array([1.0]))]))
+                for c, g, m in scores}
+
+    for right_margin, adopted in ((4_000.0, True), (-50.0, False)):
+        table = trials(right_margin)
+        monkeypatch.setattr(search, "try_door", lambda _b, _s, c, _cfg, t=table: t[float(c.hinge[0])])
+        after, added = add_doors(beams, state, [right, wrong], config)
+        assert added == int(adopted)
+        assert [d.hinge.tolist() for d in after.obj_map.doors] == ([[0.5, 2.0]] if adopted else [])
