@@ -347,13 +347,12 @@ def _hinge_groups(leaves: Leaves, config: DoorDetectionConfig) -> list[_Hinged]:
         members = np.flatnonzero(labels == label)
         leaf, first, count = np.unique(owner[members], return_index=True, return_counts=True)
         end = members[first]
+        other = np.where(end < n, end + n, end - n)
         if (count > 1).any():
             hinge = _densest_end(ends[members], config.hinge_distance_m)
-            other = np.where(end < n, end + n, end - n)
             swap = (count > 1) & (np.hypot(*(ends[other] - hinge).T) < np.hypot(*(ends[end] - hinge).T))
-            end = np.where(swap, other, end)
-        near = ends[end]
-        far = ends[np.where(end < n, end + n, end - n)]
+            end, other = np.where(swap, other, end), np.where(swap, end, other)
+        near, far = ends[end], ends[other]
         yaw = np.arctan2(far[:, 1] - near[:, 1], far[:, 0] - near[:, 0])
         groups.append(_Hinged(leaf, near, far, yaw, when[leaf]))
     return groups
