@@ -589,9 +589,13 @@ class ObjectMapConfig(Section):
     rho_length_per_m: float = Field(70.0, ge=0.0)  # ρL = 0.7 per cm of segment
     # dmax: ranges at or beyond min(scan range_max, this) are max-range readings (long CARMEN ranges are sparse).
     max_range_m: float = Field(20.0, gt=0.0)
-    # Decimation (the stage keeps every n-th scan and every n-th beam of it).
-    scan_stride: int = Field(2, ge=1)
-    beam_stride: int = Field(2, ge=1)
+    # Decimation: the stage keeps every scan_stride-th scan and every beam_stride-th beam of it; 0 (the
+    # default): chosen from the logs so that at least kept_beams_per_s beams a second of log are kept (every
+    # 2nd scan and beam of the sample's 360-beam 10 Hz laser, all of a 181-beam 5 Hz one's: the paper's ρ
+    # are set for full data, so a sparse laser must not be thinned; stage.em_strides).
+    scan_stride: int = Field(0, ge=0)
+    beam_stride: int = Field(0, ge=0)
+    kept_beams_per_s: float = Field(800.0, gt=0.0)
     # Once the structure has converged: walls proposed and re-cut by eq. (9) over every final_scan_stride-th
     # scan and final_beam_stride-th beam (default all: the paper's ρ are set for full data; ~81 bytes a beam)
     # in at most this many sweeps over the walls; 0: off.

@@ -146,7 +146,8 @@ def run_map(logs: Sequence[Path], out: Path, config: DoorbatchConfig, stages: Se
         files += [out / "walls.parquet", out / "classes.json"]
         manifest.extra["em"] = {"beams": em.n_beams, "log_posterior": em.log_posterior,
                                 "walls": len(em.object_map.walls), "doors": len(em.doors),
-                                "grid_doors": len(door_map.doors), "classes_given": classes is not None}
+                                "grid_doors": len(door_map.doors), "classes_given": classes is not None,
+                                "scan_stride": em.strides[0], "beam_stride": em.strides[1]}
     if mcap and recordings is not None:
         files.append(_write_mapping_mcap(logs, recordings, door_map, em, out / "annotated.mcap", config))
     _remove_stale_map_files(out, files, logs)

@@ -7,6 +7,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -47,11 +48,45 @@ def pass_scans(rec: Recording, poses: PassPoses, scan_stride: int, with_color: b
     return out
 
 
+def strides_for_rate(beams_per_s: float, config: ObjectMapConfig) -> tuple[int, int]:
+    """The search's (scan stride, beam stride) for a log of ``beams_per_s``: ``config.scan_stride`` and
+    ``beam_stride`` where set (> 0), the others derived so that at least ``kept_beams_per_s`` are kept,
+
+        k = max(1, ⌊beams_per_s / kept_beams_per_s⌋),  beam stride = ⌊√k⌋,  scan stride = ⌊k / beam stride⌋
+
+    (one of them set: the other ⌊k / it⌋): a dense laser is thinned to about the data a sparse one gives
+    whole, and a sparse one is not thinned at all."""
+    k = max(1, int(beams_per_s // config.kept_beams_per_s)) if np.isfinite(beams_per_s) else 1
+    scan_stride, beam_stride = config.scan_stride, config.beam_stride
+    if not beam_stride:
+        beam_stride = max(1, k // scan_stride) if scan_stride else max(1, math.isqrt(k))
+    if not scan_stride:
+        scan_stride = max(1, k // beam_stride)
+    return int(scan_stride), int(beam_stride)
+
+
+def em_strides(recordings: Sequence[Recording], config: ObjectMapConfig) -> tuple[int, int]:
+    """:func:`strides_for_rate` at the logs' data rate: the median beams per scan over the median interval
+    between scans (1, 1 where the logs give no rate)."""
+    intervals = [np.diff(r.scans.stamps_ns) * 1e-9 for r in recordings if len(r.scans) > 1]
+    dt = np.concatenate(intervals) if intervals else np.zeros(0)
+    dt = dt[dt > 0.0]
+    counts = [len(x) for r in recordings for x in r.scans.ranges]
+    rate = float(np.median(counts)) / float(np.median(dt)) if dt.size and counts else 0.0
+    return strides_for_rate(rate, config)
+
+
+def with_strides(recordings: Sequence[Recording], config: ObjectMapConfig) -> ObjectMapConfig:
+    """``config`` with the search's strides resolved for these logs (:func:`em_strides`)."""
+    scan_stride, beam_stride = em_strides(recordings, config)
+    return config.model_copy(update={"scan_stride": scan_stride, "beam_stride": beam_stride})
+
+
 def collect_beams(recordings: Sequence[Recording], passes: Sequence[PassPoses], config: ObjectMapConfig,
                   strides: tuple[int, int] | None = None) -> BeamSet:
     """All passes' kept beams in the map frame: every n-th scan and beam by ``strides`` (scan, beam), by
-    default the search's (scan_stride, beam_stride); (1, 1): every scan and beam."""
-    scan_stride, beam_stride = strides or (config.scan_stride, config.beam_stride)
+    default the search's (:func:`em_strides`); (1, 1): every scan and beam."""
+    scan_stride, beam_stride = strides or em_strides(recordings, config)
     scans = [pass_scans(r, p, scan_stride, config.use_color) for r, p in zip(recordings, passes, strict=True)]
     return beams_from_scans(scans, config.max_range_m, beam_stride)
 
@@ -84,6 +119,7 @@ class ObjectMapResult:
     n_beams: int
     trace: EmTrace
     seconds: float
+    strides: tuple[int, int]  # the search's (scan, beam) strides; 0: not resolved (beams given directly)
 
 
 def _covered_fraction(wall: Wall, s0: float, s1: float) -> float:
@@ -144,7 +180,10 @@ def describe_doors(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> 
 
 def stride_weighted(config: ObjectMapConfig) -> ObjectMapConfig:
     """The prior's constants divided by scan_stride·beam_stride: the same balance as multiplying the data
-    term by it (each kept beam stands for that many beams of the log)."""
+    term by it (each kept beam stands for that many beams of the log). Strides as :func:`with_strides`
+    resolves them."""
+    if not (config.scan_stride and config.beam_stride):
+        raise ValueError("stride_weighted needs resolved strides (with_strides)")
     k = float(config.scan_stride * config.beam_stride)
     return config.model_copy(update={"rho_global": config.rho_global / k, "rho_static": config.rho_static / k,
                                      "rho_dynamic": config.rho_dynamic / k,
@@ -164,11 +203,13 @@ def build_object_map(beams: BeamSet, config: ObjectMapConfig, classes: ClassPara
     if final_beams is not None and config.final_recut_sweeps > 0:
         state = evaluate(beams, final_walls(final_beams, state.obj_map, config), config)
     return ObjectMapResult(state.obj_map, describe_doors(beams, state, config), state.log_posterior, len(beams),
-                           trace, time.perf_counter() - t0)
+                           trace, time.perf_counter() - t0, (config.scan_stride, config.beam_stride))
 
 
 def em_stage(recordings: Sequence[Recording], passes: Sequence[PassPoses], config: DoorbatchConfig,
              classes: ClassParams | None = None) -> ObjectMapResult:
-    """The em stage of ``doorbatch map`` on loaded recordings and their poses."""
-    return build_object_map(collect_beams(recordings, passes, config.em), config.em, classes,
-                            final_step_beams(recordings, passes, config.em))
+    """The em stage of ``doorbatch map`` on loaded recordings and their poses (strides resolved for them:
+    :func:`with_strides`)."""
+    em = with_strides(recordings, config.em)
+    return build_object_map(collect_beams(recordings, passes, em), em, classes,
+                            final_step_beams(recordings, passes, em))

@@ -307,3 +307,33 @@ def test_of_a_pairs_two_ends_the_one_that_explains_more_is_the_hinge(monkeypatch
         after, added = add_doors(beams, state, [right, wrong], config)
         assert added == int(adopted)
         assert [d.hinge.tolist() for d in after.obj_map.doors] == ([[0.5, 2.0]] if adopted else [])
+
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.floats(1.0, 1e6), st.floats(10.0, 5000.0))
+def test_the_search_keeps_at_least_the_configured_beam_rate_and_at_most_twice_it(rate: float, target: float) -> None:
+    """Strides from the data rate (stage.strides_for_rate): a log with fewer beams a second than the target
+    is kept whole; a denser one is thinned to between the target and twice it, scans no less than beams."""
+    from doorbatch.pipeline.objectmap.stage import strides_for_rate
+
+    config = DoorbatchConfig().em.model_copy(update={"kept_beams_per_s": target})
+    scan_stride, beam_stride = strides_for_rate(rate, config)
+    assert scan_stride >= beam_stride >= 1
+    if rate < target:
+        assert (scan_stride, beam_stride) == (1, 1)
+    else:
+        assert target <= rate / (scan_stride * beam_stride) < 2.0 * target
+
+
+def test_strides_for_the_sample_laser_and_a_sparse_one_and_explicit_ones_win() -> None:
+    """The sample's 360-beam 10 Hz laser keeps every 2nd scan and beam (its strides before they were
+    derived); a SICK-like 181-beam 5 Hz one keeps all; a configured stride stands and the other fills k."""
+    from doorbatch.pipeline.objectmap.stage import strides_for_rate
+
+    config = DoorbatchConfig().em
+    assert strides_for_rate(360 * 10.0, config) == (2, 2)
+    assert strides_for_rate(181 * 5.0, config) == (1, 1)
+    assert strides_for_rate(1081 * 40.0, config) == (7, 7)  # k = 54
+    assert strides_for_rate(1081 * 40.0, config.model_copy(update={"beam_stride": 1})) == (54, 1)
+    assert strides_for_rate(360 * 10.0, config.model_copy(update={"scan_stride": 3, "beam_stride": 1})) == (3, 1)
