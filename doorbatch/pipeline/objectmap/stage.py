@@ -160,14 +160,37 @@ def closed_yaw(obj_map: ObjectMap, i: int, max_distance_m: float, observed: Bool
     return float(wrap_angle(options[int(np.argmin(cost))]))
 
 
+def leaf_on_wall(obj_map: ObjectMap, i: int, yaw: float, band_m: float) -> bool:
+    """Door i's leaf at ``yaw`` lies on a wall: hinge and tip within ``band_m`` of the wall's line, and the
+    leaf's span (less a tenth of the width at each end) at least half covered by the wall's segments. Such
+    a pass does not show the leaf: the wall explains the same points (a leaf fitted along the wall behind
+    its hinge, where no door can turn)."""
+    door = obj_map.doors[i]
+    width = obj_map.door_width(i)
+    tip = door.hinge + width * np.array([np.cos(yaw), np.sin(yaw)])
+    for w in obj_map.walls:
+        if max(abs(float(door.hinge @ w.normal) - w.offset), abs(float(tip @ w.normal) - w.offset)) > band_m:
+            continue
+        s0, s1 = float(door.hinge @ w.tangent), float(tip @ w.tangent)
+        lo, hi = min(s0, s1), max(s0, s1)
+        if _covered_fraction(w, lo + 0.1 * (hi - lo), hi - 0.1 * (hi - lo)) >= 0.5:
+            return True
+    return False
+
+
 def describe_doors(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> list[EmDoor]:
     """Doors as rows: angles relative to the closed direction over the passes the leaf was seen in."""
     out = []
     obj_map = state.obj_map
     for i, door in enumerate(obj_map.doors):
         mine = (state.first.cls == DOOR) & (state.first.obj == i) & beams.hit & (state.e > 0.5)
-        counts = np.bincount(beams.pass_index[mine], minlength=obj_map.n_passes)
-        observed = counts >= config.min_leaf_support
+        # a pass shows the leaf's angle only by points off the hinge: those within the pseudo-E-step band
+        # (pseudo_e_sigmas·σ) of it fit every angle (a hinge seen edge-on, the leaf hidden)
+        off_hinge = np.linalg.norm(beams.points - door.hinge, axis=1) > config.pseudo_e_sigmas * config.sigma_m
+        counts = np.bincount(beams.pass_index[mine & off_hinge], minlength=obj_map.n_passes)
+        band = config.pseudo_e_sigmas * config.sigma_m
+        on_wall = np.array([leaf_on_wall(obj_map, i, float(y), band) for y in door.yaws], dtype=bool)
+        observed = (counts >= config.min_leaf_support) & ~on_wall
         closed = closed_yaw(obj_map, i, config.wall_hinge_distance_m, observed)
         rel = wrap_angle(door.yaws - closed)
         seen = rel[observed] if observed.any() else rel

@@ -309,6 +309,32 @@ def test_of_a_pairs_two_ends_the_one_that_explains_more_is_the_hinge(monkeypatch
         assert [d.hinge.tolist() for d in after.obj_map.doors] == ([[0.5, 2.0]] if adopted else [])
 
 
+def test_a_pass_that_shows_only_the_hinge_does_not_count_as_seeing_the_leaf() -> None:
+    """Leaf hinged at (0.5, 1.0). Pass 1 shows it along +x (90 hits on the leaf); pass 2 only at its hinge
+    (hits within 1 cm of it, e.g. the leaf seen edge-on), which any angle fits. The door's range is pass 1's
+    angle alone, and it did not move: before, the hinge hits made pass 2 "seen" at whatever angle the fit
+    left there (here 70°), a 70° range that no scan showed (a sparse laser's d06 read −160°)."""
+    from doorbatch.pipeline.objectmap.stage import describe_doors
+
+    config = DoorbatchConfig().em
+    wall = Wall(np.array([0.0, -1.0]), -2.0, np.array([[-1.0, 4.0]]))  # y = 2, s = x
+    door = Door(np.array([0.5, 1.0]), np.deg2rad(np.array([0.0, 70.0])))
+    on_wall = np.stack([np.arange(-1.0, 4.0, 0.01), np.full(500, 2.0)], 1)
+    leaf = np.stack([0.55 + np.arange(0.0, 0.8, 0.01 * 8 / 9), np.full(90, 1.0)], 1)
+    hinge = np.array([0.5, 1.0]) + np.stack([np.linspace(0.0, 0.01, 12), np.zeros(12)], 1)
+    origin = np.array([2.0, 0.0])
+    passes = [_beams_to(origin, np.concatenate([leaf, on_wall])), _beams_to(origin, np.concatenate([hinge, on_wall]))]
+    fields = ("origin", "direction", "range_m", "dmax", "hit", "color")
+    index = np.concatenate([np.full(len(b), t) for t, b in enumerate(passes)])
+    beams = BeamSet(index, *(np.concatenate([getattr(b, f) for b in passes]) for f in fields), 2)
+    state = evaluate(beams, ObjectMap([wall], [door], ClassParams(0.9), 2), config)
+    explained = (state.first.cls == DOOR) & (state.e > 0.5) & (beams.pass_index == 1)
+    assert int(explained.sum()) >= config.min_leaf_support  # the hinge hits are the door's in pass 2
+    (described,) = describe_doors(beams, state, config)
+    assert described.pass_observed.tolist() == [True, False]
+    assert abs(described.preview.angle_max - described.preview.angle_min) < 1e-9
+    assert not described.preview.moved
+
 
 @settings(max_examples=200, deadline=None)
 @given(st.floats(1.0, 1e6), st.floats(10.0, 5000.0))
@@ -337,3 +363,32 @@ def test_strides_for_the_sample_laser_and_a_sparse_one_and_explicit_ones_win() -
     assert strides_for_rate(1081 * 40.0, config) == (7, 7)  # k = 54
     assert strides_for_rate(1081 * 40.0, config.model_copy(update={"beam_stride": 1})) == (54, 1)
     assert strides_for_rate(360 * 10.0, config.model_copy(update={"scan_stride": 3, "beam_stride": 1})) == (3, 1)
+
+
+def test_a_leaf_fitted_along_the_wall_behind_its_hinge_is_not_seen_there() -> None:
+    """Wall y = 2 with a doorway x ∈ (0.5, 1.4), hinge (0.5, 2). Pass 1 shows the leaf open at 90° (into
+    y > 2); in pass 2 the fit left the leaf at 180°, on the wall behind the hinge, where the wall's own hits
+    are. No door turns there, and the wall explains those hits: pass 2 does not show the leaf, and the
+    door's range is pass 1's angle, not 90°…180° (a sparse laser's d06 read −53.8°…179.9°)."""
+    from doorbatch.pipeline.objectmap.stage import describe_doors, leaf_on_wall
+
+    config = DoorbatchConfig().em
+    wall = Wall(np.array([0.0, -1.0]), -2.0, np.array([[-3.0, 0.5], [1.4, 4.0]]))  # y = 2, s = x
+    door = Door(np.array([0.5, 2.0]), np.deg2rad(np.array([90.0, 180.0])))
+    on_wall = np.stack([np.concatenate([np.arange(-3.0, 0.5, 0.01), np.arange(1.4, 4.0, 0.01)]),
+                        np.full(610, 2.0)], 1)
+    leaf = np.stack([np.full(90, 0.5), 2.05 + np.arange(0.0, 0.8, 0.01 * 8 / 9)], 1)
+    origin = np.array([1.0, 0.0])
+    passes = [_beams_to(origin, np.concatenate([leaf, on_wall])), _beams_to(origin, on_wall)]
+    fields = ("origin", "direction", "range_m", "dmax", "hit", "color")
+    index = np.concatenate([np.full(len(b), t) for t, b in enumerate(passes)])
+    beams = BeamSet(index, *(np.concatenate([getattr(b, f) for b in passes]) for f in fields), 2)
+    obj_map = ObjectMap([wall], [door], ClassParams(0.9), 2)
+    band = config.pseudo_e_sigmas * config.sigma_m
+    assert leaf_on_wall(obj_map, 0, np.pi, band) and not leaf_on_wall(obj_map, 0, 0.0, band)  # closed: the gap
+    assert not leaf_on_wall(obj_map, 0, np.deg2rad(170.0), band)  # tip 16 cm off the wall line
+    state = evaluate(beams, obj_map, config)
+    (described,) = describe_doors(beams, state, config)
+    assert described.pass_observed.tolist() == [True, False]
+    assert described.preview.angle_min == pytest.approx(described.preview.angle_max)
+    assert not described.preview.moved
