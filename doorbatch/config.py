@@ -590,12 +590,14 @@ class ObjectMapConfig(Section):
     # dmax: ranges at or beyond min(scan range_max, this) are max-range readings (long CARMEN ranges are sparse).
     max_range_m: float = Field(20.0, gt=0.0)
     # Decimation: the stage keeps every scan_stride-th scan and every beam_stride-th beam of it; 0 (the
-    # default): chosen from the logs so that at least kept_beams_per_s beams a second of log are kept (every
-    # 2nd scan and beam of the sample's 360-beam 10 Hz laser, all of a 181-beam 5 Hz one's: the paper's ρ
-    # are set for full data, so a sparse laser must not be thinned; stage.em_strides).
+    # default): chosen from the logs so that at least kept_beams_per_s beams a second of log are kept, and at
+    # least 1/max_thinning of them (every 2nd scan and beam of a 360-beam 10 Hz or a 720-beam 15 Hz laser, all
+    # of a 181-beam 5 Hz one's: the paper's ρ are set for full data, so a sparse laser must not be thinned;
+    # stage.strides_for_rate).
     scan_stride: int = Field(0, ge=0)
     beam_stride: int = Field(0, ge=0)
     kept_beams_per_s: float = Field(800.0, gt=0.0)
+    max_thinning: int = Field(4, ge=1)
     # Once the structure has converged: walls proposed and re-cut by eq. (9) over every final_scan_stride-th
     # scan and final_beam_stride-th beam (default all: the paper's ρ are set for full data; ~81 bytes a beam)
     # in at most this many sweeps over the walls; 0: off.

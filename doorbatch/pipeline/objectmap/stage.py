@@ -52,11 +52,13 @@ def strides_for_rate(beams_per_s: float, config: ObjectMapConfig) -> tuple[int, 
     """The search's (scan stride, beam stride) for a log of ``beams_per_s``: ``config.scan_stride`` and
     ``beam_stride`` where set (> 0), the others derived so that at least ``kept_beams_per_s`` are kept,
 
-        k = max(1, ⌊beams_per_s / kept_beams_per_s⌋),  beam stride = ⌊√k⌋,  scan stride = ⌊k / beam stride⌋
+        k = min(max_thinning, max(1, ⌊beams_per_s / kept_beams_per_s⌋)),
+        beam stride = ⌊√k⌋,  scan stride = ⌊k / beam stride⌋
 
-    (one of them set: the other ⌊k / it⌋): a dense laser is thinned to about the data a sparse one gives
-    whole, and a sparse one is not thinned at all."""
+    (one of them set: the other ⌊k / it⌋): a sparse laser is not thinned at all, a dense one by at most
+    max_thinning."""
     k = max(1, int(beams_per_s // config.kept_beams_per_s)) if np.isfinite(beams_per_s) else 1
+    k = min(k, config.max_thinning)
     scan_stride, beam_stride = config.scan_stride, config.beam_stride
     if not beam_stride:
         beam_stride = max(1, k // scan_stride) if scan_stride else max(1, math.isqrt(k))
@@ -160,24 +162,6 @@ def closed_yaw(obj_map: ObjectMap, i: int, max_distance_m: float, observed: Bool
     return float(wrap_angle(options[int(np.argmin(cost))]))
 
 
-def leaf_on_wall(obj_map: ObjectMap, i: int, yaw: float, band_m: float) -> bool:
-    """Door i's leaf at ``yaw`` lies on a wall: hinge and tip within ``band_m`` of the wall's line, and the
-    leaf's span (less a tenth of the width at each end) at least half covered by the wall's segments. Such
-    a pass does not show the leaf: the wall explains the same points (a leaf fitted along the wall behind
-    its hinge, where no door can turn)."""
-    door = obj_map.doors[i]
-    width = obj_map.door_width(i)
-    tip = door.hinge + width * np.array([np.cos(yaw), np.sin(yaw)])
-    for w in obj_map.walls:
-        if max(abs(float(door.hinge @ w.normal) - w.offset), abs(float(tip @ w.normal) - w.offset)) > band_m:
-            continue
-        s0, s1 = float(door.hinge @ w.tangent), float(tip @ w.tangent)
-        lo, hi = min(s0, s1), max(s0, s1)
-        if _covered_fraction(w, lo + 0.1 * (hi - lo), hi - 0.1 * (hi - lo)) >= 0.5:
-            return True
-    return False
-
-
 def describe_doors(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> list[EmDoor]:
     """Doors as rows: angles relative to the closed direction over the passes the leaf was seen in."""
     out = []
@@ -188,11 +172,16 @@ def describe_doors(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> 
         # (pseudo_e_sigmas·σ) of it fit every angle (a hinge seen edge-on, the leaf hidden)
         off_hinge = np.linalg.norm(beams.points - door.hinge, axis=1) > config.pseudo_e_sigmas * config.sigma_m
         counts = np.bincount(beams.pass_index[mine & off_hinge], minlength=obj_map.n_passes)
-        band = config.pseudo_e_sigmas * config.sigma_m
-        on_wall = np.array([leaf_on_wall(obj_map, i, float(y), band) for y in door.yaws], dtype=bool)
-        observed = (counts >= config.min_leaf_support) & ~on_wall
+        observed = counts >= config.min_leaf_support
         closed = closed_yaw(obj_map, i, config.wall_hinge_distance_m, observed)
         rel = wrap_angle(door.yaws - closed)
+        # nor by a leaf turned beyond max_opening_deg from closed: no door turns there, and what it explains
+        # is the wall behind the hinge (a leaf the fit left along it)
+        turnable = np.abs(rel) <= np.deg2rad(config.max_opening_deg)
+        if np.any(observed & ~turnable):
+            observed &= turnable
+            closed = closed_yaw(obj_map, i, config.wall_hinge_distance_m, observed)
+            rel = wrap_angle(door.yaws - closed)
         seen = rel[observed] if observed.any() else rel
         lo, hi = float(np.min(seen)), float(np.max(seen))
         moved = bool(observed.sum() >= 2 and hi - lo >= np.deg2rad(config.min_opening_deg))
