@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import numpy.typing as npt
@@ -162,29 +162,66 @@ def closed_yaw(obj_map: ObjectMap, i: int, max_distance_m: float, observed: Bool
     return float(wrap_angle(options[int(np.argmin(cost))]))
 
 
+def wall_distance(obj_map: ObjectMap, point: FloatArray) -> float:
+    """Distance from ``point`` to the nearest wall segment of the map (inf without walls)."""
+    best = np.inf
+    for w in obj_map.walls:
+        if not w.segments.size:
+            continue
+        s = float(point @ w.tangent)
+        along = np.maximum(np.maximum(w.segments[:, 0] - s, s - w.segments[:, 1]), 0.0)
+        best = min(best, float(np.hypot(float(point @ w.normal) - w.offset, along.min())))
+    return best
+
+
+def _door_angles(obj_map: ObjectMap, i: int, observed: BoolArray, config: ObjectMapConfig
+                 ) -> tuple[float, FloatArray, BoolArray]:
+    """Door i's closed direction, its angles relative to it, and the passes that show the leaf: ``observed``
+    less those whose leaf is turned beyond max_opening_deg from closed (no door turns there, and what it
+    explains is the wall behind the hinge: a leaf the fit left along it)."""
+    yaws = obj_map.doors[i].yaws
+    closed = closed_yaw(obj_map, i, config.wall_hinge_distance_m, observed)
+    rel = wrap_angle(yaws - closed)
+    turnable = np.abs(rel) <= np.deg2rad(config.max_opening_deg)
+    if np.any(observed & ~turnable):
+        observed = observed & turnable
+        closed = closed_yaw(obj_map, i, config.wall_hinge_distance_m, observed)
+        rel = wrap_angle(yaws - closed)
+    return closed, rel, observed
+
+
+def _moved(rel: FloatArray, observed: BoolArray, config: ObjectMapConfig) -> tuple[float, float, bool]:
+    seen = rel[observed] if observed.any() else rel
+    lo, hi = float(np.min(seen)), float(np.max(seen))
+    return lo, hi, bool(observed.sum() >= 2 and hi - lo >= np.deg2rad(config.min_opening_deg))
+
+
 def describe_doors(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> list[EmDoor]:
-    """Doors as rows: angles relative to the closed direction over the passes the leaf was seen in."""
+    """Doors as rows: angles relative to the closed direction over the passes the leaf was seen in.
+
+    A door that never moved shows no hinge: both ends of its leaf explain the same hits. Where its hinge
+    end lies off every wall and its free end on one (within ``wall_hinge_distance_m`` of a segment), the
+    ends are swapped: a hinge is mounted in a wall or frame (a door left open into a corridor while mapping).
+    """
     out = []
-    obj_map = state.obj_map
-    for i, door in enumerate(obj_map.doors):
+    for i, door in enumerate(state.obj_map.doors):
+        obj_map = state.obj_map
         mine = (state.first.cls == DOOR) & (state.first.obj == i) & beams.hit & (state.e > 0.5)
         # a pass shows the leaf's angle only by points off the hinge: those within the pseudo-E-step band
         # (pseudo_e_sigmas·σ) of it fit every angle (a hinge seen edge-on, the leaf hidden)
         off_hinge = np.linalg.norm(beams.points - door.hinge, axis=1) > config.pseudo_e_sigmas * config.sigma_m
         counts = np.bincount(beams.pass_index[mine & off_hinge], minlength=obj_map.n_passes)
-        observed = counts >= config.min_leaf_support
-        closed = closed_yaw(obj_map, i, config.wall_hinge_distance_m, observed)
-        rel = wrap_angle(door.yaws - closed)
-        # nor by a leaf turned beyond max_opening_deg from closed: no door turns there, and what it explains
-        # is the wall behind the hinge (a leaf the fit left along it)
-        turnable = np.abs(rel) <= np.deg2rad(config.max_opening_deg)
-        if np.any(observed & ~turnable):
-            observed &= turnable
-            closed = closed_yaw(obj_map, i, config.wall_hinge_distance_m, observed)
-            rel = wrap_angle(door.yaws - closed)
-        seen = rel[observed] if observed.any() else rel
-        lo, hi = float(np.min(seen)), float(np.max(seen))
-        moved = bool(observed.sum() >= 2 and hi - lo >= np.deg2rad(config.min_opening_deg))
+        closed, rel, observed = _door_angles(obj_map, i, counts >= config.min_leaf_support, config)
+        lo, hi, moved = _moved(rel, observed, config)
+        if not moved:
+            yaw = float(np.angle(np.mean(np.exp(1j * door.yaws[observed if observed.any() else slice(None)]))))
+            tip = door.hinge + obj_map.door_width(i) * np.array([np.cos(yaw), np.sin(yaw)])
+            near = config.wall_hinge_distance_m
+            if wall_distance(obj_map, door.hinge) > near >= wall_distance(obj_map, tip):
+                door = replace(door, hinge=tip, yaws=np.full_like(door.yaws, wrap_angle(yaw + np.pi)))
+                obj_map = replace(obj_map, doors=[*obj_map.doors[:i], door, *obj_map.doors[i + 1:]])
+                closed, rel, observed = _door_angles(obj_map, i, observed, config)
+                lo, hi, moved = _moved(rel, observed, config)
         out.append(EmDoor(PreviewDoor(float(door.hinge[0]), float(door.hinge[1]), obj_map.door_width(i), closed,
                                       lo, hi, moved), int(mine.sum()), door.yaws.copy(), observed))
     return out

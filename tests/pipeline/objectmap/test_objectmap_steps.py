@@ -396,3 +396,30 @@ def test_a_leaf_fitted_along_the_wall_behind_its_hinge_is_not_seen_there() -> No
     assert described.pass_observed.tolist() == [True, False]
     assert described.preview.angle_min == pytest.approx(described.preview.angle_max)
     assert not described.preview.moved
+
+
+@pytest.mark.parametrize("hinge_at_free_end", [True, False])
+def test_a_door_that_never_moved_is_hinged_at_the_end_on_the_wall(hinge_at_free_end: bool) -> None:
+    """Wall y = 0 with a doorway x ∈ (0, 0.9); a leaf stood open at 90° into the corridor in both passes,
+    x = 0, y ∈ [0, 0.9]. Both ends explain its hits the same; the search may keep the free end (0, 0.9) as
+    the hinge. A hinge is in the wall: the door is described hinged at (0, 0), closing east along the wall,
+    open 90° (a sparse laser's d05 read hinge (15.6, −0.19) instead of (15.6, −1.1))."""
+    from doorbatch.pipeline.objectmap.stage import describe_doors
+
+    config = DoorbatchConfig().em
+    wall = Wall(np.array([0.0, -1.0]), 0.0, np.array([[-3.0, 0.0], [0.9, 4.0]]))  # y = 0, s = x
+    door = (Door(np.array([0.0, 0.9]), np.full(2, -np.pi / 2)) if hinge_at_free_end
+            else Door(np.array([0.0, 0.0]), np.full(2, np.pi / 2)))
+    leaf = np.stack([np.zeros(80), np.linspace(0.05, 0.85, 80)], 1)
+    on_wall = np.stack([np.arange(1.0, 4.0, 0.01), np.zeros(300)], 1)
+    origin = np.array([1.5, 1.5])
+    one = _beams_to(origin, np.concatenate([leaf, on_wall]))
+    fields = ("origin", "direction", "range_m", "dmax", "hit", "color")
+    beams = BeamSet(np.repeat(np.arange(2), len(one)), *(np.concatenate([getattr(one, f)] * 2) for f in fields), 2)
+    state = evaluate(beams, ObjectMap([wall], [door], ClassParams(0.9), 2), config)
+    (described,) = describe_doors(beams, state, config)
+    p = described.preview
+    assert np.hypot(p.hinge_x, p.hinge_y) < 1e-9
+    assert abs(p.closed_yaw) < 1e-9
+    assert p.angle_min == pytest.approx(np.pi / 2) and p.angle_max == pytest.approx(np.pi / 2)
+    assert not p.moved and described.pass_observed.all()
