@@ -16,6 +16,7 @@ import numpy as np
 import numpy.typing as npt
 
 from doorbatch.errors import ConfigError
+from doorbatch.geometry.segments import point_segment_distance
 from doorbatch.sim.motion import MotionLimits, Trajectory, new_builder, plan_path, sample_trajectory
 from doorbatch.sim.scenario import DoorState, PassSpec, PersonSpec, Scenario
 from doorbatch.sim.world import World, door_leaf_segments
@@ -248,18 +249,6 @@ def plan_scenario(world: World, scenario: Scenario, rng: np.random.Generator) ->
     if scenario.robot.collision_check:
         check_clearance(plan)
     return plan
-
-
-def point_segment_distance(points: FloatArray, segments: FloatArray) -> FloatArray:
-    """Distances (..., S) from points (..., 2) to segments (..., S, 2, 2) (broadcast):
-    |p − (a + clip(u, 0, 1)·e)| with u = (p − a)·e / |e|²."""
-    a = segments[..., 0, :]
-    e = segments[..., 1, :] - a
-    w = points[..., None, :] - a
-    ee = np.maximum(np.einsum("...i,...i->...", e, e), 1e-300)
-    u = np.clip(np.einsum("...i,...i->...", w, e) / ee, 0.0, 1.0)
-    diff = w - u[..., None] * e
-    return np.asarray(np.hypot(diff[..., 0], diff[..., 1]), dtype=np.float64)
 
 
 def check_clearance(plan: Plan) -> None:

@@ -17,6 +17,7 @@ import numpy.typing as npt
 
 from doorbatch.config import DoorbatchConfig, ObjectMapConfig
 from doorbatch.geometry.rotations import wrap_angle
+from doorbatch.geometry.segments import point_segment_distance
 from doorbatch.io.preview import PreviewDoor
 from doorbatch.io.recording import Recording
 from doorbatch.pipeline.mapping import PassPoses
@@ -164,14 +165,8 @@ def closed_yaw(obj_map: ObjectMap, i: int, max_distance_m: float, observed: Bool
 
 def wall_distance(obj_map: ObjectMap, point: FloatArray) -> float:
     """Distance from ``point`` to the nearest wall segment of the map (inf without walls)."""
-    best = np.inf
-    for w in obj_map.walls:
-        if not w.segments.size:
-            continue
-        s = float(point @ w.tangent)
-        along = np.maximum(np.maximum(w.segments[:, 0] - s, s - w.segments[:, 1]), 0.0)
-        best = min(best, float(np.hypot(float(point @ w.normal) - w.offset, along.min())))
-    return best
+    segments = [w.endpoints() for w in obj_map.walls if w.segments.size]
+    return float(point_segment_distance(point, np.concatenate(segments)).min()) if segments else float("inf")
 
 
 def _door_angles(obj_map: ObjectMap, i: int, observed: BoolArray, config: ObjectMapConfig
