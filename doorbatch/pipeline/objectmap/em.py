@@ -132,10 +132,14 @@ def m_step_colors(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> O
     obj_map = state.obj_map
     if not obj_map.classes.has_color:
         return obj_map
-    classes = ml_class_colors(obj_map.classes, beams.color, state.first.cls, state.e, config.color_var_floor)
+    classes = ml_class_colors(obj_map.classes, beams.color, state.first.cls, state.e, config.color_var_floor,
+                              config.door_color_components)
     if not obj_map.doors:  # no door seen yet: keep the door class as it is
-        classes = replace(classes, color_mean=np.stack([classes.color_mean[0], obj_map.classes.color_mean[1]]),
-                          color_var=np.stack([classes.color_var[0], obj_map.classes.color_var[1]]))
+        old = obj_map.classes
+        classes = replace(classes, color_mean=np.stack([classes.color_mean[0], old.color_mean[1]]),
+                          color_var=np.stack([classes.color_var[0], old.color_var[1]]),
+                          door_mix_weight=old.door_mix_weight, door_mix_mean=old.door_mix_mean,
+                          door_mix_var=old.door_mix_var)
     return replace(obj_map, classes=classes)
 
 

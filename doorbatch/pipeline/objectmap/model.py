@@ -61,6 +61,11 @@ class ClassParams:
     color_mean: FloatArray = field(default_factory=lambda: np.zeros((2, 3)))  # (2, 3) RGB
     color_var: FloatArray = field(default_factory=lambda: np.full((2, 3), 400.0))
     has_color: bool = False
+    # A door class per paint (em.door_color_components > 1): the door colours' mixture weights (M,), means
+    # and per-channel variances (M, 3); empty: the door colour is the one Gaussian of index 1 (paper 001).
+    door_mix_weight: FloatArray = field(default_factory=lambda: np.zeros(0))
+    door_mix_mean: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
+    door_mix_var: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
 
     def with_width(self, width: float) -> ClassParams:
         return replace(self, door_width_m=float(width))

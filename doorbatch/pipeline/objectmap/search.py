@@ -21,6 +21,7 @@ import numpy.typing as npt
 from doorbatch.config import ObjectMapConfig
 from doorbatch.pipeline.gridmap.doors import cluster_points
 from doorbatch.pipeline.objectmap.beams import BeamSet
+from doorbatch.pipeline.objectmap.colors import class_color_loglik
 from doorbatch.pipeline.objectmap.doors import fit_hinge_angles, initial_angles, rays_near
 from doorbatch.pipeline.objectmap.em import EmTrace, MapState, evaluate, run_em
 from doorbatch.pipeline.objectmap.hough import hough_lines
@@ -189,9 +190,8 @@ def color_candidates(beams: BeamSet, state: MapState, config: ObjectMapConfig) -
     # the range must fit the wall (the colour may not: under the wall class a door's colour is 'invalid')
     fits = np.abs(beams.range_m - state.first.delta) < config.pseudo_e_sigmas * config.sigma_m
     ok = beams.hit & np.isfinite(col[:, 0]) & (state.first.cls == WALL) & fits
-    ll = [-0.5 * np.sum((col - classes.color_mean[c]) ** 2 / classes.color_var[c]
-                        + np.log(classes.color_var[c]), axis=1) for c in (WALL, DOOR)]
-    ratio = ll[1] - ll[0]
+    ratio = np.zeros(col.shape[0])
+    ratio[ok] = class_color_loglik(col[ok], DOOR, classes) - class_color_loglik(col[ok], WALL, classes)
     door_like = ok & (ratio > 0.0)
     out: list[DoorCandidate] = []
     width = classes.door_width_m

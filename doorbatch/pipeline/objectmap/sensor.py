@@ -21,6 +21,7 @@ import numpy.typing as npt
 from scipy.special import log_ndtr
 
 from doorbatch.pipeline.objectmap.beams import BeamSet
+from doorbatch.pipeline.objectmap.colors import class_color_loglik
 from doorbatch.pipeline.objectmap.model import ClassParams, ObjectMap
 from doorbatch.sim.raycast import RayBuffers, cast_rays
 
@@ -95,11 +96,9 @@ def color_loglik(color: FloatArray, cls: IntArray, classes: ClassParams) -> Floa
     out = np.zeros(cls.shape[0])
     if not classes.has_color:
         return out
-    ok = np.isfinite(color[:, 0]) & (cls >= 0)
-    c = cls[ok]
-    mean, var = classes.color_mean[c], classes.color_var[c]
-    ll = -0.5 * np.sum((color[ok] - mean) ** 2 / var + np.log(2.0 * np.pi * var), axis=1)
-    out[ok] = ll - LOG_UNIFORM_COLOR
+    for c in (0, 1):
+        ok = np.isfinite(color[:, 0]) & (cls == c)
+        out[ok] = class_color_loglik(color[ok], c, classes) - LOG_UNIFORM_COLOR
     return out
 
 
