@@ -47,7 +47,7 @@ def main() -> None:
     print("| scans | beams | s per EM iteration (CPU) |")
     print("| --- | --- | --- |")
     for stride in (int(s) for s in args.strides.split(",")):
-        em = config.em.model_copy(update={"scan_stride": stride})
+        em = config.em.model_copy(update={"scan_stride": stride, "beam_stride": 2})
         b = collect_beams(recs, passes, em)
         n_scans = sum(len(range(0, len(r.scans), stride)) for r in recs)
         trace = EmTrace()

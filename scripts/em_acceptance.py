@@ -46,7 +46,13 @@ from doorbatch.pipeline.objectmap.em import evaluate
 from doorbatch.pipeline.objectmap.model import ClassParams
 from doorbatch.pipeline.objectmap.prior import log_prior
 from doorbatch.pipeline.objectmap.sensor import cast_segments
-from doorbatch.pipeline.objectmap.stage import ObjectMapResult, build_object_map, collect_beams, final_step_beams
+from doorbatch.pipeline.objectmap.stage import (
+    ObjectMapResult,
+    build_object_map,
+    collect_beams,
+    final_step_beams,
+    with_strides,
+)
 from doorbatch.sim.simulate import run_simulation
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -131,6 +137,7 @@ def run(site: Site, em: ObjectMapConfig, classes: ClassParams | None = None, noi
         passes = [replace(p, poses=p.poses + np.column_stack([rng.normal(0, noise[0], (p.poses.shape[0], 2)),
                                                                rng.normal(0, np.deg2rad(noise[1]), p.poses.shape[0])]))
                   for p in passes]
+    em = with_strides(site.recordings, em)  # resolved, as the stage does (stride_weighted_prior needs them)
     beams = collect_beams(site.recordings, passes, em)
     return build_object_map(beams, em, classes, final_step_beams(site.recordings, passes, em)), beams
 
