@@ -63,7 +63,7 @@ def _spread_means(color: FloatArray, w: FloatArray, m: int) -> FloatArray:
 
 
 def ml_class_colors(classes: ClassParams, color: FloatArray, cls: IntArray, e: FloatArray, var_floor: float,
-                    door_components: int = 1, mixture_beams: npt.NDArray[np.bool_] | None = None) -> ClassParams:
+                    door_components: int = 1) -> ClassParams:
     """µ_C = Σ e·l / Σ e over the beams whose first object is of class C (and that have a colour); the
     per-channel variance likewise, floored at ``var_floor``. A class without weight keeps its values.
     ``door_components`` > 1: the door colours also as a mixture of that many Gaussians (a door class per
@@ -79,14 +79,9 @@ def ml_class_colors(classes: ClassParams, color: FloatArray, cls: IntArray, e: F
         mean[c] = w @ color[sel] / w.sum()
         var[c] = np.maximum(w @ (color[sel] - mean[c]) ** 2 / w.sum(), var_floor)
         if c == 1 and door_components > 1:
-            fit = sel & mixture_beams if mixture_beams is not None else sel
-            wf = e[fit]
-            if wf.sum() < 1.0:
-                mix = (np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)))
-                continue
             start = (classes.door_mix_mean if classes.door_mix_mean.shape[0] == door_components
-                     else _spread_means(color[fit], wf, door_components))
-            mix = weighted_mixture(color[fit], wf, start, var_floor)
+                     else _spread_means(color[sel], w, door_components))
+            mix = weighted_mixture(color[sel], w, start, var_floor)
     return replace(classes, color_mean=mean, color_var=var, has_color=True, door_mix_weight=mix[0],
                    door_mix_mean=mix[1], door_mix_var=mix[2])
 

@@ -132,13 +132,8 @@ def m_step_colors(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> O
     obj_map = state.obj_map
     if not obj_map.classes.has_color:
         return obj_map
-    # the paints are learned from doors that moved (their motion, not their colour, made them doors), so
-    # that a component cannot be fitted to a wall patch and then vouch for it as a door that never moved
-    moved = [i for i, d in enumerate(obj_map.doors)
-             if np.ptp(np.unwrap(d.yaws)) >= np.deg2rad(config.min_opening_deg)]
-    mixture_beams = (state.first.cls == DOOR) & np.isin(state.first.obj, moved)
     classes = ml_class_colors(obj_map.classes, beams.color, state.first.cls, state.e, config.color_var_floor,
-                              config.door_color_components, mixture_beams)
+                              config.door_color_components)
     if not obj_map.doors:  # no door seen yet: keep the door class as it is
         old = obj_map.classes
         classes = replace(classes, color_mean=np.stack([classes.color_mean[0], old.color_mean[1]]),
