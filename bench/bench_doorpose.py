@@ -6,13 +6,17 @@ through TF, the box's ray bearings, the door points, the fit (RANSAC: 1000 trial
 (``scan_in_camera`` + ``estimate_door``). Best of the repeats, per frame.
 
 Detector: a YOLOv5s-shaped network (the paper's model size: width 0.5, depth 0.33, 3 scales × 3 anchors,
-640×640 input, output [1, 25200, 5 + C]) with random weights, exported to ONNX and TorchScript into a temp
-folder, timed through ``detect_image`` (letterbox, inference, decoding, NMS) on a 640×480 image. Random
-weights do not change the arithmetic, so the time is that of a trained model of this shape. Needs the
+640×640 input, output [1, 25200, 5 + C]) with random weights and YOLOv5's prior biases (about 8 objects per
+image), exported to ONNX and TorchScript into a temp folder, timed on a 640×480 image twice: the model's
+forward alone (blob in, output back) and through ``detect_image`` (letterbox, inference, decoding, NMS).
+Random weights do not change the inference's arithmetic, so that time is a trained model's of this shape;
+the prior biases keep NMS to the few candidates a trained model leaves (without them, random objectness
+let ~11,600 of the 25,200 rows through and NMS, not the network, took a third of the time). Needs the
 ``torch`` extra (skipped without it).
 
-Run: ``taskset -c 0 python bench/bench_doorpose.py [--frames F] [--repeats R] [--images N]`` (one core; the
-script also sets OpenCV's and torch's thread counts to 1).
+Run: ``taskset -c 0 python bench/bench_doorpose.py [--frames F] [--repeats R] [--images N]
+[--torch-device D]`` (one core; the script also sets OpenCV's and torch's thread counts to 1; D runs the
+TorchScript model on a GPU, ``cuda``).
 """
 
 from __future__ import annotations
@@ -136,6 +140,11 @@ def yolov5s_like(num_classes: int = 2) -> Any:
             self.up = nn.Upsample(scale_factor=2.0, mode="nearest")
             self.det = nn.ModuleList(nn.Conv2d(c, 3 * no, 1) for c in (128, 256, 512))
             self.register_buffer("anchors", anchors)
+            with torch.no_grad():  # YOLOv5's prior biases (Detect._initialize_biases): ~8 objects per image, so
+                for conv, s in zip(self.det, strides, strict=True):  # NMS sees a trained model's few candidates
+                    b = conv.bias.view(3, no)
+                    b[:, 4] += math.log(8 / (640 / s) ** 2)
+                    b[:, 5:] += math.log(0.6 / (num_classes - 0.99))
 
         def forward(self, x: Any) -> Any:
             p3 = self.b4(self.b3(self.b2(self.b1(self.b0(x)))))
@@ -151,7 +160,8 @@ def yolov5s_like(num_classes: int = 2) -> Any:
                 y = self.det[i](o)
                 _, _, h, w = y.shape
                 y = y.view(1, 3, no, h, w).permute(0, 1, 3, 4, 2).sigmoid()
-                gy, gx = torch.meshgrid(torch.arange(h), torch.arange(w), indexing="ij")
+                gy, gx = torch.meshgrid(torch.arange(h, device=y.device), torch.arange(w, device=y.device),
+                                        indexing="ij")
                 grid = torch.stack([gx, gy], -1).view(1, 1, h, w, 2).float()
                 xy = (y[..., :2] * 2 - 0.5 + grid) * strides[i]
                 wh = (y[..., 2:4] * 2) ** 2 * self.anchors[i]
@@ -161,14 +171,18 @@ def yolov5s_like(num_classes: int = 2) -> Any:
     return Net().eval()
 
 
-def bench_detectors(n_images: int) -> dict[str, float]:
-    """ms per 640×480 image through detect_image, for the ONNX (OpenCV DNN) and TorchScript paths."""
+def bench_detectors(n_images: int, torch_device: str = "cpu") -> dict[str, float]:
+    """ms per 640×480 image through detect_image, for the ONNX (OpenCV DNN) and TorchScript paths.
+
+    The TorchScript model is traced and run on ``torch_device`` (a GPU's time includes the copies of the
+    blob in and the output back, as ``doorbatch doorpose`` pays them).
+    """
     try:
         import torch
     except ImportError:
         return {}
     from doorbatch.io.detector_model import load_detector
-    from doorbatch.pipeline.doorpose.yolo import detect_image
+    from doorbatch.pipeline.doorpose.yolo import detect_image, letterbox
 
     torch.manual_seed(0)
     torch.set_num_threads(1)
@@ -182,14 +196,20 @@ def bench_detectors(n_images: int) -> dict[str, float]:
         with torch.no_grad():
             torch.onnx.export(net, (x,), str(onnx_path), dynamo=False, opset_version=17, input_names=["images"],
                               output_names=["output0"])
-            torch.jit.trace(net, x).save(str(ts_path))
-        for name, path in (("onnx_opencv_dnn", onnx_path), ("torchscript", ts_path)):
-            model = load_detector(path)
-            detect_image(model.forward, image, cfg)  # warm up
+            torch.jit.trace(net.to(torch_device), x.to(torch_device)).save(str(ts_path))
+        for name, path in (("onnx_opencv_dnn", onnx_path), (f"torchscript_{torch_device}", ts_path)):
+            model = load_detector(path, torch_device)
+            for _ in range(3):  # warm up: TorchScript's profiling executor optimizes over the first calls
+                detect_image(model.forward, image, cfg)
+            blob = letterbox(image, cfg.input_size_px).blob
+            t0 = time.perf_counter()
+            for _ in range(n_images):
+                model.forward(blob)
+            out[f"{name} forward"] = 1e3 * (time.perf_counter() - t0) / n_images
             t0 = time.perf_counter()
             for _ in range(n_images):
                 detect_image(model.forward, image, cfg)
-            out[name] = 1e3 * (time.perf_counter() - t0) / n_images
+            out[f"{name} detect_image"] = 1e3 * (time.perf_counter() - t0) / n_images
     return out
 
 
@@ -198,14 +218,15 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=100)
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--images", type=int, default=10)
+    ap.add_argument("--torch-device", default="cpu", help="device of the TorchScript detector (cpu, cuda)")
     args = ap.parse_args()
     cv2.setNumThreads(1)
     print(f"machine: {platform.processor() or platform.machine()}, python {platform.python_version()}, "
           f"opencv {cv2.__version__}")
     for fit, ms in bench_fusion(args.frames, args.repeats).items():
         print(f"fusion + {fit:6s}: {ms:7.3f} ms per frame ({args.frames} frames, best of {args.repeats})")
-    for name, ms in bench_detectors(args.images).items():
-        print(f"detector {name:16s}: {ms:7.1f} ms per 640x480 image (YOLOv5s shape, {args.images} images)")
+    for name, ms in bench_detectors(args.images, args.torch_device).items():
+        print(f"detector {name:29s}: {ms:7.1f} ms per 640x480 image (YOLOv5s shape, {args.images} images)")
 
 
 if __name__ == "__main__":

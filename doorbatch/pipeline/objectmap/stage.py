@@ -70,7 +70,9 @@ def strides_for_rate(beams_per_s: float, config: ObjectMapConfig) -> tuple[int, 
 
 def em_strides(recordings: Sequence[Recording], config: ObjectMapConfig) -> tuple[int, int]:
     """:func:`strides_for_rate` at the logs' data rate: the median beams per scan over the median interval
-    between scans (1, 1 where the logs give no rate)."""
+    between scans (1, 1 where the logs give no rate); the configured strides where both are set."""
+    if config.scan_stride and config.beam_stride:
+        return config.scan_stride, config.beam_stride
     intervals = [np.diff(r.scans.stamps_ns) * 1e-9 for r in recordings if len(r.scans) > 1]
     dt = np.concatenate(intervals) if intervals else np.zeros(0)
     dt = dt[dt > 0.0]

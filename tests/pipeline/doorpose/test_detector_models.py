@@ -45,10 +45,13 @@ def test_onnx_model_through_opencv_dnn(tmp_path: Path) -> None:
     check_detections(detect_image(model.forward, IMAGE, detector_config()))
 
 
-def test_torchscript_model(tmp_path: Path) -> None:
+@pytest.mark.parametrize("device", ["cpu", pytest.param("cuda", marks=pytest.mark.skipif(
+    not torch.cuda.is_available(), reason="no CUDA"))])
+def test_torchscript_model(tmp_path: Path, device: str) -> None:
+    """Traced on the CPU, loaded onto ``device`` (``doorpose.torch_device``): the same boxes."""
     path = tmp_path / "tiny_v5.pt"
     torch.jit.trace(_FixedHead(ROWS).eval(), torch.zeros(1, 3, SIZE, SIZE)).save(str(path))
-    model = load_detector(path)
+    model = load_detector(path, device)
     assert model.kind == "torchscript"
     check_detections(detect_image(model.forward, IMAGE, detector_config()))
 
