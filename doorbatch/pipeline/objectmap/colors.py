@@ -98,19 +98,9 @@ class ColorMixture:
 
 def two_gaussian_mixture(color: FloatArray, iterations: int = 100, var_floor: float = 4.0, seed: int = 0
                          ) -> ColorMixture:
-    """EM for a mixture of two diagonal Gaussians on (N, 3) colours (the paper's colour-only model)."""
-    rng = np.random.default_rng(seed)
-    n = color.shape[0]
-    mean = color[rng.choice(n, 2, replace=False)].astype(np.float64)
-    var = np.tile(np.maximum(color.var(axis=0), var_floor), (2, 1))
-    weights = np.array([0.5, 0.5])
-    resp = np.zeros((n, 2))
-    for _ in range(iterations):
-        ll = np.stack([np.log(weights[c]) - 0.5 * np.sum((color - mean[c]) ** 2 / var[c]
-                                                          + np.log(2 * np.pi * var[c]), axis=1) for c in (0, 1)], 1)
-        resp = np.exp(ll - np.logaddexp(ll[:, :1], ll[:, 1:]))
-        nk = resp.sum(axis=0) + 1e-9
-        weights = nk / n
-        mean = (resp.T @ color) / nk[:, None]
-        var = np.maximum(np.stack([resp[:, c] @ (color - mean[c]) ** 2 for c in (0, 1)]) / nk[:, None], var_floor)
-    return ColorMixture(weights, mean, var, np.argmax(resp, axis=1).astype(np.int64))
+    """EM for a mixture of two diagonal Gaussians on (N, 3) colours (the paper's colour-only model), started
+    at two colours drawn at random (:func:`weighted_mixture` with unit weights); labels: the likelier one."""
+    init = color[np.random.default_rng(seed).choice(color.shape[0], 2, replace=False)]
+    weights, mean, var = weighted_mixture(color, np.ones(color.shape[0]), init, var_floor, iterations)
+    ll = np.stack([np.log(w) + _gaussian_loglik(color, m, v) for w, m, v in zip(weights, mean, var, strict=True)], 1)
+    return ColorMixture(weights, mean, var, np.argmax(ll, axis=1).astype(np.int64))

@@ -436,7 +436,7 @@ def try_door(beams: BeamSet, state: MapState, c: DoorCandidate, config: ObjectMa
     gain = _local_log_posterior(beams, idx, new_map, config) - before
     # Sec. VI: the door is adopted only if it scores higher than the map without it, "i.e. when the segment
     # is static": the same leaf (first pass's direction) as a wall of its own
-    gain_static = _local_log_posterior(beams, idx, _as_static_segment(new_map, len(new_map.doors) - 1), config) - before
+    gain_static = _local_log_posterior(beams, idx, as_static_segment(new_map, len(new_map.doors) - 1), config) - before
     return DoorTrial(gain, min(gain, gain - gain_static), new_map)
 
 
@@ -460,7 +460,7 @@ def terminate_doors(beams: BeamSet, state: MapState, config: ObjectMapConfig) ->
         idx = np.flatnonzero(rays_near(beams, obj_map.doors[i].hinge,
                                        obj_map.door_width(i) + config.door_ray_margin_m))
         current = float(state.loglik[idx].sum()) + log_prior(obj_map, config)
-        options = [replace(obj_map, doors=obj_map.doors[:i] + obj_map.doors[i + 1:]), _as_static_segment(obj_map, i)]
+        options = [replace(obj_map, doors=obj_map.doors[:i] + obj_map.doors[i + 1:]), as_static_segment(obj_map, i)]
         scores = [_local_log_posterior(beams, idx, m, config) for m in options]
         if max(scores) > current:
             state = evaluate(beams, options[int(np.argmax(scores))], config)
@@ -468,7 +468,7 @@ def terminate_doors(beams: BeamSet, state: MapState, config: ObjectMapConfig) ->
     return state, terminated
 
 
-def _as_static_segment(obj_map: ObjectMap, i: int) -> ObjectMap:
+def as_static_segment(obj_map: ObjectMap, i: int) -> ObjectMap:
     """The map with door i replaced by a static wall segment where its leaf stands in the first pass."""
     door = obj_map.doors[i]
     yaw = float(door.yaws[0])

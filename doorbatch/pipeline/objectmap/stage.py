@@ -23,8 +23,8 @@ from doorbatch.io.recording import Recording
 from doorbatch.pipeline.mapping import PassPoses
 from doorbatch.pipeline.objectmap.beams import BeamSet, ScanBeams, beams_from_scans
 from doorbatch.pipeline.objectmap.em import EmTrace, MapState, evaluate
-from doorbatch.pipeline.objectmap.model import DOOR, ClassParams, ObjectMap, Wall
-from doorbatch.pipeline.objectmap.search import final_walls, search_structure
+from doorbatch.pipeline.objectmap.model import DOOR, WALL, ClassParams, ObjectMap, Wall
+from doorbatch.pipeline.objectmap.search import as_static_segment, color_contrast, final_walls, search_structure
 
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
@@ -196,9 +196,11 @@ def _moved(rel: FloatArray, observed: BoolArray, config: ObjectMapConfig) -> tup
 def describe_doors(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> list[EmDoor]:
     """Doors as rows: angles relative to the closed direction over the passes the leaf was seen in.
 
-    A door that never moved shows no hinge: both ends of its leaf explain the same hits. Where its hinge
-    end lies off every wall and its free end on one (within ``wall_hinge_distance_m`` of a segment), the
-    ends are swapped: a hinge is mounted in a wall or frame (a door left open into a corridor while mapping).
+    A door that never moved shows no hinge: both ends of its leaf explain the same hits. Where its free end
+    lies on a wall (within ``wall_hinge_distance_m`` of a segment) and its hinge end off every wall, or
+    farther from them than the free end by more than ``sigma_m`` (a leaf left open almost flat against a
+    wall meets it at the hinge; its free end stands off it by length·sin(angle)), the ends are swapped: a
+    hinge is mounted in a wall or frame (a door left open into a corridor while mapping).
     """
     out = []
     for i, door in enumerate(state.obj_map.doors):
@@ -214,7 +216,8 @@ def describe_doors(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> 
             yaw = float(np.angle(np.mean(np.exp(1j * door.yaws[observed if observed.any() else slice(None)]))))
             tip = door.hinge + obj_map.door_width(i) * np.array([np.cos(yaw), np.sin(yaw)])
             near = config.wall_hinge_distance_m
-            if wall_distance(obj_map, door.hinge) > near >= wall_distance(obj_map, tip):
+            to_hinge, to_tip = wall_distance(obj_map, door.hinge), wall_distance(obj_map, tip)
+            if to_tip <= near and (to_hinge > near or to_hinge - to_tip > config.sigma_m):
                 door = replace(door, hinge=tip, yaws=np.full_like(door.yaws, wrap_angle(yaw + np.pi)))
                 obj_map = replace(obj_map, doors=[*obj_map.doors[:i], door, *obj_map.doors[i + 1:]])
                 closed, rel, observed = _door_angles(obj_map, i, observed, config)
@@ -222,6 +225,57 @@ def describe_doors(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> 
         out.append(EmDoor(PreviewDoor(float(door.hinge[0]), float(door.hinge[1]), obj_map.door_width(i), closed,
                                       lo, hi, moved), int(mine.sum()), door.yaws.copy(), observed))
     return out
+
+
+def leaf_wall_contrast(beams: BeamSet, state: MapState, i: int, door: PreviewDoor, config: ObjectMapConfig) -> float:
+    """The colour contrast (:func:`~doorbatch.pipeline.objectmap.search.color_contrast`) of door i's leaf
+    against the wall it is hung in: the leaf's beams (first object door i, valid) against the hits on walls
+    collinear with the closed direction's line through the hinge (within ``collinear_angle_deg`` of it and the
+    pseudo-E-step band, from a door width behind the hinge to two ahead: the wall on both sides of the
+    doorway; a wall across the line, as at a corner, is not the wall the door is in). 0 when either has too
+    few beams."""
+    hinge = np.array([door.hinge_x, door.hinge_y])
+    tangent = np.array([math.cos(door.closed_yaw), math.sin(door.closed_yaw)])
+    first, width = state.first, door.length
+    band = config.pseudo_e_sigmas * config.sigma_m
+    rel = beams.points - hinge
+    along, across = rel @ tangent, rel @ np.array([-tangent[1], tangent[0]])
+    ok = beams.hit & np.isfinite(beams.color[:, 0])
+    leaf = ok & (first.cls == DOOR) & (first.obj == i) & (state.e > 0.5)
+    beside = (ok & (first.cls == WALL) & (np.abs(beams.range_m - first.delta) < band) & (np.abs(across) < band)
+              & (along >= -width) & (along <= 2.0 * width))
+    walls = state.obj_map.walls
+    if walls:
+        normals = np.array([w.normal for w in walls])[np.where(beside, first.obj, 0)]
+        beside &= np.abs(normals @ tangent) < math.sin(math.radians(config.collinear_angle_deg))
+    return color_contrast(beams.color[leaf], beams.color[beside], config)
+
+
+def without_plain_still_doors(beams: BeamSet, state: MapState, doors: list[EmDoor], config: ObjectMapConfig
+                              ) -> tuple[MapState, list[EmDoor]]:
+    """Doors that never moved from their closed angle (within ``min_opening_deg`` of it in every pass that
+    shows them) and whose leaf's colour does not stand out from the wall they are hung in
+    (:func:`leaf_wall_contrast` below ``color_contrast_min_sigmas``) become static wall segments.
+
+    Why: nothing but its colour tells a closed door that never moved from a piece of wall (paper 001 Sec. VI);
+    a door class that explains wall paint (a component of the door colours fitted to white doors) lets a
+    door-sized wall piece, e.g. beside a niche, pay for a door. The colour proposals test the same contrast;
+    this holds every such door to it, whatever proposed it. A leaf that stood open at an angle all along is
+    left to the shape evidence that found it (a door-sized piece standing out of a wall). Logs without colour
+    are left alone (range-only EM's own limit)."""
+    if not state.obj_map.classes.has_color or not beams.has_color:
+        return state, doors
+    closed = math.radians(config.min_opening_deg)
+    plain = [i for i, d in enumerate(doors) if not d.preview.moved
+             and max(abs(d.preview.angle_min), abs(d.preview.angle_max)) < closed
+             and leaf_wall_contrast(beams, state, i, d.preview, config) < config.color_contrast_min_sigmas]
+    if not plain:
+        return state, doors
+    obj_map = state.obj_map
+    for i in reversed(plain):
+        obj_map = as_static_segment(obj_map, i)
+    state = evaluate(beams, obj_map, config)
+    return state, describe_doors(beams, state, config)
 
 
 def stride_weighted(config: ObjectMapConfig) -> ObjectMapConfig:
@@ -248,8 +302,9 @@ def build_object_map(beams: BeamSet, config: ObjectMapConfig, classes: ClassPara
     state = search_structure(beams, config, classes, trace)
     if final_beams is not None and config.final_recut_sweeps > 0:
         state = evaluate(beams, final_walls(final_beams, state.obj_map, config), config)
-    return ObjectMapResult(state.obj_map, describe_doors(beams, state, config), state.log_posterior, len(beams),
-                           trace, time.perf_counter() - t0, (config.scan_stride, config.beam_stride))
+    state, doors = without_plain_still_doors(beams, state, describe_doors(beams, state, config), config)
+    return ObjectMapResult(state.obj_map, doors, state.log_posterior, len(beams), trace, time.perf_counter() - t0,
+                           (config.scan_stride, config.beam_stride))
 
 
 def em_stage(recordings: Sequence[Recording], passes: Sequence[PassPoses], config: DoorbatchConfig,

@@ -423,3 +423,102 @@ def test_a_door_that_never_moved_is_hinged_at_the_end_on_the_wall(hinge_at_free_
     assert abs(p.closed_yaw) < 1e-9
     assert p.angle_min == pytest.approx(np.pi / 2) and p.angle_max == pytest.approx(np.pi / 2)
     assert not p.moved and described.pass_observed.all()
+
+
+
+@pytest.mark.parametrize("hinge_at_free_end", [True, False])
+def test_a_leaf_left_almost_flat_against_a_wall_is_hinged_where_it_meets_the_wall(hinge_at_free_end: bool) -> None:
+    """Wall y = 0, seen at x ≤ 0 and x ≥ 1 (the leaf hides the rest); a 0.9 m leaf stood open 5° off it in
+    both passes, from (0, 0) to (0.897, −0.078) (double_door:5's fire door d09, open against the corridor
+    wall). Both ends lie within wall_hinge_distance_m of a wall; the hinge is the end on it."""
+    from doorbatch.pipeline.objectmap.stage import describe_doors
+
+    config = DoorbatchConfig().em
+    yaw = -np.deg2rad(5.0)
+    tip = 0.9 * np.array([np.cos(yaw), np.sin(yaw)])
+    wall = Wall(np.array([0.0, -1.0]), 0.0, np.array([[-3.0, 0.0], [1.0, 4.0]]))  # y = 0, s = x
+    door = Door(tip, np.full(2, yaw + np.pi)) if hinge_at_free_end else Door(np.zeros(2), np.full(2, yaw))
+    leaf = np.linspace(0.05, 0.85, 80)[:, None] * np.array([np.cos(yaw), np.sin(yaw)])
+    on_wall = np.stack([np.concatenate([np.arange(-2.0, -0.05, 0.01), np.arange(1.05, 3.0, 0.01)]),
+                        np.zeros(390)], 1)
+    one = _beams_to(np.array([0.5, -1.5]), np.concatenate([leaf, on_wall]))
+    fields = ("origin", "direction", "range_m", "dmax", "hit", "color")
+    beams = BeamSet(np.repeat(np.arange(2), len(one)), *(np.concatenate([getattr(one, f)] * 2) for f in fields), 2)
+    state = evaluate(beams, ObjectMap([wall], [door], ClassParams(0.9), 2), config)
+    (described,) = describe_doors(beams, state, config)
+    assert np.hypot(described.preview.hinge_x, described.preview.hinge_y) < 1e-9
+    assert not described.preview.moved
+
+WALL_RGB, WOOD_RGB, WARM_RGB = (204.0, 203.0, 195.0), (150.0, 104.0, 64.0), (214.0, 186.0, 140.0)
+
+
+@pytest.mark.parametrize(("leaf_rgb", "open_deg", "corner_wall", "kept"), [
+    (WOOD_RGB, 0.0, False, True),  # closed all along, painted unlike its wall: a door by its colour
+    (WALL_RGB, 0.0, False, False),  # closed all along, painted like its wall: nothing tells it from the wall
+    (WALL_RGB, 60.0, False, True),  # stood open at 60° all along: its shape, a leaf out of the wall, tells it
+    (WALL_RGB, 0.0, True, False),  # a warm wall across the line at its free end is not the wall it is hung in
+])
+def test_a_closed_door_that_never_moved_is_kept_only_if_its_colour_stands_out_from_its_wall(
+        leaf_rgb: tuple[float, ...], open_deg: float, corner_wall: bool, kept: bool) -> None:
+    """Wall y = 0 with a doorway x ∈ (0, 0.9), a door hinged at (0, 0) at one angle in both passes, the door
+    class's colour that of its leaf (as a class fitted to it would be). The door stays a door, or its leaf
+    becomes a static wall segment (the niche-side false doors of double_door:5 and l_corridor:5)."""
+    from doorbatch.pipeline.objectmap.stage import describe_doors, without_plain_still_doors
+
+    config = DoorbatchConfig().em
+    rng = np.random.default_rng(3)
+    yaw = np.deg2rad(open_deg)
+    # a niche's side: the line's wall ends 1 m short of the hinge, so only the corner's hits lie near the line
+    segments = np.array([[-3.0, -1.0]]) if corner_wall else np.array([[-3.0, 0.0], [0.9, 4.0]])
+    walls = [Wall(np.array([0.0, -1.0]), 0.0, segments)]  # y = 0, s = x
+    leaf = np.linspace(0.05, 0.85, 80)[:, None] * np.array([np.cos(yaw), np.sin(yaw)])
+    on_wall = np.stack([np.linspace(-2.0, -1.05 if corner_wall else -0.05, 195), np.zeros(195)], 1)
+    ends, rgb = [leaf, on_wall], [np.tile(leaf_rgb, (80, 1)), np.tile(WALL_RGB, (195, 1))]
+    if corner_wall:  # x = 0.95, y ∈ [−2, 0.05]: its hits near y = 0 lie within the band of the door's line
+        walls.append(Wall(np.array([1.0, 0.0]), 0.95, np.array([[-2.0, 0.05]])))
+        ends.append(np.stack([np.full(100, 0.95), np.linspace(-0.8, 0.04, 100)], 1))
+        rgb.append(np.tile(WARM_RGB, (100, 1)))
+    origin = np.array([0.5, -1.5]) if corner_wall else np.array([1.5, 1.5])
+    one = _beams_to(origin, np.concatenate(ends))
+    one = replace(one, color=np.concatenate(rgb) + rng.normal(0.0, 4.0, (len(one), 3)))
+    fields = ("origin", "direction", "range_m", "dmax", "hit", "color")
+    beams = BeamSet(np.repeat(np.arange(2), len(one)), *(np.concatenate([getattr(one, f)] * 2) for f in fields), 2)
+    classes = ClassParams(0.9, np.array([WALL_RGB, leaf_rgb]), np.full((2, 3), 36.0), True)
+    state = evaluate(beams, ObjectMap(walls, [Door(np.zeros(2), np.full(2, yaw))], classes, 2), config)
+    doors = describe_doors(beams, state, config)
+    assert len(doors) == 1 and not doors[0].preview.moved
+    after, described = without_plain_still_doors(beams, state, doors, config)
+    assert len(described) == len(after.obj_map.doors) == int(kept)
+    if not kept:  # the leaf is a wall segment now, where the door stood closed
+        new = after.obj_map.walls[-1]
+        assert len(after.obj_map.walls) == len(walls) + 1
+        np.testing.assert_allclose(np.sort(new.endpoints().reshape(-1, 2)[:, 0]), [0.0, 0.9], atol=1e-9)
+        assert after.log_posterior == pytest.approx(evaluate(beams, after.obj_map, config).log_posterior)
+
+
+def test_the_door_class_per_paint_learns_each_paint_and_scores_each_door_by_its_own() -> None:
+    """Door beams of three paints (wood, white, blue; 50/30/20 %) and wall beams: with
+    ``door_components`` = 3 the M-step's mixture finds the three paints and their shares, and a white door's
+    colour scores higher under it than under the one Gaussian, which sits between the paints; with 1 there is
+    no mixture (paper 001's class)."""
+    from doorbatch.pipeline.objectmap.colors import class_color_loglik, ml_class_colors
+
+    rng = np.random.default_rng(5)
+    paints = np.array([[150.0, 104, 64], [200, 199, 191], [88, 118, 164]])
+    counts = [500, 300, 200]
+    door = np.concatenate([rng.normal(p, 6.0, (n, 3)) for p, n in zip(paints, counts, strict=True)])
+    color = np.concatenate([door, rng.normal([205.0, 203, 195], 5.0, (800, 3))])
+    cls = np.concatenate([np.full(door.shape[0], DOOR), np.full(800, WALL)])
+    e = np.ones(cls.size)
+    one = ml_class_colors(ClassParams(0.9), color, cls, e, 4.0)
+    assert one.door_mix_weight.size == 0
+    mix = ml_class_colors(ClassParams(0.9), color, cls, e, 4.0, door_components=3)
+    order = [int(np.argmin(np.linalg.norm(mix.door_mix_mean - p, axis=1))) for p in paints]
+    assert sorted(order) == [0, 1, 2]
+    np.testing.assert_allclose(mix.door_mix_mean[order], paints, atol=2.0)
+    np.testing.assert_allclose(mix.door_mix_weight[order], np.array(counts) / 1000, atol=0.02)
+    np.testing.assert_allclose(np.sqrt(mix.door_mix_var[order]), 6.0, atol=1.0)
+    white = rng.normal(paints[1], 6.0, (50, 3))
+    gain = class_color_loglik(white, DOOR, mix) - class_color_loglik(white, DOOR, one)
+    assert np.all(gain > 1.0) and gain.mean() > 4.0  # nats per beam
+    np.testing.assert_allclose(class_color_loglik(white, WALL, mix), class_color_loglik(white, WALL, one))
