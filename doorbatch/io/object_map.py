@@ -58,8 +58,13 @@ def classes_dict(classes: ClassParams) -> dict[str, Any]:
     """classes.json content."""
     def one(c: int) -> dict[str, Any]:
         return {"color_mean_rgb": classes.color_mean[c].tolist(), "color_var_rgb": classes.color_var[c].tolist()}
-    return {"format": CLASSES_FORMAT, "door_width_m": classes.door_width_m, "has_color": classes.has_color,
-            "classes": {"wall": one(0), "door": one(1)}}
+    out: dict[str, Any] = {"format": CLASSES_FORMAT, "door_width_m": classes.door_width_m,
+                           "has_color": classes.has_color, "classes": {"wall": one(0), "door": one(1)}}
+    if classes.door_mix_weight.size:  # the door colours per paint (em.door_color_components > 1)
+        out["door_paints"] = [{"weight": float(w), "color_mean_rgb": m.tolist(), "color_var_rgb": v.tolist()}
+                              for w, m, v in zip(classes.door_mix_weight, classes.door_mix_mean,
+                                                 classes.door_mix_var, strict=True)]
+    return out
 
 
 def write_classes(path: Path, classes: ClassParams) -> None:
@@ -86,8 +91,16 @@ def read_classes(path: Path) -> ClassParams:
         var = np.array([data["classes"][c]["color_var_rgb"] for c in ("wall", "door")], dtype=np.float64)
         width = float(data["door_width_m"])
         has_color = bool(data["has_color"])
+        paints = data.get("door_paints", [])  # optional: absent in files of a one-Gaussian door class
+        mix_weight = np.array([float(p["weight"]) for p in paints], dtype=np.float64)
+        mix_mean = np.array([p["color_mean_rgb"] for p in paints], dtype=np.float64).reshape(-1, 3)
+        mix_var = np.array([p["color_var_rgb"] for p in paints], dtype=np.float64).reshape(-1, 3)
     except (KeyError, TypeError, ValueError) as err:
         raise InputDataError(f"classes file: missing or malformed field: {err}", path=path) from err
     if mean.shape != (2, 3) or var.shape != (2, 3) or not np.all(var > 0) or not width > 0:
         raise InputDataError("classes file: colours must be 3 values per class, variances and width > 0", path=path)
-    return ClassParams(width, mean, var, has_color)
+    if not (mix_mean.shape[0] == mix_var.shape[0] == mix_weight.size and np.all(mix_var > 0)
+            and np.all(mix_weight > 0)):
+        raise InputDataError("classes file: door_paints need a weight > 0, 3 colour values and 3 variances > 0 "
+                             "each", path=path)
+    return ClassParams(width, mean, var, has_color, mix_weight, mix_mean, mix_var)
