@@ -610,7 +610,8 @@ class ObjectMapConfig(Section):
     color_var_floor: float = Field(4.0, gt=0.0)  # per-channel colour variance floor (RGB units²)
     # Door colours as a mixture of at most this many Gaussians (a door class per paint; a component left without
     # weight is dropped); 1: one Gaussian (paper 001). 3: office doors come in a few paints (wood, white, a
-    # colour); one Gaussian spread over them lost moved doors of every paint but its mean's (docs/results.md).
+    # colour); one Gaussian spread over them lost moved doors of every paint but its mean's. The one Gaussian
+    # stays as one more component at share 1/(M+1), for paints not learned yet (docs/results.md).
     door_color_components: int = Field(3, ge=1)
     # A colour proposal's mean chromaticity must differ from its wall's just beside it by this many pooled
     # standard deviations (search.color_contrast), else no door is proposed there. 2: a beam is then told to

@@ -24,9 +24,14 @@ def class_color_loglik(color: FloatArray, c: int, classes: ClassParams) -> Float
     """log p(l | class c) for colours (N, 3): the class Gaussian, or for doors with a mixture per paint
     log Σ_m π_m N(l; µ_m, σ_m²)."""
     if c == 1 and classes.door_mix_weight.size:
-        comp = np.stack([np.log(w) + _gaussian_loglik(color, m, v) for w, m, v in
-                         zip(classes.door_mix_weight, classes.door_mix_mean, classes.door_mix_var, strict=True)])
-        return np.asarray(np.logaddexp.reduce(comp, axis=0), dtype=np.float64)
+        # the paper's one Gaussian over all door colours stays as one more component, of an equal share 1/(M+1):
+        # a paint no component has learned yet (a door class fitted to the doors adopted first) is still
+        # scored as paper 001 scores it, not as an outlier of the learned paints
+        share = 1.0 / (classes.door_mix_weight.size + 1)
+        comp = [np.log(share) + _gaussian_loglik(color, classes.color_mean[1], classes.color_var[1])]
+        comp += [np.log((1.0 - share) * w) + _gaussian_loglik(color, m, v) for w, m, v in
+                 zip(classes.door_mix_weight, classes.door_mix_mean, classes.door_mix_var, strict=True)]
+        return np.asarray(np.logaddexp.reduce(np.stack(comp), axis=0), dtype=np.float64)
     return _gaussian_loglik(color, classes.color_mean[c], classes.color_var[c])
 
 

@@ -499,8 +499,8 @@ def test_a_closed_door_that_never_moved_is_kept_only_if_its_colour_stands_out_fr
 def test_the_door_class_per_paint_learns_each_paint_and_scores_each_door_by_its_own() -> None:
     """Door beams of three paints (wood, white, blue; 50/30/20 %) and wall beams: with
     ``door_components`` = 3 the M-step's mixture finds the three paints and their shares, and a white door's
-    colour scores higher under it than under the one Gaussian, which sits between the paints; with 1 there is
-    no mixture (paper 001's class)."""
+    colour scores higher under it than under the one Gaussian, which sits between the paints; a paint none
+    learned keeps the one Gaussian's score at its share; with 1 there is no mixture (paper 001's class)."""
     from doorbatch.pipeline.objectmap.colors import class_color_loglik, ml_class_colors
 
     rng = np.random.default_rng(5)
@@ -521,4 +521,11 @@ def test_the_door_class_per_paint_learns_each_paint_and_scores_each_door_by_its_
     white = rng.normal(paints[1], 6.0, (50, 3))
     gain = class_color_loglik(white, DOOR, mix) - class_color_loglik(white, DOOR, one)
     assert np.all(gain > 1.0) and gain.mean() > 4.0  # nats per beam
+    # a paint none of the three learned (a vivid green door adopted later) is scored as the one Gaussian
+    # scores it, at the share 1/4 of that component: not as an outlier of the learned paints
+    green = rng.normal([60.0, 170, 80], 6.0, (50, 3))
+    np.testing.assert_allclose(class_color_loglik(green, DOOR, mix), class_color_loglik(green, DOOR, one)
+                               + np.log(0.25), atol=0.01)
+    learned_only = replace(mix, color_var=np.stack([mix.color_var[0], np.full(3, 1e-9)]))
+    assert np.all(class_color_loglik(green, DOOR, learned_only) < class_color_loglik(green, DOOR, mix) - 20.0)
     np.testing.assert_allclose(class_color_loglik(white, WALL, mix), class_color_loglik(white, WALL, one))
