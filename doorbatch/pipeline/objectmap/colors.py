@@ -8,7 +8,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import numpy.typing as npt
 
-from doorbatch.pipeline.objectmap.model import ClassParams
+from doorbatch.pipeline.objectmap.model import DOOR, WALL, ClassParams
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -20,18 +20,25 @@ def _gaussian_loglik(color: FloatArray, mean: FloatArray, var: FloatArray) -> Fl
                       dtype=np.float64)
 
 
+def _component_logliks(color: FloatArray, weights: FloatArray, means: FloatArray, variances: FloatArray
+                       ) -> FloatArray:
+    """(N, M): log π_m + log N(l; µ_m, diag σ_m²) for colours (N, 3) and M weighted diagonal Gaussians."""
+    return np.stack([np.log(w) + _gaussian_loglik(color, m, v)
+                     for w, m, v in zip(weights, means, variances, strict=True)], 1)
+
+
 def class_color_loglik(color: FloatArray, c: int, classes: ClassParams) -> FloatArray:
     """log p(l | class c) for colours (N, 3): the class Gaussian, or for doors with a mixture per paint
-    log Σ_m π_m N(l; µ_m, σ_m²)."""
-    if c == 1 and classes.door_mix_weight.size:
+    log [s·N(l; µ_door, σ_door²) + (1 − s)·Σ_m π_m N(l; µ_m, σ_m²)] with s = 1/(M + 1)."""
+    if c == DOOR and classes.door_mix_weight.size:
         # the paper's one Gaussian over all door colours stays as one more component, of an equal share 1/(M+1):
         # a paint no component has learned yet (a door class fitted to the doors adopted first) is still
         # scored as paper 001 scores it, not as an outlier of the learned paints
         share = 1.0 / (classes.door_mix_weight.size + 1)
-        comp = [np.log(share) + _gaussian_loglik(color, classes.color_mean[1], classes.color_var[1])]
-        comp += [np.log((1.0 - share) * w) + _gaussian_loglik(color, m, v) for w, m, v in
-                 zip(classes.door_mix_weight, classes.door_mix_mean, classes.door_mix_var, strict=True)]
-        return np.asarray(np.logaddexp.reduce(np.stack(comp), axis=0), dtype=np.float64)
+        ll = _component_logliks(color, np.concatenate([[share], (1.0 - share) * classes.door_mix_weight]),
+                                np.concatenate([classes.color_mean[DOOR][None], classes.door_mix_mean]),
+                                np.concatenate([classes.color_var[DOOR][None], classes.door_mix_var]))
+        return np.asarray(np.logaddexp.reduce(ll, axis=1), dtype=np.float64)
     return _gaussian_loglik(color, classes.color_mean[c], classes.color_var[c])
 
 
@@ -45,7 +52,7 @@ def weighted_mixture(color: FloatArray, w: FloatArray, init_mean: FloatArray, va
                              var_floor), (mean.shape[0], 1))
     pi = np.full(mean.shape[0], 1.0 / mean.shape[0])
     for _ in range(iterations):
-        ll = np.stack([np.log(p) + _gaussian_loglik(color, m, v) for p, m, v in zip(pi, mean, var, strict=True)], 1)
+        ll = _component_logliks(color, pi, mean, var)
         resp = np.exp(ll - np.logaddexp.reduce(ll, axis=1, keepdims=True)) * w[:, None]
         nk = resp.sum(axis=0)
         keep = nk > 1.0
@@ -76,14 +83,14 @@ def ml_class_colors(classes: ClassParams, color: FloatArray, cls: IntArray, e: F
     mean, var = classes.color_mean.copy(), classes.color_var.copy()
     ok = np.isfinite(color[:, 0])
     mix = (classes.door_mix_weight, classes.door_mix_mean, classes.door_mix_var)
-    for c in (0, 1):
+    for c in (WALL, DOOR):
         sel = ok & (cls == c)
         w = e[sel]
         if w.sum() < 1.0:
             continue
         mean[c] = w @ color[sel] / w.sum()
         var[c] = np.maximum(w @ (color[sel] - mean[c]) ** 2 / w.sum(), var_floor)
-        if c == 1 and door_components > 1:
+        if c == DOOR and door_components > 1:
             start = (classes.door_mix_mean if classes.door_mix_mean.shape[0] == door_components
                      else _spread_means(color[sel], w, door_components))
             mix = weighted_mixture(color[sel], w, start, var_floor)
@@ -107,5 +114,5 @@ def two_gaussian_mixture(color: FloatArray, iterations: int = 100, var_floor: fl
     at two colours drawn at random (:func:`weighted_mixture` with unit weights); labels: the likelier one."""
     init = color[np.random.default_rng(seed).choice(color.shape[0], 2, replace=False)]
     weights, mean, var = weighted_mixture(color, np.ones(color.shape[0]), init, var_floor, iterations)
-    ll = np.stack([np.log(w) + _gaussian_loglik(color, m, v) for w, m, v in zip(weights, mean, var, strict=True)], 1)
-    return ColorMixture(weights, mean, var, np.argmax(ll, axis=1).astype(np.int64))
+    labels = np.argmax(_component_logliks(color, weights, mean, var), axis=1)
+    return ColorMixture(weights, mean, var, labels.astype(np.int64))

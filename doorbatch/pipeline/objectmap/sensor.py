@@ -22,7 +22,7 @@ from scipy.special import log_ndtr
 
 from doorbatch.pipeline.objectmap.beams import BeamSet
 from doorbatch.pipeline.objectmap.colors import class_color_loglik
-from doorbatch.pipeline.objectmap.model import ClassParams, ObjectMap
+from doorbatch.pipeline.objectmap.model import DOOR, WALL, ClassParams, ObjectMap
 from doorbatch.sim.raycast import RayBuffers, cast_rays
 
 FloatArray = npt.NDArray[np.float64]
@@ -96,8 +96,9 @@ def color_loglik(color: FloatArray, cls: IntArray, classes: ClassParams) -> Floa
     out = np.zeros(cls.shape[0])
     if not classes.has_color:
         return out
-    for c in (0, 1):
-        ok = np.isfinite(color[:, 0]) & (cls == c)
+    has_color = np.isfinite(color[:, 0])
+    for c in (WALL, DOOR):
+        ok = has_color & (cls == c)
         out[ok] = class_color_loglik(color[ok], c, classes) - LOG_UNIFORM_COLOR
     return out
 

@@ -244,10 +244,10 @@ def leaf_wall_contrast(beams: BeamSet, state: MapState, i: int, door: PreviewDoo
     leaf = ok & (first.cls == DOOR) & (first.obj == i) & (state.e > 0.5)
     beside = (ok & (first.cls == WALL) & (np.abs(beams.range_m - first.delta) < band) & (np.abs(across) < band)
               & (along >= -width) & (along <= 2.0 * width))
-    walls = state.obj_map.walls
-    if walls:
-        normals = np.array([w.normal for w in walls])[np.where(beside, first.obj, 0)]
-        beside &= np.abs(normals @ tangent) < math.sin(math.radians(config.collinear_angle_deg))
+    idx = np.flatnonzero(beside)
+    if idx.size:
+        normals = np.array([w.normal for w in state.obj_map.walls])[first.obj[idx]]
+        beside[idx[np.abs(normals @ tangent) >= math.sin(math.radians(config.collinear_angle_deg))]] = False
     return color_contrast(beams.color[leaf], beams.color[beside], config)
 
 
