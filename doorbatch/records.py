@@ -80,6 +80,7 @@ class Transform:
     translation: FloatArray  # (3,)
     rotation_xyzw: FloatArray  # (4,) unit quaternion
     static: bool = False
+    log_time_ns: int = 0  # when the log recorded it (0: not known)
 
 
 @dataclass(frozen=True, slots=True)

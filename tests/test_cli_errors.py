@@ -131,6 +131,8 @@ def test_unset_stamps_and_two_clocks_are_reported(write_log: Callable[..., Path]
     assert any(p["topic"] == "/scan" and "1 of 5 header stamps are 0" in p["message"] for p in problems)
     assert any("different clocks" in p["message"] for p in problems)
     assert not any("clock" in p["message"] for p in _problems(capsys, write_log("fine.mcap", sample_messages(5))))
+    tf_only = [msg for msg in messages if msg[0] != "/odom"]  # odometry from TF odom → base_link only
+    assert any("different clocks" in p["message"] for p in _problems(capsys, write_log("tf.mcap", tf_only)))
 
 
 def test_unknown_config_key_names_the_closest(write_log: Callable[..., Path],

@@ -24,15 +24,18 @@ class _Edge:
     stamps: list[int] = field(default_factory=list)
     translations: list[FloatArray] = field(default_factory=list)
     rotations: list[FloatArray] = field(default_factory=list)
+    log_times: list[int] = field(default_factory=list)  # when the log recorded each (0: not known)
 
     def add(self, tf: Transform) -> None:
         i = bisect.bisect_right(self.stamps, tf.stamp_ns)
         if i > 0 and self.stamps[i - 1] == tf.stamp_ns:
             self.translations[i - 1], self.rotations[i - 1] = tf.translation, tf.rotation_xyzw
+            self.log_times[i - 1] = tf.log_time_ns
             return
         self.stamps.insert(i, tf.stamp_ns)
         self.translations.insert(i, tf.translation)
         self.rotations.insert(i, tf.rotation_xyzw)
+        self.log_times.insert(i, tf.log_time_ns)
 
     def at(self, stamp_ns: int, limit_ns: int, child: str) -> FloatArray:
         if self.static or (len(self.stamps) == 1 and self.static):
@@ -70,6 +73,7 @@ class TfBuffer:
             self._edges[tf.child] = edge
         if tf.static:
             edge.stamps, edge.translations, edge.rotations = [tf.stamp_ns], [tf.translation], [tf.rotation_xyzw]
+            edge.log_times = [tf.log_time_ns]
         else:
             edge.add(tf)
 
@@ -89,6 +93,10 @@ class TfBuffer:
     def stamps(self, child: str) -> list[int]:
         """The stamps (ns, sorted) of the edge into ``child`` (KeyError: ``child`` has no parent)."""
         return list(self._edges[child].stamps)
+
+    def log_times(self, child: str) -> list[int]:
+        """When the log recorded each transform of :meth:`stamps` (ns; 0 where not known)."""
+        return list(self._edges[child].log_times)
 
     def chain(self, frame: str) -> list[str]:
         """``frame`` and its ancestors up to the root of its tree, child first.

@@ -122,7 +122,7 @@ def decode_pose(msg: Any, msgtype: str, log_time_ns: int) -> Pose2D:
     return _pose2d(msg.header, "", msg.pose, log_time_ns)
 
 
-def decode_transforms(msg: Any, static: bool) -> Iterator[Transform]:
+def decode_transforms(msg: Any, static: bool, log_time_ns: int = 0) -> Iterator[Transform]:
     """tf2_msgs/TFMessage → one :class:`Transform` per TransformStamped."""
     for ts in msg.transforms:
         t, r = ts.transform.translation, ts.transform.rotation
@@ -135,6 +135,7 @@ def decode_transforms(msg: Any, static: bool) -> Iterator[Transform]:
             translation=np.array([t.x, t.y, t.z], dtype=np.float64),
             rotation_xyzw=quat / norm if norm > 0 else np.array([0.0, 0.0, 0.0, 1.0]),
             static=static,
+            log_time_ns=log_time_ns,
         )
 
 
@@ -336,7 +337,7 @@ def decode(role: Role, msg: Any, msgtype: str, log_time_ns: int, topic: str) -> 
     elif role in (Role.ODOMETRY, Role.REFERENCE):
         yield decode_pose(msg, msgtype, log_time_ns)
     elif role is Role.TRANSFORMS:
-        yield from decode_transforms(msg, static=topic.rstrip("/").endswith("tf_static"))
+        yield from decode_transforms(msg, topic.rstrip("/").endswith("tf_static"), log_time_ns)
     elif role is Role.COLORS:
         yield decode_pointcloud_colors(msg, log_time_ns, topic)
     elif role is Role.IMAGE:

@@ -23,7 +23,13 @@ from doorbatch.io.decode import decode_scan, decode_transforms, stamp_to_ns
 from doorbatch.io.map_topic import OCCUPANCY_GRID
 from doorbatch.io.pose_topic import POSE_TYPES
 from doorbatch.io.reader import most_are_bad, open_log
-from doorbatch.io.recording import clock_lags_s, missing_laser_tf_hint, odometry_frame, odometry_frame_note
+from doorbatch.io.recording import (
+    clock_lags_s,
+    missing_laser_tf_hint,
+    odometry_frame,
+    odometry_frame_note,
+    tf_odometry,
+)
 from doorbatch.io.roles import TopicInfo
 from doorbatch.records import Role
 
@@ -143,7 +149,7 @@ def inspect_log(path: Path, config: DoorbatchConfig | None = None,
             st.first_ns = raw.log_time_ns if st.first_ns is None else st.first_ns
             st.last_ns = raw.log_time_ns
             if role_of.get(raw.topic) is Role.TRANSFORMS:
-                for t in decode_transforms(raw.msg, static=raw.topic.rstrip("/").endswith("tf_static")):
+                for t in decode_transforms(raw.msg, raw.topic.rstrip("/").endswith("tf_static"), raw.log_time_ns):
                     tf.add(t)
                 continue
             stamp = _header_stamp(raw.msg)
@@ -189,7 +195,7 @@ def inspect_log(path: Path, config: DoorbatchConfig | None = None,
     report.duration_s = (report.end_ns - report.start_ns) / 1e9
     _check_roles(report, roles.topics, scan_frames, tf, config, stats)
     _check_stamps(report, stats, role_of, config.io.gap_factor)
-    _check_clocks(report, stats, role_of, config.io.clock_mismatch_s)
+    _check_clocks(report, stats, role_of, tf, config)
     return report
 
 
@@ -250,13 +256,18 @@ def _check_stamps(report: LogReport, stats: dict[str, _TopicStats], role_of: dic
                         f"(longest {gaps.max() / 1e9:.3f} s)"))
 
 
-def _check_clocks(report: LogReport, stats: dict[str, _TopicStats], role_of: dict[str, Role],
-                  mismatch_s: float) -> None:
-    """Scan and odometry header stamps on two clocks (:func:`doorbatch.io.recording.on_one_clock`)."""
+def _check_clocks(report: LogReport, stats: dict[str, _TopicStats], role_of: dict[str, Role], tf: TfBuffer,
+                  config: DoorbatchConfig) -> None:
+    """Scan and odometry header stamps on two clocks (:func:`doorbatch.io.recording.on_one_clock`); without an
+    odometry topic, the odometry from TF."""
     of = {role_of.get(name): st for name, st in stats.items() if st.stamps}
     scan, odom = of.get(Role.SCAN), of.get(Role.ODOMETRY)
+    if odom is None and Role.ODOMETRY not in role_of.values():
+        poses, _ = tf_odometry(tf, config.frames.odom, config.frames.base_link)
+        odom = _TopicStats(stamps=[p.stamp_ns for p in poses], log_times=[p.log_time_ns for p in poses]) \
+            if poses else None
     lags = None if scan is None or odom is None else clock_lags_s(scan.stamps, scan.log_times, odom.stamps,
-                                                                  odom.log_times, mismatch_s)
+                                                                  odom.log_times, config.io.clock_mismatch_s)
     if lags is not None:
         report.problems.append(Problem(
             Severity.WARNING, None, f"scan and odometry header stamps are on different clocks (median stamp − log "

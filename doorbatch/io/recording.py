@@ -130,14 +130,17 @@ def tf_odometry(tf: TfBuffer, odom: str, base: str) -> tuple[list[Pose2D], str |
         return [], None
     chain = tf.chain(base)
     edges = [c for c in chain[:chain.index(frame)] if not tf.is_static(c)]
-    stamps = sorted({t for c in edges for t in tf.stamps(c)})
+    logged: dict[int, int] = {}  # stamp → when the log recorded it (for the clock check, on_one_clock)
+    for c in edges:
+        for t, g in zip(tf.stamps(c), tf.log_times(c), strict=True):
+            logged.setdefault(t, g or t)
     poses = []
-    for t in stamps:
+    for t in sorted(logged):
         try:
             x, y, yaw = _planar(tf.lookup(frame, base, t))
         except TransformError:  # another dynamic edge of the chain has no data near this stamp
             continue
-        poses.append(Pose2D(t, t, frame, base, float(x), float(y), float(yaw)))
+        poses.append(Pose2D(t, logged[t], frame, base, float(x), float(y), float(yaw)))
     return poses, None if frame == odom else odometry_frame_note(frame, odom, base)
 
 
@@ -190,15 +193,20 @@ def base_pose_series(poses: list[Pose2D], tf: TfBuffer, base: str) -> PoseSeries
     return pose_series(kept)
 
 
-def robot_pose_series(odom: list[Pose2D], ref: list[Pose2D], tf: TfBuffer, odometry_topic: bool,
-                      frames: FramesConfig) -> tuple[PoseSeries | None, PoseSeries | None, list[str]]:
-    """The odometry and reference poses of base_link a reader collected (:func:`base_pose_series`); without an
-    odometry topic, the odometry from TF (:func:`tf_odometry`). And the notes for the user."""
-    notes: list[str] = []
-    if not odometry_topic:
-        odom, note = tf_odometry(tf, frames.odom, frames.base_link)
-        notes += [note] if note else []
-    return base_pose_series(odom, tf, frames.base_link), base_pose_series(ref, tf, frames.base_link), notes
+def odometry_poses(odom: list[Pose2D], tf: TfBuffer, odometry_topic: bool, frames: FramesConfig
+                   ) -> tuple[list[Pose2D], list[str]]:
+    """The odometry a reader collected from its odometry topic; without one, the odometry from TF
+    (:func:`tf_odometry`, with the log time of each transform). And the notes for the user."""
+    if odometry_topic:
+        return odom, []
+    poses, note = tf_odometry(tf, frames.odom, frames.base_link)
+    return poses, [note] if note else []
+
+
+def robot_pose_series(odom: list[Pose2D], ref: list[Pose2D], tf: TfBuffer, frames: FramesConfig
+                      ) -> tuple[PoseSeries | None, PoseSeries | None]:
+    """The odometry (:func:`odometry_poses`) and reference poses of base_link (:func:`base_pose_series`)."""
+    return base_pose_series(odom, tf, frames.base_link), base_pose_series(ref, tf, frames.base_link)
 
 
 def _planar_affine(tf: TfBuffer, base: str, frame: str, stamp_ns: int, assume_identity: bool) -> FloatArray:
@@ -238,8 +246,8 @@ class OneClock:
 def clock_lags_s(scan_stamps_ns: Sequence[int], scan_log_ns: Sequence[int], odom_stamps_ns: Sequence[int],
                  odom_log_ns: Sequence[int], mismatch_s: float) -> tuple[float, float] | None:
     """The median (header stamp − log time) of scans and of odometry, in s, when they differ by more than
-    ``mismatch_s`` (two clocks), else None. Unset stamps (0) are left out. Odometry only from TF (no log
-    times here) is not compared: a known gap."""
+    ``mismatch_s`` (two clocks), else None. Unset stamps (0) are left out. Odometry from TF has the log times
+    of its transforms (:func:`tf_odometry`)."""
     def lag(stamps: Sequence[int], logged: Sequence[int]) -> float | None:
         d = [t - g for t, g in zip(stamps, logged, strict=True) if t != 0]
         return float(np.median(d)) / 1e9 if d else None
@@ -330,10 +338,10 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
                 ref.append(rec)
             elif item.role is Role.COLORS and isinstance(rec, BeamColors):
                 colors.append(rec)
+        odom, notes = odometry_poses(odom, tf, reader.roles.topic(Role.ODOMETRY) is not None, config.frames)
         timed = on_one_clock(scans, odom, ref, config.io.clock_mismatch_s)
         scans = timed.scans
-        odometry, reference, notes = robot_pose_series(timed.odom, timed.ref, tf,
-                                                       reader.roles.topic(Role.ODOMETRY) is not None, config.frames)
+        odometry, reference = robot_pose_series(timed.odom, timed.ref, tf, config.frames)
         warnings = [*reader.warnings, *(f"{path}: {n}" for n in timed.notes), *notes]
         camera = reader.roles.topic(Role.IMAGE) is not None and reader.roles.topic(Role.CAMERA_INFO) is not None
     if not scans:

@@ -233,7 +233,8 @@ def build_map(logs: Sequence[Path], config: DoorbatchConfig | None = None,
         passes = [pass_poses(rec, source, config) for rec in recordings]
     seconds["poses"] = time.perf_counter() - t0
     if not any(p.valid.any() for p in passes):
-        raise PipelineError(f"no scan has a {source} pose within mapping.max_pose_gap_s "
+        article = "an" if source[0] in "aeiou" else "a"
+        raise PipelineError(f"no scan has {article} {source} pose within mapping.max_pose_gap_s "
                             f"({config.mapping.max_pose_gap_s} s) of one: nothing to map (try another --pose-source)")
     warnings += [w for rec in recordings for w in rec.warnings]
     for p in passes:

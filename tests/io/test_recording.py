@@ -162,6 +162,23 @@ def test_scans_stamped_by_a_device_clock_are_timed_by_the_log(write_log: Callabl
     np.testing.assert_array_equal(same.scans.stamps_ns, log_times)
 
 
+def test_scans_on_a_device_clock_with_odometry_from_tf_only_are_timed_by_the_log(
+        write_log: Callable[..., Path]) -> None:
+    """A TF-only log (no /odom: odometry from odom → base_link) whose laser stamps from its own clock. Before,
+    the clock check saw no odometry topic and kept the scans' stamps: no scan had odometry within reach and
+    `doorbatch map --pose-source odometry` stopped with "no scan has a pose"; now the transforms' log times
+    reveal the two clocks and both sides are timed by the log, as with an odometry topic."""
+    messages = [msg for msg in _restamped(sample_messages(6), "/scan", lambda k, t: 5_000_000 + 100_000_000 * k)
+                if msg[0] != "/odom"]
+    rec = load_recording(write_log("device_tf.mcap", messages))
+    log_times = [t for name, _, t, _ in messages if name == "/scan"]
+    np.testing.assert_array_equal(rec.scans.stamps_ns, log_times)
+    assert any("different clocks" in w for w in rec.warnings)
+    assert rec.odometry is not None
+    np.testing.assert_array_equal(rec.odometry.stamps_ns, log_times)  # TF written with each scan
+    np.testing.assert_allclose(rec.odometry.poses[:, 0], 0.1 * np.arange(6), atol=1e-12)
+
+
 def test_scans_logged_out_of_stamp_order_are_sorted(write_log: Callable[..., Path]) -> None:
     messages = sample_messages(6)
     scans = [msg for name, _, _, msg in messages if name == "/scan"]
