@@ -33,7 +33,7 @@ from doorbatch.pipeline.objectmap.walls import (
     first_without,
     fit_line,
     line_crossings,
-    ray_line_distances,
+    rays_meeting_line_before,
     segment_dp,
     wall_segments,
 )
@@ -360,9 +360,11 @@ def _full_first(beams: BeamSet, obj_map: ObjectMap, idx: IntArray, template: Fir
         segs, seg_cls, seg_obj = obj_map.segments(t)
         rng, hit = cast_segments(beams.origin[sel], beams.direction[sel], segs)
         delta[sel] = rng
-        got = hit >= 0
-        cls[sel] = np.where(got, seg_cls[np.maximum(hit, 0)], -1)
-        obj[sel] = np.where(got, seg_obj[np.maximum(hit, 0)], -1)
+        cls[sel] = -1
+        obj[sel] = -1
+        got = hit >= 0  # (none when the map has no segment in this pass)
+        cls[sel[got]] = seg_cls[hit[got]]
+        obj[sel[got]] = seg_obj[hit[got]]
     return FirstObjects(delta, cls, obj)
 
 
@@ -517,9 +519,9 @@ def recut_all_walls(beams: BeamSet, state: MapState, config: ObjectMapConfig) ->
                                 config.validity_prior, config.sigma_m, config.rho_length_per_m,
                                 2.0 * config.rho_static)
         walls[j] = Wall(wall.normal, wall.offset, segs)
-        t = ray_line_distances(beams, wall.normal, wall.offset)  # rays meeting the line before their first object
-        changed = ((first.cls == WALL) & (first.obj == j)) | (np.isfinite(t) & (t > 0.0) & (t < first.delta))
-        first = _full_first(beams, replace(obj_map, walls=walls), np.flatnonzero(changed), first)
+        changed = np.union1d(np.flatnonzero((first.cls == WALL) & (first.obj == j)),
+                             rays_meeting_line_before(beams, wall.normal, wall.offset, first.delta))
+        first = _full_first(beams, replace(obj_map, walls=walls), changed, first)
     return evaluate(beams, replace(obj_map, walls=walls), config)
 
 
@@ -569,11 +571,14 @@ def final_walls(beams: BeamSet, obj_map: ObjectMap, config: ObjectMapConfig) -> 
     tails and short walls (e.g. a room's side wall seen through a doorway) were cut.
     """
     state = _recut_sweeps(beams, evaluate(beams, propose_walls(beams, obj_map, config), config), config)
+    best, best_log_posterior = state.obj_map, state.log_posterior
     if config.final_recut_sweeps:
-        trial = _recut_sweeps(beams, evaluate(beams, reacquire_occluded(beams, state, config), config), config)
-        if trial.log_posterior > state.log_posterior:
-            state = trial
-    return replace(state.obj_map, walls=[w for w in state.obj_map.walls if w.segments.shape[0]])
+        grown = reacquire_occluded(beams, state, config)
+        del state  # its per-beam arrays are not needed while the trial runs (long logs: hundreds of MB)
+        trial = _recut_sweeps(beams, evaluate(beams, grown, config), config)
+        if trial.log_posterior > best_log_posterior:
+            best = trial.obj_map
+    return replace(best, walls=[w for w in best.walls if w.segments.shape[0]])
 
 
 def search_structure(beams: BeamSet, config: ObjectMapConfig, classes: ClassParams | None = None,

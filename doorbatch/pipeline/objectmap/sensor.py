@@ -20,7 +20,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.special import log_ndtr
 
-from doorbatch.pipeline.objectmap.beams import BeamSet
+from doorbatch.pipeline.objectmap.beams import BeamSet, beam_blocks
 from doorbatch.pipeline.objectmap.colors import class_color_loglik
 from doorbatch.pipeline.objectmap.model import DOOR, WALL, ClassParams, ObjectMap
 from doorbatch.sim.raycast import RayBuffers, cast_rays
@@ -55,8 +55,7 @@ def cast_segments(origin: FloatArray, direction: FloatArray, segments: FloatArra
     if segments.shape[0] == 0 or n == 0:
         return rng, idx
     buf = buffers or RayBuffers()
-    for start in range(0, n, _CHUNK):
-        sl = slice(start, min(n, start + _CHUNK))
+    for sl in beam_blocks(n, _CHUNK):
         rng[sl], idx[sl] = cast_rays(origin[sl], direction[sl], segments, buf)
     return rng, idx
 
@@ -116,7 +115,12 @@ def beam_logliks(beams: BeamSet, delta: FloatArray, cls: IntArray, classes: Clas
 def e_step(beams: BeamSet, first: FirstObjects, classes: ClassParams, lam: float, sigma: float
            ) -> tuple[FloatArray, FloatArray]:
     """Eq. (7): e_k = p(v_k = 1 | d_k, l_k, map) and the per-beam marginal log-likelihood
-    log Σ_v p(d, l, v) (up to the constant uniform colour term)."""
-    valid, invalid = beam_logliks(beams, first.delta, first.cls, classes, lam, sigma)
-    total = np.logaddexp(valid, invalid)
-    return np.exp(valid - total), total
+    log Σ_v p(d, l, v) (up to the constant uniform colour term). In blocks of beams (per-beam values, so
+    the same as one pass over all), to bound the scratch memory on long logs."""
+    e = np.empty(len(beams))
+    total = np.empty(len(beams))
+    for sl in beam_blocks(len(beams)):
+        valid, invalid = beam_logliks(beams.subset(sl), first.delta[sl], first.cls[sl], classes, lam, sigma)
+        total[sl] = np.logaddexp(valid, invalid)
+        e[sl] = np.exp(valid - total[sl])
+    return e, total

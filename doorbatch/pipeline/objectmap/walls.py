@@ -9,7 +9,7 @@ import numba  # type: ignore[import-untyped]
 import numpy as np
 import numpy.typing as npt
 
-from doorbatch.pipeline.objectmap.beams import BeamSet
+from doorbatch.pipeline.objectmap.beams import BeamSet, beam_blocks
 from doorbatch.pipeline.objectmap.model import WALL, ClassParams, ObjectMap
 from doorbatch.pipeline.objectmap.sensor import FirstObjects, beam_logliks, cast_segments
 
@@ -103,14 +103,29 @@ def ray_line_distances(beams: BeamSet, normal: FloatArray, offset: float) -> Flo
     return t
 
 
+def rays_meeting_line_before(beams: BeamSet, normal: FloatArray, offset: float, limit: FloatArray) -> IntArray:
+    """Indices of the beams whose ray meets the line n·p = β at 0 < t < ``limit`` (one limit per beam, e.g.
+    the distance to its first object), in blocks of beams."""
+    parts = []
+    for sl in beam_blocks(len(beams)):
+        t = ray_line_distances(beams.subset(sl), normal, offset)
+        parts.append(np.flatnonzero(np.isfinite(t) & (t > 0.0) & (t < limit[sl])) + sl.start)
+    return np.concatenate(parts) if parts else np.zeros(0, dtype=np.int64)
+
+
 def line_crossings(beams: BeamSet, normal: FloatArray, offset: float, sigma: float) -> LineCrossings:
-    """R_W: beams whose ray meets the line n·p = β before its measured end (+5σ) and within dmax."""
-    t = ray_line_distances(beams, normal, offset)
-    ok = np.isfinite(t) & (t > 0.0) & (t <= np.minimum(beams.range_m + 5.0 * sigma, beams.dmax))
-    idx = np.flatnonzero(ok)
+    """R_W: beams whose ray meets the line n·p = β before its measured end (+5σ) and within dmax (in blocks
+    of beams, to bound the scratch memory on long logs)."""
     tangent = np.array([-normal[1], normal[0]])
-    s = (beams.origin[idx] + t[idx, None] * beams.direction[idx]) @ tangent
-    return LineCrossings(idx, t[idx], s)
+    parts: list[tuple[IntArray, FloatArray, FloatArray]] = []
+    for sl in beam_blocks(len(beams)):
+        b = beams.subset(sl)
+        t = ray_line_distances(b, normal, offset)
+        ok = np.flatnonzero(np.isfinite(t) & (t > 0.0) & (t <= np.minimum(b.range_m + 5.0 * sigma, b.dmax)))
+        parts.append((ok + sl.start, t[ok], (b.origin[ok] + t[ok, None] * b.direction[ok]) @ tangent))
+    if not parts:
+        return LineCrossings(np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros(0))
+    return LineCrossings(*(np.concatenate(p) for p in zip(*parts, strict=True)))
 
 
 def first_without(beams: BeamSet, first: FirstObjects, idx: IntArray, obj_map: ObjectMap, cls: int,
@@ -153,14 +168,18 @@ def crossing_gains(beams: BeamSet, idx: IntArray, t_obj: FloatArray, delta_other
     where its ray crosses at t (δ⁺ = min(δ⁻, t)) rather than absent (δ⁻: the first other object).
 
     Deviation from the paper (one line): Δ is the change of the marginal log-likelihood log Σ_v p(d, l, v)
-    instead of e·(log p⁺ − log p⁻), so that rays the current map calls noise (e ≈ 0) still count."""
-    b = beams.subset(idx)
-    nearer = t_obj < delta_other
-    d_plus = np.where(nearer, t_obj, delta_other)
-    c_plus = np.where(nearer, obj_cls, cls_other)
-    v_plus, inv = beam_logliks(b, d_plus, c_plus, classes, lam, sigma)
-    v_minus, _ = beam_logliks(b, delta_other, cls_other, classes, lam, sigma)
-    return np.asarray(np.logaddexp(v_plus, inv) - np.logaddexp(v_minus, inv), dtype=np.float64)
+    instead of e·(log p⁺ − log p⁻), so that rays the current map calls noise (e ≈ 0) still count.
+    Computed in blocks of beams (per-beam values) to bound the scratch memory on long logs."""
+    gain = np.empty(idx.shape[0])
+    for sl in beam_blocks(idx.shape[0]):
+        b = beams.subset(idx[sl])
+        nearer = t_obj[sl] < delta_other[sl]
+        d_plus = np.where(nearer, t_obj[sl], delta_other[sl])
+        c_plus = np.where(nearer, obj_cls, cls_other[sl])
+        v_plus, inv = beam_logliks(b, d_plus, c_plus, classes, lam, sigma)
+        v_minus, _ = beam_logliks(b, delta_other[sl], cls_other[sl], classes, lam, sigma)
+        gain[sl] = np.logaddexp(v_plus, inv) - np.logaddexp(v_minus, inv)
+    return gain
 
 
 def wall_segments(beams: BeamSet, first: FirstObjects, obj_map: ObjectMap, j: int, normal: FloatArray,

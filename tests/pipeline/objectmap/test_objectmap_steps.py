@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from scipy.integrate import quad
 
 from doorbatch.config import DoorbatchConfig
+from doorbatch.pipeline.objectmap import beams as beams_module
 from doorbatch.pipeline.objectmap import search
 from doorbatch.pipeline.objectmap.beams import BeamSet
 from doorbatch.pipeline.objectmap.colors import two_gaussian_mixture
@@ -28,7 +29,13 @@ from doorbatch.pipeline.objectmap.search import (
     terminate_doors,
 )
 from doorbatch.pipeline.objectmap.sensor import cast_segments, e_step, first_objects, range_loglik_valid
-from doorbatch.pipeline.objectmap.walls import fit_line, segment_dp, wall_segments
+from doorbatch.pipeline.objectmap.walls import (
+    fit_line,
+    line_crossings,
+    rays_meeting_line_before,
+    segment_dp,
+    wall_segments,
+)
 
 
 def test_line_fit_recovers_an_exact_line_and_ignores_zero_weights() -> None:
@@ -529,3 +536,58 @@ def test_the_door_class_per_paint_learns_each_paint_and_scores_each_door_by_its_
     learned_only = replace(mix, color_var=np.stack([mix.color_var[0], np.full(3, 1e-9)]))
     assert np.all(class_color_loglik(green, DOOR, learned_only) < class_color_loglik(green, DOOR, mix) - 20.0)
     np.testing.assert_allclose(class_color_loglik(white, WALL, mix), class_color_loglik(white, WALL, one))
+
+
+def test_the_per_beam_steps_in_blocks_give_the_same_bits_as_in_one_block(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The E-step, the line crossings and eq. (9)'s gains run in blocks of beams to bound their scratch memory
+    on long logs; the blocks (here 37 beams, an odd size that splits every array unevenly) must not change a
+    single value, nor the walls the sweeps cut from them."""
+    rng = np.random.default_rng(3)
+    config = DoorbatchConfig().em
+    wall_a = Wall(np.array([0.0, -1.0]), -2.0, np.array([[0.0, 4.12]]))
+    wall_b = Wall(np.array([1.0, 0.0]), 4.0, np.array([[0.0, 1.94]]))
+    door = Door(np.array([1.0, -0.5]), np.array([np.pi / 2]))
+    classes = ClassParams(0.9, np.array([[200.0, 200, 200], [150, 100, 60]]), np.full((2, 3), 25.0), True)
+    obj_map = ObjectMap([wall_a, wall_b], [door], classes, 1)
+    n = 1000
+    yaws = rng.uniform(-np.pi, np.pi, n)
+    colors = rng.normal(180.0, 30.0, (n, 3))
+    colors[rng.random(n) < 0.2] = np.nan
+    origin = np.array([1.0, 1.0])
+    # ranges to the map's first object (σ = 1 cm), a fifth of them random (people, noise)
+    truth = first_objects(_beams(origin, yaws, np.full(n, 20.0), colors), obj_map).delta
+    ranges = np.where(np.isfinite(truth), truth + rng.normal(0.0, 0.01, n), 20.0)
+    noise = rng.random(n) < 0.2
+    ranges[noise] = rng.uniform(0.2, 20.0, int(noise.sum()))
+    beams = _beams(origin, yaws, np.minimum(ranges, 20.0), colors)
+
+    def run() -> tuple[np.ndarray, ...]:
+        first = first_objects(beams, obj_map)
+        e, ll = e_step(beams, first, classes, 0.7, config.sigma_m)
+        cross = line_crossings(beams, wall_a.normal, wall_a.offset, config.sigma_m)
+        segs, cost = wall_segments(beams, first, obj_map, 0, wall_a.normal, wall_a.offset, 0.7, config.sigma_m,
+                                   config.rho_length_per_m, 2.0 * config.rho_static)
+        before = rays_meeting_line_before(beams, wall_b.normal, wall_b.offset, first.delta)
+        final = final_walls(beams, ObjectMap([wall_a, wall_b], [], ClassParams(0.9), 1), config)
+        return (e, ll, cross.beam, cross.t, cross.s, segs, np.array([cost]), before,
+                *(w.segments for w in final.walls))
+
+    one = run()
+    monkeypatch.setattr(beams_module, "BEAM_BLOCK", 37)
+    blocked = run()
+    assert one[2].size > 37 and one[7].size > 37  # more than one block of crossings
+    assert len(one) == 10  # both walls kept by the sweeps
+    assert len(one) == len(blocked)
+    for a, b in zip(one, blocked, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_the_final_sweeps_drop_walls_no_beam_supports() -> None:
+    """Rays that pass both walls (nothing there in the data): the sweeps cut every segment, the first objects
+    are recast against a map with no segment at all, and no wall is left."""
+    config = DoorbatchConfig().em
+    walls = [Wall(np.array([0.0, -1.0]), -2.0, np.array([[0.0, 4.0]])),
+             Wall(np.array([1.0, 0.0]), 4.0, np.array([[0.0, 2.0]]))]
+    yaws = np.linspace(0.05, np.pi / 2 - 0.05, 200)
+    beams = _beams(np.array([1.0, 1.0]), yaws, np.full(200, 20.0), np.full((200, 3), np.nan))
+    assert final_walls(beams, ObjectMap(walls, [], ClassParams(0.9), 1), config).walls == []
