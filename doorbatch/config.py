@@ -607,6 +607,14 @@ class ObjectMapConfig(Section):
     # Divide ρG, ρS, ρD, ρL by scan_stride·beam_stride (each kept beam stands for that many of the log's).
     stride_weighted_prior: bool = False
     use_color: bool = True  # false: range-only EM even when the log has colors
+    # doors.parquet also lists the grid stage's doors (paper 000: seen moving about one hinge) in doorways where
+    # the em stage has no door, or one it never saw move (pipeline/door_rows.py: the em prior's fixed cost per
+    # door outweighs the few beams a sparse or short-range laser puts on a leaf); false: the em doors only.
+    keep_grid_doors: bool = True
+    # The grid stage's doors seed the em search: fitted before its first round so that the door class learns
+    # from them, then kept only if they pay (search.search_structure). A 3.5 m laser's em search alone adopted
+    # no door on the tiny test site and 2 of 9 on the sample world (docs/results.md, "A short-range laser").
+    seed_grid_doors: bool = True
     color_var_floor: float = Field(4.0, gt=0.0)  # per-channel colour variance floor (RGB units²)
     # Door colours as a mixture of at most this many Gaussians (a door class per paint; a component left without
     # weight is dropped); 1: one Gaussian (paper 001). 3: office doors come in a few paints (wood, white, a

@@ -24,9 +24,10 @@ from doorbatch.maps import DoorSet, OccupancyMap
 FloatArray = npt.NDArray[np.float64]
 
 
-def doors_columns(doors: Sequence[PreviewDoor], n_observations: Sequence[int], source: str,
+def doors_columns(doors: Sequence[PreviewDoor], n_observations: Sequence[int], source: str | Sequence[str],
                   ) -> dict[str, object]:
-    """doors.parquet columns (DESIGN schema), door_id in the given order, angles wrapped to (−π, π]."""
+    """doors.parquet columns (DESIGN schema), door_id in the given order, angles wrapped to (−π, π]; ``source``
+    one for all rows or one per row."""
     n = len(doors)
     return {
         "door_id": np.arange(n, dtype=np.int32),
@@ -37,13 +38,14 @@ def doors_columns(doors: Sequence[PreviewDoor], n_observations: Sequence[int], s
         "angle_min": [d.angle_min for d in doors],
         "angle_max": [d.angle_max for d in doors],
         "n_observations": np.asarray(n_observations, dtype=np.int32),
-        "source": [source] * n,
+        "source": [source] * n if isinstance(source, str) else list(source),
         "moved": [d.moved for d in doors],
     }
 
 
 def write_map_dir(out: Path, static_map: OccupancyMap, doors: Sequence[PreviewDoor], n_observations: Sequence[int],
-                  source: str, trajectories: Sequence[np.ndarray], walls: np.ndarray | None = None) -> list[Path]:
+                  source: str | Sequence[str], trajectories: Sequence[np.ndarray], walls: np.ndarray | None = None
+                  ) -> list[Path]:
     """Write map.yaml/map.pgm, doors.parquet and preview.png (with ``walls`` (K, 2, 2) segments of the em
     stage drawn, when given) into ``out``; returns the files written."""
     out.mkdir(parents=True, exist_ok=True)

@@ -12,14 +12,14 @@ import numpy.typing as npt
 
 from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import InputDataError, UsageError
-from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.geometry.se2 import interpolate_poses
 from doorbatch.io.annotated_mcap import write_annotated_mcap
 from doorbatch.io.manifest import Manifest
 from doorbatch.io.mapdir import MappedPass, door_set_of_previews, mapping_annotations, write_map_dir
 from doorbatch.io.object_map import read_classes, write_classes, write_walls
 from doorbatch.io.recording import Recording, load_recording
-from doorbatch.pipeline.mapping import DoorMap, build_map, preview_doors, without_leaves
+from doorbatch.pipeline.door_rows import DoorRow, em_rows, grid_rows, with_grid_doors
+from doorbatch.pipeline.mapping import DoorMap, build_map, without_leaves
 from doorbatch.pipeline.objectmap.stage import ObjectMapResult, em_stage
 
 STAGES = ("grid", "em")  # em (paper 001) takes the grid stage's poses: grid always runs
@@ -56,24 +56,15 @@ def _mapped_passes(recordings: Sequence[Recording], door_map: DoorMap, door_angl
     return out
 
 
-def _pass_door_angles(em: ObjectMapResult | None, n_doors: int, n_passes: int) -> npt.NDArray[np.float64]:
-    """(passes, doors) each door's angle relative to its closed direction in each pass: the em stage's where it
-    saw the leaf, NaN elsewhere and for grid doors (the grid stage keeps no per-pass angle)."""
-    angles = np.full((n_passes, n_doors), np.nan)
-    for k, door in enumerate(em.doors if em is not None else []):
-        seen = door.pass_observed
-        angles[seen, k] = wrap_angle(door.pass_yaws[seen] - door.preview.closed_yaw)
-    return angles
-
-
 def _write_mapping_mcap(logs: Sequence[Path], recordings: Sequence[Recording], door_map: DoorMap,
-                        em: ObjectMapResult | None, path: Path, config: DoorbatchConfig) -> Path:
-    """annotated.mcap of the mapping run (:func:`~doorbatch.io.mapdir.mapping_annotations`)."""
-    doors = [d.preview for d in em.doors] if em is not None else preview_doors(door_map.doors)
-    angles = _pass_door_angles(em, len(doors), len(recordings))
+                        rows: Sequence[DoorRow], path: Path, config: DoorbatchConfig) -> Path:
+    """annotated.mcap of the mapping run (:func:`~doorbatch.io.mapdir.mapping_annotations`); each door at its
+    angle in each pass where its stage saw the leaf."""
+    angles = np.stack([r.pass_angles for r in rows], axis=1) if rows else np.full((len(recordings), 0), np.nan)
     write_annotated_mcap([Path(p) for p in logs], path,
                          mapping_annotations(_mapped_passes(recordings, door_map, angles), door_map.static_map,
-                                             door_set_of_previews(doors), config.frames.map, config.frames.odom),
+                                             door_set_of_previews([r.door for r in rows]), config.frames.map,
+                                             config.frames.odom),
                          config)
     return path
 
@@ -101,7 +92,9 @@ def run_map(logs: Sequence[Path], out: Path, config: DoorbatchConfig, stages: Se
             mcap: bool = False) -> tuple[DoorMap, MapRunSummary]:
     """Build the door map of ``logs`` (one pass each) and write ``out``/{map.yaml, map.pgm, doors.parquet,
     preview.png, manifest.json}; with the em stage also walls.parquet and classes.json, and doors.parquet
-    holds the em doors (source ``em``). ``stages`` None: :func:`default_stages`. ``classes_file``: class
+    holds the em doors (source ``em``) and, with ``em.keep_grid_doors``, the grid doors in doorways the em
+    stage left without a door it saw move (source ``grid``; :func:`~doorbatch.pipeline.door_rows.with_grid_doors`).
+    ``stages`` None: :func:`default_stages`. ``classes_file``: class
     parameters applied without relearning (paper 001 Fig. 5b). ``mcap``: also ``out``/annotated.mcap, every
     message of the passes with the map, the doors per pass, the poses, paths and map→odom (DESIGN's annotated
     MCAP, :func:`~doorbatch.io.mapdir.mapping_annotations`).
@@ -126,30 +119,31 @@ def run_map(logs: Sequence[Path], out: Path, config: DoorbatchConfig, stages: Se
         raise UsageError("--classes applies to the em stage: add it with --stages grid,em")
     manifest = Manifest.start(config.as_dict(), [Path(p) for p in logs], command="map", stages=list(stages))
     door_map = build_map(logs, config, progress, recordings)
+    rows = grid_rows(door_map.doors, len(door_map.passes))
     em: ObjectMapResult | None = None
     if "em" in stages and recordings is not None:
         t0 = time.perf_counter()
-        em = em_stage(recordings, door_map.passes, config, classes)
-        door_map = without_leaves(door_map, [d.preview for d in em.doors], config)
+        em = em_stage(recordings, door_map.passes, config, classes, door_map.doors)
+        rows = (with_grid_doors(em_rows(em.doors), rows, config.em.existing_door_radius_m)
+                if config.em.keep_grid_doors else em_rows(em.doors))
+        door_map = without_leaves(door_map, [r.door for r in rows], config)
         door_map.stage_seconds["em"] = time.perf_counter() - t0
     trajectories = [p.poses[p.valid] for p in door_map.passes]
-    if em is None:
-        files = write_map_dir(out, door_map.static_map, preview_doors(door_map.doors),
-                              [d.n_observations for d in door_map.doors], "grid", trajectories)
-    else:
-        walls = [w.endpoints() for w in em.object_map.walls if w.segments.size]
-        files = write_map_dir(out, door_map.static_map, [d.preview for d in em.doors],
-                              [d.n_observations for d in em.doors], "em", trajectories,
-                              walls=np.concatenate(walls) if walls else None)
+    walls = [w.endpoints() for w in em.object_map.walls if w.segments.size] if em is not None else []
+    files = write_map_dir(out, door_map.static_map, [r.door for r in rows], [r.n_observations for r in rows],
+                          [r.source for r in rows], trajectories, walls=np.concatenate(walls) if walls else None)
+    if em is not None:
         write_walls(out / "walls.parquet", em.object_map.walls)
         write_classes(out / "classes.json", em.object_map.classes)
         files += [out / "walls.parquet", out / "classes.json"]
         manifest.extra["em"] = {"beams": em.n_beams, "log_posterior": em.log_posterior,
                                 "walls": len(em.object_map.walls), "doors": len(em.doors),
-                                "grid_doors": len(door_map.doors), "classes_given": classes is not None,
+                                "grid_doors": len(door_map.doors),
+                                "grid_doors_kept": sum(r.source == "grid" for r in rows),
+                                "classes_given": classes is not None,
                                 "scan_stride": em.strides[0], "beam_stride": em.strides[1]}
     if mcap and recordings is not None:
-        files.append(_write_mapping_mcap(logs, recordings, door_map, em, out / "annotated.mcap", config))
+        files.append(_write_mapping_mcap(logs, recordings, door_map, rows, out / "annotated.mcap", config))
     _remove_stale_map_files(out, files, logs)
     manifest.extra["optional_files"] = [f.name for f in files if f.name in OPTIONAL_MAP_FILES]
     manifest.extra["pose_source"] = door_map.pose_source
@@ -158,7 +152,6 @@ def run_map(logs: Sequence[Path], out: Path, config: DoorbatchConfig, stages: Se
     manifest.stage_seconds.update(door_map.stage_seconds)
     manifest.finish()
     manifest.write(out / "manifest.json")
-    n_doors = len(em.doors) if em is not None else len(door_map.doors)
-    summary = MapRunSummary(str(out), door_map.pose_source, n_doors, len(door_map.passes),
+    summary = MapRunSummary(str(out), door_map.pose_source, len(rows), len(door_map.passes),
                             [str(f) for f in [*files, out / "manifest.json"]], door_map.warnings)
     return door_map, summary

@@ -268,9 +268,3 @@ def without_leaves(door_map: DoorMap, doors: Sequence[PreviewDoor], config: Door
     remove_leaves(grid, [DetectedDoor(d.hinge_x, d.hinge_y, d.length, d.closed_yaw, d.angle_min, d.angle_max, 0,
                                       d.moved) for d in doors], config.doors, config.grid)
     return replace(door_map, static_map=to_occupancy_map(grid), grid=grid)
-
-
-def preview_doors(doors: Sequence[DetectedDoor]) -> list[PreviewDoor]:
-    """The doors as the map directory writers take them."""
-    return [PreviewDoor(d.hinge_x, d.hinge_y, d.length, d.closed_yaw, d.angle_min, d.angle_max, d.moved)
-            for d in doors]

@@ -13,6 +13,7 @@ Outline::
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -582,9 +583,12 @@ def final_walls(beams: BeamSet, obj_map: ObjectMap, config: ObjectMapConfig) -> 
 
 
 def search_structure(beams: BeamSet, config: ObjectMapConfig, classes: ClassParams | None = None,
-                     trace: EmTrace | None = None) -> MapState:
+                     trace: EmTrace | None = None, seeds: Sequence[DoorCandidate] = ()) -> MapState:
     """The whole stage: walls, EM, then rounds of door proposals and EM. ``classes`` given: they are
-    applied as they are (not relearned), as in paper 001 Fig. 5b."""
+    applied as they are (not relearned), as in paper 001 Fig. 5b. ``seeds``: doors found by motion elsewhere
+    (the grid stage's), fitted into the map before the first round whatever they score, so that the door
+    class (width, colours) learns from them from the start (Sec. VI: the colour model improves as doors are
+    found "based on motion, for example"); the rounds' termination then drops those that do not pay."""
     learn = classes is None
     cls0 = classes if classes is not None else initial_classes(beams, config)
     if cls0.has_color and not (config.use_color and beams.has_color):
@@ -592,6 +596,14 @@ def search_structure(beams: BeamSet, config: ObjectMapConfig, classes: ClassPara
     obj_map = ObjectMap([], [], cls0, beams.n_passes)
     obj_map = propose_walls(beams, obj_map, config)
     state = run_em(beams, obj_map, config, learn, trace=trace)
+    fitted = 0
+    for c in seeds:
+        if not _near_existing(c, state.obj_map, config.existing_door_radius_m):
+            state = evaluate(beams, try_door(beams, state, c, config).obj_map, config)
+            fitted += 1
+    if fitted:  # EM with them, then each faces termination as an adopted door does
+        state = run_em(beams, state.obj_map, config, learn, trace=trace)
+        state, _ = terminate_doors(beams, state, config)
     for _ in range(config.structure_rounds):
         candidates = motion_candidates(beams, state, config)
         if state.obj_map.doors or not learn:

@@ -20,11 +20,18 @@ from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.geometry.segments import point_segment_distance
 from doorbatch.io.preview import PreviewDoor
 from doorbatch.io.recording import Recording
+from doorbatch.pipeline.gridmap.doors import DetectedDoor
 from doorbatch.pipeline.mapping import PassPoses
 from doorbatch.pipeline.objectmap.beams import BeamSet, ScanBeams, beams_from_scans
 from doorbatch.pipeline.objectmap.em import EmTrace, MapState, evaluate
 from doorbatch.pipeline.objectmap.model import DOOR, WALL, ClassParams, ObjectMap, Wall
-from doorbatch.pipeline.objectmap.search import as_static_segment, color_contrast, final_walls, search_structure
+from doorbatch.pipeline.objectmap.search import (
+    DoorCandidate,
+    as_static_segment,
+    color_contrast,
+    final_walls,
+    search_structure,
+)
 
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
@@ -291,15 +298,16 @@ def stride_weighted(config: ObjectMapConfig) -> ObjectMapConfig:
 
 
 def build_object_map(beams: BeamSet, config: ObjectMapConfig, classes: ClassParams | None = None,
-                     final_beams: BeamSet | None = None) -> ObjectMapResult:
+                     final_beams: BeamSet | None = None, seeds: Sequence[DoorCandidate] = ()) -> ObjectMapResult:
     """The em stage on beams (see :func:`collect_beams`); ``classes`` given: applied without relearning.
     ``final_beams`` (:func:`final_step_beams`) given and ``config.final_recut_sweeps`` > 0: the converged
-    walls are proposed and re-cut once more over them (:func:`final_walls`)."""
+    walls are proposed and re-cut once more over them (:func:`final_walls`). ``seeds``: doors found by motion
+    (:func:`~doorbatch.pipeline.objectmap.search.search_structure`)."""
     t0 = time.perf_counter()
     trace = EmTrace()
     if config.stride_weighted_prior:
         config = stride_weighted(config)
-    state = search_structure(beams, config, classes, trace)
+    state = search_structure(beams, config, classes, trace, seeds)
     if final_beams is not None and config.final_recut_sweeps > 0:
         state = evaluate(beams, final_walls(final_beams, state.obj_map, config), config)
     state, doors = without_plain_still_doors(beams, state, describe_doors(beams, state, config), config)
@@ -308,9 +316,11 @@ def build_object_map(beams: BeamSet, config: ObjectMapConfig, classes: ClassPara
 
 
 def em_stage(recordings: Sequence[Recording], passes: Sequence[PassPoses], config: DoorbatchConfig,
-             classes: ClassParams | None = None) -> ObjectMapResult:
+             classes: ClassParams | None = None, grid_doors: Sequence[DetectedDoor] = ()) -> ObjectMapResult:
     """The em stage of ``doorbatch map`` on loaded recordings and their poses (strides resolved for them:
-    :func:`with_strides`)."""
+    :func:`with_strides`); with ``em.seed_grid_doors``, the grid stage's doors seed the search."""
     em = with_strides(recordings, config.em)
+    seeds = [DoorCandidate(np.array([d.hinge_x, d.hinge_y]), d.closed_yaw, "grid", d.n_observations)
+             for d in grid_doors] if config.em.seed_grid_doors else []
     return build_object_map(collect_beams(recordings, passes, em), em, classes,
-                            final_step_beams(recordings, passes, em))
+                            final_step_beams(recordings, passes, em), seeds)
