@@ -613,7 +613,8 @@ class ObjectMapConfig(Section):
     keep_grid_doors: bool = True
     # The grid stage's doors seed the em search: fitted before its first round so that the door class learns
     # from them, then kept only if they pay (search.search_structure). A 3.5 m laser's em search alone adopted
-    # no door on the tiny test site and 2 of 9 on the sample world (docs/results.md, "A short-range laser").
+    # no door on the tiny test site, and on the sample world listed 2 doors, one right (docs/results.md, "A
+    # short-range laser").
     seed_grid_doors: bool = True
     color_var_floor: float = Field(4.0, gt=0.0)  # per-channel colour variance floor (RGB units²)
     # Door colours as a mixture of at most this many Gaussians (a door class per paint; a component left without

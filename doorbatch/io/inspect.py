@@ -262,7 +262,7 @@ def _check_clocks(report: LogReport, stats: dict[str, _TopicStats], role_of: dic
     odometry topic, the odometry from TF."""
     of = {role_of.get(name): st for name, st in stats.items() if st.stamps}
     scan, odom = of.get(Role.SCAN), of.get(Role.ODOMETRY)
-    if odom is None and Role.ODOMETRY not in role_of.values():
+    if scan is not None and odom is None and Role.ODOMETRY not in role_of.values():
         poses, _ = tf_odometry(tf, config.frames.odom, config.frames.base_link)
         odom = _TopicStats(stamps=[p.stamp_ns for p in poses], log_times=[p.log_time_ns for p in poses]) \
             if poses else None

@@ -133,7 +133,7 @@ def tf_odometry(tf: TfBuffer, odom: str, base: str) -> tuple[list[Pose2D], str |
     logged: dict[int, int] = {}  # stamp → when the log recorded it (for the clock check, on_one_clock)
     for c in edges:
         for t, g in zip(tf.stamps(c), tf.log_times(c), strict=True):
-            logged.setdefault(t, g or t)
+            logged.setdefault(t, g)
     poses = []
     for t in sorted(logged):
         try:
@@ -246,10 +246,10 @@ class OneClock:
 def clock_lags_s(scan_stamps_ns: Sequence[int], scan_log_ns: Sequence[int], odom_stamps_ns: Sequence[int],
                  odom_log_ns: Sequence[int], mismatch_s: float) -> tuple[float, float] | None:
     """The median (header stamp − log time) of scans and of odometry, in s, when they differ by more than
-    ``mismatch_s`` (two clocks), else None. Unset stamps (0) are left out. Odometry from TF has the log times
-    of its transforms (:func:`tf_odometry`)."""
+    ``mismatch_s`` (two clocks), else None. Unset stamps (0) and unknown log times (0) are left out. Odometry
+    from TF has the log times of its transforms (:func:`tf_odometry`)."""
     def lag(stamps: Sequence[int], logged: Sequence[int]) -> float | None:
-        d = [t - g for t, g in zip(stamps, logged, strict=True) if t != 0]
+        d = [t - g for t, g in zip(stamps, logged, strict=True) if t != 0 and g != 0]
         return float(np.median(d)) / 1e9 if d else None
 
     a, b = lag(scan_stamps_ns, scan_log_ns), lag(odom_stamps_ns, odom_log_ns)

@@ -1,5 +1,5 @@
-"""The doors a map directory lists (doors.parquet): the em stage's, and the grid stage's where the em stage
-has none.
+"""The doors a map directory lists (doors.parquet): the em stage's, and the grid stage's in doorways where
+the em stage has none or one it never saw move.
 
 The two stages judge a door by different evidence. The grid stage (paper 000 Sec. III) keeps a leaf seen at
 two or more distinguishable angles about one hinge: motion, whatever the number of beams. The em stage
@@ -7,7 +7,8 @@ two or more distinguishable angles about one hinge: motion, whatever the number 
 door (ρS per hinge coordinate, ρD per pass angle, ρL per metre; the first door also pays the width and the
 door colours). With a sparse or short-range laser a door gets few beams, and a door that plainly swung loses
 to that cost: on the sample world seen by a 3.5 m, 360-beam, 5 Hz laser (a TurtleBot-like one) the em stage
-kept 2 of the 7 doors the grid stage found moving, all 7 right (docs/results.md, "Short-range laser").
+listed 2 doors, one of them right, where the grid stage found all 7 that moved (docs/results.md, "A
+short-range laser").
 """
 
 from __future__ import annotations
@@ -75,10 +76,12 @@ def with_grid_doors(em: Sequence[DoorRow], grid: Sequence[DoorRow], hinge_radius
     from one angle and the walls (stage.describe_doors)."""
     rows = list(em)
     extra = []
-    for g in grid:
-        k = next((i for i, r in enumerate(rows) if _same_door(r.door, g.door, hinge_radius_m)), None)
-        if k is None:
+    for g in grid:  # against the em doors only, the nearest hinge first; an em door is replaced at most once
+        same = [i for i, r in enumerate(em) if _same_door(r.door, g.door, hinge_radius_m)]
+        if not same:
             extra.append(g)
-        elif g.door.moved and not rows[k].door.moved:
+            continue
+        k = min(same, key=lambda i: np.hypot(em[i].door.hinge_x - g.door.hinge_x, em[i].door.hinge_y - g.door.hinge_y))
+        if g.door.moved and not em[k].door.moved and rows[k] is em[k]:
             rows[k] = g
     return rows + extra

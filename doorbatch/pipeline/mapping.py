@@ -254,7 +254,7 @@ def build_map(logs: Sequence[Path], config: DoorbatchConfig | None = None,
 
 
 def without_leaves(door_map: DoorMap, doors: Sequence[PreviewDoor], config: DoorbatchConfig) -> DoorMap:
-    """The door map whose static map also lacks the leaves of ``doors`` (the em stage's), taken out as the
+    """The door map whose static map also lacks the leaves of ``doors`` (the map directory's), taken out as the
     grid stage takes out its own (:func:`~doorbatch.pipeline.gridmap.doors.remove_leaves`: the sector each
     leaf swept over its opening range, the hinge kept).
 

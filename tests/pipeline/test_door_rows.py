@@ -35,3 +35,14 @@ def test_without_em_doors_every_grid_door_is_listed_and_without_grid_doors_the_e
     assert with_grid_doors([], grid, 0.25) == grid
     em = [_row(3.0, 1.1, 0.0, "em", moved=False)]
     assert with_grid_doors(em, [], 0.25) == em
+
+
+def test_the_grid_doors_order_does_not_matter_and_an_em_door_is_replaced_once() -> None:
+    """Each grid door is matched against the em doors, not against grid doors that already replaced one."""
+    em = [_row(5.0, 0.0, 0.0, "em", moved=False)]
+    g1, g2 = _row(5.1, 0.0, 0.0, "grid"), _row(5.3, 0.0, math.pi / 2, "grid")
+    for grid in ([g1, g2], [g2, g1]):
+        rows = with_grid_doors(em, grid, 0.25)
+        assert sorted((r.source, r.door.hinge_x) for r in rows) == [("grid", 5.1), ("grid", 5.3)]
+    g0 = _row(4.98, 0.0, 0.0, "grid")  # two grid doors at the em door's hinge: one door, listed once
+    assert [r.source for r in with_grid_doors(em, [g1, g0], 0.25)] == ["grid"]

@@ -50,7 +50,7 @@ class DoorCandidate:
 
     hinge: FloatArray
     fallback_yaw: float
-    source: str  # "motion" or "color"
+    source: str  # "motion", "color" or "grid" (a seed: search_structure)
     support: int
 
 
@@ -588,7 +588,8 @@ def search_structure(beams: BeamSet, config: ObjectMapConfig, classes: ClassPara
     applied as they are (not relearned), as in paper 001 Fig. 5b. ``seeds``: doors found by motion elsewhere
     (the grid stage's), fitted into the map before the first round whatever they score, so that the door
     class (width, colours) learns from them from the start (Sec. VI: the colour model improves as doors are
-    found "based on motion, for example"); the rounds' termination then drops those that do not pay."""
+    found "based on motion, for example"); the rounds' termination then drops those that do not pay (what
+    they taught the classes stays, and the walls re-cut around them are re-cut by the later sweeps)."""
     learn = classes is None
     cls0 = classes if classes is not None else initial_classes(beams, config)
     if cls0.has_color and not (config.use_color and beams.has_color):
