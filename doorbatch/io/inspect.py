@@ -134,7 +134,7 @@ def inspect_log(path: Path, config: DoorbatchConfig | None = None,
     path = Path(path)
     problems: list[Problem] = []
     stats: dict[str, _TopicStats] = {}
-    tf = TfBuffer()
+    tf = TfBuffer(int(config.io.tf_extrapolation_limit_s * 1e9))  # as load_recording reads them
     scan_frames: set[str] = set()
     with open_log(path, config) as reader:
         roles = reader.roles
