@@ -423,18 +423,24 @@ class DoorTrial:
     obj_map: ObjectMap
 
 
-def try_door(beams: BeamSet, state: MapState, c: DoorCandidate, config: ObjectMapConfig) -> DoorTrial:
-    """Fit a door at candidate ``c`` (with the walls seen through its doorway) and score it."""
-    obj_map = state.obj_map
+def with_fitted_door(beams: BeamSet, obj_map: ObjectMap, c: DoorCandidate, config: ObjectMapConfig
+                     ) -> tuple[ObjectMap, IntArray]:
+    """The map with a door fitted at candidate ``c`` (its nearby walls re-cut, the walls seen through its
+    doorway added) and the beams whose likelihood that may change."""
     width = obj_map.classes.door_width_m
     door = _door_fit(beams, c, width, config)
     with_door = replace(obj_map, doors=[*obj_map.doors, door])
     new_map, changed = _recut_walls(beams, with_door, door.hinge, width + config.door_wall_margin_m, config)
     idx = _affected(beams, door, width, changed, new_map, config.sigma_m, config.door_ray_margin_m)
-    empty = FirstObjects.none(len(beams))
-    first_mid = _full_first(beams, new_map, idx, empty)
+    first_mid = _full_first(beams, new_map, idx, FirstObjects.none(len(beams)))
     new_map, extra = _walls_behind(beams, new_map, idx, first_mid, config)
-    idx = np.union1d(idx, extra)
+    return new_map, np.union1d(idx, extra)
+
+
+def try_door(beams: BeamSet, state: MapState, c: DoorCandidate, config: ObjectMapConfig) -> DoorTrial:
+    """Fit a door at candidate ``c`` (:func:`with_fitted_door`) and score it."""
+    obj_map = state.obj_map
+    new_map, idx = with_fitted_door(beams, obj_map, c, config)
     before = float(state.loglik[idx].sum()) + log_prior(obj_map, config)
     gain = _local_log_posterior(beams, idx, new_map, config) - before
     # Sec. VI: the door is adopted only if it scores higher than the map without it, "i.e. when the segment
@@ -600,7 +606,7 @@ def search_structure(beams: BeamSet, config: ObjectMapConfig, classes: ClassPara
     fitted = 0
     for c in seeds:
         if not _near_existing(c, state.obj_map, config.existing_door_radius_m):
-            state = evaluate(beams, try_door(beams, state, c, config).obj_map, config)
+            state = evaluate(beams, with_fitted_door(beams, state.obj_map, c, config)[0], config)
             fitted += 1
     if fitted:  # EM with them, then each faces termination as an adopted door does
         state = run_em(beams, state.obj_map, config, learn, trace=trace)
