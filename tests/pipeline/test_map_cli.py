@@ -215,3 +215,40 @@ def test_map_never_removes_a_file_it_did_not_write_there(tmp_path: Path) -> None
     assert main(["map", str(log), "-o", str(out), "--stages", "grid", "--mcap", "-q"]) == 2  # over its input
     assert log.read_bytes() == (SAMPLE_LOGS / "map_pass1.mcap").read_bytes()
 
+
+
+def _with_reference(reference: Callable[[float, float, float], tuple[float, float, float]]
+                    ) -> list[tuple[str, str, int, object]]:
+    """The sample messages with /ground_truth made from each scan's odometry pose by ``reference``."""
+    msgs = [x for x in sample_messages(20) if x[0] != "/ground_truth"]
+    odometry_stamps = [t for topic, _, t, _ in msgs if topic == "/odom"]
+    for k, t in enumerate(odometry_stamps):  # the sample's k-th odometry pose is (0.1 k, 0.02 k, 0.01 k)
+        msgs.append(("/ground_truth", "nav_msgs/msg/Odometry", t,
+                     m.odometry(t, "map", "base_link", *reference(0.1 * k, 0.02 * k, 0.01 * k))))
+    return sorted(msgs, key=lambda x: x[2])
+
+
+def _turned_and_moved(x: float, y: float, yaw: float) -> tuple[float, float, float]:
+    c, s = np.cos(0.5), np.sin(0.5)
+    return 3.0 + c * x - s * y, -2.0 + s * x + c * y, yaw + 0.5
+
+
+@pytest.mark.parametrize(("reference", "source"), [
+    (_turned_and_moved, "scanmatch"),  # the odometry again, in another frame: a raw CARMEN log's laser poses
+    (lambda x, y, yaw: (1.01 * x, y, yaw - 0.02 * x), "reference"),  # 1 % and 1.1°/m off it: a reference
+])
+def test_auto_takes_no_reference_that_repeats_the_odometry(write_log: Callable[..., Path], tmp_path: Path,
+                                                           capsys: pytest.CaptureFixture[str],
+                                                           reference: Callable[[float, float, float],
+                                                                               tuple[float, float, float]],
+                                                           source: str) -> None:
+    log = write_log("copy.mcap", _with_reference(reference))
+    out = tmp_path / "out"
+    assert main(["map", str(log), "-o", str(out), "--stages", "grid", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["pose_source"] == source
+    warnings = " ".join(json.loads((out / "manifest.json").read_text()).get("warnings", []))
+    assert ("repeat the odometry" in warnings) == (source == "scanmatch")
+    # asked for, the reference is taken as it is (a corrected CARMEN log's poses equal its odometry too)
+    assert main(["map", str(log), "-o", str(tmp_path / "asked"), "--stages", "grid", "--pose-source", "reference",
+                 "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["pose_source"] == "reference"
