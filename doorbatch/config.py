@@ -66,6 +66,11 @@ class IoConfig(Section):
     # this are on different clocks (a laser driver stamping with its device clock): both are timed by their
     # log times instead (one recorder clock), with a warning.
     clock_mismatch_s: float = Field(1.0, gt=0.0)
+    # A reference that is the odometry moved rigidly within these is no reference (a raw CARMEN log's laser poses
+    # are its odometry): a warning, and map's auto pose source matches scans instead. Expert choice: a millimetre
+    # and 0.05°, above the logs' printed precision, far below what a real reference parts from odometry by.
+    reference_repeats_odometry_m: float = Field(0.001, ge=0.0)
+    reference_repeats_odometry_deg: float = Field(0.05, ge=0.0)
     # CARMEN: laser field of view when 180/181 or 360/361 readings are given (paper-era SICK scanners).
     carmen_fov_deg: float = Field(180.0, gt=0.0, le=360.0)
     # CARMEN: maximum range used when the log gives none and no reading exceeds it.
@@ -375,11 +380,6 @@ class MappingConfig(Section):
     # localization poses published on filter updates only, or one a node published for a while, is not the
     # trajectory); else scan matching, with a warning. Expert choice: half.
     min_reference_coverage: float = Field(0.5, ge=0.0, le=1.0)
-    # auto takes no reference that is the odometry moved rigidly within these (a raw CARMEN log's laser poses are
-    # its odometry); scan matching instead, with a warning. Expert choice: a millimetre and 0.05°, above the logs'
-    # printed precision and far below what any real reference differs from wheel odometry by over a log.
-    reference_repeats_odometry_m: float = Field(0.001, ge=0.0)
-    reference_repeats_odometry_deg: float = Field(0.05, ge=0.0)
     # Passes after the first must start within this distance of where the previous one's odometry ended
     # when poses come from odometry or scan matching (one odometry frame), else the frames are disjoint.
     odometry_continuity_m: float = Field(1.0, gt=0.0)

@@ -7,6 +7,7 @@ Images are never loaded here; stages that need them stream the log themselves.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -18,9 +19,10 @@ import numpy.typing as npt
 from doorbatch.config import DoorbatchConfig, FramesConfig
 from doorbatch.errors import LogContentError, TransformError
 from doorbatch.geometry.rotations import yaw_of_matrix
-from doorbatch.geometry.se2 import compose
+from doorbatch.geometry.se2 import compose, interpolate_poses
 from doorbatch.geometry.tf_buffer import TfBuffer
 from doorbatch.io.reader import LogReader, open_log
+from doorbatch.pipeline.evaluate.trajectory_error import rigid_copy_offset
 from doorbatch.records import BeamColors, Pose2D, Role, Scan, Transform
 
 FloatArray = npt.NDArray[np.float64]
@@ -93,6 +95,8 @@ class Recording:
     colors: list[npt.NDArray[np.uint8]] | None = None
     warnings: list[str] = field(default_factory=list)
     color_valid: list[npt.NDArray[np.bool_]] | None = None
+    # The reference is the odometry moved rigidly (io.reference_repeats_odometry_m/_deg): no independent reference.
+    reference_is_odometry: bool = False
 
 
 def pose_series(poses: list[Pose2D]) -> PoseSeries | None:
@@ -379,7 +383,33 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
         aligned, valid = camera_beam_colors(path, scans, tf, config)
         if not any(v.any() for v in valid):
             aligned, valid = None, None
-    return Recording(str(path), scan_set, odometry, reference, aligned, warnings, valid)
+    repeats = reference_repeats_odometry(reference, odometry, scan_set.stamps_ns, config)
+    if repeats:
+        warnings.append(f"{path}: the reference poses are the odometry moved rigidly (within "
+                        f"{config.io.reference_repeats_odometry_m} m and {config.io.reference_repeats_odometry_deg}°): "
+                        "no independent reference (a raw CARMEN log's laser poses are its odometry; a corrected log's "
+                        "odometry was replaced by its corrected poses)")
+    return Recording(str(path), scan_set, odometry, reference, aligned, warnings, valid, repeats)
+
+
+def reference_repeats_odometry(reference: PoseSeries | None, odometry: PoseSeries | None,
+                               stamps_ns: Int64Array, config: DoorbatchConfig) -> bool:
+    """Whether the reference, at ``stamps_ns`` (the scans'), is the odometry moved rigidly
+    (:func:`~doorbatch.pipeline.evaluate.trajectory_error.rigid_copy_offset` within
+    ``io.reference_repeats_odometry_m`` and ``_deg``). A CARMEN log's laser poses are its odometry unless the log
+    was corrected, and a corrected log's odometry was replaced by the corrected poses, so the reader cannot tell
+    the two apart; a robot may also republish its odometry as a pose topic.
+    """
+    if reference is None or odometry is None:
+        return False
+    ref, ref_ok = interpolate_poses(reference.stamps_ns, reference.poses, stamps_ns)
+    odo, odo_ok = interpolate_poses(odometry.stamps_ns, odometry.poses, stamps_ns)
+    both = ref_ok & odo_ok
+    if np.count_nonzero(both) < 2:
+        return False
+    off_m, off_rad = rigid_copy_offset(odo[both], ref[both])
+    io = config.io
+    return off_m <= io.reference_repeats_odometry_m and math.degrees(off_rad) <= io.reference_repeats_odometry_deg
 
 
 # No lidar measures below a millimetre; a 0.0 reading is a driver's "no data".

@@ -29,7 +29,6 @@ from doorbatch.geometry.se2 import interpolate_poses, rotation_matrix
 from doorbatch.io.preview import PreviewDoor
 from doorbatch.io.recording import Recording, load_recording
 from doorbatch.maps import OccupancyMap
-from doorbatch.pipeline.evaluate.trajectory_error import align_first_pose, position_errors, yaw_errors
 from doorbatch.pipeline.gridmap.build import GridMapper, MapScan
 from doorbatch.pipeline.gridmap.doors import DetectedDoor, remove_leaves
 from doorbatch.pipeline.gridmap.occupancy import LogOddsGrid, to_occupancy_map
@@ -75,34 +74,11 @@ def reference_coverage(rec: Recording, max_gap_s: float) -> float:
     return float(np.mean(valid))
 
 
-def reference_repeats_odometry(rec: Recording, max_gap_s: float, tolerance_m: float, tolerance_deg: float) -> bool:
-    """Whether the log's reference is its odometry moved rigidly, and so no independent reference.
-
-    With both at the scan stamps, the odometry is carried onto the reference's first pose,
-    ``T = r_0 ⊕ o_0⁻¹``, and compared: ``max_k |(T ⊕ o_k) − r_k|`` within ``tolerance_m`` in position and
-    ``tolerance_deg`` in heading. A CARMEN log's laser poses are its odometry unless the log was corrected (and
-    in a corrected log the odometry was replaced by the corrected poses: the two cannot be told apart); a robot
-    may publish a copy of its odometry as a pose topic.
-    """
-    if rec.reference is None or rec.odometry is None:
-        return False
-    gap_ns = int(max_gap_s * 1e9)
-    stamps = rec.scans.stamps_ns
-    ref, ref_ok = interpolate_poses(rec.reference.stamps_ns, rec.reference.poses, stamps, gap_ns)
-    odo, odo_ok = interpolate_poses(rec.odometry.stamps_ns, rec.odometry.poses, stamps, gap_ns)
-    both = ref_ok & odo_ok
-    if np.count_nonzero(both) < 2:
-        return False
-    carried = align_first_pose(odo[both], ref[both])
-    return bool(np.max(position_errors(carried, ref[both])) <= tolerance_m
-                and np.degrees(np.max(yaw_errors(carried, ref[both]))) <= tolerance_deg)
-
-
 def choose_pose_source(recordings: Sequence[Recording], wanted: str, config: DoorbatchConfig
                        ) -> tuple[str, list[str]]:
     """The pose source and why another than asked for: the one asked for, or (``auto``) ``reference`` when
     every log has a reference that covers at least ``mapping.min_reference_coverage`` of its scans and is not
-    its odometry again (:func:`reference_repeats_odometry`), else ``scanmatch`` (a sparse pose topic, e.g.
+    its odometry again (``Recording.reference_is_odometry``), else ``scanmatch`` (a sparse pose topic, e.g.
     localization poses published only on filter updates, is not the trajectory: with it most scans would be
     skipped). ``scanmatch`` asked for matches a log without odometry at
     constant velocity (a handheld lidar).
@@ -125,13 +101,8 @@ def choose_pose_source(recordings: Sequence[Recording], wanted: str, config: Doo
         why = [f"{r.path}: the reference poses cover {c:.0%} of the scans (< mapping.min_reference_coverage "
                f"{mc.min_reference_coverage:.0%}); poses from scan matching instead"
                for r, c in coverage if c < mc.min_reference_coverage]
-        why += [f"{r.path}: the reference poses repeat the odometry (within {mc.reference_repeats_odometry_m} m and "
-                f"{mc.reference_repeats_odometry_deg}°, moved rigidly), so they are no reference: poses from scan "
-                "matching instead (a raw CARMEN log holds its odometry in both; --pose-source reference takes them "
-                "as they are, for a corrected log)"
-                for r in recordings
-                if reference_repeats_odometry(r, mc.max_pose_gap_s, mc.reference_repeats_odometry_m,
-                                              mc.reference_repeats_odometry_deg)]
+        why += [f"{r.path}: poses from scan matching, as the reference is the odometry again (--pose-source "
+                "reference takes it, for a corrected CARMEN log)" for r in recordings if r.reference_is_odometry]
         return ("scanmatch", why) if why else ("reference", [])
     need = {"reference": "reference", "odometry": "odometry"}.get(wanted)
     for rec in recordings:

@@ -247,7 +247,7 @@ def test_auto_takes_no_reference_that_repeats_the_odometry(write_log: Callable[.
     assert main(["map", str(log), "-o", str(out), "--stages", "grid", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["pose_source"] == source
     warnings = " ".join(json.loads((out / "manifest.json").read_text()).get("warnings", []))
-    assert ("repeat the odometry" in warnings) == (source == "scanmatch")
+    assert ("the odometry again" in warnings) == ("moved rigidly" in warnings) == (source == "scanmatch")
     # asked for, the reference is taken as it is (a corrected CARMEN log's poses equal its odometry too)
     assert main(["map", str(log), "-o", str(tmp_path / "asked"), "--stages", "grid", "--pose-source", "reference",
                  "--json"]) == 0

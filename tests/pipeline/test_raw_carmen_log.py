@@ -56,7 +56,7 @@ def test_a_raw_carmen_log_is_mapped_from_scan_matching(tmp_path: Path) -> None:
     config = DoorbatchConfig()
     door_map = build_map([raw], config)
     assert door_map.pose_source == "scanmatch"
-    assert any("repeat the odometry" in w for w in door_map.warnings)
+    assert any("the odometry again" in w for w in door_map.warnings)
 
     truth = load_recording(corrected, config).reference
     odometry = load_recording(raw, config).odometry

@@ -34,6 +34,16 @@ def yaw_errors(estimate: npt.ArrayLike, reference: npt.ArrayLike) -> FloatArray:
     return np.abs(wrap_angle(est[:, 2] - ref[:, 2]))
 
 
+def rigid_copy_offset(estimate: npt.ArrayLike, reference: npt.ArrayLike) -> tuple[float, float]:
+    """How far ``estimate`` is from being ``reference`` moved rigidly: after :func:`align_first_pose`, the largest
+    position (m) and heading (rad) error. Both zero for a copy in another frame (odometry republished as a pose
+    topic, a raw CARMEN log's laser poses)."""
+    aligned = align_first_pose(estimate, reference)
+    if aligned.shape[0] == 0:
+        return 0.0, 0.0
+    return float(np.max(position_errors(aligned, reference))), float(np.max(yaw_errors(aligned, reference)))
+
+
 def ate_rmse(estimate: npt.ArrayLike, reference: npt.ArrayLike) -> float:
     """Translational ATE RMSE (m), no alignment: √(mean |p_est − p_ref|²)."""
     err = position_errors(estimate, reference)
