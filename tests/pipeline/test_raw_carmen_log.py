@@ -8,12 +8,12 @@ orebro log: every pose field replaced by one drifting odometry (the simulator's 
 
 from __future__ import annotations
 
-import gzip
 from pathlib import Path
 
 import numpy as np
 
 from doorbatch.config import DoorbatchConfig
+from doorbatch.io.carmen_rewrite import rewrite_carmen_poses
 from doorbatch.io.recording import load_recording
 from doorbatch.pipeline.evaluate.trajectory_error import align_first_pose, position_errors
 from doorbatch.pipeline.mapping import build_map
@@ -24,29 +24,8 @@ from tests.conftest import carmen_log
 
 def _raw_log(corrected: Path, out: Path, seed: int) -> Path:
     """``corrected`` with its FLASER laser poses, FLASER odometry and ODOM lines all one drifted odometry."""
-    with gzip.open(corrected, "rt") as f:
-        lines = f.read().splitlines()
-    rows, poses = [], []
-    for i, line in enumerate(lines):
-        words = line.split()
-        if words and words[0] == "FLASER":
-            n = int(words[1])
-            rows.append(i)
-            poses.append([float(v) for v in words[n + 5 : n + 8]])
-        elif words and words[0] == "ODOM":
-            rows.append(i)
-            poses.append([float(v) for v in words[1:4]])
-    drifted = scenario_drift(np.array(poses), load_scenario(None), np.random.default_rng(seed))
-    for i, pose in zip(rows, drifted, strict=True):
-        words = lines[i].split()
-        fields = [f"{v:.6f}" for v in pose]
-        if words[0] == "FLASER":
-            n = int(words[1])
-            words[n + 2 : n + 8] = fields + fields
-        else:
-            words[1:4] = fields
-        lines[i] = " ".join(words)
-    out.write_text("\n".join(lines) + "\n")
+    rng = np.random.default_rng(seed)
+    rewrite_carmen_poses(corrected, out, lambda poses: scenario_drift(poses, load_scenario(None), rng))
     return out
 
 
