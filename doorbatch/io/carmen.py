@@ -11,8 +11,9 @@ topic           type                        from
                                             log with neither: RAWLASER1, the front laser's raw lines)
 /odom           nav_msgs/Odometry           FLASER odometry fields (one per scan), ROBOTLASER1 robot
                                             pose, and ODOM lines (moved off the scans' stamps)
-/ground_truth   nav_msgs/Odometry           FLASER and ROBOTLASER1 laser pose (the corrected pose in
-                                            corrected logs), moved back to base_link
+/ground_truth   nav_msgs/Odometry           TRUEPOS lines (the true robot pose CARMEN's simulator logs),
+                                            else FLASER and ROBOTLASER1 laser pose (the corrected pose in
+                                            corrected logs, the odometry in raw ones), moved back to base_link
 /tf             tf2_msgs/TFMessage          odom→base_link, one per odometry pose
 /tf_static      tf2_msgs/TFMessage          base_link→laser from the ``robot_frontlaser_*offset`` PARAMs
                                             (metres, metres, radians as CARMEN's simulator adds it), or
@@ -68,8 +69,9 @@ _FLASER = "FLASER"
 _ODOM = "ODOM"
 _ROBOTLASER1 = "ROBOTLASER1"
 _RAWLASER1 = "RAWLASER1"
-_TIMED = frozenset({_FLASER, _ODOM, _ROBOTLASER1})
-_TIMED_RAW = frozenset({_ODOM, _RAWLASER1})  # a log without FLASER and ROBOTLASER1 lines
+_TRUEPOS = "TRUEPOS"  # CARMEN's simulator: the true robot pose (and the odometry, which ODOM lines carry too)
+_TIMED = frozenset({_FLASER, _ODOM, _ROBOTLASER1, _TRUEPOS})
+_TIMED_RAW = frozenset({_ODOM, _RAWLASER1, _TRUEPOS})  # a log without FLASER and ROBOTLASER1 lines
 # ROBOTLASER1 without offset PARAMs: its laser pose in its robot pose is the mount when it holds this still.
 _MOUNT_TOLERANCE_M = 1e-3
 _MOUNT_TOLERANCE_RAD = 1e-3
@@ -357,6 +359,14 @@ class _Odom:
     stamp_ns: int
 
 
+@dataclass(frozen=True, slots=True)
+class _TruePose:
+    """A TRUEPOS line: the simulator's true robot pose."""
+
+    pose: tuple[float, float, float]
+    stamp_ns: int
+
+
 def _floats(parts: list[str], what: str, dtype: type[np.floating[Any]] = np.float64) -> npt.NDArray[Any]:
     try:
         return np.array(parts, dtype=dtype)
@@ -463,9 +473,17 @@ def _parse_odom(parts: list[str]) -> _Odom:
     return _Odom(_pose(values[:3], "odometry pose"), float(values[3]), float(values[4]), stamp)
 
 
-def _parse(parts: list[str]) -> _Laser | _Odom:
+def _parse_truepos(parts: list[str]) -> _TruePose:
+    """``TRUEPOS true_x true_y true_theta odom_x odom_y odom_theta timestamp [hostname logger_timestamp]``."""
+    stamp = _tail_stamp(parts, 7, _TRUEPOS)
+    return _TruePose(_pose(_floats(parts[1:4], "true pose"), "true pose"), stamp)
+
+
+def _parse(parts: list[str]) -> _Laser | _Odom | _TruePose:
     if parts[0] == _ODOM:
         return _parse_odom(parts)
+    if parts[0] == _TRUEPOS:
+        return _parse_truepos(parts)
     if parts[0] == _FLASER:
         return _parse_flaser(parts)
     return _parse_laser_with_header(parts, 11 if parts[0] == _ROBOTLASER1 else 0)
@@ -509,6 +527,7 @@ class CarmenReader(LogReader):
         self._fov_deg = self.io_config.carmen_fov_deg
         self._resolution_deg: float | None = None  # PARAM laser_front_laser_resolution
         self._timed = _TIMED  # the keywords this log's messages come from (_TIMED_RAW: RAWLASER1 scans)
+        self._truth_lines = False  # the reference comes from TRUEPOS lines, not the laser lines' poses
 
     # ---- reading lines
 
@@ -608,8 +627,13 @@ class CarmenReader(LogReader):
         # Choice: re-stamped by file order, not dropped: they record motion just before or after the scan. Not
         # for RAWLASER1 scans: they carry no odometry of their own, so an ODOM line at their stamp is the only one.
         scan_lines = np.array(is_scan, dtype=bool) & (self._timed is not _TIMED_RAW)
-        separation = separate_odom_from_scan_stamps(self._stamps, scan_lines)
-        self._stamps, self._dropped = separation.stamps_ns, separation.dropped
+        # TRUEPOS lines keep their stamps: the true pose at a scan's instant is what a reference should give there.
+        truth_lines = np.array([k == _TRUEPOS for k, k_kept in zip(keywords, keep, strict=True) if k_kept])
+        others = np.flatnonzero(~truth_lines)
+        separation = separate_odom_from_scan_stamps(self._stamps[others], scan_lines[others])
+        self._stamps[others] = separation.stamps_ns
+        self._dropped = np.zeros(self._stamps.shape[0], dtype=bool)
+        self._dropped[others] = separation.dropped
         n_dropped = int(np.count_nonzero(self._dropped))
         if separation.n_restamped or n_dropped:
             self._warn(f"{separation.n_restamped + n_dropped} of {counts[_ODOM]} ODOM lines share a scan's time "
@@ -618,9 +642,14 @@ class CarmenReader(LogReader):
                        f"dropped {n_dropped}")
         n_posed = 0 if self._timed is _TIMED_RAW else n_scans  # scans whose line carries poses
         n_odom = n_posed + counts[_ODOM] - n_dropped
+        self._truth_lines = counts[_TRUEPOS] > 0
+        n_reference = counts[_TRUEPOS] if self._truth_lines else n_posed
+        if self._truth_lines:
+            self._warn(f"the reference is the {counts[_TRUEPOS]} TRUEPOS lines (a simulator's true poses), not the "
+                       f"laser lines' poses")
         topics = [TopicInfo(SCAN_TOPIC, LASERSCAN, n_scans, ENCODING),
                   TopicInfo(ODOM_TOPIC, ODOMETRY, n_odom, ENCODING),
-                  TopicInfo(REFERENCE_TOPIC, ODOMETRY, n_posed, ENCODING),
+                  TopicInfo(REFERENCE_TOPIC, ODOMETRY, n_reference, ENCODING),
                   TopicInfo(TF_TOPIC, TF_MESSAGE, n_odom, ENCODING),
                   TopicInfo(TF_STATIC_TOPIC, TF_MESSAGE, 1, ENCODING)]
         self._topics = {t.name: t for t in topics if t.count}
@@ -741,6 +770,8 @@ class CarmenReader(LogReader):
             if hi is not None and stamp >= hi:
                 break
             is_odom = parts[0] == _ODOM
+            if parts[0] == _TRUEPOS and REFERENCE_TOPIC not in wanted:
+                continue
             if (is_odom and not odometry_wanted) or (not is_odom and not laser_wanted):
                 continue
             try:
@@ -749,8 +780,13 @@ class CarmenReader(LogReader):
                 raise self._error(lineno, parts, str(err)) from err
             yield from self._messages_of(record, stamp, wanted)
 
-    def _messages_of(self, record: _Laser | _Odom, stamp: int, wanted: set[str]) -> Iterator[RawMessage]:
+    def _messages_of(self, record: _Laser | _Odom | _TruePose, stamp: int, wanted: set[str]
+                     ) -> Iterator[RawMessage]:
         frames = self.frames
+        if isinstance(record, _TruePose):
+            yield RawMessage(REFERENCE_TOPIC, ODOMETRY, stamp, rm.odometry(stamp, frames.map, frames.base_link,
+                                                                            *record.pose), False)
+            return
         if isinstance(record, _Odom):
             odom_pose, tv, rv = record.pose, record.tv, record.rv
         else:
@@ -765,7 +801,8 @@ class CarmenReader(LogReader):
         if TF_TOPIC in wanted:
             tf = rm.tf_message([rm.planar_transform(stamp, frames.odom, frames.base_link, *odom_pose)])
             yield RawMessage(TF_TOPIC, TF_MESSAGE, stamp, tf, False)
-        if isinstance(record, _Laser) and record.laser_pose is not None and REFERENCE_TOPIC in wanted:
+        if (isinstance(record, _Laser) and record.laser_pose is not None and REFERENCE_TOPIC in wanted
+                and not self._truth_lines):
             pose = base_from_laser(record.laser_pose, self.laser_offset)
             ref = rm.odometry(stamp, frames.map, frames.base_link, *pose)
             yield RawMessage(REFERENCE_TOPIC, ODOMETRY, stamp, ref, False)

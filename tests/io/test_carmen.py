@@ -24,6 +24,7 @@ from doorbatch.io.carmen import (
     repair_stamps,
 )
 from doorbatch.io.reader import open_log
+from doorbatch.io.recording import load_recording
 from doorbatch.io.typestore import ros2_typestore
 from doorbatch.records import Pose2D, Role, RoleMessage, Scan, Transform
 
@@ -603,3 +604,46 @@ def test_a_mount_needs_the_robot_to_have_turned(tmp_path: Path) -> None:
     lines = [robotlaser1(_mounted(r, mount), r, 3.0 + 0.1 * k) for k, r in enumerate(straight)]
     records = read_all(write_log(tmp_path / "straight.clf", lines))
     np.testing.assert_allclose(next(t for t in only(Transform, records) if t.static).translation, 0.0)
+
+
+# ---- CARMEN's simulator: TRUEPOS lines
+
+
+def truepos_line(truth: tuple[float, float, float], odom: tuple[float, float, float], stamp: str) -> str:
+    return " ".join(["TRUEPOS", *(f"{v:g}" for v in (*truth, *odom)), stamp, "host", stamp])
+
+
+def simulator_log(n_scans: int = 8, period: float = 0.2, t0: float = 100.0) -> tuple[list[str], np.ndarray]:
+    """A log as CARMEN's simulator writes it: FLASER lines whose poses are the odometry (0.5 % short and
+    turning 0.02 rad per scan off the truth), ODOM lines, and a TRUEPOS line with each, on the same stamps."""
+    lines = ["# message formats defined: PARAM SYNC ODOM FLASER TRUEPOS"]
+    truth = np.array([[0.2 * k, 0.01 * k * k, 0.03 * k] for k in range(n_scans)])
+    for k, (x, y, yaw) in enumerate(truth):
+        odom = (0.995 * x, 0.995 * y, yaw - 0.02 * k)
+        t = f"{t0 + k * period:.6f}"
+        lines.append(odom_line(odom, t))
+        lines.append(truepos_line((x, y, yaw), odom, t))
+        lines.append(flaser([2.0] * 180, odom, t))
+    return lines, truth
+
+
+def test_truepos_lines_are_the_reference_and_the_laser_poses_are_not(tmp_path: Path) -> None:
+    lines, truth = simulator_log()
+    path = write_log(tmp_path / "sim.log", lines)
+    records = read_all(path)
+    reference = only(Pose2D, records, Role.REFERENCE)
+    assert np.allclose([[p.x, p.y, p.yaw] for p in reference], truth, atol=1e-6)
+    assert {p.frame_id for p in reference} == {"map"}
+    with CarmenReader(path) as reader:
+        assert reader.topics["/ground_truth"].count == len(truth)
+        assert any("TRUEPOS" in w for w in reader.warnings)
+    # the scans' stamps are the truth's: ODOM lines move off them, TRUEPOS lines stay
+    assert [s.stamp_ns for s in scans_of(path)] == [p.stamp_ns for p in reference]
+
+
+def test_a_simulator_log_has_a_reference_that_is_not_its_odometry(tmp_path: Path) -> None:
+    lines, _ = simulator_log()
+    with_truth = load_recording(write_log(tmp_path / "sim.log", lines), DoorbatchConfig())
+    without = load_recording(write_log(tmp_path / "raw.log", [w for w in lines if not w.startswith("TRUEPOS")]),
+                             DoorbatchConfig())
+    assert not with_truth.reference_is_odometry and without.reference_is_odometry
