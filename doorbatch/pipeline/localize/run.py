@@ -272,6 +272,10 @@ def localize(log_path: Path, lmap: LocalizationMap, config: DoorbatchConfig, met
     if isinstance(start, StartPose) and start.frame_id not in ("", config.frames.map):
         rec.warnings.append(f"--init {start.topic}: its pose is in frame {start.frame_id!r}, taken as the map frame "
                             f"{config.frames.map!r}")
+    if start == "reference" and rec.reference_is_odometry:
+        rec.warnings.append("--init reference: the reference is the odometry, so the start is the odometry's first "
+                            "pose, in the map frame only if the map was built from this log; else give --init "
+                            "X,Y,YAW or --init global")
     return localize_recording(rec, lmap, config, method, start, progress)
 
 
