@@ -142,32 +142,41 @@ def _covered_fraction(wall: Wall, s0: float, s1: float) -> float:
     return float(overlap.sum() / (s1 - s0))
 
 
-def closed_yaw(obj_map: ObjectMap, i: int, max_distance_m: float, observed: BoolArray | None = None) -> float:
-    """The closed direction of door i: along the nearest wall line through its hinge, towards the doorway.
+def _tangent_yaw(wall: Wall) -> float:
+    return float(np.arctan2(wall.tangent[1], wall.tangent[0]))
 
-    Of the line's two directions from the hinge, a closed leaf lies across the gap its segments leave (the
-    leaf's span, less a tenth of the width at each end, less than half covered); where exactly one side is such
-    a gap, that side. Otherwise (both or neither) the direction closest to the leaf's directions in the passes
-    it was seen in (``observed``; all passes when none): a door that never moved stands at one angle that is
-    as far from either side, and an unseen pass's direction is only the search's guess. Without a wall line
-    near the hinge: the first observed pass's direction.
+
+def closed_yaw(obj_map: ObjectMap, i: int, max_distance_m: float, observed: BoolArray | None = None) -> float:
+    """The closed direction of door i: along a wall line through its hinge, towards the doorway.
+
+    A closed leaf lies across the gap a wall line's segments leave (the leaf's span, less a tenth of the width at
+    each end, less than half covered). The line is the nearest within ``max_distance_m`` of the hinge that has
+    such a gap on exactly one side of it, the wall going on along the other and again beyond the gap (within
+    half a width past it: the far jamb); a door jamb or a stub at the hinge, short on both sides, is no such line
+    however near, nor is a wall that ends at a corner. With that line, the gap's side. Without
+    one, along the nearest line, the direction closest to the leaf's directions in the passes it was seen in
+    (``observed``; all passes when none): a door that never moved stands at one angle that is as far from either
+    side, and an unseen pass's direction is only the search's guess. Without a wall line near the hinge: the
+    first observed pass's direction.
     """
     door = obj_map.doors[i]
     yaws = door.yaws[observed] if observed is not None and observed.any() else door.yaws
-    best, best_d = None, max_distance_m
-    for w in obj_map.walls:
-        dist = abs(float(door.hinge @ w.normal) - w.offset)
-        if dist <= best_d:
-            best, best_d = w, dist
-    if best is None:
+    width = obj_map.door_width(i)
+    near = sorted((abs(float(door.hinge @ w.normal) - w.offset), k) for k, w in enumerate(obj_map.walls))
+    near = [(d, k) for d, k in near if d <= max_distance_m]
+    if not near:
         return float(yaws[0])
-    base = float(np.arctan2(best.tangent[1], best.tangent[0]))
+    for _, k in near:
+        wall = obj_map.walls[k]
+        s_hinge = float(door.hinge @ wall.tangent)
+        gap = np.array([_covered_fraction(wall, s_hinge + 0.1 * width, s_hinge + 0.9 * width) < 0.5,
+                        _covered_fraction(wall, s_hinge - 0.9 * width, s_hinge - 0.1 * width) < 0.5])
+        jamb = np.array([_covered_fraction(wall, s_hinge + width, s_hinge + 1.5 * width) > 0.0,
+                         _covered_fraction(wall, s_hinge - 1.5 * width, s_hinge - width) > 0.0])
+        if gap.sum() == 1 and jamb[np.argmax(gap)]:  # a doorway: the door closes into it, whatever its angles
+            return float(wrap_angle(_tangent_yaw(wall) + (0.0 if gap[0] else np.pi)))
+    base = _tangent_yaw(obj_map.walls[near[0][1]])
     options = np.array([base, base + np.pi])
-    s_hinge, width = float(door.hinge @ best.tangent), obj_map.door_width(i)
-    gap = np.array([_covered_fraction(best, s_hinge + 0.1 * width, s_hinge + 0.9 * width) < 0.5,
-                    _covered_fraction(best, s_hinge - 0.9 * width, s_hinge - 0.1 * width) < 0.5])
-    if gap.sum() == 1:  # the doorway: a door closes into its frame, whatever angles it was seen at
-        return float(wrap_angle(options[int(np.argmax(gap))]))
     cost = [np.min(np.abs(wrap_angle(yaws - o))) for o in options]
     return float(wrap_angle(options[int(np.argmin(cost))]))
 

@@ -591,3 +591,20 @@ def test_the_final_sweeps_drop_walls_no_beam_supports() -> None:
     yaws = np.linspace(0.05, np.pi / 2 - 0.05, 200)
     beams = _beams(np.array([1.0, 1.0]), yaws, np.full(200, 20.0), np.full((200, 3), np.nan))
     assert final_walls(beams, ObjectMap(walls, [], ClassParams(0.9), 1), config).walls == []
+
+
+def test_a_jamb_at_the_hinge_is_not_the_wall_the_door_closes_along() -> None:
+    """A recessed door (an outside tester's world): hinge 6 cm behind the corridor wall y = 0, whose doorway runs
+    x ∈ (0, 0.9); a 17 cm jamb through the hinge across the wall (x = 0), and a line joining a 7 cm stub at the
+    hinge with a pillar face 3.4 m away, both nearer the hinge than the corridor wall. The door closes along the
+    corridor wall, into the doorway, whatever it was seen at (before: along the jamb, −90°, or the stub's line)."""
+    from doorbatch.pipeline.objectmap.stage import closed_yaw
+
+    corridor = Wall(np.array([0.0, -1.0]), 0.0, np.array([[-5.0, 0.0], [0.9, 5.0]]))  # y = 0, s = x
+    jamb = Wall(np.array([1.0, 0.0]), 0.0, np.array([[-0.17, 0.0]]))  # x = 0 from y = −0.17 to 0 (s = y)
+    stub_and_pillar = Wall(np.array([0.0, 1.0]), -0.06, np.array([[-0.07, 0.0], [3.4, 3.8]]))  # y = −0.06
+    for walls in ([corridor, jamb], [corridor, stub_and_pillar], [jamb, stub_and_pillar, corridor]):
+        for seen_deg in ([0.0, 45.0, 90.0], [-90.0, -45.0, -80.0]):
+            hinge = np.array([0.0, -0.06])
+            obj_map = ObjectMap(walls, [Door(hinge, np.deg2rad(np.array(seen_deg)))], ClassParams(0.9), 3)
+            assert abs(closed_yaw(obj_map, 0, 0.3)) < 1e-9
