@@ -356,6 +356,9 @@ class DoorDetectionConfig(Section):
     # Removing the leaf: cells within this distance of the swept sector are cleared; occupied cells
     # within hinge_keep_m of the hinge are kept (the hinge stays in the static map, paper 000 Sec. IV).
     sweep_margin_m: float = Field(0.04, ge=0.0)
+    # ... and alongside the leaf at either end of its range, this much more: a leaf seen from one side is fitted
+    # on that face, its other face one thickness away (interior door leaves are 35-45 mm thick).
+    leaf_thickness_m: float = Field(0.04, ge=0.0)
     hinge_keep_m: float = Field(0.075, ge=0.0)
     # Static cells above this probability count as occupied when probing walls and partners.
     p_occupied: float = Field(0.65, gt=0.5, lt=1.0)

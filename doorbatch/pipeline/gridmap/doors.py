@@ -952,20 +952,22 @@ def _wall_behind(grid: LogOddsGrid, occupied: BoolArray, hinge: FloatArray, mode
 # ------------------------------------------------------------------------------------------ static map
 
 
-def swept_cells(grid: LogOddsGrid, door: DetectedDoor, margin_m: float) -> BoolArray:
+def swept_cells(grid: LogOddsGrid, door: DetectedDoor, margin_m: float, thickness_m: float = 0.0) -> BoolArray:
     """(H, W) mask of the cells whose centres lie in the sector the leaf swept over its observed range
     (radius = leaf length, angles [angle_min, angle_max] about closed_yaw), or within ``margin_m`` of
-    the leaf at either end of the range."""
+    the leaf at either end of the range, or within ``margin_m + thickness_m`` of its line alongside it there,
+    from that far from the hinge to ``margin_m`` past its free end (the fitted line may lie on either face of a
+    leaf seen from one side; its other face's cells are that much farther)."""
     mask = np.zeros(grid.shape, dtype=bool)
-    mask.reshape(-1)[_swept_flat(grid, door, margin_m)] = True
+    mask.reshape(-1)[_swept_flat(grid, door, margin_m, thickness_m)] = True
     return mask
 
 
-def _swept_flat(grid: LogOddsGrid, door: DetectedDoor, margin_m: float) -> IntArray:
+def _swept_flat(grid: LogOddsGrid, door: DetectedDoor, margin_m: float, thickness_m: float = 0.0) -> IntArray:
     """Flat indices of :func:`swept_cells` (computed in the door's box only)."""
     h, w = grid.shape
     res = grid.resolution_m
-    reach = door.length + margin_m + res
+    reach = door.length + margin_m + thickness_m + res
     c0 = np.floor(grid.world_to_cell_float([door.hinge_x - reach, door.hinge_y - reach])).astype(np.int64)
     c1 = np.floor(grid.world_to_cell_float([door.hinge_x + reach, door.hinge_y + reach])).astype(np.int64)
     j0, i0 = np.maximum(c0, 0)
@@ -980,8 +982,13 @@ def _swept_flat(grid: LogOddsGrid, door: DetectedDoor, margin_m: float) -> IntAr
     inside = (r <= door.length) & (a >= door.angle_min) & (a <= door.angle_max)
     for ang in (door.angle_min, door.angle_max):
         u = (math.cos(door.closed_yaw + ang), math.sin(door.closed_yaw + ang))
-        t = np.clip(px * u[0] + py * u[1], 0.0, door.length)
+        along = px * u[0] + py * u[1]
+        t = np.clip(along, 0.0, door.length)
         inside |= np.hypot(px - t * u[0], py - t * u[1]) <= margin_m
+        # alongside the leaf only: not past its free end by more than margin_m (the far jamb of a closed leaf stays),
+        # nor within the band's width of the hinge (the wall the door hangs in, across an open leaf there)
+        band = margin_m + thickness_m
+        inside |= (along >= band) & (along <= door.length + margin_m) & (np.abs(px * u[1] - py * u[0]) <= band)
     return np.asarray((ii * w + jj)[inside], dtype=np.int64)
 
 
@@ -998,7 +1005,7 @@ def remove_leaves(grid: LogOddsGrid, doors: list[DetectedDoor], config: DoorDete
     threshold = np.float32(_logit(config.p_occupied))
     parts = []
     for door in doors:
-        flat = _swept_flat(grid, door, config.sweep_margin_m)
+        flat = _swept_flat(grid, door, config.sweep_margin_m, config.leaf_thickness_m)
         near_hinge = np.hypot(*(grid.cell_centers(flat) - (door.hinge_x, door.hinge_y)).T) <= config.hinge_keep_m
         parts.append(flat[~(near_hinge & (grid.log_odds.reshape(-1)[flat] > threshold))])
     swept = np.unique(np.concatenate(parts))

@@ -211,3 +211,23 @@ def test_a_door_does_not_depend_on_which_end_of_a_leaf_comes_first(swap: list[bo
     assert math.hypot(door.hinge_x, door.hinge_y) < 0.05
     assert math.degrees(door.closed_yaw + door.angle_min) == pytest.approx(0.0, abs=1.0)
     assert math.degrees(door.angle_max - door.angle_min) == pytest.approx(90.0, abs=1.0)
+
+
+def test_a_thick_leaf_seen_from_one_side_leaves_nothing_at_the_ends_of_its_swing() -> None:
+    """A 4 cm leaf standing open at 90° (an outside tester's world), fitted on the face the robot saw: hits on its
+    other face (4.2 cm away with noise) fall in cells whose centres lie 6.5 cm from the fitted line, beyond
+    ``sweep_margin_m``. All of them leave the static map; the wall it hangs in, across it at the hinge, and
+    the far jamb of the doorway stay."""
+    gcfg, dcfg = GridConfig(), DoorDetectionConfig()
+    grid = new_grid(gcfg, (0.0, 0.0), 6.0)
+    grid.log_odds[:] = gcfg.l_min
+    wall = np.stack([np.concatenate([np.arange(-2.0, -0.02, 0.02), np.arange(0.96, 2.0, 0.02)]), np.zeros(151)], 1)
+    faces = [np.stack([np.full(45, x), np.linspace(0.1, 0.9, 45)], 1) for x in (0.01, 0.052)]  # fitted on x = 0.01
+    flat = grid.log_odds.reshape(-1)
+    flat[grid.flat_index(wall)] = gcfg.l_max
+    leaf = np.unique(grid.flat_index(np.concatenate(faces)))
+    flat[leaf] = gcfg.l_max
+    door = DetectedDoor(0.01, 0.0, 0.9, 0.0, 0.0, math.pi / 2, 3)  # seen closed and at 90°
+    remove_leaves(grid, [door], dcfg, gcfg)
+    assert np.all(flat[leaf] <= 0)  # free where seen free, else unknown: not occupied
+    assert np.all(flat[grid.flat_index(wall)] > 0)
