@@ -15,6 +15,12 @@ detector therefore asks for more than a small covariance:
 
 The claimed convergence time is the update at which 3 is met for the streak that lasts to the end of the log
 (the time a user could act on it); a streak that breaks later withdraws its claim.
+
+4. **fits**: a tight, unimodal cloud on the wrong pose of a symmetric corridor passes 1–3 and fits the scans
+   as well as the truth would, until the robot nears something the two poses do not share (an end wall the
+   estimate then drives through). The cloud is **lost** once, at its mean, under ``lost_min_fit`` of the scan's
+   hits lie within ``lost_fit_distance_m`` of the map's occupied cells (:func:`scan_fit`) for ``lost_after_s``:
+   the streak and any claim break, and the run may start over from a uniform cloud.
 """
 
 from __future__ import annotations
@@ -27,7 +33,7 @@ import numpy.typing as npt
 
 from doorbatch.config import LocalizeConfig
 from doorbatch.geometry.rotations import wrap_angle
-from doorbatch.pipeline.localize.likelihood_field import cloud_converged
+from doorbatch.pipeline.localize.likelihood_field import DistanceField, cloud_converged, endpoint_distances
 from doorbatch.pipeline.localize.particles import ParticleSet
 
 
@@ -48,6 +54,16 @@ def multimodal(particles: ParticleSet, config: LocalizeConfig) -> bool:
                          config.ambiguity_min_weight)
 
 
+def scan_fit(field: DistanceField, pose: npt.ArrayLike, hits_base: npt.ArrayLike, distance_m: float) -> float:
+    """Share of the scan's hits (base_link, (B, 2)) that lie within ``distance_m`` of an occupied cell of the
+    map, the robot at ``pose``; 1.0 for a scan without hits (nothing contradicts the pose)."""
+    hits = np.asarray(hits_base, dtype=np.float64).reshape(-1, 2)
+    if hits.shape[0] == 0:
+        return 1.0
+    return float(np.mean(endpoint_distances(field, np.asarray(pose, dtype=np.float64).reshape(1, 3), hits)[0]
+                         <= distance_m))
+
+
 @dataclass(frozen=True)
 class ConvergenceMonitor:
     """The detector's state between updates.
@@ -57,24 +73,33 @@ class ConvergenceMonitor:
         travel_m: odometry path length since then.
         last_odom: (3,) odometry pose at the previous update (None before the first).
         converged_ns: stamp at which the current streak's convergence was claimed (None: no claim stands).
+        poor_fit_since_ns: stamp of the first update of the current run of poor fits (None: the last one fit).
+        lost: this update found the cloud lost (criterion 4): the caller may start it over.
     """
 
     since_ns: int | None = None
     travel_m: float = 0.0
     last_odom: npt.NDArray[np.float64] | None = None
     converged_ns: int | None = None
+    poor_fit_since_ns: int | None = None
+    lost: bool = False
 
-    def update(self, stamp_ns: int, odom: npt.ArrayLike, particles: ParticleSet,
-               config: LocalizeConfig) -> ConvergenceMonitor:
-        """The state after one filter update. A claim is withdrawn when the cloud later spreads or splits (a
-        hypothesis the scans went on to contradict was not a convergence); a new streak must then hold again."""
+    def update(self, stamp_ns: int, odom: npt.ArrayLike, particles: ParticleSet, config: LocalizeConfig,
+               fit: float = 1.0) -> ConvergenceMonitor:
+        """The state after one filter update, whose scan fits the map as ``fit`` says (:func:`scan_fit` at the
+        cloud's mean). A claim is withdrawn when the cloud later spreads or splits, or is lost (a hypothesis the
+        scans went on to contradict was not a convergence); a new streak must then hold again."""
         o = np.asarray(odom, dtype=np.float64).reshape(3)
         step = 0.0 if self.last_odom is None else float(np.hypot(*(o[:2] - self.last_odom[:2])))
+        poor = None if fit >= config.lost_min_fit else (stamp_ns if self.poor_fit_since_ns is None
+                                                         else self.poor_fit_since_ns)
+        if poor is not None and (stamp_ns - poor) / 1e9 >= config.lost_after_s:
+            return ConvergenceMonitor(None, 0.0, o, None, None, lost=True)
         if not (cloud_converged(particles.weight, particles.pose, config) and not multimodal(particles, config)):
-            return ConvergenceMonitor(None, 0.0, o, None)
+            return ConvergenceMonitor(None, 0.0, o, None, poor)
         if self.converged_ns is not None:
-            return ConvergenceMonitor(self.since_ns, self.travel_m + step, o, self.converged_ns)
+            return ConvergenceMonitor(self.since_ns, self.travel_m + step, o, self.converged_ns, poor)
         since = stamp_ns if self.since_ns is None else self.since_ns
         travel = 0.0 if self.since_ns is None else self.travel_m + step
         held = (stamp_ns - since) / 1e9 >= config.converged_hold_s and travel >= config.converged_min_travel_m
-        return ConvergenceMonitor(since, travel, o, stamp_ns if held else None)
+        return ConvergenceMonitor(since, travel, o, stamp_ns if held and poor is None else None, poor)

@@ -11,6 +11,7 @@ The stage in outline::
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from collections.abc import Callable
@@ -29,7 +30,7 @@ from doorbatch.io.mapdir import read_door_set
 from doorbatch.io.pose_topic import StartPose, read_start_pose
 from doorbatch.io.recording import PoseSeries, Recording, load_recording
 from doorbatch.maps import DoorSet, OccupancyMap
-from doorbatch.pipeline.localize.convergence import ConvergenceMonitor, multimodal
+from doorbatch.pipeline.localize.convergence import ConvergenceMonitor, multimodal, scan_fit
 from doorbatch.pipeline.localize.door_geometry import subset_doors, with_closed_in_range
 from doorbatch.pipeline.localize.likelihood_field import (
     BeamCombination,
@@ -352,8 +353,18 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
         mean, cov = p.mean_and_covariance()
         dmean, dstd = p.door_estimate()
         if init == "global":
-            monitor = monitor.update(int(scan.stamp_ns), odom[i], p, lc)
+            fit = scan_fit(lmap.field, mean, rec.scans.hits_base(i), lc.lost_fit_distance_m)
+            monitor = monitor.update(int(scan.stamp_ns), odom[i], p, lc, fit)
             converged_ns = monitor.converged_ns
+            if monitor.lost:
+                t_s = (scan.stamp_ns - rec.scans.stamps_ns[0]) / 1e9
+                rec.warnings.append(f"lost at {t_s:.1f} s: under {lc.lost_min_fit:.0%} of the scans' hits within "
+                                    f"{lc.lost_fit_distance_m} m of the map for {lc.lost_after_s} s"
+                                    + ("; the cloud was spread over the free space again"
+                                       if lc.relocalize_when_lost else ""))
+                if lc.relocalize_when_lost:
+                    state = dataclasses.replace(state, particles=_initial_particles(rec, lmap, "global", method, lc,
+                                                                                    rng))
         # a fixed-size draw of the (equally weighted after resampling) particles for the annotated MCAP
         pick = np.linspace(0, len(p) - 1, k_draw).round().astype(np.intp)
         track.add(scan.stamp_ns, mean, cov, odom[i], len(p), diag.neff, dmean, dstd, observed, p.pose[pick])

@@ -67,3 +67,42 @@ def test_a_claim_is_withdrawn_when_the_cloud_later_splits() -> None:
     assert monitor.converged_ns == 2_000_000_000
     monitor = monitor.update(3_100_000_000, (1.55, 0.0, 0.0), split, CONFIG)
     assert monitor.converged_ns is None
+
+
+def _fed(fits: list[float]) -> list[ConvergenceMonitor]:
+    """A tight cloud moving at 0.5 m/s at 10 Hz whose scans fit the map as ``fits`` says, one per update."""
+    tight, monitor, states = cloud([(1.0, 2.0, 0.3)], [1.0]), ConvergenceMonitor(), []
+    for k, fit in enumerate(fits):
+        monitor = monitor.update(k * 100_000_000, (0.05 * k, 0.0, 0.0), tight, CONFIG, fit)
+        states.append(monitor)
+    return states
+
+
+def test_a_claim_on_a_pose_whose_scans_stop_fitting_the_map_is_withdrawn_as_lost() -> None:
+    """Criterion 4 (an outside tester's world: the turned pose of a symmetric corridor fitted for 40 s, then drove
+    through the end wall with the claim standing). Under lost_min_fit for lost_after_s (2 s): lost, no claim."""
+    states = _fed([0.9] * 31 + [0.2] * 21)
+    assert states[30].converged_ns == 2_000_000_000 and not any(s.lost for s in states[:51])
+    assert states[51].lost and states[51].converged_ns is None  # 2.0 s after the first poor fit at 3.1 s
+    # a dip shorter than that (a person in front of the laser) leaves the claim standing
+    dipped = _fed([0.9] * 31 + [0.2] * 19 + [0.9] * 5)
+    assert not any(s.lost for s in dipped) and dipped[-1].converged_ns == 2_000_000_000
+
+
+def test_no_claim_is_made_while_the_scans_fit_poorly() -> None:
+    states = _fed([0.3] * 19 + [0.9] * 41)  # poor for 1.9 s (not yet lost), then fitting
+    assert not any(s.lost for s in states)
+    assert states[-1].converged_ns == 2_000_000_000  # the streak from t = 0, but claimed only once fitting
+
+
+def test_scan_fit_counts_the_hits_near_the_maps_walls() -> None:
+    from doorbatch.maps import OccupancyMap
+    from doorbatch.pipeline.localize.convergence import scan_fit
+    from doorbatch.pipeline.localize.likelihood_field import build_distance_field
+
+    occ = np.zeros((40, 40), dtype=np.int8)
+    occ[:, 20] = 100  # a wall x = 1.0 m (0.05 m cells from the origin)
+    field = build_distance_field(OccupancyMap(occ, 0.05, 0.0, 0.0), 2.0)
+    hits = np.array([[1.02, 0.0], [1.02, 0.5], [0.4, 0.0], [1.5, 0.2]])  # two on the wall, two 0.5-0.6 m off
+    assert scan_fit(field, (0.0, 0.5, 0.0), hits, 0.3) == 0.5
+    assert scan_fit(field, (0.0, 0.5, 0.0), np.zeros((0, 2)), 0.3) == 1.0

@@ -68,6 +68,28 @@ def test_same_seed_same_outputs(sample_map: Path, tmp_path: Path, method: str, i
     assert (tmp_path / "a" / "trajectory.tum").read_bytes() != (tmp_path / "c" / "trajectory.tum").read_bytes()
 
 
+def test_a_global_run_that_is_lost_claims_nothing_and_starts_over(sample_map: Path, tmp_path: Path,
+                                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    """Lost (criterion 4 of pipeline/localize/convergence.py) made certain: no scan fits the map. Every
+    lost_after_s the run says so and spreads the cloud over the free space again; nothing is claimed."""
+    from doorbatch.pipeline.localize import run as run_module
+
+    monkeypatch.setattr(run_module, "scan_fit", lambda *_: 0.0)
+    run = tmp_path / "lost"
+    sets = ["localize.global_particles=2000", "localize.max_particles=2000", "localize.lost_after_s=5.0"]
+    assert main(["localize", str(SAMPLE_LOGS / "loc_partial.mcap"), "--map", str(sample_map), "-o", str(run),
+                 "--method", "mcl", "--init", "global", *(a for s in sets for a in ("--set", s)), "-q"]) == 0
+    manifest = json.loads((run / "manifest.json").read_text())
+    lost = [w for w in manifest["warnings"] if w.startswith("lost at ")]
+    assert all(w.endswith("spread over the free space again") for w in lost)
+    times = np.array([float(w.split()[2]) for w in lost])
+    stamps = read_table("trajectory", run / "trajectory.parquet").to_pydict()["stamp_ns"]
+    duration_s = (stamps[-1] - stamps[0]) / 1e9
+    assert len(times) >= int(duration_s // 5.5) >= 5  # one every 5 s (and an update), from the first update on
+    assert np.all((np.diff(times) >= 5.0) & (np.diff(times) < 5.5)) and times[0] < 5.5
+    assert manifest["extra"]["converged_after_s"] is None
+
+
 @pytest.mark.parametrize("device", ["cpu", "cuda"])
 def test_the_torch_backend_gives_numpys_outputs(sample_map: Path, tmp_path: Path, device: str) -> None:
     torch = pytest.importorskip("torch")
