@@ -512,12 +512,13 @@ class LocalizeConfig(Section):
     # symmetric corridor is often tight on the wrong pose.
     converged_hold_s: float = Field(3.0, ge=0.0)  # expert choice: several scans at 10 Hz, ~1 s of walking twice
     converged_min_travel_m: float = Field(1.0, ge=0.0)  # new views, not the same scan again
-    # Global runs: lost when, at the cloud's mean, under lost_min_fit of the scan's hits lie within
-    # lost_fit_distance_m of the map's occupied cells for lost_after_s (a symmetric corridor's turned pose fits
-    # until the robot nears an end the estimate drives through). A claim then stands withdrawn and, with
-    # relocalize_when_lost, the cloud is spread over the free space again. Expert choice: 3 sigma_hit; half the hits
-    # (at the true pose 74 % or more fit on the sample's logs, people and doors included, and on an outside tester's
-    # world; 0-25 % at a pose that has driven off the map); 2 s, twenty scans at 10 Hz.
+    # Lost: at the cloud's mean, under lost_min_fit of the scan's hits lie within lost_fit_distance_m of the map's
+    # occupied cells for lost_after_s (a symmetric corridor's turned pose fits until the robot nears an end the
+    # estimate drives through). A warning says when; a global run's claim stands withdrawn and, with
+    # relocalize_when_lost, its cloud is spread over the free space again (a tracked run goes on as it is). Expert
+    # choice: 3 sigma_hit; half the hits (at the true pose 74 % or more fit on the sample's logs, people and doors
+    # included, and on an outside tester's world; 0-25 % at a pose that has driven off the map); 2 s, twenty scans
+    # at 10 Hz.
     lost_fit_distance_m: float = Field(0.3, gt=0.0)
     lost_min_fit: float = Field(0.5, ge=0.0, le=1.0)
     lost_after_s: float = Field(2.0, ge=0.0)

@@ -327,7 +327,8 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
     track = _Track()
     first_i = start_scan_index(rec, init) if isinstance(init, StartPose) else 0
     converged_ns = None if init == "global" else int(rec.scans.stamps_ns[first_i])
-    monitor = ConvergenceMonitor()
+    monitor = ConvergenceMonitor()  # convergence claims of a global run; lost detection of every run
+    lost = False
     last_s: float | None = None
     k_draw = max(1, lc.annotate_particles)
     for i in range(len(rec.scans)):
@@ -352,19 +353,19 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
         p = state.particles
         mean, cov = p.mean_and_covariance()
         dmean, dstd = p.door_estimate()
+        fit = scan_fit(lmap.field, mean, rec.scans.hits_base(i), lc.lost_fit_distance_m)
+        monitor = monitor.update(int(scan.stamp_ns), odom[i], p, lc, fit)
         if init == "global":
-            fit = scan_fit(lmap.field, mean, rec.scans.hits_base(i), lc.lost_fit_distance_m)
-            monitor = monitor.update(int(scan.stamp_ns), odom[i], p, lc, fit)
             converged_ns = monitor.converged_ns
-            if monitor.lost:
-                t_s = (scan.stamp_ns - rec.scans.stamps_ns[0]) / 1e9
-                rec.warnings.append(f"lost at {t_s:.1f} s: under {lc.lost_min_fit:.0%} of the scans' hits within "
-                                    f"{lc.lost_fit_distance_m} m of the map for {lc.lost_after_s} s"
-                                    + ("; the cloud was spread over the free space again"
-                                       if lc.relocalize_when_lost else ""))
-                if lc.relocalize_when_lost:
-                    state = dataclasses.replace(state, particles=_initial_particles(rec, lmap, "global", method, lc,
-                                                                                    rng))
+        respread = monitor.lost and init == "global" and lc.relocalize_when_lost
+        if monitor.lost and (respread or not lost):  # a tracked run says so once per episode
+            t_s = (scan.stamp_ns - rec.scans.stamps_ns[0]) / 1e9
+            rec.warnings.append(f"lost at {t_s:.1f} s: under {lc.lost_min_fit:.0%} of the scans' hits within "
+                                f"{lc.lost_fit_distance_m} m of the map for {lc.lost_after_s} s"
+                                + ("; the cloud was spread over the free space again" if respread else ""))
+        lost = (lost or monitor.lost) and fit < lc.lost_min_fit
+        if respread:
+            state = dataclasses.replace(state, particles=_initial_particles(rec, lmap, "global", method, lc, rng))
         # a fixed-size draw of the (equally weighted after resampling) particles for the annotated MCAP
         pick = np.linspace(0, len(p) - 1, k_draw).round().astype(np.intp)
         track.add(scan.stamp_ns, mean, cov, odom[i], len(p), diag.neff, dmean, dstd, observed, p.pose[pick])

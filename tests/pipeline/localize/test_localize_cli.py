@@ -90,6 +90,22 @@ def test_a_global_run_that_is_lost_claims_nothing_and_starts_over(sample_map: Pa
     assert manifest["extra"]["converged_after_s"] is None
 
 
+def test_a_tracked_run_that_is_lost_says_so_once_and_goes_on(sample_map: Path, tmp_path: Path,
+                                                              monkeypatch: pytest.MonkeyPatch) -> None:
+    from doorbatch.pipeline.localize import run as run_module
+
+    fits = iter([0.9] * 50 + [0.1] * 60 + [0.9] * 10_000)  # 5 s fitting, 6 s not, then fitting again
+    monkeypatch.setattr(run_module, "scan_fit", lambda *_: next(fits))
+    run = tmp_path / "lost"
+    assert main(["localize", str(SAMPLE_LOGS / "loc_open.mcap"), "--map", str(sample_map), "-o", str(run),
+                 "--method", "mcl", "-q"]) == 0
+    manifest = json.loads((run / "manifest.json").read_text())
+    lost = [w for w in manifest["warnings"] if w.startswith("lost at ")]
+    assert len(lost) == 1 and "spread" not in lost[0]
+    assert manifest["extra"]["converged_after_s"] == 0.0
+    assert _errors(run, SAMPLE_LOGS / "loc_open.mcap").mean() < 0.1  # nothing else changed
+
+
 @pytest.mark.parametrize("device", ["cpu", "cuda"])
 def test_the_torch_backend_gives_numpys_outputs(sample_map: Path, tmp_path: Path, device: str) -> None:
     torch = pytest.importorskip("torch")
