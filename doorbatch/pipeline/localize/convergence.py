@@ -18,9 +18,10 @@ The claimed convergence time is the update at which 3 is met for the streak that
 
 4. **fits**: a tight, unimodal cloud on the wrong pose of a symmetric corridor passes 1–3 and fits the scans
    as well as the truth would, until the robot nears something the two poses do not share (an end wall the
-   estimate then drives through). The cloud is **lost** once, at its mean, under ``lost_min_fit`` of the scan's
-   hits lie within ``lost_fit_distance_m`` of the map's occupied cells (:func:`scan_fit`) for ``lost_after_s``:
-   the streak and any claim break, and the run may start over from a uniform cloud.
+   estimate then drives through). A cloud that has been tight and unimodal once (since the start or the last
+   loss: a uniform start's mean is no pose) is **lost** once, at its mean, under ``lost_min_fit`` of the scan's
+   hits lie within ``lost_fit_distance_m`` of the map's occupied cells (:func:`scan_fit`) for ``lost_after_s``,
+   whatever its shape by then: the streak and any claim break, and the run may start over from a uniform cloud.
 """
 
 from __future__ import annotations
@@ -74,6 +75,8 @@ class ConvergenceMonitor:
         last_odom: (3,) odometry pose at the previous update (None before the first).
         converged_ns: stamp at which the current streak's convergence was claimed (None: no claim stands).
         poor_fit_since_ns: stamp of the first update of the current run of poor fits (None: the last one fit).
+        settled: the cloud has been tight and unimodal since the start or the last loss; only then is a poor fit
+            counted (a uniform start's mean is no pose).
         lost: this update found the cloud lost (criterion 4): the caller may start it over.
     """
 
@@ -82,6 +85,7 @@ class ConvergenceMonitor:
     last_odom: npt.NDArray[np.float64] | None = None
     converged_ns: int | None = None
     poor_fit_since_ns: int | None = None
+    settled: bool = False
     lost: bool = False
 
     def update(self, stamp_ns: int, odom: npt.ArrayLike, particles: ParticleSet, config: LocalizeConfig,
@@ -91,15 +95,17 @@ class ConvergenceMonitor:
         scans went on to contradict was not a convergence); a new streak must then hold again."""
         o = np.asarray(odom, dtype=np.float64).reshape(3)
         step = 0.0 if self.last_odom is None else float(np.hypot(*(o[:2] - self.last_odom[:2])))
-        poor = None if fit >= config.lost_min_fit else (stamp_ns if self.poor_fit_since_ns is None
-                                                         else self.poor_fit_since_ns)
+        tight = cloud_converged(particles.weight, particles.pose, config) and not multimodal(particles, config)
+        settled = self.settled or tight
+        poor = None if fit >= config.lost_min_fit or not settled else (
+            stamp_ns if self.poor_fit_since_ns is None else self.poor_fit_since_ns)
         if poor is not None and (stamp_ns - poor) / 1e9 >= config.lost_after_s:
-            return ConvergenceMonitor(None, 0.0, o, None, None, lost=True)
-        if not (cloud_converged(particles.weight, particles.pose, config) and not multimodal(particles, config)):
-            return ConvergenceMonitor(None, 0.0, o, None, poor)
+            return ConvergenceMonitor(None, 0.0, o, None, None, False, lost=True)
+        if not tight:
+            return ConvergenceMonitor(None, 0.0, o, None, poor, settled)
         if self.converged_ns is not None:
-            return ConvergenceMonitor(self.since_ns, self.travel_m + step, o, self.converged_ns, poor)
+            return ConvergenceMonitor(self.since_ns, self.travel_m + step, o, self.converged_ns, poor, settled)
         since = stamp_ns if self.since_ns is None else self.since_ns
         travel = 0.0 if self.since_ns is None else self.travel_m + step
         held = (stamp_ns - since) / 1e9 >= config.converged_hold_s and travel >= config.converged_min_travel_m
-        return ConvergenceMonitor(since, travel, o, stamp_ns if held and poor is None else None, poor)
+        return ConvergenceMonitor(since, travel, o, stamp_ns if held and poor is None else None, poor, settled)

@@ -106,3 +106,12 @@ def test_scan_fit_counts_the_hits_near_the_maps_walls() -> None:
     hits = np.array([[1.02, 0.0], [1.02, 0.5], [0.4, 0.0], [1.5, 0.2]])  # two on the wall, two 0.5-0.6 m off
     assert scan_fit(field, (0.0, 0.5, 0.0), hits, 0.3) == 0.5
     assert scan_fit(field, (0.0, 0.5, 0.0), np.zeros((0, 2)), 0.3) == 1.0
+
+
+def test_a_spread_cloud_is_never_lost_whatever_its_mean_fits() -> None:
+    """A uniform start's mean is no pose: its poor fit must not restart a cloud that is still converging."""
+    wide = cloud([(1.0, 2.0, 0.3), (6.0, 2.0, 0.3)], [0.5, 0.5])
+    monitor = ConvergenceMonitor()
+    for k in range(60):
+        monitor = monitor.update(k * 100_000_000, (0.05 * k, 0.0, 0.0), wide, CONFIG, 0.0)
+        assert not monitor.lost and monitor.converged_ns is None

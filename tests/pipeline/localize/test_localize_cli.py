@@ -70,8 +70,8 @@ def test_same_seed_same_outputs(sample_map: Path, tmp_path: Path, method: str, i
 
 def test_a_global_run_that_is_lost_claims_nothing_and_starts_over(sample_map: Path, tmp_path: Path,
                                                                   monkeypatch: pytest.MonkeyPatch) -> None:
-    """Lost (criterion 4 of pipeline/localize/convergence.py) made certain: no scan fits the map. Every
-    lost_after_s the run says so and spreads the cloud over the free space again; nothing is claimed."""
+    """Lost (criterion 4 of pipeline/localize/convergence.py) made certain: no scan fits the map. Once the cloud
+    has been tight for lost_after_s the run says so and spreads it over the free space again; nothing is claimed."""
     from doorbatch.pipeline.localize import run as run_module
 
     monkeypatch.setattr(run_module, "scan_fit", lambda *_: 0.0)
@@ -83,10 +83,8 @@ def test_a_global_run_that_is_lost_claims_nothing_and_starts_over(sample_map: Pa
     lost = [w for w in manifest["warnings"] if w.startswith("lost at ")]
     assert all(w.endswith("spread over the free space again") for w in lost)
     times = np.array([float(w.split()[2]) for w in lost])
-    stamps = read_table("trajectory", run / "trajectory.parquet").to_pydict()["stamp_ns"]
-    duration_s = (stamps[-1] - stamps[0]) / 1e9
-    assert len(times) >= int(duration_s // 5.5) >= 5  # one every 5 s (and an update), from the first update on
-    assert np.all((np.diff(times) >= 5.0) & (np.diff(times) < 5.5)) and times[0] < 5.5
+    # the first once the cloud has been tight and unimodal for 5 s; again only after it has become so once more
+    assert len(times) >= 1 and times[0] < 15.0 and np.all(np.diff(times) >= 5.0)
     assert manifest["extra"]["converged_after_s"] is None
 
 
