@@ -328,7 +328,7 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
     first_i = start_scan_index(rec, init) if isinstance(init, StartPose) else 0
     converged_ns = None if init == "global" else int(rec.scans.stamps_ns[first_i])
     monitor = ConvergenceMonitor()  # convergence claims of a global run; lost detection of every run
-    lost = False
+    lost = barred = False
     last_s: float | None = None
     k_draw = max(1, lc.annotate_particles)
     for i in range(len(rec.scans)):
@@ -355,9 +355,10 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
         dmean, dstd = p.door_estimate()
         fit = scan_fit(lmap.field, mean, rec.scans.hits_base(i), lc.lost_fit_distance_m)
         monitor = monitor.update(int(scan.stamp_ns), odom[i], p, lc, fit)
-        if init == "global":
-            converged_ns = monitor.converged_ns
         respread = monitor.lost and init == "global" and lc.relocalize_when_lost
+        barred = barred or (monitor.lost and not respread)  # the same cloud, once lost, claims nothing again
+        if init == "global":
+            converged_ns = None if barred else monitor.converged_ns
         if monitor.lost and (respread or not lost):  # a tracked run says so once per episode
             t_s = (scan.stamp_ns - rec.scans.stamps_ns[0]) / 1e9
             rec.warnings.append(f"lost at {t_s:.1f} s: under {lc.lost_min_fit:.0%} of the scans' hits within "

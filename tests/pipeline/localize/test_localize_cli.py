@@ -5,7 +5,9 @@ from __future__ import annotations
 import json
 import os
 import shutil
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -68,24 +70,46 @@ def test_same_seed_same_outputs(sample_map: Path, tmp_path: Path, method: str, i
     assert (tmp_path / "a" / "trajectory.tum").read_bytes() != (tmp_path / "c" / "trajectory.tum").read_bytes()
 
 
-def test_a_global_run_that_is_lost_claims_nothing_and_starts_over(sample_map: Path, tmp_path: Path,
-                                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+@pytest.mark.parametrize("relocalize", [False, True])
+def test_a_global_run_that_is_lost_claims_nothing(sample_map: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                 relocalize: bool) -> None:
     """Lost (criterion 4 of pipeline/localize/convergence.py) made certain: no scan fits the map. Once the cloud
-    has been tight for lost_after_s the run says so and spreads it over the free space again; nothing is claimed."""
+    has been tight for lost_after_s the run says so; by default the same cloud goes on and claims nothing again,
+    with relocalize_when_lost it is spread over the free space again (and again, as it settles); nothing is
+    claimed either way."""
     from doorbatch.pipeline.localize import run as run_module
 
     monkeypatch.setattr(run_module, "scan_fit", lambda *_: 0.0)
     run = tmp_path / "lost"
-    sets = ["localize.global_particles=2000", "localize.max_particles=2000", "localize.lost_after_s=5.0"]
+    sets = ["localize.global_particles=2000", "localize.max_particles=2000", "localize.lost_after_s=5.0",
+            f"localize.relocalize_when_lost={str(relocalize).lower()}"]
     assert main(["localize", str(SAMPLE_LOGS / "loc_partial.mcap"), "--map", str(sample_map), "-o", str(run),
                  "--method", "mcl", "--init", "global", *(a for s in sets for a in ("--set", s)), "-q"]) == 0
     manifest = json.loads((run / "manifest.json").read_text())
     lost = [w for w in manifest["warnings"] if w.startswith("lost at ")]
-    assert all(w.endswith("spread over the free space again") for w in lost)
     times = np.array([float(w.split()[2]) for w in lost])
-    # the first once the cloud has been tight and unimodal for 5 s; again only after it has become so once more
     assert len(times) >= 1 and times[0] < 15.0 and np.all(np.diff(times) >= 5.0)
+    assert all(w.endswith("spread over the free space again") == relocalize for w in lost)
+    assert relocalize or len(lost) == 1  # one episode: the fit never comes back
     assert manifest["extra"]["converged_after_s"] is None
+
+
+def test_a_global_claim_lost_once_is_not_made_again_by_the_same_cloud(sample_map: Path, tmp_path: Path,
+                                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    from doorbatch.pipeline.localize import run as run_module
+
+    def manifest(name: str, fit: Callable[..., float]) -> dict[str, Any]:
+        monkeypatch.setattr(run_module, "scan_fit", fit)
+        assert main(["localize", str(SAMPLE_LOGS / "loc_partial.mcap"), "--map", str(sample_map), "-o",
+                     str(tmp_path / name), "--method", "mcl", "--init", "global", "--set",
+                     "localize.global_particles=2000", "--set", "localize.max_particles=2000", "-q"]) == 0
+        return dict(json.loads((tmp_path / name / "manifest.json").read_text()))
+
+    assert manifest("fitting", lambda *_: 0.9)["extra"]["converged_after_s"] is not None  # it claims, and keeps it
+    fits = iter([0.9] * 100 + [0.1] * 30 + [0.9] * 10_000)  # fitting, then not for 3 s (lost), then again
+    lost = manifest("lost", lambda *_: next(fits))
+    assert len([w for w in lost["warnings"] if w.startswith("lost at ")]) == 1
+    assert lost["extra"]["converged_after_s"] is None
 
 
 def test_a_tracked_run_that_is_lost_says_so_once_and_goes_on(sample_map: Path, tmp_path: Path,
