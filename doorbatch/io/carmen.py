@@ -245,15 +245,18 @@ class ScanStampSeparation:
     n_restamped: int
 
 
-def odom_at_scan_stamps(stamps_ns: Int64Array, is_scan: BoolArray) -> BoolArray:
-    """Which timed lines are ODOM lines whose stamp equals a laser line's stamp."""
+def odom_at_scan_stamps(stamps_ns: Int64Array, is_scan: BoolArray, is_odom: BoolArray | None = None) -> BoolArray:
+    """Which timed lines are ODOM lines (``is_odom``; None: every line that is not a scan) whose stamp equals a
+    laser line's stamp."""
     stamps = np.asarray(stamps_ns, dtype=np.int64)
     scan = np.asarray(is_scan, dtype=bool)
-    mask: BoolArray = ~scan & np.isin(stamps, stamps[scan])
+    odom = ~scan if is_odom is None else np.asarray(is_odom, dtype=bool)
+    mask: BoolArray = odom & np.isin(stamps, stamps[scan])
     return mask
 
 
-def separate_odom_from_scan_stamps(stamps_ns: Int64Array, is_scan: BoolArray) -> ScanStampSeparation:
+def separate_odom_from_scan_stamps(stamps_ns: Int64Array, is_scan: BoolArray, is_odom: BoolArray | None = None
+                                   ) -> ScanStampSeparation:
     """Move ODOM lines off the laser lines' stamps, so that at a scan's instant its own odometry field wins.
 
     A laser line's odometry field is the odometry at its instant. In intel and aces, ODOM lines just before
@@ -267,14 +270,16 @@ def separate_odom_from_scan_stamps(stamps_ns: Int64Array, is_scan: BoolArray) ->
     Args:
         stamps_ns: non-decreasing stamps of the timed lines in file order (after :func:`repair_stamps`).
         is_scan: which of those lines are laser scans.
+        is_odom: which are ODOM lines (None: every line that is not a scan); other lines (TRUEPOS) keep their stamps
+            and bound the moved ones.
     """
     stamps = np.asarray(stamps_ns, dtype=np.int64)
     scan = np.asarray(is_scan, dtype=bool)
-    on_scan = odom_at_scan_stamps(stamps, scan)
+    on_scan = odom_at_scan_stamps(stamps, scan, is_odom)
     if not on_scan.any():
         return ScanStampSeparation(stamps.copy(), on_scan, 0)
     moved = _interpolate_bad(stamps, np.flatnonzero(~on_scan).astype(np.int64))
-    dropped = on_scan & odom_at_scan_stamps(moved, scan)
+    dropped = on_scan & odom_at_scan_stamps(moved, scan, is_odom)
     return ScanStampSeparation(moved, dropped, int(np.count_nonzero(on_scan & ~dropped)))
 
 
@@ -503,6 +508,16 @@ def base_from_laser(laser_pose: tuple[float, float, float],
 # The reader
 
 
+def open_carmen_text(path: Path) -> IO[str]:
+    """A CARMEN log's text, gunzipped when its first bytes say gzip (whatever its name), undecodable bytes replaced
+    (old logs carry Latin-1 comments)."""
+    with path.open("rb") as f:
+        gzipped = f.read(2) == b"\x1f\x8b"
+    if gzipped:
+        return gzip.open(path, "rt", encoding="utf-8", errors="replace")
+    return path.open("r", encoding="utf-8", errors="replace")
+
+
 class CarmenReader(LogReader):
     """A CARMEN text log (``.log``, ``.clf``, gzipped or not) as synthetic ROS 2 topics.
 
@@ -531,18 +546,12 @@ class CarmenReader(LogReader):
 
     # ---- reading lines
 
-    def _open_text(self) -> IO[str]:
-        with self.path.open("rb") as f:
-            gzipped = f.read(2) == b"\x1f\x8b"
-        if gzipped:
-            return gzip.open(self.path, "rt", encoding="utf-8", errors="replace")
-        return self.path.open("r", encoding="utf-8", errors="replace")
 
     def _lines(self) -> Iterator[tuple[int, list[str]]]:
         """(line number, fields) of every line that is not blank or a comment."""
         lineno = 0
         try:
-            with self._open_text() as text:
+            with open_carmen_text(self.path) as text:
                 for lineno, line in enumerate(text, start=1):
                     parts = line.split()
                     if parts and not parts[0].startswith("#"):
@@ -607,7 +616,7 @@ class CarmenReader(LogReader):
             self._timed, n_scans = _TIMED_RAW, counts[_RAWLASER1]
             self._warn(f"scans from {n_scans} RAWLASER1 lines (no FLASER or ROBOTLASER1): they carry no pose, "
                        f"so the log has {'odometry from its ODOM lines' if counts[_ODOM] else 'no odometry'} "
-                       f"and no reference")
+                       f"and {'a reference from its TRUEPOS lines only' if counts[_TRUEPOS] else 'no reference'}")
         elif counts[_RAWLASER1]:
             ignored[_RAWLASER1] = counts[_RAWLASER1]
         if n_scans == 0:
@@ -627,13 +636,11 @@ class CarmenReader(LogReader):
         # Choice: re-stamped by file order, not dropped: they record motion just before or after the scan. Not
         # for RAWLASER1 scans: they carry no odometry of their own, so an ODOM line at their stamp is the only one.
         scan_lines = np.array(is_scan, dtype=bool) & (self._timed is not _TIMED_RAW)
-        # TRUEPOS lines keep their stamps: the true pose at a scan's instant is what a reference should give there.
-        truth_lines = np.array([k == _TRUEPOS for k, k_kept in zip(keywords, keep, strict=True) if k_kept])
-        others = np.flatnonzero(~truth_lines)
-        separation = separate_odom_from_scan_stamps(self._stamps[others], scan_lines[others])
-        self._stamps[others] = separation.stamps_ns
-        self._dropped = np.zeros(self._stamps.shape[0], dtype=bool)
-        self._dropped[others] = separation.dropped
+        # Only ODOM lines move: a TRUEPOS line keeps its stamp (the true pose at a scan's instant is what a reference
+        # should give there) and bounds the ODOM lines around it, so the lines stay in time order.
+        odom_lines = np.array([k == _ODOM for k, k_kept in zip(keywords, keep, strict=True) if k_kept], dtype=bool)
+        separation = separate_odom_from_scan_stamps(self._stamps, scan_lines, odom_lines)
+        self._stamps, self._dropped = separation.stamps_ns, separation.dropped
         n_dropped = int(np.count_nonzero(self._dropped))
         if separation.n_restamped or n_dropped:
             self._warn(f"{separation.n_restamped + n_dropped} of {counts[_ODOM]} ODOM lines share a scan's time "

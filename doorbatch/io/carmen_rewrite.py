@@ -10,7 +10,7 @@ whose ``robot_frontlaser_offset`` is zero has them.
 
 from __future__ import annotations
 
-import gzip
+import zlib
 from collections.abc import Callable
 from pathlib import Path
 
@@ -18,16 +18,16 @@ import numpy as np
 import numpy.typing as npt
 
 from doorbatch.errors import LogReadError
+from doorbatch.io.carmen import open_carmen_text
 
 FloatArray = npt.NDArray[np.float64]
 
 
 def _read_lines(path: Path) -> list[str]:
-    opener = gzip.open if path.suffix == ".gz" else open
     try:
-        with opener(path, "rt", encoding="utf-8") as f:
+        with open_carmen_text(path) as f:
             return f.read().splitlines()
-    except OSError as err:
+    except (OSError, EOFError, zlib.error) as err:
         raise LogReadError(f"cannot read CARMEN log: {err}", path=path) from err
 
 
@@ -46,16 +46,13 @@ def rewrite_carmen_poses(source: Path, output: Path, new_poses: Callable[[FloatA
     poses: list[list[float]] = []
     for i, line in enumerate(lines):
         words = line.split()
-        if words and words[0] == "FLASER":
-            n = int(words[1])
-            where = slice(n + 5, n + 8)  # FLASER n r1..rn x y θ odom_x odom_y odom_θ ...
-        elif words and words[0] == "ODOM":
-            where = slice(1, 4)
-        else:
+        if not words or words[0] not in ("FLASER", "ODOM"):
             continue
         try:
+            # FLASER n r1..rn x y θ odom_x odom_y odom_θ ...; ODOM x y θ ...
+            where = slice(int(words[1]) + 5, int(words[1]) + 8) if words[0] == "FLASER" else slice(1, 4)
             poses.append([float(v) for v in words[where]])
-        except ValueError:
+        except (ValueError, IndexError):
             raise LogReadError(f"line {i + 1}: {words[0]} has no pose fields", path=source) from None
         if len(poses[-1]) != 3:
             raise LogReadError(f"line {i + 1}: {words[0]} has no pose fields", path=source)

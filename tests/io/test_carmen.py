@@ -613,17 +613,19 @@ def truepos_line(truth: tuple[float, float, float], odom: tuple[float, float, fl
     return " ".join(["TRUEPOS", *(f"{v:g}" for v in (*truth, *odom)), stamp, "host", stamp])
 
 
-def simulator_log(n_scans: int = 8, period: float = 0.2, t0: float = 100.0) -> tuple[list[str], np.ndarray]:
+def simulator_log(n_scans: int = 15, period: float = 0.2, t0: float = 100.0, order: str = "OTF"
+                  ) -> tuple[list[str], np.ndarray]:
     """A log as CARMEN's simulator writes it: FLASER lines whose poses are the odometry (0.5 % short and
-    turning 0.02 rad per scan off the truth), ODOM lines, and a TRUEPOS line with each, on the same stamps."""
+    turning 0.02 rad per scan off the truth), ODOM lines, and a TRUEPOS line with each, on the same stamps, in the
+    file order ``order`` gives (O: ODOM, T: TRUEPOS, F: FLASER)."""
     lines = ["# message formats defined: PARAM SYNC ODOM FLASER TRUEPOS"]
     truth = np.array([[0.2 * k, 0.01 * k * k, 0.03 * k] for k in range(n_scans)])
     for k, (x, y, yaw) in enumerate(truth):
         odom = (0.995 * x, 0.995 * y, yaw - 0.02 * k)
         t = f"{t0 + k * period:.6f}"
-        lines.append(odom_line(odom, t))
-        lines.append(truepos_line((x, y, yaw), odom, t))
-        lines.append(flaser([2.0] * 180, odom, t))
+        of_kind = {"O": odom_line(odom, t), "T": truepos_line((x, y, yaw), odom, t),
+                   "F": flaser([2.0] * 180, odom, t)}
+        lines += [of_kind[c] for c in order]
     return lines, truth
 
 
@@ -647,3 +649,26 @@ def test_a_simulator_log_has_a_reference_that_is_not_its_odometry(tmp_path: Path
     without = load_recording(write_log(tmp_path / "raw.log", [w for w in lines if not w.startswith("TRUEPOS")]),
                              DoorbatchConfig())
     assert not with_truth.reference_is_odometry and without.reference_is_odometry
+
+
+@pytest.mark.parametrize("order", ["OTF", "FOT", "FTO", "TFO"])
+def test_truepos_lines_keep_the_messages_in_time_order(tmp_path: Path, order: str) -> None:
+    """ODOM lines on a scan's stamp move off it, between their neighbours; TRUEPOS lines keep their stamps and
+    bound them, so the stream stays in log-time order and a time window holds every TRUEPOS line in it (a reviewer
+    found FLASER, ODOM, TRUEPOS going back in time, and a window losing a reference pose)."""
+    lines, truth = simulator_log(order=order)
+    path = write_log(tmp_path / "sim.log", lines)
+    with CarmenReader(path) as reader:
+        times = [m.log_time_ns for m in reader.raw_messages()]
+        assert times == sorted(times)
+        stop = int(100.25e9)
+        window = [m for m in reader.raw_messages(["/ground_truth"], stop_ns=stop)]
+    assert len(window) == 2  # the truth at 100.0 and 100.2 s
+    assert len(only(Pose2D, read_all(path), Role.REFERENCE)) == len(truth)
+
+
+def test_a_malformed_truepos_line_is_an_error_that_names_it(tmp_path: Path) -> None:
+    lines, _ = simulator_log(n_scans=3)
+    lines[2] = "TRUEPOS 0.0 nan 0.0 0 0 0 100.000000 host 100.000000"
+    with pytest.raises(LogReadError, match="line 3: true pose is not finite"):
+        read_all(write_log(tmp_path / "bad.log", lines))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gzip
 from pathlib import Path
 
 import numpy as np
@@ -39,7 +40,17 @@ def test_the_poses_come_in_file_order_and_go_back_into_every_pose_field(tmp_path
         assert np.allclose(a.poses, b.poses + np.array([2.0, -1.0, 0.1]), atol=1e-6)
 
 
-def test_a_flaser_line_without_its_poses_is_an_error(tmp_path: Path) -> None:
-    source = write_log(tmp_path / "short.log", ["FLASER 3 1.0 1.0 1.0 0.0 0.0"])
-    with pytest.raises(LogReadError, match="line 1: FLASER has no pose fields"):
+@pytest.mark.parametrize("line", ["FLASER 3 1.0 1.0 1.0 0.0 0.0", "FLASER x 1.0", "FLASER", "ODOM 1.0"])
+def test_a_line_without_its_poses_is_an_error(tmp_path: Path, line: str) -> None:
+    source = write_log(tmp_path / "short.log", [line])
+    with pytest.raises(LogReadError, match=f"line 1: {line.split()[0]} has no pose fields"):
         rewrite_carmen_poses(source, tmp_path / "out.log", lambda poses: poses)
+
+
+def test_it_reads_what_the_reader_reads_a_gzipped_clf_with_latin_1_bytes(tmp_path: Path) -> None:
+    """Gzip by the file's first bytes, not its name; undecodable bytes replaced (the reader's own opener)."""
+    path = tmp_path / "old.clf"
+    with gzip.open(path, "wb") as f:
+        f.write("# Logfile of the caf\xe9\n".encode("latin-1"))  # 0xE9: no UTF-8
+        f.write(("\n".join(simple_log(n_scans=2)) + "\n").encode())
+    assert rewrite_carmen_poses(path, tmp_path / "out.log", lambda poses: poses) == 4
