@@ -71,6 +71,8 @@ class IoConfig(Section):
     # and 0.05°, above the logs' printed precision, far below what a real reference parts from odometry by.
     reference_repeats_odometry_m: float = Field(0.001, ge=0.0)
     reference_repeats_odometry_deg: float = Field(0.05, ge=0.0)
+    # ... judged only over this much odometry path: wheel odometry drifts 0.1 % of distance at its best, 2 mm here.
+    reference_repeats_min_path_m: float = Field(2.0, ge=0.0)
     # CARMEN: laser field of view when 180/181 or 360/361 readings are given (paper-era SICK scanners).
     carmen_fov_deg: float = Field(180.0, gt=0.0, le=360.0)
     # CARMEN: maximum range used when the log gives none and no reading exceeds it.

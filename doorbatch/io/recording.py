@@ -396,20 +396,25 @@ def reference_repeats_odometry(reference: PoseSeries | None, odometry: PoseSerie
                                stamps_ns: Int64Array, config: DoorbatchConfig) -> bool:
     """Whether the reference, at ``stamps_ns`` (the scans'), is the odometry moved rigidly
     (:func:`~doorbatch.pipeline.evaluate.trajectory_error.rigid_copy_offset` within
-    ``io.reference_repeats_odometry_m`` and ``_deg``). A CARMEN log's laser poses are its odometry unless the log
-    was corrected, and a corrected log's odometry was replaced by the corrected poses, so the reader cannot tell
-    the two apart; a robot may also republish its odometry as a pose topic.
+    ``io.reference_repeats_odometry_m`` plus the printed precision of the coordinates, 1e-5 of their magnitude, and
+    ``_deg``), over at least ``io.reference_repeats_min_path_m`` of odometry path (False below: no telling). A
+    CARMEN log's laser poses are its odometry unless the log was corrected, and a corrected log's odometry was
+    replaced by the corrected poses, so the reader cannot tell the two apart; a robot may also republish its
+    odometry as a pose topic.
     """
     if reference is None or odometry is None:
         return False
     ref, ref_ok = interpolate_poses(reference.stamps_ns, reference.poses, stamps_ns)
     odo, odo_ok = interpolate_poses(odometry.stamps_ns, odometry.poses, stamps_ns)
     both = ref_ok & odo_ok
-    if np.count_nonzero(both) < 2:
-        return False
-    off_m, off_rad = rigid_copy_offset(odo[both], ref[both])
+    ref, odo = ref[both], odo[both]
     io = config.io
-    return off_m <= io.reference_repeats_odometry_m and math.degrees(off_rad) <= io.reference_repeats_odometry_deg
+    if ref.shape[0] < 2 or float(np.hypot(*np.diff(odo[:, :2], axis=0).T).sum()) < io.reference_repeats_min_path_m:
+        return False  # too little motion for any odometry to have drifted from a true reference
+    # printed precision: a CARMEN log writes 6 significant digits, a millimetre at 100 m
+    tolerance_m = io.reference_repeats_odometry_m + 1e-5 * float(np.abs(np.concatenate([ref[:, :2], odo[:, :2]])).max())
+    off_m, off_rad = rigid_copy_offset(odo, ref)
+    return off_m <= tolerance_m and math.degrees(off_rad) <= io.reference_repeats_odometry_deg
 
 
 # No lidar measures below a millimetre; a 0.0 reading is a driver's "no data".

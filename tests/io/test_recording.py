@@ -199,3 +199,22 @@ def test_unstamped_colours_go_to_the_unstamped_scan_logged_with_them(write_log: 
     for k in range(6):  # the same colours as when every message carries its stamp, not the last cloud's
         np.testing.assert_array_equal(rec.colors[k], stamped.colors[k])
     assert not np.array_equal(rec.colors[0], rec.colors[5])
+
+
+def test_a_copy_printed_to_six_digits_far_from_the_origin_is_still_a_copy() -> None:
+    """A raw CARMEN log 150 m from its origin prints poses to 6 significant digits, a millimetre there; its laser
+    poses, rounded apart from its odometry fields, are still its odometry (a reviewer's case: 1.3 mm apart)."""
+    from doorbatch.io.recording import PoseSeries, reference_repeats_odometry
+
+    k = np.arange(200)
+    stamps = (k * 100_000_000).astype(np.int64)
+    odometry = np.stack([150.0 + 0.05 * k, 120.0 + 0.01 * k, 0.3 + 0.001 * k], axis=1)
+    laser = odometry + np.array([0.2 * np.cos(odometry[:, 2]), 0.2 * np.sin(odometry[:, 2]), 0 * k]).T
+    printed = np.array([[float(f"{v:.6g}") for v in row] for row in laser])
+    reference = printed - np.array([0.2 * np.cos(printed[:, 2]), 0.2 * np.sin(printed[:, 2]), 0 * k]).T
+    rounded_odometry = np.array([[float(f"{v:.6g}") for v in row] for row in odometry])
+    args = (PoseSeries(stamps, reference, "map"), PoseSeries(stamps, rounded_odometry, "odom"), stamps,
+            DoorbatchConfig())
+    assert reference_repeats_odometry(*args)
+    drifted = PoseSeries(stamps, rounded_odometry * np.array([1.0005, 1.0, 1.0]), "odom")  # 0.05 % scale in x
+    assert not reference_repeats_odometry(args[0], drifted, stamps, DoorbatchConfig())

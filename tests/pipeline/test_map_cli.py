@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 from doorbatch.cli import main
-from doorbatch.config import load_config
+from doorbatch.config import DoorbatchConfig, load_config
 from doorbatch.io import ros_messages as m
 from doorbatch.io.map_server import read_map
 from doorbatch.io.parquet import read_table
 from doorbatch.pipeline.mapping import build_map
-from tests.conftest import REPO, sample_messages
+from tests.conftest import REPO, T0, sample_messages
 
 SAMPLE_LOGS = REPO / "datasets" / "sample" / "logs"
 
@@ -220,7 +220,7 @@ def test_map_never_removes_a_file_it_did_not_write_there(tmp_path: Path) -> None
 def _with_reference(reference: Callable[[float, float, float], tuple[float, float, float]]
                     ) -> list[tuple[str, str, int, object]]:
     """The sample messages with /ground_truth made from each scan's odometry pose by ``reference``."""
-    msgs = [x for x in sample_messages(20) if x[0] != "/ground_truth"]
+    msgs = [x for x in sample_messages(30) if x[0] != "/ground_truth"]  # 3 m of odometry path
     odometry_stamps = [t for topic, _, t, _ in msgs if topic == "/odom"]
     for k, t in enumerate(odometry_stamps):  # the sample's k-th odometry pose is (0.1 k, 0.02 k, 0.01 k)
         msgs.append(("/ground_truth", "nav_msgs/msg/Odometry", t,
@@ -252,3 +252,14 @@ def test_auto_takes_no_reference_that_repeats_the_odometry(write_log: Callable[.
     assert main(["map", str(log), "-o", str(tmp_path / "asked"), "--stages", "grid", "--pose-source", "reference",
                  "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["pose_source"] == "reference"
+
+
+def test_a_robot_that_barely_moved_cannot_tell_its_reference_from_its_odometry(write_log: Callable[..., Path]) -> None:
+    """Under io.reference_repeats_min_path_m (2 m) of odometry path no odometry has drifted from any reference
+    yet: the reference is not flagged, whatever it is (a robot watching doors move, standing still)."""
+    from doorbatch.io.recording import load_recording
+
+    short = [x for x in _with_reference(_turned_and_moved) if x[2] <= T0 + 1_500_000_000]  # 1.5 m
+    assert not load_recording(write_log("short.mcap", short), DoorbatchConfig()).reference_is_odometry
+    assert load_recording(write_log("long.mcap", _with_reference(_turned_and_moved)),
+                          DoorbatchConfig()).reference_is_odometry

@@ -38,9 +38,9 @@ def rigid_copy_offset(estimate: npt.ArrayLike, reference: npt.ArrayLike) -> tupl
     """How far ``estimate`` is from being ``reference`` moved rigidly: after :func:`align_first_pose`, the largest
     position (m) and heading (rad) error. Both zero for a copy in another frame (odometry republished as a pose
     topic, a raw CARMEN log's laser poses)."""
-    aligned = align_first_pose(estimate, reference)
-    if aligned.shape[0] == 0:
+    if np.asarray(estimate).reshape(-1, 3).shape[0] == 0:
         return 0.0, 0.0
+    aligned = align_first_pose(estimate, reference)
     return float(np.max(position_errors(aligned, reference))), float(np.max(yaw_errors(aligned, reference)))
 
 
