@@ -55,12 +55,16 @@ def multimodal(particles: ParticleSet, config: LocalizeConfig) -> bool:
                          config.ambiguity_min_weight)
 
 
+# Below this many hits a scan's share is too coarse to judge a pose by (0, ½, 1 of two hits): no evidence.
+MIN_FIT_HITS = 10
+
+
 def scan_fit(field: DistanceField, pose: npt.ArrayLike, hits_base: npt.ArrayLike, distance_m: float) -> float:
     """Share of the scan's hits (base_link, (B, 2)) that lie within ``distance_m`` of an occupied cell of the
-    map, the robot at ``pose``; 1.0 for a scan without hits (nothing contradicts the pose)."""
+    map, the robot at ``pose``; NaN (no evidence either way) for a scan of fewer than ``MIN_FIT_HITS`` hits."""
     hits = np.asarray(hits_base, dtype=np.float64).reshape(-1, 2)
-    if hits.shape[0] == 0:
-        return 1.0
+    if hits.shape[0] < MIN_FIT_HITS:
+        return math.nan
     return float(np.mean(endpoint_distances(field, np.asarray(pose, dtype=np.float64).reshape(1, 3), hits)[0]
                          <= distance_m))
 
@@ -91,14 +95,17 @@ class ConvergenceMonitor:
     def update(self, stamp_ns: int, odom: npt.ArrayLike, particles: ParticleSet, config: LocalizeConfig,
                fit: float = 1.0) -> ConvergenceMonitor:
         """The state after one filter update, whose scan fits the map as ``fit`` says (:func:`scan_fit` at the
-        cloud's mean). A claim is withdrawn when the cloud later spreads or splits, or is lost (a hypothesis the
-        scans went on to contradict was not a convergence); a new streak must then hold again."""
+        cloud's mean; NaN: no evidence). A claim is withdrawn when the cloud later spreads or splits, or is lost (a
+        hypothesis the scans went on to contradict was not a convergence); a new streak must then hold again."""
         o = np.asarray(odom, dtype=np.float64).reshape(3)
         step = 0.0 if self.last_odom is None else float(np.hypot(*(o[:2] - self.last_odom[:2])))
         tight = cloud_converged(particles.weight, particles.pose, config) and not multimodal(particles, config)
         settled = self.settled or tight
-        poor = None if fit >= config.lost_min_fit or not settled else (
-            stamp_ns if self.poor_fit_since_ns is None else self.poor_fit_since_ns)
+        if math.isnan(fit):  # no evidence: a run of poor fits neither ends nor starts here
+            poor = self.poor_fit_since_ns if settled else None
+        else:
+            poor = None if fit >= config.lost_min_fit or not settled else (
+                stamp_ns if self.poor_fit_since_ns is None else self.poor_fit_since_ns)
         if poor is not None and (stamp_ns - poor) / 1e9 >= config.lost_after_s:
             return ConvergenceMonitor(None, 0.0, o, None, None, False, lost=True)
         if not tight:

@@ -48,6 +48,7 @@ from doorbatch.pipeline.localize.mcl import (
 )
 from doorbatch.pipeline.localize.particles import ParticleSet
 from doorbatch.pipeline.localize.rbpf import rbpf_step
+from doorbatch.pipeline.localize.resampling import RecoveryState
 from doorbatch.pipeline.localize.result import LocalizationResult
 from doorbatch.pipeline.localize.torch_field import check_device
 from doorbatch.pipeline.mapping import pass_poses
@@ -328,6 +329,7 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
     first_i = start_scan_index(rec, init) if isinstance(init, StartPose) else 0
     converged_ns = None if init == "global" else int(rec.scans.stamps_ns[first_i])
     monitor = ConvergenceMonitor()  # convergence claims of a global run; lost detection of every run
+    warnings = list(rec.warnings)  # the run's own, not added to the caller's recording
     lost = barred = False
     last_s: float | None = None
     k_draw = max(1, lc.annotate_particles)
@@ -361,19 +363,20 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
             converged_ns = None if barred else monitor.converged_ns
         if monitor.lost and (respread or not lost):  # a tracked run says so once per episode
             t_s = (scan.stamp_ns - rec.scans.stamps_ns[0]) / 1e9
-            rec.warnings.append(f"lost at {t_s:.1f} s: under {lc.lost_min_fit:.0%} of the scans' hits within "
+            warnings.append(f"lost at {t_s:.1f} s: under {lc.lost_min_fit:.0%} of the scans' hits within "
                                 f"{lc.lost_fit_distance_m} m of the map for {lc.lost_after_s} s"
                                 + ("; the cloud was spread over the free space again" if respread else ""))
-        lost = (lost or monitor.lost) and fit < lc.lost_min_fit
+        lost = (lost or monitor.lost) and not fit >= lc.lost_min_fit  # NaN (no evidence) keeps an episode going
         if respread:
-            state = dataclasses.replace(state, particles=_initial_particles(rec, lmap, "global", method, lc, rng))
+            state = dataclasses.replace(state, particles=_initial_particles(rec, lmap, "global", method, lc, rng),
+                                        recovery=RecoveryState())  # a fresh start, as AMCL's pf_init
         # a fixed-size draw of the (equally weighted after resampling) particles for the annotated MCAP
         pick = np.linspace(0, len(p) - 1, k_draw).round().astype(np.intp)
         track.add(scan.stamp_ns, mean, cov, odom[i], len(p), diag.neff, dmean, dstd, observed, p.pose[pick])
     if not track.stamps:
         raise PipelineError(f"{log_path}: no scan had an odometry pose; nothing was localized")
     return track.result(Path(log_path).name, method, state.particles.n_doors, converged_ns,
-                        multimodal(state.particles, lc), list(rec.warnings))
+                        multimodal(state.particles, lc), warnings)
 
 
 @dataclass(frozen=True)

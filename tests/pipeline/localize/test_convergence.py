@@ -103,9 +103,18 @@ def test_scan_fit_counts_the_hits_near_the_maps_walls() -> None:
     occ = np.zeros((40, 40), dtype=np.int8)
     occ[:, 20] = 100  # a wall x = 1.0 m (0.05 m cells from the origin)
     field = build_distance_field(OccupancyMap(occ, 0.05, 0.0, 0.0), 2.0)
-    hits = np.array([[1.02, 0.0], [1.02, 0.5], [0.4, 0.0], [1.5, 0.2]])  # two on the wall, two 0.5-0.6 m off
+    on_wall = np.stack([np.full(6, 1.02), np.linspace(-0.5, 0.5, 6)], 1)
+    off_wall = np.stack([np.full(6, 0.4), np.linspace(-0.5, 0.5, 6)], 1)  # 0.6 m off
+    hits = np.concatenate([on_wall, off_wall])
     assert scan_fit(field, (0.0, 0.5, 0.0), hits, 0.3) == 0.5
-    assert scan_fit(field, (0.0, 0.5, 0.0), np.zeros((0, 2)), 0.3) == 1.0
+    assert np.isnan(scan_fit(field, (0.0, 0.5, 0.0), hits[:2], 0.3))  # too few hits to tell: no evidence
+
+
+def test_scans_without_evidence_neither_end_nor_start_a_run_of_poor_fits() -> None:
+    """An open space the laser sees nothing in (fit NaN) does not reset the lost timer, nor start it."""
+    states = _fed([0.9] * 31 + [0.2] * 10 + [float("nan")] * 5 + [0.2] * 6)
+    assert not any(s.lost for s in states[:51]) and states[51].lost  # 2 s after the first poor fit, NaNs included
+    assert not any(s.lost for s in _fed([0.9] * 31 + [float("nan")] * 40))
 
 
 def test_a_spread_cloud_is_never_lost_whatever_its_mean_fits() -> None:

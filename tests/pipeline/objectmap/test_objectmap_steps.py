@@ -4,6 +4,7 @@ angles (eq. 10), width, sensor model and E-step, Hough proposals."""
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -595,14 +596,16 @@ def test_the_final_sweeps_drop_walls_no_beam_supports() -> None:
 
 def test_a_jamb_at_the_hinge_is_not_the_wall_the_door_closes_along() -> None:
     """A recessed door (an outside tester's world): hinge 6 cm behind the corridor wall y = 0, whose doorway runs
-    x ∈ (0, 0.9); a 17 cm jamb through the hinge across the wall (x = 0), and a line joining a 7 cm stub at the
-    hinge with a pillar face 3.4 m away, both nearer the hinge than the corridor wall. The door closes along the
+    x ∈ (0, 0.9); a 17 cm jamb through the hinge across the wall (x = 0), and a line at 52° joining a 7 cm stub at
+    the hinge with a pillar face 3.4 m away, both nearer the hinge than the corridor wall. The door closes along the
     corridor wall, into the doorway, whatever it was seen at (before: along the jamb, −90°, or the stub's line)."""
     from doorbatch.pipeline.objectmap.stage import closed_yaw
 
     corridor = Wall(np.array([0.0, -1.0]), 0.0, np.array([[-5.0, 0.0], [0.9, 5.0]]))  # y = 0, s = x
     jamb = Wall(np.array([1.0, 0.0]), 0.0, np.array([[-0.17, 0.0]]))  # x = 0 from y = −0.17 to 0 (s = y)
-    stub_and_pillar = Wall(np.array([0.0, 1.0]), -0.06, np.array([[-0.07, 0.0], [3.4, 3.8]]))  # y = −0.06
+    slant = math.radians(52.0)  # the line fitted through a 7 cm stub at the hinge and a pillar face 3.4 m off
+    normal = np.array([-math.sin(slant), math.cos(slant)])
+    stub_and_pillar = Wall(normal, float(normal @ np.array([0.0, -0.06])), np.array([[-0.07, 0.0], [3.4, 3.8]]))
     for walls in ([corridor, jamb], [corridor, stub_and_pillar], [jamb, stub_and_pillar, corridor]):
         for seen_deg in ([0.0, 45.0, 90.0], [-90.0, -45.0, -80.0]):
             hinge = np.array([0.0, -0.06])
