@@ -50,6 +50,8 @@ def test_the_doors_that_moved_are_found_and_leave_nothing_behind(world: Path, do
     for door in moved:
         assert door["hinge_error_m"] <= 0.10 and abs(door["length_error_m"]) <= 0.10, door
         assert max(abs(e) for e in door["range_error_deg"]) <= 10.0, door
+        # the closed direction, and so every angle door_states reports: B hangs 6 cm behind its wall (4.3° off once)
+        assert abs(door["closed_yaw_diff_deg"]) <= 1.0, door
     assert all(r["cells"] == 0 for r in score["leaf_remnants"]), score["leaf_remnants"]
     static = score["static"]
     assert static["person_path_cells"] == 0 and static["corridor_interior_cells"] == 0

@@ -909,9 +909,12 @@ def _wall_behind(grid: LogOddsGrid, occupied: BoolArray, hinge: FloatArray, mode
     fully over a spread of directions). Among the walls whose closed direction lies outside the observed
     range (or within ``angle_cluster_gap_deg`` of its ends) and within the rotation limit of it, the one
     nearest to an end of the range wins (a perpendicular wall at the hinge scores too, but lies far from
-    the range). Without such a wall, the end of the observed range with the better score is used (paper
-    000 only asks for "a reference opening angle in global coordinates"). Returns the closed direction
-    and a point on the wall's fitted line (None without a wall).
+    the range). An end of the observed range within ``angle_cluster_gap_deg`` of that wall's direction (one
+    angle, as the leaf's observations cluster) is the leaf seen closed, and its direction is the closed one: a
+    leaf's length of cells says it better than ``wall_probe_m`` of a wall that may stand off the hinge, as behind a
+    recessed frame (4.3° off in an outside tester's world). Without such a wall, the end of the observed range with
+    the better score is used (paper 000 only asks for "a reference opening angle in global coordinates"). Returns
+    the closed direction and a point on the wall's fitted line (None without a wall).
     """
     start, span = _range_about(modes)
     res = grid.resolution_m
@@ -945,7 +948,11 @@ def _wall_behind(grid: LogOddsGrid, occupied: BoolArray, hinge: FloatArray, mode
         if best is None or dist < best[0]:
             best = (dist, phi, point)
     if best is not None:
-        return float(wrap_angle(best[1])), best[2]
+        phi = best[1]
+        off = np.abs(wrap_angle(ends - phi))
+        if off.min() <= gap:  # one angle with the wall's (angle_cluster_gap_deg): the leaf seen closed says it best
+            phi = float(ends[int(np.argmin(off))])
+        return float(wrap_angle(phi)), best[2]
     return float(wrap_angle(ends[int(np.argmax(end_score))])), None
 
 
