@@ -146,18 +146,21 @@ def _tangent_yaw(wall: Wall) -> float:
     return float(np.arctan2(wall.tangent[1], wall.tangent[0]))
 
 
-def closed_yaw(obj_map: ObjectMap, i: int, max_distance_m: float, observed: BoolArray | None = None) -> float:
+def closed_yaw(obj_map: ObjectMap, i: int, max_distance_m: float, observed: BoolArray | None = None,
+               min_turn_rad: float = 0.0) -> float:
     """The closed direction of door i: along a wall line through its hinge, towards the doorway.
 
     A closed leaf lies across the gap a wall line's segments leave (the leaf's span, less a tenth of the width at
-    each end, less than half covered). The line is the nearest within ``max_distance_m`` of the hinge that has
-    such a gap on exactly one side of it, the wall going on along the other and again beyond the gap (within
-    half a width past it: the far jamb); a door jamb or a stub at the hinge, short on both sides, is no such line
-    however near, nor is a wall that ends at a corner. With that line, the gap's side. Without
-    one, along the nearest line, the direction closest to the leaf's directions in the passes it was seen in
-    (``observed``; all passes when none): a door that never moved stands at one angle that is as far from either
-    side, and an unseen pass's direction is only the search's guess. Without a wall line near the hinge: the
-    first observed pass's direction.
+    each end, less than half covered). For a door seen at angles at least ``min_turn_rad`` apart, the line is the
+    nearest within ``max_distance_m`` of the hinge that has such a gap on exactly one side of it, the wall going
+    on along the other and again beyond the gap (within half a width past it: the far jamb); a door jamb or a stub
+    at the hinge, short on both sides, is no such line however near, nor is a wall that ends at a corner. With
+    that line, the gap's side. A door seen at one angle is judged on the nearest line alone: a niche's side wall
+    taken for a leaf standing open then lies along that line, closed, and the colour test can return it to the
+    wall (double_door:5). Otherwise, along the nearest line, the direction closest to the leaf's directions in the
+    passes it was seen in (``observed``; all passes when none): a door that never moved stands at one angle that
+    is as far from either side, and an unseen pass's direction is only the search's guess. Without a wall line
+    near the hinge: the first observed pass's direction.
     """
     door = obj_map.doors[i]
     yaws = door.yaws[observed] if observed is not None and observed.any() else door.yaws
@@ -166,7 +169,9 @@ def closed_yaw(obj_map: ObjectMap, i: int, max_distance_m: float, observed: Bool
     near = [(d, k) for d, k in near if d <= max_distance_m]
     if not near:
         return float(yaws[0])
-    for _, k in near:
+    around = np.sort(np.mod(yaws, 2 * np.pi))
+    moved = 2 * np.pi - float(np.diff(np.append(around, around[0] + 2 * np.pi)).max()) >= min_turn_rad  # the arc
+    for _, k in near if moved else near[:1]:
         wall = obj_map.walls[k]
         s_hinge = float(door.hinge @ wall.tangent)
         gap = np.array([_covered_fraction(wall, s_hinge + 0.1 * width, s_hinge + 0.9 * width) < 0.5,
@@ -193,12 +198,13 @@ def _door_angles(obj_map: ObjectMap, i: int, observed: BoolArray, config: Object
     less those whose leaf is turned beyond max_opening_deg from closed (no door turns there, and what it
     explains is the wall behind the hinge: a leaf the fit left along it)."""
     yaws = obj_map.doors[i].yaws
-    closed = closed_yaw(obj_map, i, config.wall_hinge_distance_m, observed)
+    turn = math.radians(config.min_opening_deg)
+    closed = closed_yaw(obj_map, i, config.wall_hinge_distance_m, observed, turn)
     rel = wrap_angle(yaws - closed)
     turnable = np.abs(rel) <= np.deg2rad(config.max_opening_deg)
     if np.any(observed & ~turnable):
         observed = observed & turnable
-        closed = closed_yaw(obj_map, i, config.wall_hinge_distance_m, observed)
+        closed = closed_yaw(obj_map, i, config.wall_hinge_distance_m, observed, turn)
         rel = wrap_angle(yaws - closed)
     return closed, rel, observed
 

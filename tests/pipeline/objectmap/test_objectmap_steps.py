@@ -611,3 +611,21 @@ def test_a_jamb_at_the_hinge_is_not_the_wall_the_door_closes_along() -> None:
             hinge = np.array([0.0, -0.06])
             obj_map = ObjectMap(walls, [Door(hinge, np.deg2rad(np.array(seen_deg)))], ClassParams(0.9), 3)
             assert abs(closed_yaw(obj_map, 0, 0.3)) < 1e-9
+
+
+def test_a_leaf_seen_at_one_angle_only_closes_along_the_nearest_line() -> None:
+    """A niche's side wall taken for a leaf standing open (double_door:5): seen at one angle in every pass, it lies
+    along the nearest line, closed, even though a doorway-like gap opens in the corridor wall beside it; the colour
+    test can then return it to the wall. Seen at two angles, the doorway's line wins (the recessed door above)."""
+    from doorbatch.pipeline.objectmap.stage import closed_yaw
+
+    niche_side = Wall(np.array([1.0, 0.0]), 0.0, np.array([[0.95, 2.0]]))  # x = 0, beyond the 'leaf'
+    corridor = Wall(np.array([0.0, -1.0]), 0.0, np.array([[-5.0, 0.0], [0.9, 5.0]]))  # y = 0, a gap x ∈ (0, 0.9)
+    hinge = np.array([0.0, 0.02])
+
+    def closed_deg(seen_deg: list[float]) -> float:
+        obj_map = ObjectMap([niche_side, corridor], [Door(hinge, np.deg2rad(np.array(seen_deg)))], ClassParams(0.9), 3)
+        return math.degrees(closed_yaw(obj_map, 0, 0.3, None, math.radians(10.0)))
+
+    assert abs(closed_deg([90.0, 90.0, 90.0]) - 90.0) < 1e-9
+    assert abs(closed_deg([0.0, 45.0, 90.0])) < 1e-9
