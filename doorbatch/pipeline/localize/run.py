@@ -361,11 +361,11 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
         barred = barred or (monitor.lost and not respread)  # the same cloud, once lost, claims nothing again
         if init == "global":
             converged_ns = None if barred else monitor.converged_ns
-        if monitor.lost and (respread or not lost):  # a tracked run says so once per episode
+        if monitor.lost and (respread or not lost):  # once per episode of poor fits, unless spread anew
             t_s = (scan.stamp_ns - rec.scans.stamps_ns[0]) / 1e9
             warnings.append(f"lost at {t_s:.1f} s: under {lc.lost_min_fit:.0%} of the scans' hits within "
-                                f"{lc.lost_fit_distance_m} m of the map for {lc.lost_after_s} s"
-                                + ("; the cloud was spread over the free space again" if respread else ""))
+                            f"{lc.lost_fit_distance_m} m of the map for {lc.lost_after_s} s"
+                            + ("; the cloud was spread over the free space again" if respread else ""))
         lost = (lost or monitor.lost) and not fit >= lc.lost_min_fit  # NaN (no evidence) keeps an episode going
         if respread:
             state = dataclasses.replace(state, particles=_initial_particles(rec, lmap, "global", method, lc, rng),
