@@ -232,3 +232,74 @@ def test_an_mcap_without_summary_reads_the_messages_before_the_cut_in_time_order
     assert len(full) * 0.3 < len(got) < len(full)
     assert [t for _, t in got] == sorted(t for _, t in got)
     assert sorted(got) == sorted(full[: len(got)])  # the log's first messages, nothing invented or lost before the cut
+
+
+def _recompress_bag1(src: Path, dst: Path, mode: str) -> None:
+    """``src`` chunk by chunk into ``dst`` as ``rosbag record --bz2`` / ``--lz4`` writes it."""
+    from rosbags.rosbag1 import Reader, Writer
+
+    writer = Writer(dst)
+    writer.set_compression(Writer.CompressionFormat[mode])
+    with Reader(src) as reader, writer:
+        conns = {c.id: writer.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data, md5sum=c.digest,
+                                             callerid=c.ext.callerid, latching=c.ext.latching)
+                 for c in reader.connections}
+        for conn, t, data in reader.messages():
+            writer.write(conns[conn.id], t, data)
+
+
+def _recompress_bag2(src: Path, dst: Path, mode: str) -> None:
+    """``src`` into a ROS 2 bag with zstd compression per file or per message (``ros2 bag record
+    --compression-mode``)."""
+    from rosbags.rosbag2 import CompressionFormat, CompressionMode, Reader, Writer
+
+    writer = Writer(dst, version=8)
+    writer.set_compression(CompressionMode[mode], CompressionFormat.ZSTD)
+    with Reader(src) as reader, writer:
+        conns = {c.id: writer.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data, rihs01=c.digest,
+                                             serialization_format=c.ext.serialization_format)
+                 for c in reader.connections}
+        for conn, t, data in reader.messages():
+            writer.write(conns[conn.id], t, data)
+
+
+def _rechunk_mcap(src: Path, dst: Path, mode: str) -> None:
+    """``src`` (zstd chunks) into ``dst`` with lz4 chunks, uncompressed chunks, or no chunks at all."""
+    from mcap.reader import make_reader
+    from mcap.writer import CompressionType
+
+    with src.open("rb") as f, dst.open("wb") as g:
+        writer = McapWriter(g, compression=CompressionType[mode if mode != "UNCHUNKED" else "NONE"],
+                            use_chunking=mode != "UNCHUNKED")
+        writer.start(profile="ros2", library="other writer")
+        schemas: dict[int, int] = {}
+        channels: dict[int, int] = {}
+        for schema, channel, message in make_reader(f).iter_messages(log_time_order=False):
+            if schema is not None and schema.id not in schemas:
+                schemas[schema.id] = writer.register_schema(schema.name, schema.encoding, schema.data)
+            if channel.id not in channels:
+                channels[channel.id] = writer.register_channel(channel.topic, channel.message_encoding,
+                                                               schemas[channel.schema_id], channel.metadata)
+            writer.add_message(channels[channel.id], message.log_time, message.data, message.publish_time,
+                               message.sequence)
+        writer.finish()
+
+
+@pytest.mark.parametrize(("fmt", "mode"), [("bag", "BZ2"), ("bag", "LZ4"), ("rosbag2", "FILE"),
+                                           ("rosbag2", "MESSAGE"), ("mcap", "LZ4"), ("mcap", "NONE"),
+                                           ("mcap", "UNCHUNKED")])
+def test_compressed_logs_read_like_plain_ones(write_log: Callable[..., Path], tmp_path: Path, fmt: str,
+                                             mode: str) -> None:
+    """Recorders compress: ROS 1 chunks in bz2 or lz4, ROS 2 bags in zstd per file or per message, MCAP chunks
+    in lz4 or zstd or not at all. The same messages read back from every such log as from ours."""
+    plain = write_log(FORMATS[fmt], fmt=fmt)
+    packed = tmp_path / f"packed_{mode.lower()}{'' if fmt == 'rosbag2' else '.' + fmt}"
+    {"bag": _recompress_bag1, "rosbag2": _recompress_bag2, "mcap": _rechunk_mcap}[fmt](plain, packed, mode)
+    if fmt == "bag":  # really compressed: smaller than the plain bag
+        assert packed.stat().st_size < plain.stat().st_size
+    elif fmt == "rosbag2":
+        assert f"compression_mode: {mode.lower()}" in (packed / "metadata.yaml").read_text()
+    ref_roles, ref = _read(plain)
+    roles, records = _read(packed)
+    assert roles == ref_roles
+    _assert_same_records(records, ref)
