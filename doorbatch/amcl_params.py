@@ -17,8 +17,21 @@ becomes the ``localize`` key of the same name, and the ones the file leaves out 
   only where the file gives them (nav2's default base frame, base_footprint, is often not in a log's tree).
 - An initial pose (``set_initial_pose``) is not a config value here: the warning names the ``--init`` to pass.
 
-Other top-level keys that are doorbatch sections are kept and merged over the translation. Only ROS 2 files:
-ROS 1 amcl's names differ (``odom_alpha1``, ``laser_z_hit``, ``kld_err``); such a file is a clear error.
+Other top-level keys that are doorbatch sections are kept and merged over the translation.
+
+ROS 1 amcl (navigation's ``amcl_node``) names its parameters differently (``odom_alpha1``, ``laser_z_hit``,
+``kld_err``) and has other defaults (``amcl_node.cpp``: 100–5000 particles, z_hit 0.95, resample_interval 2,
+recovery 0.001 / 0.1). A ROS 1 parameter tree (flat as a ``<rosparam>`` file, or under an ``amcl`` key as
+``rosparam dump`` writes it, or an amcl ``<node>`` of a launch file) is renamed onto the Nav2 names with those
+defaults (:func:`translate_ros1_amcl_parameters`):
+
+- ``odom_model_type``: ``diff-corrected`` is Nav2's differential model; ``diff`` (the default) is the same model
+  drawing each noise with its α-sum as the standard deviation (``localize.alpha_sums_as_std``); ``omni-corrected``
+  / ``omni`` are Nav2's omnidirectional model with α1 and α4 swapped (ROS 1 charges the translation and strafe
+  noise from rotation to α1, the rotation noise from rotation to α4; Nav2 the other way round).
+- ``selective_resampling: true`` resamples only when Neff < N/2 (``resample_neff_ratio`` 0.5).
+- ``initial_cov_xx`` / ``_yy`` / ``_aa`` set the start's spread (``init_sigma_xy_m``, ``init_sigma_yaw_deg``);
+  ``initial_pose_x`` / ``_y`` / ``_a`` are named in a warning as the ``--init`` to pass.
 """
 
 from __future__ import annotations
@@ -74,26 +87,105 @@ class AmclTranslation:
     ignored: list[str] = field(default_factory=list)  # known parameters without effect offline
 
 
-# Parameter names only ROS 1 amcl has (Nav2 renamed them): a file with them is a ROS 1 amcl configuration.
-_ROS1_ONLY = frozenset({"odom_model_type", "odom_alpha1", "odom_alpha2", "odom_alpha3", "odom_alpha4", "odom_alpha5",
-                        "laser_z_hit", "laser_z_rand", "laser_sigma_hit", "laser_max_beams", "kld_err", "kld_z"})
+# ROS 1 amcl's declared defaults (navigation's amcl/src/amcl_node.cpp, noetic: the node's own private_nh_.param
+# values, which its first dynamic_reconfigure call leaves in place), for the parameters that change the filter.
+ROS1_AMCL_DEFAULTS: dict[str, Any] = {
+    "odom_model_type": "diff",
+    "odom_alpha1": 0.2, "odom_alpha2": 0.2, "odom_alpha3": 0.2, "odom_alpha4": 0.2, "odom_alpha5": 0.2,
+    "laser_model_type": "likelihood_field",
+    "laser_z_hit": 0.95, "laser_z_rand": 0.05, "laser_sigma_hit": 0.2, "laser_likelihood_max_dist": 2.0,
+    "laser_max_range": -1.0, "laser_min_range": -1.0, "laser_max_beams": 30,
+    "do_beamskip": False, "beam_skip_distance": 0.5, "beam_skip_threshold": 0.3, "beam_skip_error_threshold": 0.9,
+    "min_particles": 100, "max_particles": 5000, "kld_err": 0.01, "kld_z": 0.99,
+    "recovery_alpha_slow": 0.001, "recovery_alpha_fast": 0.1, "resample_interval": 2, "selective_resampling": False,
+    "update_min_d": 0.2, "update_min_a": math.pi / 6.0,
+}
+# ROS 1 names that Nav2 renamed (the others keep their names).
+_ROS1_TO_NAV2 = {
+    "odom_alpha1": "alpha1", "odom_alpha2": "alpha2", "odom_alpha3": "alpha3", "odom_alpha4": "alpha4",
+    "odom_alpha5": "alpha5", "laser_z_hit": "z_hit", "laser_z_rand": "z_rand", "laser_sigma_hit": "sigma_hit",
+    "laser_max_beams": "max_beams", "kld_err": "pf_err", "kld_z": "pf_z",
+}
+# odom_model_type → (Nav2 robot model, α-sums as standard deviations, α1 and α4 swapped).
+_ROS1_ODOM_MODELS = {
+    "diff": ("differential", True, False), "diff-corrected": ("differential", False, False),
+    "omni": ("omnidirectional", True, True), "omni-corrected": ("omnidirectional", False, True),
+}
+_ROS1_NO_EFFECT_OFFLINE = frozenset({
+    "use_map_topic", "first_map_only", "gui_publish_rate", "save_pose_rate", "transform_tolerance", "tf_broadcast",
+    "laser_z_short", "laser_z_max", "laser_lambda_short", "bag_scan_period", "std_warn_level_x", "std_warn_level_y",
+    "std_warn_level_yaw", "force_update_after_initialpose", "force_update_after_set_map", "restore_defaults",
+})
+_ROS1_INITIAL = ("initial_pose_x", "initial_pose_y", "initial_pose_a", "initial_cov_xx", "initial_cov_yy",
+                 "initial_cov_aa")
+# Parameter names only ROS 1 amcl has (Nav2 renamed them): a tree with them is a ROS 1 amcl configuration.
+_ROS1_ONLY = frozenset({"odom_model_type", *_ROS1_TO_NAV2})
 
 
-def refuse_ros1_amcl_file(tree: Mapping[str, Any], source: str) -> None:
-    """Raise a clear error for a ROS 1 amcl parameter file (flat, or under an ``amcl`` key).
-
-    Not translated: ROS 1's default ``odom_model_type: diff`` draws its noise with the α-sums as standard deviations
-    (not variances), which no setting of Nav2's model reproduces.
+def ros1_amcl_parameters(tree: Mapping[str, Any]) -> dict[str, Any] | None:
+    """The ROS 1 amcl parameters of a YAML tree, or None when it holds none: flat (a ``<rosparam>`` file loaded
+    into the node), under an ``amcl`` key, or under ``NAMESPACE: {amcl: ...}`` (``rosparam dump``).
 
     Raises:
-        ConfigError: the tree holds ROS 1 amcl parameter names.
+        ConfigError: more than one ``amcl`` mapping holds ROS 1 names.
     """
-    inner = tree.get(AMCL_NODE)
-    names = set(tree) | (set(inner) if isinstance(inner, Mapping) else set())
-    found = sorted(names & _ROS1_ONLY)
-    if found:
-        raise ConfigError(f"{source}: a ROS 1 amcl parameter file ({', '.join(found[:3])}, ...); doorbatch reads "
-                          "Nav2 (ROS 2) amcl files, whose names are the localize section's (alpha1, z_hit, pf_err)")
+    found: list[Mapping[str, Any]] = []
+    if set(tree) & _ROS1_ONLY:
+        found.append(tree)
+    for key, value in tree.items():
+        if not isinstance(value, Mapping):
+            continue
+        inner = [value] if key == AMCL_NODE else [v for k, v in value.items() if k == AMCL_NODE]
+        found += [m for m in inner if isinstance(m, Mapping) and set(m) & _ROS1_ONLY]
+    if len(found) > 1:
+        raise ConfigError("more than one set of ROS 1 amcl parameters in one file; keep one")
+    return dict(found[0]) if found else None
+
+
+def translate_ros1_amcl_parameters(params: Mapping[str, Any], source: str = "config") -> AmclTranslation:
+    """Map ROS 1 amcl parameters onto doorbatch's ``localize``, ``frames`` and ``topics`` (module docstring):
+    renamed onto Nav2's names, with ROS 1's defaults for what ``params`` leaves out, then
+    :func:`translate_amcl_parameters`. ``scan_topic`` (not a ROS 1 parameter): where a launch file remapped the
+    node's ``scan``.
+
+    Raises:
+        ConfigError: an unknown ``odom_model_type``, or what :func:`translate_amcl_parameters` refuses.
+    """
+    given = dict(params)
+    merged = {**ROS1_AMCL_DEFAULTS, **{k: v for k, v in given.items() if k in ROS1_AMCL_DEFAULTS}}
+    odom_model = str(merged.pop("odom_model_type"))
+    if odom_model not in _ROS1_ODOM_MODELS:
+        raise ConfigError(f"{source}: amcl odom_model_type {odom_model!r}: expected one of "
+                          f"{', '.join(_ROS1_ODOM_MODELS)}")
+    robot_model, sums_as_std, swap = _ROS1_ODOM_MODELS[odom_model]
+    selective = merged.pop("selective_resampling") is True
+    nav2 = {_ROS1_TO_NAV2.get(k, k): v for k, v in merged.items()}
+    if swap:
+        nav2["alpha1"], nav2["alpha4"] = nav2["alpha4"], nav2["alpha1"]
+    nav2["robot_model_type"] = robot_model
+    nav2.update({k: given[k] for k in _FRAMES if k in given})
+    if "scan_topic" in given:
+        nav2["scan_topic"] = given["scan_topic"]
+    core = translate_amcl_parameters(nav2, source)
+    localize = dict(core.tree["localize"], alpha_sums_as_std=sums_as_std)
+    if selective:
+        localize["resample_neff_ratio"] = 0.5  # pf_update_resample: only when Neff < N/2
+    warnings = list(core.warnings)
+    try:
+        initial = {k: float(given[k]) for k in _ROS1_INITIAL if k in given}
+    except (TypeError, ValueError) as err:
+        raise ConfigError(f"{source}: amcl initial_pose_* and initial_cov_* must be numbers ({err})") from err
+    if any(k in initial for k in ("initial_cov_xx", "initial_cov_yy")):
+        cov_xy = (initial.get("initial_cov_xx", 0.25) + initial.get("initial_cov_yy", 0.25)) / 2.0  # node: 0.5²
+        localize["init_sigma_xy_m"] = math.sqrt(cov_xy)
+    if "initial_cov_aa" in initial:
+        localize["init_sigma_yaw_deg"] = math.degrees(math.sqrt(initial["initial_cov_aa"]))
+    if any(k in initial for k in _ROS1_INITIAL[:3]):
+        x, y, yaw = (initial.get(k, 0.0) for k in _ROS1_INITIAL[:3])
+        warnings.append(_start_hint("initial_pose_x/y/a", x, y, yaw))
+    warnings += _unknown(given, set(ROS1_AMCL_DEFAULTS) | _ROS1_NO_EFFECT_OFFLINE | set(_ROS1_INITIAL))
+    tree = dict(core.tree, localize=localize)
+    return AmclTranslation(tree, warnings, sorted(k for k in given if k in _ROS1_NO_EFFECT_OFFLINE))
 
 
 def is_ros2_parameter_file(tree: Mapping[str, Any]) -> bool:
@@ -191,21 +283,33 @@ def translate_amcl_parameters(params: Mapping[str, Any], source: str = "config")
             x, y, yaw = (float(given.get(f"initial_pose.{k}", 0.0)) for k in ("x", "y", "yaw"))
         except (TypeError, ValueError) as err:
             raise ConfigError(f"{source}: amcl initial_pose must hold numbers x, y, yaw ({err})") from err
-        warnings.append(f"amcl set_initial_pose: pass --init {x:g},{y:g},{yaw:g} to start there "
-                        f"(yaw {math.degrees(yaw):.1f}°); the config does not choose the start")
-    known = set(NAV2_AMCL_DEFAULTS) | set(_FRAMES) | _NO_EFFECT_OFFLINE | set(_INITIAL_POSE) | {"scan_topic"}
-    unknown = sorted(k for k in given if k not in known)
-    if unknown:
-        warnings.append(f"amcl parameter(s) not known to doorbatch, ignored: {', '.join(unknown)}")
+        warnings.append(_start_hint("set_initial_pose", x, y, yaw))
+    warnings += _unknown(given, set(NAV2_AMCL_DEFAULTS) | _NO_EFFECT_OFFLINE | set(_INITIAL_POSE))
     ignored = sorted(k for k in given if k in _NO_EFFECT_OFFLINE)
     return AmclTranslation(tree, warnings, ignored)
 
 
+def _start_hint(names: str, x: float, y: float, yaw: float) -> str:
+    """The warning for a start pose in a parameter file: the ``--init`` that gives it."""
+    return (f"amcl {names}: pass --init {x:g},{y:g},{yaw:g} to start there (yaw {math.degrees(yaw):.1f}°); "
+            "the config does not choose the start")
+
+
+def _unknown(given: Mapping[str, Any], known: set[str]) -> list[str]:
+    """A warning naming the parameters neither ``known`` nor frames nor the scan topic, if any."""
+    unknown = sorted(k for k in given if k not in known | set(_FRAMES) | {"scan_topic"})
+    return [f"amcl parameter(s) not known to doorbatch, ignored: {', '.join(unknown)}"] if unknown else []
+
+
 def translate_ros2_parameter_file(tree: Mapping[str, Any], source: str) -> AmclTranslation:
     """The translation of a ROS 2 parameter file's ``amcl`` node; its warnings are logged."""
-    translation = translate_amcl_parameters(amcl_parameters(tree, source), source)
+    return logged(translate_amcl_parameters(amcl_parameters(tree, source), source), source, "nav2_amcl")
+
+
+def logged(translation: AmclTranslation, source: str, origin: str) -> AmclTranslation:
+    """``translation``, once its warnings are logged and an info line says what was translated from where."""
     for message in translation.warnings:
         log.warning("%s: %s", source, message)
-    log.info("%s: nav2_amcl parameters translated into localize/frames/topics%s", source,
+    log.info("%s: %s parameters translated into localize/frames/topics%s", source, origin,
              f" (no effect offline: {', '.join(translation.ignored)})" if translation.ignored else "")
     return translation

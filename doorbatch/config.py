@@ -11,6 +11,7 @@ from __future__ import annotations
 import difflib
 import hashlib
 import json
+import logging
 import math
 from collections.abc import Iterable, Mapping
 from pathlib import Path
@@ -19,9 +20,19 @@ from typing import Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from doorbatch.amcl_params import is_ros2_parameter_file, refuse_ros1_amcl_file, translate_ros2_parameter_file
+from doorbatch.amcl_params import (
+    AMCL_NODE,
+    is_ros2_parameter_file,
+    logged,
+    ros1_amcl_parameters,
+    translate_ros1_amcl_parameters,
+    translate_ros2_parameter_file,
+)
 from doorbatch.errors import ConfigError, UsageError
+from doorbatch.io.ros1_launch import is_launch_file, read_launch_node
 from doorbatch.records import class_name
+
+log = logging.getLogger(__name__)
 
 
 class Section(BaseModel):
@@ -413,6 +424,9 @@ class LocalizeConfig(Section):
     robot_model_type: Literal["differential", "omnidirectional"] = "differential"
     # Strafe noise from translation (omnidirectional only). Nav2's defaults give it alpha3's value; so do we.
     alpha5: float = Field(0.015, ge=0.0)
+    # ROS 1 amcl's odom_model_type diff and omni (its default, before the -corrected models): each noise's α-sum
+    # is drawn as a standard deviation, not a variance (amcl_odom.cpp). Only for replaying a ROS 1 amcl file.
+    alpha_sums_as_std: bool = False
     # Likelihood-field endpoint model (Nav2: laser_model_type likelihood_field).
     # z_rand 0.2 (Nav2 0.05... 0.5): people and doors the map lacks are common; a heavier floor keeps a few
     # unexplained beams from dominating the product of the beams.
@@ -905,6 +919,20 @@ def _explain(err: ValidationError, source: str) -> ConfigError:
     return ConfigError(f"{source}: config key {key!r}: {first['msg']} (got {first.get('input')!r})")
 
 
+def _ros1_launch_tree(path: Path) -> dict[str, Any]:
+    """A ROS 1 launch file's amcl node as a ROS 1 amcl tree (``{amcl: params}``); ``<remap from="scan">`` becomes
+    its ``scan_topic``. Values the file alone cannot resolve are left out, with a warning."""
+    node = read_launch_node(path, AMCL_NODE)
+    if node.unresolved:
+        log.warning("%s: amcl parameter(s) left out, their values need ROS: %s", path, "; ".join(node.unresolved))
+    params = dict(node.params)
+    scan = node.remaps.get("scan", node.remaps.get("/scan"))
+    if scan is not None:
+        params["scan_topic"] = scan
+    params.setdefault("odom_model_type", "diff")  # marks the tree as ROS 1 amcl's even when the file sets nothing
+    return {AMCL_NODE: params}
+
+
 def load_config(
     config_file: Path | None = None,
     overrides: Iterable[str] = (),
@@ -915,7 +943,8 @@ def load_config(
     layers that were given (the file, ``extra_source`` for ``extra``, ``--set``).
 
     A ``config_file`` that is a ROS 2 parameter file (a Nav2 ``nav2_params.yaml``) contributes its ``amcl`` node's
-    parameters (:mod:`doorbatch.amcl_params`).
+    parameters, and so do a ROS 1 amcl parameter file and a ROS 1 launch file with an amcl node
+    (:mod:`doorbatch.amcl_params`).
 
     Raises:
         ConfigError: unreadable file, bad YAML, unknown key (with the closest valid one), wrong type.
@@ -923,13 +952,18 @@ def load_config(
     tree: dict[str, Any] = {}
     source = "config"
     if config_file is not None:
-        tree = read_yaml_mapping(config_file)
         source = str(config_file)
+        tree = _ros1_launch_tree(config_file) if is_launch_file(config_file) else read_yaml_mapping(config_file)
+        own = {k: v for k, v in tree.items() if k in DoorbatchConfig.model_fields}
         if is_ros2_parameter_file(tree):  # a Nav2 params file: its amcl node, and any doorbatch sections over it
-            own = {k: v for k, v in tree.items() if k in DoorbatchConfig.model_fields}
             tree = deep_merge(translate_ros2_parameter_file(tree, source).tree, own)
         else:
-            refuse_ros1_amcl_file(tree, source)
+            try:
+                ros1 = ros1_amcl_parameters(tree)
+            except ConfigError as err:
+                raise ConfigError(f"{source}: {err}") from err
+            if ros1 is not None:  # a ROS 1 amcl file (or launch file): translated, doorbatch sections over it
+                tree = deep_merge(logged(translate_ros1_amcl_parameters(ros1, source), source, "ROS 1 amcl").tree, own)
     overrides = list(overrides)
     if extra:
         tree = deep_merge(tree, extra)

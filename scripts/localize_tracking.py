@@ -34,7 +34,8 @@ def main() -> None:
     ap.add_argument("--cases", nargs="+", default=["closed", "open", "partial"])
     ap.add_argument("--methods", nargs="+", default=["mcl", "rbpf"])
     ap.add_argument("--seeds", nargs="+", type=int, default=[0])
-    ap.add_argument("--config", type=Path, default=None, help="config file (YAML, or a Nav2 parameter file)")
+    ap.add_argument("--config", type=Path, default=None,
+                    help="config file (YAML, or an AMCL parameter file: Nav2, ROS 1, a ROS 1 launch file)")
     ap.add_argument("--set", dest="overrides", action="append", default=[], help="config override key=value")
     ap.add_argument("--out", type=Path, default=Path("/tmp/doorbatch-tracking"), help="report directory")
     ap.add_argument("--workers", type=int, default=1)

@@ -1,8 +1,10 @@
-"""Nav2 AMCL parameter files given as --config: each parameter lands on the doorbatch key that does the same."""
+"""AMCL parameter files given as --config (Nav2's, ROS 1 amcl's YAML and launch files): each parameter lands on the
+doorbatch key that does the same, and what a file leaves out takes that AMCL's own default."""
 
 from __future__ import annotations
 
 import logging
+import math
 from pathlib import Path
 
 import pytest
@@ -103,9 +105,126 @@ def test_the_initial_pose_is_named_as_the_init_to_pass(tmp_path: Path, caplog: p
     ("a:\n  amcl:\n    ros__parameters: {}\nb:\n  amcl:\n    ros__parameters: {}\n", "more than one"),
     ("amcl:\n  ros__parameters:\n    max_particles: many\n", "max_particles"),
     ("amcl:\n  ros__parameters:\n    set_initial_pose: true\n    initial_pose: {x: one}\n", "initial_pose"),
-    ("odom_model_type: diff\nodom_alpha1: 0.2\nlaser_z_hit: 0.95\n", "ROS 1 amcl"),  # a ROS 1 launch's rosparams
-    ("amcl:\n  kld_err: 0.01\n", "ROS 1 amcl"),
+    ("odom_model_type: ackermann\nodom_alpha1: 0.2\n", "odom_model_type"),
+    ("a:\n  amcl:\n    kld_err: 0.01\nb:\n  amcl:\n    kld_err: 0.02\n", "more than one"),
+    ("amcl:\n  kld_err: 0.01\n  initial_pose_x: left\n", "initial_pose"),
 ])
 def test_what_cannot_be_translated_is_a_config_error(tmp_path: Path, text: str, message: str) -> None:
     with pytest.raises(ConfigError, match=message):
         _load(tmp_path, text)
+
+
+# ROS 1 amcl (navigation's amcl_node.cpp, noetic) defaults, written out here from its source as the test's truth.
+ROS1_DEFAULTS = {"alpha1": 0.2, "alpha2": 0.2, "alpha3": 0.2, "alpha4": 0.2, "alpha5": 0.2, "z_hit": 0.95,
+                 "z_rand": 0.05, "sigma_hit": 0.2, "laser_likelihood_max_dist": 2.0, "laser_max_range": -1.0,
+                 "laser_min_range": -1.0, "max_beams": 30, "min_particles": 100, "max_particles": 5000,
+                 "pf_err": 0.01, "pf_z": 0.99, "recovery_alpha_slow": 0.001, "recovery_alpha_fast": 0.1,
+                 "resample_interval": 2, "update_min_d": 0.2, "update_min_a": math.pi / 6}
+
+
+def _indent(text: str, n: int) -> str:
+    return "".join(" " * n + line + "\n" for line in text.splitlines())
+
+
+@pytest.mark.parametrize("layout", ["flat", "rosparam dump", "namespaced dump"])
+def test_a_ros1_amcl_file_takes_ros1_names_and_ros1_defaults(tmp_path: Path, layout: str) -> None:
+    """A ``<rosparam>`` file loaded into the node (flat), or ``rosparam dump``'s nesting under the node's name."""
+    params = "odom_alpha1: 0.1\nlaser_z_hit: 0.5\nkld_err: 0.05\nlaser_max_beams: 90\n"
+    text = {"flat": params, "rosparam dump": "amcl:\n" + _indent(params, 2),
+            "namespaced dump": "robot1:\n  amcl:\n" + _indent(params, 4)}[layout]
+    lc = _load(tmp_path, text).localize
+    expected = dict(ROS1_DEFAULTS, alpha1=0.1, z_hit=0.5, pf_err=0.05, max_beams=90)
+    assert {k: getattr(lc, k) for k in expected} == pytest.approx(expected)
+    # odom_model_type diff (the default): the alpha sums drawn as standard deviations; AMCL's likelihood_field
+    assert lc.robot_model_type == "differential" and lc.alpha_sums_as_std
+    assert lc.beam_combination == "amcl" and not lc.do_beamskip and lc.resample_neff_ratio == 1.0
+
+
+@pytest.mark.parametrize(("model", "robot", "as_std", "swapped"), [
+    ("diff", "differential", True, False), ("diff-corrected", "differential", False, False),
+    ("omni", "omnidirectional", True, True), ("omni-corrected", "omnidirectional", False, True)])
+def test_ros1_odometry_models(tmp_path: Path, model: str, robot: str, as_std: bool, swapped: bool) -> None:
+    """ROS 1's omni models charge translation and strafe noise from rotation to alpha1 and rotation noise from
+    rotation to alpha4 (amcl_odom.cpp); Nav2's omni model, doorbatch's, the other way round."""
+    text = f"odom_model_type: {model}\nodom_alpha1: 0.1\nodom_alpha4: 0.4\nodom_alpha5: 0.05\n"
+    lc = _load(tmp_path, text).localize
+    assert (lc.robot_model_type, lc.alpha_sums_as_std) == (robot, as_std)
+    assert (lc.alpha1, lc.alpha4) == ((0.4, 0.1) if swapped else (0.1, 0.4)) and lc.alpha5 == 0.05
+
+
+def test_selective_resampling_and_the_initial_covariance(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    text = ("odom_model_type: diff-corrected\nselective_resampling: true\ninitial_pose_x: 2.0\n"
+            "initial_pose_a: 1.0\ninitial_cov_xx: 0.09\ninitial_cov_yy: 0.01\ninitial_cov_aa: 0.04\n"
+            "gui_publish_rate: 10.0\nsome_new_knob: 1\n")
+    with caplog.at_level(logging.WARNING, logger="doorbatch"):
+        lc = _load(tmp_path, text).localize
+    assert lc.resample_neff_ratio == 0.5  # pf_update_resample: only when Neff < N/2
+    assert lc.init_sigma_xy_m == pytest.approx(math.sqrt(0.05))
+    assert lc.init_sigma_yaw_deg == pytest.approx(math.degrees(0.2))
+    assert "--init 2,0,1" in caplog.text and "some_new_knob" in caplog.text and "gui_publish_rate" not in caplog.text
+
+
+LAUNCH = """<launch>
+  <arg name="scan_topic" default="base_scan"/>
+  <arg name="use_omni" default="false"/>
+  <arg name="x0" default="1.5"/>
+  <node pkg="map_server" type="map_server" name="map_server" args="$(find my_robot)/maps/office.yaml"/>
+  <group ns="robot1">
+    <node pkg="amcl" type="amcl" name="amcl">
+      <remap from="scan" to="$(arg scan_topic)"/>
+      <param name="odom_model_type" value="omni-corrected" if="$(arg use_omni)"/>
+      <param name="odom_model_type" value="diff-corrected" unless="$(arg use_omni)"/>
+      <param name="odom_alpha3" value="0.3"/>
+      <param name="laser_max_beams" value="90" type="int"/>
+      <param name="base_frame_id" value="base_footprint"/>
+      <param name="use_map_topic" value="true"/>
+      <param name="initial_pose_x" value="$(arg x0)"/>
+      <param name="min_particles" value="$(eval 100 * 2)"/>
+      <rosparam>
+        kld_err: 0.02
+        laser_z_rand: 0.3
+      </rosparam>
+      <rosparam file="$(find my_robot)/config/amcl_extra.yaml" command="load"/>
+    </node>
+  </group>
+</launch>
+"""
+
+
+def test_a_ros1_launch_file_sets_the_node_as_roslaunch_would(tmp_path: Path,
+                                                            caplog: pytest.LogCaptureFixture) -> None:
+    path = tmp_path / "amcl.launch"
+    path.write_text(LAUNCH)
+    with caplog.at_level(logging.WARNING, logger="doorbatch"):
+        config = load_config(path)
+    lc = config.localize
+    assert lc.robot_model_type == "differential" and not lc.alpha_sums_as_std  # unless= chose diff-corrected
+    assert (lc.alpha3, lc.max_beams, lc.pf_err, lc.z_rand) == (0.3, 90, 0.02, 0.3)  # param, typed, <rosparam> text
+    assert lc.z_hit == 0.95 and lc.max_particles == 5000  # ROS 1 defaults for what the file leaves out
+    assert config.topics.scan == "/base_scan" and config.frames.base_link == "base_footprint"
+    # what needs a ROS installation is left out and said: min_particles ($(eval)) and the $(find) rosparam file
+    assert lc.min_particles == 100
+    assert "min_particles" in caplog.text and "amcl_extra.yaml" in caplog.text and "--init 1.5,0,0" in caplog.text
+    with_omni = tmp_path / "omni.launch"
+    with_omni.write_text(LAUNCH.replace('name="use_omni" default="false"', 'name="use_omni" default="true"'))
+    assert load_config(with_omni).localize.robot_model_type == "omnidirectional"
+
+
+def test_the_shipped_ros1_launch_example_reads() -> None:
+    lc = load_config(REPO / "configs" / "amcl_ros1.example.launch").localize
+    assert (lc.alpha1, lc.alpha3, lc.alpha5, lc.z_hit, lc.max_particles) == (0.2, 0.2, 0.1, 0.5, 3000)
+    assert lc.alpha_sums_as_std and lc.resample_interval == 1
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ("<launch><node pkg='amcl' type='amcl' name='a'/><node pkg='amcl' type='amcl' name='b'/></launch>", "keep one"),
+    ("<launch><include file='$(find my_robot)/launch/amcl.launch'/></launch>", "includes"),
+    ("<launch><node pkg='amcl' type='amcl' name='amcl'>", "not a valid launch file"),
+    ("<launch><node type='amcl' name='amcl'><param name='kld_err' value='x' type='double'/></node></launch>",
+     "kld_err"),
+])
+def test_launch_files_that_cannot_be_read_are_config_errors(tmp_path: Path, text: str, message: str) -> None:
+    path = tmp_path / "bad.launch"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match=message):
+        load_config(path)

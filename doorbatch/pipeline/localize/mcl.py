@@ -140,10 +140,10 @@ def predict(particles: ParticleSet, odom_prev: npt.ArrayLike, odom_now: npt.Arra
     c = config
     if c.robot_model_type == "omnidirectional":
         pose = sample_motion_model_omni(particles.pose, odom_prev, odom_now,
-                                        (c.alpha1, c.alpha2, c.alpha3, c.alpha4, c.alpha5), rng)
+                                        (c.alpha1, c.alpha2, c.alpha3, c.alpha4, c.alpha5), rng, c.alpha_sums_as_std)
     else:
         pose = sample_motion_model_odometry(particles.pose, odom_prev, odom_now,
-                                            (c.alpha1, c.alpha2, c.alpha3, c.alpha4), rng)
+                                            (c.alpha1, c.alpha2, c.alpha3, c.alpha4), rng, c.alpha_sums_as_std)
     return replace(particles, pose=pose)
 
 

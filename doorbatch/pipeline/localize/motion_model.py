@@ -12,6 +12,8 @@ own noisy copy of it,
 where, as in nav2_amcl ``DifferentialMotionModel::odometryUpdate``, the rotation terms of the variances are
 r = min(|δrot|, π − |δrot|), so that driving backwards (δrot1 ≈ ±π) costs no more rotation noise than
 driving forwards. The α's are variances per unit² (the book's and AMCL's convention, not standard deviations).
+ROS 1 amcl's ``diff`` and ``omni`` models (``odom_model_type``, its default before ``diff-corrected``) draw each
+noise with its α-sum as the standard deviation instead, e.g. ε1 ~ N(0, (α1 r1² + α2 δtrans²)²): ``sums_as_std``.
 
 For holonomic bases, :func:`sample_motion_model_omni` is Nav2 AMCL's ``OmniMotionModel``: the increment is a
 translation δtrans along the bearing β = atan2(Δy, Δx) − θ (odom frame) and a rotation δrot, each particle
@@ -36,11 +38,13 @@ from doorbatch.geometry.rotations import wrap_angle
 FloatArray = npt.NDArray[np.float64]
 
 
-def increment_noise_std(rot1: float, trans: float, rot2: float, alphas: Sequence[float]
+def increment_noise_std(rot1: float, trans: float, rot2: float, alphas: Sequence[float], sums_as_std: bool = False
                         ) -> tuple[float, float, float]:
-    """Standard deviations of the noise on (δrot1, δtrans, δrot2) for one increment (AMCL's diff model)."""
-    var_rot1, var_trans, var_rot2 = increment_variances(rot1, trans, rot2, alphas)
-    return float(np.sqrt(var_rot1)), float(np.sqrt(var_trans)), float(np.sqrt(var_rot2))
+    """Standard deviations of the noise on (δrot1, δtrans, δrot2) for one increment (AMCL's diff model; with
+    ``sums_as_std``, ROS 1 amcl's uncorrected ``diff``: the α-sums themselves)."""
+    sums = np.array(increment_variances(rot1, trans, rot2, alphas), dtype=np.float64)
+    sd = sums if sums_as_std else np.sqrt(sums)
+    return float(sd[0]), float(sd[1]), float(sd[2])
 
 
 def _checked_poses(pose: npt.ArrayLike, alphas: Sequence[float], n_alphas: int) -> FloatArray:
@@ -54,7 +58,8 @@ def _checked_poses(pose: npt.ArrayLike, alphas: Sequence[float], n_alphas: int) 
 
 
 def sample_motion_model_odometry(pose: npt.ArrayLike, odom_prev: npt.ArrayLike, odom_now: npt.ArrayLike,
-                                 alphas: Sequence[float], rng: np.random.Generator) -> FloatArray:
+                                 alphas: Sequence[float], rng: np.random.Generator, sums_as_std: bool = False
+                                 ) -> FloatArray:
     """Move every particle by a noisy copy of the odometry increment odom_prev → odom_now.
 
     Args:
@@ -64,6 +69,7 @@ def sample_motion_model_odometry(pose: npt.ArrayLike, odom_prev: npt.ArrayLike, 
         alphas: (α1, α2, α3, α4): rotation noise from rotation, rotation noise from translation, translation
             noise from translation, translation noise from rotation (Nav2 alpha1..alpha4).
         rng: random generator (3·N standard normal draws, in one call).
+        sums_as_std: ROS 1 amcl's ``diff`` model: each α-sum is the noise's standard deviation (module docstring).
 
     Returns:
         (N, 3) new poses, yaw wrapped to (−π, π].
@@ -75,7 +81,7 @@ def sample_motion_model_odometry(pose: npt.ArrayLike, odom_prev: npt.ArrayLike, 
     odo = np.stack([np.asarray(odom_prev, dtype=np.float64), np.asarray(odom_now, dtype=np.float64)])
     inc = odometry_increments(odo[:, 0], odo[:, 1], odo[:, 2], min_trans_m=MIN_TRANS_FOR_BEARING_M)
     rot1, trans, rot2 = float(inc.rot1[0]), float(inc.trans[0]), float(inc.rot2[0])
-    sd = np.array(increment_noise_std(rot1, trans, rot2, alphas))
+    sd = np.array(increment_noise_std(rot1, trans, rot2, alphas, sums_as_std))
     eps = rng.standard_normal((p.shape[0], 3)) * sd
     rot1_hat = rot1 - eps[:, 0]
     trans_hat = trans - eps[:, 1]
@@ -89,11 +95,14 @@ def sample_motion_model_odometry(pose: npt.ArrayLike, odom_prev: npt.ArrayLike, 
 
 
 def sample_motion_model_omni(pose: npt.ArrayLike, odom_prev: npt.ArrayLike, odom_now: npt.ArrayLike,
-                             alphas: Sequence[float], rng: np.random.Generator) -> FloatArray:
+                             alphas: Sequence[float], rng: np.random.Generator, sums_as_std: bool = False
+                             ) -> FloatArray:
     """Move every particle by a noisy copy of the odometry increment, Nav2 AMCL's omnidirectional model.
 
     Arguments, result and errors as :func:`sample_motion_model_odometry`, except that ``alphas`` are five:
     Nav2's ``alpha1``..``alpha5`` in the roles the module docstring gives them (α5: strafe noise from translation).
+    ROS 1 amcl's ``omni`` / ``omni-corrected`` are this model with its α1 and α4 swapped (``sums_as_std`` for
+    ``omni``).
     """
     p = _checked_poses(pose, alphas, 5)
     a1, a2, a3, a4, a5 = (float(a) for a in alphas)
@@ -102,7 +111,8 @@ def sample_motion_model_omni(pose: npt.ArrayLike, odom_prev: npt.ArrayLike, odom
     dx, dy = now[0] - prev[0], now[1] - prev[1]
     trans = float(np.hypot(dx, dy))
     rot = float(wrap_angle(now[2] - prev[2]))
-    sd = np.sqrt([a3 * trans**2 + a4 * rot**2, a1 * rot**2 + a2 * trans**2, a4 * rot**2 + a5 * trans**2])
+    sums = np.array([a3 * trans**2 + a4 * rot**2, a1 * rot**2 + a2 * trans**2, a4 * rot**2 + a5 * trans**2])
+    sd = sums if sums_as_std else np.sqrt(sums)
     eps = rng.standard_normal((p.shape[0], 3)) * sd
     trans_hat = trans + eps[:, 0]
     strafe_hat = eps[:, 2]

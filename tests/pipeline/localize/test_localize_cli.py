@@ -159,6 +159,33 @@ def test_a_nav2_params_file_runs_mcl_as_amcl_would(sample_map: Path, tmp_path: P
     assert _errors(run, log).mean() < 0.2  # tracks (0.07-0.09 m over seeds 0-2; doorbatch's defaults 0.02 m)
 
 
+
+def test_a_ros1_amcl_launch_file_runs_mcl_as_ros1_amcl_would(sample_map: Path, tmp_path: Path) -> None:
+    """A ROS 1 robot's amcl.launch as --config: its parameters under ROS 1 names, ROS 1 amcl's defaults for the
+    rest (laser_max_beams 30, kld_err 0.01, resample_interval 2), the uncorrected ``diff`` odometry model, and the
+    scan topic from its remap. MCL tracks the sample with AMCL's stock alphas."""
+    launch = tmp_path / "amcl.launch"
+    launch.write_text("""<launch>
+  <arg name="scan" default="/scan"/>
+  <node pkg="amcl" type="amcl" name="amcl">
+    <remap from="scan" to="$(arg scan)"/>
+    <param name="odom_model_type" value="diff"/>
+    <param name="max_particles" value="1000"/>
+    <param name="laser_z_rand" value="0.2"/>
+  </node>
+</launch>
+""")
+    log = SAMPLE_LOGS / "loc_open.mcap"
+    run = tmp_path / "ros1_amcl"
+    assert main(["localize", str(log), "--map", str(sample_map), "-o", str(run), "--method", "mcl",
+                 "--config", str(launch), "-q"]) == 0
+    manifest = json.loads((run / "manifest.json").read_text())["config"]
+    lc = manifest["localize"]
+    assert (lc["max_particles"], lc["max_beams"], lc["pf_err"], lc["resample_interval"]) == (1000, 30, 0.01, 2)
+    assert lc["alpha_sums_as_std"] is True and lc["z_hit"] == 0.95 and lc["z_rand"] == 0.2
+    assert manifest["topics"]["scan"] == "/scan"
+    assert _errors(run, log).mean() < 0.3  # tracks (doorbatch's defaults 0.02 m; lost would be metres)
+
 def _with_initial_pose(tmp_path: Path, after_scans: int, clock_offset_ns: int = 0) -> tuple[Path, int, np.ndarray]:
     """loc_open.mcap plus an RViz-style /initialpose (0.5 m, 15 deg std) at the reference pose of a later scan,
     0.2 m off it, recorded at that scan's time and stamped ``clock_offset_ns`` later; returns the log, the scan's

@@ -125,3 +125,37 @@ def test_a_sideways_step_costs_the_omni_model_no_turn() -> None:
 def test_the_omni_model_needs_five_alphas() -> None:
     with pytest.raises(ValueError, match="five alphas"):
         sample_motion_model_omni(np.zeros((1, 3)), (0, 0, 0), (1, 0, 0), ALPHAS, np.random.default_rng())
+
+
+def test_ros1_amcl_diff_draws_the_alpha_sums_as_standard_deviations() -> None:
+    """ROS 1 amcl's ``odom_model_type: diff`` (amcl_odom.cpp, ODOM_MODEL_DIFF): pf_ran_gaussian(α1 r1² + α2 t²),
+    the sum itself as σ, where diff-corrected takes its square root."""
+    rot1, trans, rot2 = 0.3, 0.5, -0.2
+    prev = (0.0, 0.0, 0.0)
+    n = 200_000
+    out = sample_motion_model_odometry(np.zeros((n, 3)), prev, odom_after(prev, rot1, trans, rot2), ALPHAS,
+                                       np.random.default_rng(2), sums_as_std=True)
+    rot1_hat = np.arctan2(out[:, 1], out[:, 0])
+    trans_hat = np.hypot(out[:, 0], out[:, 1])
+    rot2_hat = wrap_angle(out[:, 2] - rot1_hat)
+    a1, a2, a3, a4 = ALPHAS
+    expected_sd = (a1 * rot1**2 + a2 * trans**2, a3 * trans**2 + a4 * (rot1**2 + rot2**2), a1 * rot2**2 + a2 * trans**2)
+    for sample, sd in zip((rot1_hat, trans_hat, rot2_hat), expected_sd, strict=True):
+        assert sample.std() == pytest.approx(sd, rel=0.01)
+    assert expected_sd[1] < 0.1 * increment_noise_std(rot1, trans, rot2, ALPHAS)[1]  # a real difference here
+
+
+def test_ros1_amcl_omni_draws_the_alpha_sums_as_standard_deviations() -> None:
+    """ROS 1's ``omni`` is the same model with the α-sums as σ (and its α1 and α4 swapped by the translation)."""
+    trans, bearing, rot = 0.8, 0.6, 0.4
+    prev = np.array([1.0, 2.0, 0.3])
+    now = prev + np.array([trans * math.cos(prev[2] + bearing), trans * math.sin(prev[2] + bearing), rot])
+    n = 200_000
+    out = sample_motion_model_omni(np.zeros((n, 3)), prev, now, OMNI_ALPHAS, np.random.default_rng(7),
+                                   sums_as_std=True)
+    along = out[:, 0] * math.cos(bearing) + out[:, 1] * math.sin(bearing)
+    across = out[:, 0] * math.sin(bearing) - out[:, 1] * math.cos(bearing)
+    a1, a2, a3, a4, a5 = OMNI_ALPHAS
+    expected_sd = (a3 * trans**2 + a4 * rot**2, a4 * rot**2 + a5 * trans**2, a1 * rot**2 + a2 * trans**2)
+    for sample, sd in zip((along, across, out[:, 2]), expected_sd, strict=True):
+        assert sample.std() == pytest.approx(sd, rel=0.01)
