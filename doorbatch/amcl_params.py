@@ -29,9 +29,12 @@ defaults (:func:`translate_ros1_amcl_parameters`):
   drawing each noise with its α-sum as the standard deviation (``localize.alpha_sums_as_std``); ``omni-corrected``
   / ``omni`` are Nav2's omnidirectional model with α1 and α4 swapped (ROS 1 charges the translation and strafe
   noise from rotation to α1, the rotation noise from rotation to α4; Nav2 the other way round).
-- ``selective_resampling: true`` resamples only when Neff < N/2 (``resample_neff_ratio`` 0.5).
-- ``initial_cov_xx`` / ``_yy`` / ``_aa`` set the start's spread (``init_sigma_xy_m``, ``init_sigma_yaw_deg``);
-  ``initial_pose_x`` / ``_y`` / ``_a`` are named in a warning as the ``--init`` to pass.
+- ``selective_resampling: true`` resamples only when Neff < N/2 (``resample_neff_ratio`` 0.5), and injects
+  random particles only then (``neff_test_gates_recovery``), as ROS 1's ``pf.c``.
+- Values are taken as roscpp's typed ``param()`` takes them (:func:`_roscpp_value`).
+- ``initial_cov_xx`` / ``_yy`` / ``_aa`` set the start's spread (``init_sigma_xy_m``, ``init_sigma_yaw_deg``;
+  the node's 0.5 m and 15° when not given); ``initial_pose_x`` / ``_y`` / ``_a`` are named in a warning as the
+  ``--init`` to pass.
 """
 
 from __future__ import annotations
@@ -118,13 +121,19 @@ _ROS1_NO_EFFECT_OFFLINE = frozenset({
 })
 _ROS1_INITIAL = ("initial_pose_x", "initial_pose_y", "initial_pose_a", "initial_cov_xx", "initial_cov_yy",
                  "initial_cov_aa")
-# Parameter names only ROS 1 amcl has (Nav2 renamed them): a tree with them is a ROS 1 amcl configuration.
+# Parameter names only ROS 1 amcl has (Nav2 renamed them): a flat tree with them is a ROS 1 amcl configuration.
 _ROS1_ONLY = frozenset({"odom_model_type", *_ROS1_TO_NAV2})
+# Every name a ROS 1 amcl tree may hold: under an ``amcl`` key any of them marks it as one.
+_ROS1_KNOWN = frozenset({*ROS1_AMCL_DEFAULTS, *_ROS1_NO_EFFECT_OFFLINE, *_ROS1_INITIAL, *_FRAMES,
+                         "beam_skip_error_threshold_"})
+# The start's covariance when the node is given none (amcl_node.cpp updatePoseFromServer): 0.5 m, 15°.
+_ROS1_INITIAL_COV = {"initial_cov_xx": 0.25, "initial_cov_yy": 0.25, "initial_cov_aa": (math.pi / 12.0) ** 2}
 
 
 def ros1_amcl_parameters(tree: Mapping[str, Any]) -> dict[str, Any] | None:
     """The ROS 1 amcl parameters of a YAML tree, or None when it holds none: flat (a ``<rosparam>`` file loaded
-    into the node), under an ``amcl`` key, or under ``NAMESPACE: {amcl: ...}`` (``rosparam dump``).
+    into the node, told by a name only ROS 1 has), under an ``amcl`` key, or under ``NAMESPACE: {amcl: ...}``
+    (``rosparam dump``).
 
     Raises:
         ConfigError: more than one ``amcl`` mapping holds ROS 1 names.
@@ -136,29 +145,60 @@ def ros1_amcl_parameters(tree: Mapping[str, Any]) -> dict[str, Any] | None:
         if not isinstance(value, Mapping):
             continue
         inner = [value] if key == AMCL_NODE else [v for k, v in value.items() if k == AMCL_NODE]
-        found += [m for m in inner if isinstance(m, Mapping) and set(m) & _ROS1_ONLY]
+        found += [m for m in inner if isinstance(m, Mapping) and set(m) & _ROS1_KNOWN]
     if len(found) > 1:
         raise ConfigError("more than one set of ROS 1 amcl parameters in one file; keep one")
     return dict(found[0]) if found else None
 
 
+def _roscpp_value(name: str, value: Any, default: Any) -> tuple[Any, str | None]:
+    """``value`` as amcl_node's ``private_nh_.param(name, x, default)`` takes it (roscpp): a double from an int or
+    a double, an int from an int or a rounded double, a bool from a bool only, a string from a string; else the
+    default, with a warning."""
+    if isinstance(default, bool):
+        ok = isinstance(value, bool)
+    elif isinstance(default, float):
+        ok = isinstance(value, int | float) and not isinstance(value, bool)
+        value = float(value) if ok else value
+    elif isinstance(default, int):
+        ok = isinstance(value, int | float) and not isinstance(value, bool)
+        value = round(value) if ok else value
+    else:
+        ok = isinstance(value, str)
+    if ok:
+        return value, None
+    return default, (f"amcl {name}: {value!r} is not a {type(default).__name__}; amcl_node ignores it and runs with "
+                     f"its default {default!r}")
+
+
 def translate_ros1_amcl_parameters(params: Mapping[str, Any], source: str = "config") -> AmclTranslation:
     """Map ROS 1 amcl parameters onto doorbatch's ``localize``, ``frames`` and ``topics`` (module docstring):
-    renamed onto Nav2's names, with ROS 1's defaults for what ``params`` leaves out, then
-    :func:`translate_amcl_parameters`. ``scan_topic`` (not a ROS 1 parameter): where a launch file remapped the
+    typed as roscpp reads them, renamed onto Nav2's names with ROS 1's defaults for what ``params`` leaves out,
+    then :func:`translate_amcl_parameters`. ``scan_topic`` (not a ROS 1 parameter): where a launch file sends the
     node's ``scan``.
 
     Raises:
-        ConfigError: an unknown ``odom_model_type``, or what :func:`translate_amcl_parameters` refuses.
+        ConfigError: an unknown ``odom_model_type``, a start covariance that is not positive, or what
+            :func:`translate_amcl_parameters` refuses.
     """
     given = dict(params)
-    merged = {**ROS1_AMCL_DEFAULTS, **{k: v for k, v in given.items() if k in ROS1_AMCL_DEFAULTS}}
+    warnings: list[str] = []
+    if "beam_skip_error_threshold_" in given:  # amcl_node reads this name first (its cfg's, bug #790)
+        given["beam_skip_error_threshold"] = given.pop("beam_skip_error_threshold_")
+    if "restore_defaults" in given:  # only dynamic_reconfigure writes it: a dump of a running node
+        warnings.append("a parameter dump of a running amcl: dynamic_reconfigure wrote its own defaults for what "
+                        "was not set (recovery_alpha_slow/fast 0, not the 0.001 / 0.1 the node ran with; "
+                        "beam_skip_error_threshold_ 0.3, not 0.9); check those values")
+    merged = dict(ROS1_AMCL_DEFAULTS)
+    for name in given.keys() & ROS1_AMCL_DEFAULTS.keys():
+        merged[name], note = _roscpp_value(name, given[name], ROS1_AMCL_DEFAULTS[name])
+        warnings += [note] if note else []
     odom_model = str(merged.pop("odom_model_type"))
     if odom_model not in _ROS1_ODOM_MODELS:
         raise ConfigError(f"{source}: amcl odom_model_type {odom_model!r}: expected one of "
                           f"{', '.join(_ROS1_ODOM_MODELS)}")
     robot_model, sums_as_std, swap = _ROS1_ODOM_MODELS[odom_model]
-    selective = merged.pop("selective_resampling") is True
+    selective = merged.pop("selective_resampling")
     nav2 = {_ROS1_TO_NAV2.get(k, k): v for k, v in merged.items()}
     if swap:
         nav2["alpha1"], nav2["alpha4"] = nav2["alpha4"], nav2["alpha1"]
@@ -168,24 +208,41 @@ def translate_ros1_amcl_parameters(params: Mapping[str, Any], source: str = "con
         nav2["scan_topic"] = given["scan_topic"]
     core = translate_amcl_parameters(nav2, source)
     localize = dict(core.tree["localize"], alpha_sums_as_std=sums_as_std)
-    if selective:
-        localize["resample_neff_ratio"] = 0.5  # pf_update_resample: only when Neff < N/2
-    warnings = list(core.warnings)
-    try:
-        initial = {k: float(given[k]) for k in _ROS1_INITIAL if k in given}
-    except (TypeError, ValueError) as err:
-        raise ConfigError(f"{source}: amcl initial_pose_* and initial_cov_* must be numbers ({err})") from err
-    if any(k in initial for k in ("initial_cov_xx", "initial_cov_yy")):
-        cov_xy = (initial.get("initial_cov_xx", 0.25) + initial.get("initial_cov_yy", 0.25)) / 2.0  # node: 0.5²
-        localize["init_sigma_xy_m"] = math.sqrt(cov_xy)
-    if "initial_cov_aa" in initial:
-        localize["init_sigma_yaw_deg"] = math.degrees(math.sqrt(initial["initial_cov_aa"]))
-    if any(k in initial for k in _ROS1_INITIAL[:3]):
+    if selective:  # pf_update_resample: only when Neff < N/2, and no random particles when it does not
+        localize.update(resample_neff_ratio=0.5, neff_test_gates_recovery=True)
+    warnings += core.warnings
+    initial = _ros1_start(given, source, warnings)
+    localize["init_sigma_xy_m"] = math.sqrt((initial["initial_cov_xx"] + initial["initial_cov_yy"]) / 2.0)
+    localize["init_sigma_yaw_deg"] = math.degrees(math.sqrt(initial["initial_cov_aa"]))
+    if any(k in given for k in _ROS1_INITIAL[:3]):
         x, y, yaw = (initial.get(k, 0.0) for k in _ROS1_INITIAL[:3])
         warnings.append(_start_hint("initial_pose_x/y/a", x, y, yaw))
-    warnings += _unknown(given, set(ROS1_AMCL_DEFAULTS) | _ROS1_NO_EFFECT_OFFLINE | set(_ROS1_INITIAL))
+    warnings += _unknown(given, set(_ROS1_KNOWN))
     tree = dict(core.tree, localize=localize)
     return AmclTranslation(tree, warnings, sorted(k for k in given if k in _ROS1_NO_EFFECT_OFFLINE))
+
+
+def _ros1_start(given: Mapping[str, Any], source: str, warnings: list[str]) -> dict[str, float]:
+    """initial_pose_* and initial_cov_* as amcl_node takes them: the covariances' defaults (0.5 m, 15°) where
+    not given, a NaN ignored with a warning (as the node does).
+
+    Raises:
+        ConfigError: a value that is not a number, or a covariance that is not positive.
+    """
+    out = dict(_ROS1_INITIAL_COV)
+    for name in _ROS1_INITIAL:
+        if name not in given:
+            continue
+        value = given[name]
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ConfigError(f"{source}: amcl {name} must be a number, got {value!r}")
+        if math.isnan(value):
+            warnings.append(f"amcl {name} is NaN: ignored, as amcl_node does")
+            continue
+        if name.startswith("initial_cov") and value <= 0.0:
+            raise ConfigError(f"{source}: amcl {name} must be positive here (a start spread), got {value!r}")
+        out[name] = float(value)
+    return out
 
 
 def is_ros2_parameter_file(tree: Mapping[str, Any]) -> bool:
@@ -259,7 +316,7 @@ def translate_amcl_parameters(params: Mapping[str, Any], source: str = "config")
     if laser_model == "likelihood_field":
         localize.update(beam_combination="amcl", do_beamskip=False)
         if given.get("do_beamskip") is True:
-            warnings.append("amcl do_beamskip: true has no effect with laser_model_type likelihood_field (nav2_amcl "
+            warnings.append("amcl do_beamskip: true has no effect with laser_model_type likelihood_field (AMCL "
                             "skips beams only in likelihood_field_prob); beams are not skipped")
     elif laser_model == "likelihood_field_prob":
         localize.update(beam_combination="product", do_beamskip=merged["do_beamskip"])

@@ -481,6 +481,9 @@ class LocalizeConfig(Section):
     # Random-particle recovery (Nav2 recovery_alpha_slow/fast; 0 disables).
     recovery_alpha_slow: float = Field(0.0, ge=0.0, le=1.0)
     recovery_alpha_fast: float = Field(0.0, ge=0.0, le=1.0)
+    # ROS 1 amcl's selective_resampling: when the Neff test says no, nothing is resampled and no random particles
+    # come in (pf.c returns before its recovery test). false: recovery resamples whenever it injects.
+    neff_test_gates_recovery: bool = False
     # Filter update thresholds (Nav2 update_min_d / update_min_a).
     update_min_d: float = Field(0.1, ge=0.0)  # m
     update_min_a: float = Field(0.1, ge=0.0)  # rad
@@ -920,17 +923,19 @@ def _explain(err: ValidationError, source: str) -> ConfigError:
 
 
 def _ros1_launch_tree(path: Path) -> dict[str, Any]:
-    """A ROS 1 launch file's amcl node as a ROS 1 amcl tree (``{amcl: params}``); ``<remap from="scan">`` becomes
-    its ``scan_topic``. Values the file alone cannot resolve are left out, with a warning."""
+    """The doorbatch tree of a ROS 1 launch file's amcl node (:func:`translate_ros1_amcl_parameters`): its private
+    parameters, and its ``scan`` as the node resolves it (namespace, remaps) where that is not ``/scan``. Values
+    the file alone cannot resolve are left out, with a warning."""
     node = read_launch_node(path, AMCL_NODE)
     if node.unresolved:
-        log.warning("%s: amcl parameter(s) left out, their values need ROS: %s", path, "; ".join(node.unresolved))
+        log.warning("%s: left out, needs ROS: %s", path, "; ".join(node.unresolved))
+    for note in node.notes:
+        log.info("%s: %s", path, note)
     params = dict(node.params)
-    scan = node.remaps.get("scan", node.remaps.get("/scan"))
-    if scan is not None:
+    scan = node.resolve("scan")
+    if scan != "/scan":
         params["scan_topic"] = scan
-    params.setdefault("odom_model_type", "diff")  # marks the tree as ROS 1 amcl's even when the file sets nothing
-    return {AMCL_NODE: params}
+    return logged(translate_ros1_amcl_parameters(params, str(path)), str(path), "ROS 1 amcl").tree
 
 
 def load_config(
@@ -957,12 +962,13 @@ def load_config(
         own = {k: v for k, v in tree.items() if k in DoorbatchConfig.model_fields}
         if is_ros2_parameter_file(tree):  # a Nav2 params file: its amcl node, and any doorbatch sections over it
             tree = deep_merge(translate_ros2_parameter_file(tree, source).tree, own)
-        else:
+        elif not is_launch_file(config_file):
             try:
                 ros1 = ros1_amcl_parameters(tree)
             except ConfigError as err:
                 raise ConfigError(f"{source}: {err}") from err
-            if ros1 is not None:  # a ROS 1 amcl file (or launch file): translated, doorbatch sections over it
+            if ros1 is not None:  # a ROS 1 amcl file: translated, doorbatch sections over it
+                ros1 = {k: v for k, v in ros1.items() if k not in own}
                 tree = deep_merge(logged(translate_ros1_amcl_parameters(ros1, source), source, "ROS 1 amcl").tree, own)
     overrides = list(overrides)
     if extra:

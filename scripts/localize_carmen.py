@@ -95,7 +95,8 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=7, help="drift seed (scripts/scanmatch_acceptance.py's default)")
     ap.add_argument("--filter-seed", type=int, default=0)
     ap.add_argument("--logs", nargs="+", default=["orebro", "intel", "aces"])
-    ap.add_argument("--config", type=Path, default=None, help="config file (YAML, or a Nav2 parameter file)")
+    ap.add_argument("--config", type=Path, default=None,
+        help="config file (YAML, or an AMCL parameter file: Nav2, ROS 1, a ROS 1 launch file)")
     ap.add_argument("--set", dest="overrides", action="append", default=[], help="config override key=value")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:

@@ -152,16 +152,52 @@ def test_ros1_odometry_models(tmp_path: Path, model: str, robot: str, as_std: bo
     assert (lc.alpha1, lc.alpha4) == ((0.4, 0.1) if swapped else (0.1, 0.4)) and lc.alpha5 == 0.05
 
 
-def test_selective_resampling_and_the_initial_covariance(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+def test_selective_resampling_and_the_start(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
     text = ("odom_model_type: diff-corrected\nselective_resampling: true\ninitial_pose_x: 2.0\n"
             "initial_pose_a: 1.0\ninitial_cov_xx: 0.09\ninitial_cov_yy: 0.01\ninitial_cov_aa: 0.04\n"
-            "gui_publish_rate: 10.0\nsome_new_knob: 1\n")
+            "gui_publish_rate: 10.0\nsome_new_knob: 1\nbeam_skip_error_threshold_: 0.5\n"
+            "localize:\n  method: mcl\n")
     with caplog.at_level(logging.WARNING, logger="doorbatch"):
         lc = _load(tmp_path, text).localize
-    assert lc.resample_neff_ratio == 0.5  # pf_update_resample: only when Neff < N/2
+    # pf_update_resample: only when Neff < N/2, and then no random particles either
+    assert lc.resample_neff_ratio == 0.5 and lc.neff_test_gates_recovery
     assert lc.init_sigma_xy_m == pytest.approx(math.sqrt(0.05))
     assert lc.init_sigma_yaw_deg == pytest.approx(math.degrees(0.2))
+    assert lc.beam_skip_error_threshold == 0.5  # the name with the underscore, which amcl_node reads first
+    assert lc.method == "mcl"  # a doorbatch section in the same file, not an unknown amcl parameter
     assert "--init 2,0,1" in caplog.text and "some_new_knob" in caplog.text and "gui_publish_rate" not in caplog.text
+    assert "localize" not in caplog.text
+
+
+def test_the_start_spread_takes_amcl_nodes_defaults(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    lc = _load(tmp_path, "odom_alpha1: 0.1\n").localize
+    assert (lc.init_sigma_xy_m, lc.init_sigma_yaw_deg) == pytest.approx((0.5, 15.0))  # 0.5², (π/12)²
+    assert not lc.neff_test_gates_recovery
+    with caplog.at_level(logging.WARNING, logger="doorbatch"):
+        lc = _load(tmp_path, "odom_alpha1: 0.1\ninitial_cov_aa: .nan\n").localize
+    assert lc.init_sigma_yaw_deg == pytest.approx(15.0) and "NaN" in caplog.text
+    with pytest.raises(ConfigError, match="initial_cov_xx must be positive"):
+        _load(tmp_path, "odom_alpha1: 0.1\ninitial_cov_xx: -0.1\n")
+
+
+def test_values_roscpp_would_not_read_leave_amcls_defaults(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """amcl_node reads its parameters with roscpp's typed param(): a bool from an int, or a number from a string,
+    is rejected and the default runs; an int from a double is rounded."""
+    text = "odom_alpha1: 0.1\ndo_beamskip: 1\nkld_err: '5e-2'\nlaser_max_beams: 60.4\n"
+    with caplog.at_level(logging.WARNING, logger="doorbatch"):
+        lc = _load(tmp_path, text + "laser_model_type: likelihood_field_prob\n").localize
+    assert not lc.do_beamskip and lc.pf_err == 0.01 and lc.max_beams == 60
+    assert "do_beamskip" in caplog.text and "kld_err" in caplog.text and "laser_max_beams" not in caplog.text
+
+
+def test_a_rosparam_dump_of_a_running_node(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """``rosparam dump`` after dynamic_reconfigure started: its own defaults for what was not set are in the dump,
+    with ``restore_defaults``; names Nav2 shares are enough under ``amcl``."""
+    with caplog.at_level(logging.WARNING, logger="doorbatch"):
+        lc = _load(tmp_path, "amcl:\n  min_particles: 300\n  recovery_alpha_slow: 0.0\n  restore_defaults: false\n"
+                   ).localize
+    assert lc.min_particles == 300 and lc.z_hit == 0.95 and lc.recovery_alpha_slow == 0.0
+    assert "dynamic_reconfigure" in caplog.text
 
 
 LAUNCH = """<launch>
@@ -169,51 +205,81 @@ LAUNCH = """<launch>
   <arg name="use_omni" default="false"/>
   <arg name="x0" default="1.5"/>
   <node pkg="map_server" type="map_server" name="map_server" args="$(find my_robot)/maps/office.yaml"/>
+  <param name="/robot1/amcl/laser_sigma_hit" value="0.15"/>
   <group ns="robot1">
+    <arg name="x0" value="2.5"/>
     <node pkg="amcl" type="amcl" name="amcl">
       <remap from="scan" to="$(arg scan_topic)"/>
       <param name="odom_model_type" value="omni-corrected" if="$(arg use_omni)"/>
       <param name="odom_model_type" value="diff-corrected" unless="$(arg use_omni)"/>
       <param name="odom_alpha3" value="0.3"/>
       <param name="laser_max_beams" value="90" type="int"/>
+      <param name="selective_resampling" value="1" type="bool"/>
       <param name="base_frame_id" value="base_footprint"/>
       <param name="use_map_topic" value="true"/>
       <param name="initial_pose_x" value="$(arg x0)"/>
       <param name="min_particles" value="$(eval 100 * 2)"/>
+      <param name="do_beamskip" value="true" if="$(eval arg('use_omni'))"/>
       <rosparam>
         kld_err: 0.02
         laser_z_rand: 0.3
       </rosparam>
+      <rosparam param="laser_likelihood_max_dist">1.5</rosparam>
+      <rosparam ns="unused">
+        kld_z: 0.5
+      </rosparam>
       <rosparam file="$(find my_robot)/config/amcl_extra.yaml" command="load"/>
     </node>
+    <group ns="amcl">
+      <param name="update_min_d" value="0.05"/>
+    </group>
   </group>
+  <param name="robot1/amcl/max_particles" value="4000"/>
 </launch>
 """
 
 
-def test_a_ros1_launch_file_sets_the_node_as_roslaunch_would(tmp_path: Path,
-                                                            caplog: pytest.LogCaptureFixture) -> None:
+def _package(root: Path) -> None:
+    """A catkin package my_robot with an amcl YAML, for $(find my_robot)."""
+    (root / "src" / "my_robot" / "config").mkdir(parents=True)
+    (root / "src" / "my_robot" / "package.xml").write_text("<package><name>my_robot</name></package>\n")
+    (root / "src" / "my_robot" / "config" / "amcl_extra.yaml").write_text("odom_alpha4: 0.05\nkld_err: 0.03\n")
+
+
+def test_a_ros1_launch_file_sets_the_node_as_roslaunch_would(tmp_path: Path, caplog: pytest.LogCaptureFixture,
+                                                            monkeypatch: pytest.MonkeyPatch) -> None:
     path = tmp_path / "amcl.launch"
     path.write_text(LAUNCH)
+    _package(tmp_path / "ws")
+    monkeypatch.setenv("ROS_PACKAGE_PATH", str(tmp_path / "ws" / "src"))
     with caplog.at_level(logging.WARNING, logger="doorbatch"):
         config = load_config(path)
     lc = config.localize
     assert lc.robot_model_type == "differential" and not lc.alpha_sums_as_std  # unless= chose diff-corrected
-    assert (lc.alpha3, lc.max_beams, lc.pf_err, lc.z_rand) == (0.3, 90, 0.02, 0.3)  # param, typed, <rosparam> text
-    assert lc.z_hit == 0.95 and lc.max_particles == 5000  # ROS 1 defaults for what the file leaves out
-    assert config.topics.scan == "/base_scan" and config.frames.base_link == "base_footprint"
-    # what needs a ROS installation is left out and said: min_particles ($(eval)) and the $(find) rosparam file
-    assert lc.min_particles == 100
-    assert "min_particles" in caplog.text and "amcl_extra.yaml" in caplog.text and "--init 1.5,0,0" in caplog.text
+    assert (lc.alpha3, lc.max_beams, lc.z_rand) == (0.3, 90, 0.3)  # <param>, typed, <rosparam> text
+    assert lc.neff_test_gates_recovery  # type="bool" value="1" is true
+    assert (lc.alpha4, lc.pf_err) == (0.05, 0.03)  # the $(find) file, loaded after the text: it wins
+    assert lc.laser_likelihood_max_dist == 1.5 and lc.pf_z == 0.99  # param= sets one name; ns= another node's
+    # set outside the node, under its resolved name /robot1/amcl: from the top, and from a group ns="amcl"
+    assert (lc.sigma_hit, lc.max_particles, lc.update_min_d) == (0.15, 4000, 0.05)
+    assert lc.z_hit == 0.95  # ROS 1's default for what the file leaves out
+    assert config.topics.scan == "/robot1/base_scan"  # the remap, in the node's namespace
+    assert config.frames.base_link == "base_footprint"
+    # what needs roslaunch itself is left out and said: min_particles ($(eval)), an if= with $(eval)
+    assert lc.min_particles == 100 and not lc.do_beamskip
+    assert "min_particles" in caplog.text and "do_beamskip" in caplog.text
+    assert "--init 2.5,0,0" in caplog.text  # the group's own x0
     with_omni = tmp_path / "omni.launch"
     with_omni.write_text(LAUNCH.replace('name="use_omni" default="false"', 'name="use_omni" default="true"'))
     assert load_config(with_omni).localize.robot_model_type == "omnidirectional"
 
 
 def test_the_shipped_ros1_launch_example_reads() -> None:
-    lc = load_config(REPO / "configs" / "amcl_ros1.example.launch").localize
+    config = load_config(REPO / "configs" / "amcl_ros1.example.launch")
+    lc = config.localize
     assert (lc.alpha1, lc.alpha3, lc.alpha5, lc.z_hit, lc.max_particles) == (0.2, 0.2, 0.1, 0.5, 3000)
     assert lc.alpha_sums_as_std and lc.resample_interval == 1
+    assert config.topics.scan is None  # scan remapped to scan: the log's own scan topic
 
 
 @pytest.mark.parametrize(("text", "message"), [
@@ -222,6 +288,11 @@ def test_the_shipped_ros1_launch_example_reads() -> None:
     ("<launch><node pkg='amcl' type='amcl' name='amcl'>", "not a valid launch file"),
     ("<launch><node type='amcl' name='amcl'><param name='kld_err' value='x' type='double'/></node></launch>",
      "kld_err"),
+    ("<launch><node type='amcl' name='amcl'><param name='kld_err' value='1' type='float'/></node></launch>",
+     "unknown type"),
+    ("<launch><node type='amcl' name='amcl'><rosparam file='$(find nowhere_pkg)/amcl.yaml'/></node></launch>",
+     "ROS_PACKAGE_PATH"),
+    ("<launch><node type='amcl' name='amcl'><rosparam>[1, 2]</rosparam></node></launch>", "mapping"),
 ])
 def test_launch_files_that_cannot_be_read_are_config_errors(tmp_path: Path, text: str, message: str) -> None:
     path = tmp_path / "bad.launch"

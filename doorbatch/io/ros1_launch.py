@@ -1,15 +1,21 @@
 """The parameters a ROS 1 launch file (roslaunch XML) gives one node, e.g. amcl's, read with the standard library.
 
-roslaunch's rules, as far as a file alone decides them:
+roslaunch's rules (``roslaunch/loader.py``, ``xmlloader.py``), as far as a file alone decides them:
 
-- ``<arg name=... default=... | value=...>`` anywhere before use, and ``$(arg NAME)`` in attributes and text;
-  ``$(env VAR)`` / ``$(optenv VAR DEFAULT)`` from the environment, ``$(dirname)`` as the file's folder. ``$(find
-  PKG)``, ``$(eval ...)`` and the others need a ROS installation: a value holding one is *unresolved* (reported,
-  not guessed).
-- In the ``<node>`` whose ``type`` is asked for: ``<param name value [type]>`` (no ``type``: ``true``/``false`` is a
-  bool, then int, then float, else the string, as roslaunch does), ``<rosparam>`` with YAML text or
-  ``file=...`` (``command="load"``; later ones win), and ``<remap from to>``.
-- ``<group>`` blocks are entered (their ``if``/``unless`` honoured when they resolve); ``<include>`` is not followed.
+- Every ``<param>`` and ``<rosparam>`` of the file lands on the parameter server under its resolved name: relative
+  names join the enclosing ``<group ns>`` (and ``<rosparam ns>``), ``/`` names are global, and inside a ``<node>``
+  names are the node's private ones (``/NS/NODE/name``). The node reads ``/NS/NODE/*``, wherever in the file
+  they were set; the last setting wins.
+- ``<param value type>``: roslaunch's ``convert_value`` (no type: a float when the text holds a ``.``, else an int,
+  else ``true``/``false``, else the string). ``<rosparam>``: YAML from its text or ``file``, under ``param`` /
+  ``ns``; ``subst_value`` substitutes its text.
+- ``<arg name default|value>``: scoped, a ``<group>`` works on a copy; ``$(arg NAME)``, ``$(env VAR)``,
+  ``$(optenv VAR DEFAULT)``, ``$(dirname)``, and ``$(find PKG)`` by ``ROS_PACKAGE_PATH`` (a folder holding the
+  ``package.xml`` of that name). ``$(eval ...)``, ``$(anon ...)`` need roslaunch itself: such a value is
+  *unresolved* (reported, never guessed), and so is an ``if``/``unless`` that does not resolve (its element is
+  left out). No ``name:=value`` args can be passed: their defaults stand.
+- ``<remap from to>`` inside the node, or before it in an enclosing scope, resolved against the node's namespace.
+- ``<include>`` is not followed.
 """
 
 from __future__ import annotations
@@ -19,6 +25,7 @@ import os
 import re
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
+from functools import cache
 from pathlib import Path
 from typing import Any
 
@@ -27,83 +34,241 @@ import yaml
 from doorbatch.errors import ConfigError
 
 _SUBSTITUTION = re.compile(r"\$\((\w+)(?:\s+([^)]*))?\)")
+_PACKAGE_NAME = re.compile(rb"<name>\s*([^<\s]+)\s*</name>")
 
 
 class _UnresolvedError(Exception):
-    """A substitution that needs a ROS installation (``$(find ...)``, ``$(eval ...)``) or an unknown arg."""
+    """A substitution only roslaunch or a ROS installation can resolve, or an unknown arg."""
 
 
 @dataclass(frozen=True)
 class LaunchNode:
-    """One node's parameters as its launch file gives them."""
+    """One node as its launch file sets it up."""
 
-    name: str
-    params: dict[str, Any] = field(default_factory=dict)
-    remaps: dict[str, str] = field(default_factory=dict)
-    unresolved: list[str] = field(default_factory=list)  # parameter names (or rosparam files) left out, and why
+    name: str  # resolved, e.g. /robot1/amcl
+    params: dict[str, Any] = field(default_factory=dict)  # its private parameters, names relative to it
+    remaps: dict[str, str] = field(default_factory=dict)  # resolved name → resolved name
+    unresolved: list[str] = field(default_factory=list)  # what was left out, and why
+    notes: list[str] = field(default_factory=list)  # values taken from this machine's environment
 
-
-def _substitute(text: str, args: dict[str, str], folder: Path) -> str:
-    def one(match: re.Match[str]) -> str:
-        kind, rest = match.group(1), (match.group(2) or "").strip()
-        if kind == "arg":
-            if rest not in args:
-                raise _UnresolvedError(f"$(arg {rest}) has no value")
-            return args[rest]
-        if kind == "env":
-            if rest not in os.environ:
-                raise _UnresolvedError(f"$(env {rest}) is not set")
-            return os.environ[rest]
-        if kind == "optenv":
-            name, _, default = rest.partition(" ")
-            return os.environ.get(name, default)
-        if kind == "dirname":
-            return str(folder)
-        raise _UnresolvedError(f"$({kind} ...) needs a ROS installation")
-
-    return _SUBSTITUTION.sub(one, text)
+    def resolve(self, name: str) -> str:
+        """The topic the node gets when it asks for ``name`` (relative to its namespace), after remapping."""
+        full = _join(self.name.rsplit("/", 1)[0] + "/", name)
+        return self.remaps.get(full, full)
 
 
-def _typed(value: str, kind: str | None) -> Any:
-    """A ``<param>`` value as roslaunch types it."""
+@dataclass
+class _Scope:
+    ns: str  # "/" or "/robot1/"
+    args: dict[str, str]
+    remaps: dict[str, str]
+
+
+def _join(ns: str, name: str) -> str:
+    """rosgraph.names: a global name as it is, a relative one under ``ns`` (which ends with ``/``)."""
+    name = name.strip()
+    return name if name.startswith("/") else ns + name
+
+
+def _ns(ns: str, name: str | None) -> str:
+    """The namespace ``name`` (relative to ``ns``) with a trailing ``/``."""
+    return ns if not name else _join(ns, name).rstrip("/") + "/"
+
+
+@cache
+def _packages(roots: str) -> dict[str, Path]:
+    """Package name → folder under the ``ROS_PACKAGE_PATH`` roots (rospack: a package.xml stops the descent)."""
+    found: dict[str, Path] = {}
+    for root in filter(None, roots.split(os.pathsep)):
+        for folder, dirs, files in os.walk(root):
+            if "package.xml" in files:
+                match = _PACKAGE_NAME.search(Path(folder, "package.xml").read_bytes())
+                found.setdefault(match.group(1).decode() if match else Path(folder).name, Path(folder))
+                dirs.clear()
+    return found
+
+
+class _Reader:
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.folder = path.resolve().parent
+        self.params: dict[str, Any] = {}
+        self.nodes: list[tuple[str, str, dict[str, str]]] = []  # (resolved name, type, remaps in force)
+        self.unresolved: list[str] = []
+        self.notes: list[str] = []
+        self.includes: list[str] = []
+
+    def substitute(self, text: str, scope: _Scope) -> str:
+        def one(match: re.Match[str]) -> str:
+            kind, rest = match.group(1), (match.group(2) or "").strip()
+            if kind == "arg":
+                if rest not in scope.args:
+                    raise _UnresolvedError(f"$(arg {rest}) has no value")
+                return scope.args[rest]
+            if kind in ("env", "optenv"):
+                name, _, default = rest.partition(" ")
+                if name not in os.environ and kind == "env":
+                    raise _UnresolvedError(f"$(env {name}) is not set")
+                self.notes.append(f"$({kind} {name}) taken from this machine's environment")
+                return os.environ.get(name, default)
+            if kind == "dirname":
+                return str(self.folder)
+            if kind == "find":
+                package = _packages(os.environ.get("ROS_PACKAGE_PATH", "")).get(rest)
+                if package is None:
+                    raise _UnresolvedError(f"$(find {rest}) needs ROS_PACKAGE_PATH to hold package {rest!r}")
+                return str(package)
+            raise _UnresolvedError(f"$({kind} ...) needs roslaunch")
+
+        return _SUBSTITUTION.sub(one, text)
+
+    def enabled(self, element: ET.Element, scope: _Scope) -> bool:
+        """roslaunch's ``if`` / ``unless`` (true/1, false/0); one that does not resolve leaves the element out."""
+        for attribute, want in (("if", True), ("unless", False)):
+            raw = element.get(attribute)
+            if raw is None:
+                continue
+            try:
+                value = self.substitute(raw, scope).strip().lower()
+            except _UnresolvedError as why:
+                self.unresolved.append(f"<{element.tag} {element.get('name') or ''}> left out: {attribute}= {why}")
+                return False
+            if value not in ("true", "1", "false", "0"):
+                raise ConfigError(f"{self.path}: {attribute}={raw!r} is {value!r}, not true/false/1/0")
+            if (value in ("true", "1")) != want:
+                return False
+        return True
+
+    def walk(self, parent: ET.Element, scope: _Scope, node: str | None = None) -> None:
+        """Every element of ``parent`` in order; ``node``: the private namespace inside a ``<node>``."""
+        base = node or scope.ns
+        for element in parent:
+            if not self.enabled(element, scope):
+                continue
+            try:
+                self.element(element, scope, base, node)
+            except _UnresolvedError as why:
+                label = element.get("name") or element.get("param") or element.get("file") or element.tag
+                self.unresolved.append(f"{label} ({why})")
+
+    def element(self, element: ET.Element, scope: _Scope, base: str, node: str | None) -> None:
+        tag = element.tag
+        if tag == "arg" and node is None:
+            raw = element.get("value", element.get("default"))
+            if raw is not None:
+                with contextlib.suppress(_UnresolvedError):  # its uses are reported where they fail
+                    scope.args[element.get("name", "")] = self.substitute(raw, scope)
+        elif tag == "group" and node is None:
+            self.walk(element, _Scope(_ns(scope.ns, element.get("ns")), dict(scope.args), dict(scope.remaps)))
+        elif tag == "include" and node is None:
+            self.includes.append(element.get("file", "?"))
+        elif tag == "node" and node is None:
+            node_ns = _ns(scope.ns, element.get("ns"))
+            name = node_ns + element.get("name", element.get("type", ""))
+            inner = _Scope(node_ns, scope.args, dict(scope.remaps))
+            self.walk(element, inner, name + "/")
+            self.nodes.append((name, element.get("type", ""), inner.remaps))
+        elif tag == "remap" and element.get("from") and element.get("to"):
+            source, target = (self.substitute(element.get(k, ""), scope) for k in ("from", "to"))
+            scope.remaps[_join(scope.ns, source)] = _join(scope.ns, target)
+        elif tag == "param" and element.get("name"):
+            self.param(element, scope, base)
+        elif tag == "rosparam" and element.get("command", "load") == "load":
+            self.rosparam(element, scope, base)
+
+    def param(self, element: ET.Element, scope: _Scope, base: str) -> None:
+        name = _join(base, self.substitute(element.get("name", ""), scope))
+        if element.get("value") is not None:
+            text = self.substitute(element.get("value", ""), scope)
+        elif element.get("textfile") is not None:
+            text = self.read(self.substitute(element.get("textfile", ""), scope), element)
+        else:
+            raise _UnresolvedError("command= and binfile= need roslaunch")
+        try:
+            self.params[name] = convert_value(text, element.get("type", "auto"))
+        except ValueError as err:
+            raise ConfigError(f"{self.path}: <param name=\"{element.get('name')}\">: {err}") from err
+
+    def rosparam(self, element: ET.Element, scope: _Scope, base: str) -> None:
+        where = _ns(base, self.substitute(element.get("ns", ""), scope) or None)
+        file = element.get("file")
+        if file is not None:
+            try:
+                text = self.read(self.substitute(file, scope), element)
+            except _UnresolvedError as why:
+                raise ConfigError(f"{self.path}: <rosparam file=\"{file}\">: {why}; set it, or give that YAML file "
+                                  "as --config") from None
+        else:
+            text = element.text or ""
+            if element.get("subst_value", "false").lower() in ("true", "1"):
+                text = self.substitute(text, scope)
+        try:
+            data = yaml.safe_load(text)
+        except yaml.YAMLError as err:
+            raise ConfigError(f"{self.path}: <rosparam>: not valid YAML: {' '.join(str(err).split())}") from err
+        key = element.get("param")
+        if key:
+            self.store(_join(where, self.substitute(key, scope)), data)
+        elif isinstance(data, dict):
+            for k, v in data.items():
+                self.store(_join(where, str(k)), v)
+        elif data is not None:
+            raise ConfigError(f"{self.path}: <rosparam> without param= must hold a mapping, got "
+                              f"{type(data).__name__}")
+
+    def store(self, name: str, value: Any) -> None:
+        """A value on the server; a mapping sets one parameter per leaf (``rosparam load``)."""
+        if isinstance(value, dict):
+            for k, v in value.items():
+                self.store(f"{name}/{k}", v)
+        else:
+            self.params[name] = value
+
+    def read(self, name: str, element: ET.Element) -> str:
+        """A file a launch element names: relative names from the working folder (roslaunch), else the file's."""
+        candidates = [Path(name)] if Path(name).is_absolute() else [Path.cwd() / name, self.folder / name]
+        for candidate in candidates:
+            with contextlib.suppress(OSError):
+                return candidate.read_text()
+        raise ConfigError(f"{self.path}: <{element.tag}> cannot read {name}")
+
+
+def convert_value(value: str, kind: str) -> Any:
+    """A ``<param>`` value as roslaunch's ``convert_value`` types it.
+
+    Raises:
+        ValueError: the text is not of the type, or the type is unknown.
+    """
+    kind = kind.lower()
+    if kind == "auto":
+        with contextlib.suppress(ValueError):
+            return float(value) if "." in value else int(value)
+        return value.lower() == "true" if value.lower() in ("true", "false") else value
     if kind in ("str", "string"):
         return value
+    if kind == "int":
+        return int(value)
+    if kind == "double":
+        return float(value)
+    if kind in ("bool", "boolean"):
+        text = value.strip().lower()
+        if text in ("true", "1", "false", "0"):
+            return text in ("true", "1")
+        raise ValueError(f"{value!r} is not a {kind}")
     if kind == "yaml":
-        return yaml.safe_load(value)
-    text = value.strip()
-    if kind == "bool" or (kind is None and text.lower() in ("true", "false")):
-        return text.lower() == "true"
-    for convert in ((int,) if kind == "int" else (float,) if kind == "double" else (int, float) if kind is None
-                    else ()):
         try:
-            return convert(text)
-        except ValueError:
-            continue
-    if kind in ("int", "double"):
-        raise ValueError(f"{value!r} is not {kind}")
-    return value
-
-
-def _enabled(element: ET.Element, args: dict[str, str], folder: Path) -> bool:
-    """roslaunch's ``if`` / ``unless`` attributes (true/1, false/0); an unresolvable one counts as true."""
-    for attribute, want in (("if", True), ("unless", False)):
-        raw = element.get(attribute)
-        if raw is None:
-            continue
-        try:
-            value = _substitute(raw, args, folder).strip().lower()
-        except _UnresolvedError:
-            continue
-        if (value in ("true", "1")) != want:
-            return False
-    return True
+            return yaml.safe_load(value)
+        except yaml.YAMLError as err:
+            raise ValueError(f"not valid YAML: {' '.join(str(err).split())}") from err
+    raise ValueError(f"unknown type {kind!r}")
 
 
 def read_launch_node(path: Path, node_type: str) -> LaunchNode:
-    """The parameters, remaps and unresolved values of the one node of ``node_type`` in the launch file ``path``.
+    """The private parameters, remaps and unresolved values of the one node of ``node_type`` in ``path``.
 
     Raises:
-        ConfigError: unreadable or not XML; no such node, or more than one; a value of the wrong type.
+        ConfigError: unreadable or not XML; no such node, or more than one; a value of the wrong type; a
+            ``<rosparam file>`` that cannot be found or resolved.
     """
     try:
         root = ET.parse(path).getroot()
@@ -111,86 +276,20 @@ def read_launch_node(path: Path, node_type: str) -> LaunchNode:
         raise ConfigError(f"{path}: cannot read launch file: {err.strerror or err}") from err
     except ET.ParseError as err:
         raise ConfigError(f"{path}: not a valid launch file (XML): {err}") from err
-    folder = path.resolve().parent
-    args: dict[str, str] = {}
-    nodes: list[LaunchNode] = []
-    includes: list[str] = []
-
-    def walk(parent: ET.Element) -> None:
-        for element in parent:
-            if not _enabled(element, args, folder):
-                continue
-            if element.tag == "arg":
-                raw = element.get("value", element.get("default"))
-                if raw is not None and element.get("name") not in args:
-                    with contextlib.suppress(_UnresolvedError):  # roslaunch would fail; its uses are reported
-                        args[element.get("name", "")] = _substitute(raw, args, folder)
-            elif element.tag == "group":
-                walk(element)
-            elif element.tag == "include":
-                includes.append(element.get("file", "?"))
-            elif element.tag == "node" and element.get("type") == node_type:
-                nodes.append(_node(element, args, folder, path))
-
-    walk(root)
-    if not nodes:
-        hint = f"; it includes {', '.join(includes)}: give the file that holds the node" if includes else ""
+    reader = _Reader(path)
+    reader.walk(root, _Scope("/", {}, {}))
+    wanted = [(name, remaps) for name, kind, remaps in reader.nodes if kind == node_type]
+    if not wanted:
+        hint = f"; it includes {', '.join(reader.includes)}: give the file that holds the node" if reader.includes \
+            else ""
         raise ConfigError(f"{path}: no <node type=\"{node_type}\"> in this launch file{hint}")
-    if len(nodes) > 1:
-        raise ConfigError(f"{path}: {len(nodes)} <node type=\"{node_type}\"> ({', '.join(n.name for n in nodes)}); "
+    if len(wanted) > 1:
+        raise ConfigError(f"{path}: {len(wanted)} <node type=\"{node_type}\"> ({', '.join(n for n, _ in wanted)}); "
                           "keep one")
-    return nodes[0]
-
-
-def _node(element: ET.Element, args: dict[str, str], folder: Path, path: Path) -> LaunchNode:
-    params: dict[str, Any] = {}
-    remaps: dict[str, str] = {}
-    unresolved: list[str] = []
-    for child in element:
-        if not _enabled(child, args, folder):
-            continue
-        try:
-            if child.tag == "param" and child.get("name"):
-                raw = child.get("value")
-                if raw is None:
-                    unresolved.append(f"{child.get('name')} (no value attribute)")
-                    continue
-                try:
-                    params[child.get("name", "")] = _typed(_substitute(raw, args, folder), child.get("type"))
-                except ValueError as err:
-                    raise ConfigError(f"{path}: <param name=\"{child.get('name')}\">: {err}") from err
-            elif child.tag == "rosparam" and child.get("command", "load") == "load":
-                params.update(_rosparam(child, args, folder, path))
-            elif child.tag == "remap" and child.get("from") and child.get("to"):
-                source, target = (_substitute(child.get(k, ""), args, folder) for k in ("from", "to"))
-                remaps[source] = target
-        except _UnresolvedError as why:
-            unresolved.append(f"{child.get('name') or child.get('file') or child.get('from') or child.tag} ({why})")
-    return LaunchNode(element.get("name", element.get("type", "")), params, remaps, unresolved)
-
-
-def _rosparam(element: ET.Element, args: dict[str, str], folder: Path, path: Path) -> dict[str, Any]:
-    """A ``<rosparam command="load">``: its file or its text, as a mapping (``param=...`` nests it)."""
-    file = element.get("file")
-    if file is not None:
-        target = Path(_substitute(file, args, folder))
-        target = target if target.is_absolute() else folder / target
-        try:
-            text = target.read_text()
-        except OSError as err:
-            raise ConfigError(f"{path}: <rosparam file=\"{file}\">: cannot read {target}: {err.strerror or err}"
-                              ) from err
-    else:
-        text = _substitute(element.text or "", args, folder) if element.get("subst_value") == "true" else (
-            element.text or "")
-    try:
-        data = yaml.safe_load(text) or {}
-    except yaml.YAMLError as err:
-        raise ConfigError(f"{path}: <rosparam>: not valid YAML: {' '.join(str(err).split())}") from err
-    if not isinstance(data, dict):
-        raise ConfigError(f"{path}: <rosparam>: expected a mapping of parameters, got {type(data).__name__}")
-    name = element.get("param")
-    return {name: data} if name else data
+    name, remaps = wanted[0]
+    prefix = name + "/"
+    params = {k[len(prefix):]: v for k, v in reader.params.items() if k.startswith(prefix)}
+    return LaunchNode(name, params, remaps, reader.unresolved, sorted(set(reader.notes)))
 
 
 def is_launch_file(path: Path) -> bool:

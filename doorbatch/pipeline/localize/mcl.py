@@ -263,7 +263,8 @@ def with_log_weights(particles: ParticleSet, log_weight: npt.ArrayLike) -> Parti
 def resample_if_needed(particles: ParticleSet, config: LocalizeConfig, rng: np.random.Generator,
                        recovery: RecoveryState | None = None, free: FreeCells | None = None,
                        bandwidth: Bandwidth | None = None) -> tuple[ParticleSet, RecoveryState, int]:
-    """KLD-adaptive low-variance resampling when Neff < resample_neff_ratio·N or recovery injects.
+    """KLD-adaptive low-variance resampling when Neff < resample_neff_ratio·N or recovery injects (unless
+    ``neff_test_gates_recovery``: ROS 1 amcl's selective resampling injects only when the Neff test resamples).
 
     With a ``bandwidth`` (global localization) each drawn copy is moved by its source particle's kernel
     (regularized resampling, :func:`~.smoothing.jitter`); injected random particles are not.
@@ -275,8 +276,8 @@ def resample_if_needed(particles: ParticleSet, config: LocalizeConfig, rng: np.r
     n = len(particles)
     recovery = recovery or RecoveryState()
     fraction = recovery.random_fraction() if free is not None else 0.0
-    if not (config.resample_neff_ratio >= 1.0 or particles.neff() < config.resample_neff_ratio * n
-            or fraction > 0.0):
+    neff_says = config.resample_neff_ratio >= 1.0 or particles.neff() < config.resample_neff_ratio * n
+    if not (neff_says or (fraction > 0.0 and not config.neff_test_gates_recovery)):
         return particles, recovery, -1
     draw = kld_resample(particles.pose, particles.weight, rng, min_particles=config.min_particles,
                         max_particles=config.max_particles, pf_err=config.pf_err, pf_z=config.pf_z,

@@ -42,6 +42,7 @@ from doorbatch.pipeline.localize.mcl import (
     weigh,
 )
 from doorbatch.pipeline.localize.particles import ParticleSet
+from doorbatch.pipeline.localize.resampling import RecoveryState
 from doorbatch.records import Scan
 from doorbatch.sim.motion import OdometryNoise, drift_poses
 
@@ -114,6 +115,20 @@ def test_resampling_waits_for_a_low_effective_sample_size() -> None:
     every = LocalizeConfig(min_particles=100, max_particles=100, resample_neff_ratio=1.0)
     assert resample_if_needed(initial_particles([1, 1, 0], every, rng, n=100), every, rng)[2] == 0
 
+
+
+def test_ros1_selective_resampling_injects_no_random_particles_while_neff_is_high() -> None:
+    """pf.c (ROS 1, selective_resampling): with Neff above N/2 the set is copied and the function returns before
+    its recovery test, so a falling w_fast brings no random particles until the weights also collapse."""
+    _, free = room()
+    rng = np.random.default_rng(13)
+    falling = RecoveryState(log_w_slow=0.0, log_w_fast=math.log(0.5))  # recovery asks for 50 % random particles
+    for gated, expected in ((False, True), (True, False)):
+        config = LocalizeConfig(min_particles=100, max_particles=100, resample_neff_ratio=0.5,
+                                neff_test_gates_recovery=gated)
+        particles = initial_particles([1.0, 1.0, 0.0], config, rng, n=100)  # equal weights: Neff = N
+        out, _, injected = resample_if_needed(particles, config, rng, falling, free)
+        assert (injected > 0) is expected and (out is not particles) is expected
 
 def test_resampling_is_due_on_every_resample_interval_th_update_as_nav2_counts() -> None:
     field, _ = room()
