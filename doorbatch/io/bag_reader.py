@@ -76,6 +76,15 @@ class Rosbag1Reader(_AnyBagReader):
     storage = "rosbag1"
     _ros1 = True
 
+    def open(self) -> None:
+        try:
+            super().open()
+        except Exception as err:  # rosbags' ReaderError; an unclosed bag has no index to read
+            if "index" not in str(err).lower():
+                raise
+            raise LogReadError(f"bag has no readable index ({err}): a recording that was not closed (a .bag.active "
+                               "file, a killed rosbag record)? `rosbag reindex` rebuilds it", path=self.path) from err
+
 
 class Rosbag2Reader(_AnyBagReader):
     """A ROS 2 bag folder with ``metadata.yaml`` (sqlite3 or mcap storage)."""
