@@ -423,6 +423,15 @@ class DoorTrial:
     obj_map: ObjectMap
 
 
+
+def index_union(n: int, *parts: npt.ArrayLike) -> IntArray:
+    """The sorted union of index arrays into range(n), as ``np.union1d`` gives it, through a mask: O(n), where
+    union1d sorts or hashes (0.1 s a call at a million beams, a fifth of the final step on a long log)."""
+    mask = np.zeros(n, dtype=np.bool_)
+    for part in parts:
+        mask[np.asarray(part, dtype=np.intp)] = True
+    return np.flatnonzero(mask)
+
 def with_fitted_door(beams: BeamSet, obj_map: ObjectMap, c: DoorCandidate, config: ObjectMapConfig
                      ) -> tuple[ObjectMap, IntArray]:
     """The map with a door fitted at candidate ``c`` (its nearby walls re-cut, the walls seen through its
@@ -434,7 +443,7 @@ def with_fitted_door(beams: BeamSet, obj_map: ObjectMap, c: DoorCandidate, confi
     idx = _affected(beams, door, width, changed, new_map, config.sigma_m, config.door_ray_margin_m)
     first_mid = _full_first(beams, new_map, idx, FirstObjects.none(len(beams)))
     new_map, extra = _walls_behind(beams, new_map, idx, first_mid, config)
-    return new_map, np.union1d(idx, extra)
+    return new_map, index_union(len(beams), idx, extra)
 
 
 def try_door(beams: BeamSet, state: MapState, c: DoorCandidate, config: ObjectMapConfig) -> DoorTrial:
@@ -526,8 +535,8 @@ def recut_all_walls(beams: BeamSet, state: MapState, config: ObjectMapConfig) ->
                                 config.validity_prior, config.sigma_m, config.rho_length_per_m,
                                 2.0 * config.rho_static)
         walls[j] = Wall(wall.normal, wall.offset, segs)
-        changed = np.union1d(np.flatnonzero((first.cls == WALL) & (first.obj == j)),
-                             rays_meeting_line_before(beams, wall.normal, wall.offset, first.delta))
+        changed = index_union(len(beams), np.flatnonzero((first.cls == WALL) & (first.obj == j)),
+                              rays_meeting_line_before(beams, wall.normal, wall.offset, first.delta))
         first = _full_first(beams, replace(obj_map, walls=walls), changed, first)
     return evaluate(beams, replace(obj_map, walls=walls), config)
 
