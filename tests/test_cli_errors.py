@@ -128,10 +128,14 @@ def test_unset_stamps_and_two_clocks_are_reported(write_log: Callable[..., Path]
                                                   capsys: pytest.CaptureFixture[str]) -> None:
     messages = sample_messages(5)
     for k, msg in enumerate(msg for topic, _, _, msg in messages if topic == "/scan"):
-        msg.header = m.header(10_000_000 * k, msg.header.frame_id)  # a device clock from 0; the first is 0
+        msg.header = m.header(10_000_000 * k, msg.header.frame_id)  # a device clock from 0
     problems = _problems(capsys, write_log("device.mcap", messages))
-    assert any(p["topic"] == "/scan" and "1 of 5 header stamps are 0" in p["message"] for p in problems)
+    assert not any("are 0" in p["message"] for p in problems)  # the first stamp is the clock's start, not unset
     assert any("different clocks" in p["message"] for p in problems)
+    for k, msg in enumerate(msg for topic, _, _, msg in messages if topic == "/scan"):
+        msg.header = m.header(5 * 10**9 + 10_000_000 * k if k else 0, msg.header.frame_id)  # the first one unset
+    problems = _problems(capsys, write_log("unset.mcap", messages))
+    assert any(p["topic"] == "/scan" and "1 of 5 header stamps are 0" in p["message"] for p in problems)
     assert not any("clock" in p["message"] for p in _problems(capsys, write_log("fine.mcap", sample_messages(5))))
     tf_only = [msg for msg in messages if msg[0] != "/odom"]  # odometry from TF odom → base_link only
     assert any("different clocks" in p["message"] for p in _problems(capsys, write_log("tf.mcap", tf_only)))

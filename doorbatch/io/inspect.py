@@ -29,6 +29,7 @@ from doorbatch.io.recording import (
     odometry_frame,
     odometry_frame_note,
     tf_odometry,
+    unset_stamps,
 )
 from doorbatch.io.roles import TopicInfo
 from doorbatch.records import Role
@@ -107,7 +108,7 @@ class _TopicStats:
     backwards: int = 0
     first_backwards: str = ""
     periods: list[int] = field(default_factory=list)
-    unset_stamps: int = 0  # header stamps of 0
+    header_stamps: list[int] = field(default_factory=list)  # every header stamp, for recording.unset_stamps
     stamps: list[int] = field(default_factory=list)  # header stamps and log times of scan and odometry topics
     log_times: list[int] = field(default_factory=list)
 
@@ -153,8 +154,8 @@ def inspect_log(path: Path, config: DoorbatchConfig | None = None,
                     tf.add(t)
                 continue
             stamp = _header_stamp(raw.msg)
-            if stamp == 0:
-                st.unset_stamps += 1
+            if stamp is not None:
+                st.header_stamps.append(stamp)
             if stamp is not None and role_of.get(raw.topic) in (Role.SCAN, Role.ODOMETRY):
                 st.stamps.append(stamp)
                 st.log_times.append(raw.log_time_ns)
@@ -241,8 +242,9 @@ def _check_stamps(report: LogReport, stats: dict[str, _TopicStats], role_of: dic
                                                                              Role.REFERENCE) else ""
             report.problems.append(Problem(Severity.WARNING, name, f"stamps go backwards {st.backwards} time(s): "
                                                                    f"first {st.first_backwards}{sorted_note}"))
-        if st.unset_stamps:
-            report.problems.append(Problem(Severity.WARNING, name, f"{st.unset_stamps} of {st.count} header stamps "
+        unset = int(unset_stamps(st.header_stamps).sum())
+        if unset:
+            report.problems.append(Problem(Severity.WARNING, name, f"{unset} of {st.count} header stamps "
                                                                    f"are 0 (unset): their log time stands in"))
         if len(st.periods) >= 10:
             periods = np.asarray(st.periods, dtype=np.float64)

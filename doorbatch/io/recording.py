@@ -97,6 +97,10 @@ class Recording:
     color_valid: list[npt.NDArray[np.bool_]] | None = None
     # The reference is the odometry moved rigidly (io.reference_repeats_odometry_m/_deg): no independent reference.
     reference_is_odometry: bool = False
+    # The recorder's clock minus the scans' stamps (median log time − stamp) where they differ by more than
+    # io.clock_mismatch_s (a sim-time log recorded on wall-clock time), else 0: what an output message stamped
+    # at a scan's time is logged at, so that it sits beside the input's messages (annotated.mcap).
+    log_offset_ns: int = 0
 
 
 def pose_series(poses: list[Pose2D]) -> PoseSeries | None:
@@ -260,14 +264,38 @@ def clock_lags_s(scan_stamps_ns: Sequence[int], scan_log_ns: Sequence[int], odom
     return (a, b) if a is not None and b is not None and abs(a - b) > mismatch_s else None
 
 
+def unset_stamps(stamps_ns: Sequence[int]) -> npt.NDArray[np.bool_]:
+    """Which header stamps (one topic, in log order) are unset: 0, unless the clock starts there. Gazebo's sim
+    time starts at 0 s, so a 0 whose nearest set stamp in log order (before or after it) lies within
+    max(1 s, 10 median intervals of the set stamps) is that clock's first instant; a 0 among stamps far from it
+    (a driver that leaves the stamp unset, on wall-clock or mid-run sim time) is unset."""
+    s = np.asarray(stamps_ns, dtype=np.int64)
+    zero: npt.NDArray[np.bool_] = s == 0
+    if not zero.any() or zero.all():
+        return zero
+    idx = np.arange(s.size)
+    set_at = np.where(~zero, idx, -1)
+    prev = np.maximum.accumulate(set_at)  # index of the last set stamp at or before each
+    nxt = np.minimum.accumulate(np.where(~zero, idx, s.size)[::-1])[::-1]  # the first set stamp at or after
+    steps = np.diff(np.sort(s[~zero]))
+    limit = max(1e9, 10.0 * float(np.median(steps[steps > 0]))) if (steps > 0).any() else 1e9
+    padded = np.append(np.abs(s).astype(np.float64), np.inf)
+    near = np.minimum(np.where(prev >= 0, padded[np.maximum(prev, 0)], np.inf), padded[nxt])
+    unset: npt.NDArray[np.bool_] = zero & (near > limit)
+    return unset
+
+
 def _log_timed(records: list[R], every: bool) -> list[R]:
-    """The records with their log time as stamp: ``every`` one, else those whose stamp is unset (0)."""
-    return [replace(r, stamp_ns=r.log_time_ns) if every or r.stamp_ns == 0 else r for r in records]
+    """The records with their log time as stamp: ``every`` one, else those whose stamp is unset
+    (:func:`unset_stamps`)."""
+    unset = unset_stamps([r.stamp_ns for r in records])
+    return [replace(r, stamp_ns=r.log_time_ns) if every or u else r for r, u in zip(records, unset, strict=True)]
 
 
 def on_one_clock(scans: list[Scan], odom: list[Pose2D], ref: list[Pose2D], mismatch_s: float) -> OneClock:
     """Scans and poses whose header stamps can be put on one time line, in stamp order, and notes saying what
-    was done. A header stamp of 0 is unset: the message's log time stands in. Scans and odometry whose median
+    was done. A header stamp of 0 is unset (:func:`unset_stamps`: not where a clock starts at 0): the message's
+    log time stands in. Scans and odometry whose median
     (stamp − log time) differ by more than ``mismatch_s`` are on two clocks (a driver stamping with its
     device's clock): every scan and pose is timed by its log time, the recorder's one clock. Scans that
     arrived out of stamp order are sorted (bags record arrival order; the stamp is the measurement's time).
@@ -277,7 +305,7 @@ def on_one_clock(scans: list[Scan], odom: list[Pose2D], ref: list[Pose2D], misma
     lags = clock_lags_s([s.stamp_ns for s in scans], [s.log_time_ns for s in scans],
                         [p.stamp_ns for p in odom], [p.log_time_ns for p in odom], mismatch_s)
     for name, records in (("scans", scans), ("odometry poses", odom), ("reference poses", ref)):
-        unset = sum(r.stamp_ns == 0 for r in records)
+        unset = int(unset_stamps([r.stamp_ns for r in records]).sum())
         if unset:
             notes.append(f"{unset} of {len(records)} {name} have header stamp 0 (unset): timed by their log time")
     if lags is not None:
@@ -389,7 +417,19 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
                         f"{config.io.reference_repeats_odometry_m} m and {config.io.reference_repeats_odometry_deg}°): "
                         "no independent reference (a raw CARMEN log's laser poses are its odometry; a corrected log's "
                         "odometry was replaced by its corrected poses)")
-    return Recording(str(path), scan_set, odometry, reference, aligned, warnings, valid, repeats)
+    return Recording(str(path), scan_set, odometry, reference, aligned, warnings, valid, repeats,
+                     log_offset_ns(scans, config.io.clock_mismatch_s))
+
+
+def log_offset_ns(scans: Sequence[Scan], mismatch_s: float) -> int:
+    """:attr:`Recording.log_offset_ns`: the median (log time − stamp) of the scans when it exceeds ``mismatch_s``
+    (header stamps on another clock than the recorder's, e.g. sim time), else 0 (scans without a log time are
+    left out)."""
+    lags = [s.log_time_ns - s.stamp_ns for s in scans if s.log_time_ns]
+    if not lags:
+        return 0
+    lag = int(np.median(np.asarray(lags, dtype=np.int64)))
+    return lag if abs(lag) > mismatch_s * 1e9 else 0
 
 
 def reference_repeats_odometry(reference: PoseSeries | None, odometry: PoseSeries | None,

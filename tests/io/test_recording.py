@@ -11,7 +11,7 @@ import pytest
 from doorbatch.config import DoorbatchConfig, IoConfig
 from doorbatch.errors import LogContentError
 from doorbatch.io import ros_messages as m
-from doorbatch.io.recording import load_recording
+from doorbatch.io.recording import load_recording, unset_stamps
 from tests.conftest import sample_messages
 
 
@@ -149,6 +149,30 @@ def test_unset_scan_stamps_are_their_log_times(write_log: Callable[..., Path]) -
     assert any("6 of 6 scans have header stamp 0" in w for w in rec.warnings)
     assert rec.odometry is not None and len(rec.odometry.stamps_ns) == 6
 
+
+
+@pytest.mark.parametrize(("stamps_s", "unset"), [
+    ([0.0, 0.2, 0.4, 0.6], [False, False, False, False]),  # Gazebo's sim time starts at 0 s
+    ([0.0, 0.0, 0.0], [True, True, True]),  # a driver that never sets the stamp
+    ([1.7e9, 0.0, 1.7e9 + 0.2], [False, True, False]),  # one unset stamp among wall-clock ones
+    ([100.0, 100.2, 0.0, 100.6], [False, False, True, False]),  # an unset one in the middle of a sim run
+    ([0.0, 5.0, 5.2, 5.4], [True, False, False, False]),  # sim time, but its next stamp is 25 intervals later
+])
+def test_a_zero_stamp_is_unset_unless_the_clock_starts_there(stamps_s: list[float], unset: list[bool]) -> None:
+    stamps = [round(t * 1e9) for t in stamps_s]
+    assert unset_stamps(stamps).tolist() == unset
+
+
+def test_a_sim_time_log_whose_clock_starts_at_zero_keeps_its_stamps(write_log: Callable[..., Path]) -> None:
+    """Header stamps in sim time from 0 s, log times on the recorder's wall clock: the first scan's stamp 0 is
+    the clock's start, not an unset stamp (before: it took its 2023 log time and ended the run)."""
+    messages = sample_messages(6)
+    t0 = next(t for name, _, t, _ in messages if name == "/scan")
+    for topic in ("/scan", "/odom"):
+        messages = _restamped(messages, topic, lambda k, t: t - t0)
+    rec = load_recording(write_log("sim0.mcap", messages))
+    assert rec.scans.stamps_ns[0] == 0 and np.all(np.diff(rec.scans.stamps_ns) > 0)
+    assert not any("stamp 0" in w for w in rec.warnings)
 
 def test_scans_stamped_by_a_device_clock_are_timed_by_the_log(write_log: Callable[..., Path]) -> None:
     # the laser driver stamps from its own power-on (0 s), odometry and TF carry ROS time
