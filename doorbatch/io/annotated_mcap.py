@@ -9,7 +9,7 @@ from __future__ import annotations
 import heapq
 from collections.abc import Iterable, Iterator, Sequence
 from contextlib import ExitStack
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +36,13 @@ def _check(annotations: Iterable[Annotation]) -> Iterator[Annotation]:
         if not (a.topic.startswith(ANNOTATION_PREFIX) or a.topic == "/tf"):
             raise UsageError(f"annotation topic {a.topic} must be under {ANNOTATION_PREFIX} (or be /tf)")
         yield a
+
+
+def on_log_clock(annotations: Iterable[Annotation], offset_ns: int) -> Iterator[Annotation]:
+    """The annotations logged ``offset_ns`` after their stamps (their messages' header stamps unchanged): on the
+    recorder's clock of a log whose header stamps are on another one (sim time; ``Recording.log_offset_ns``)."""
+    for a in annotations:
+        yield replace(a, log_time_ns=a.log_time_ns + offset_ns) if offset_ns else a
 
 
 def write_annotated_mcap(source: Path | Sequence[Path], output: Path, annotations: Iterable[Annotation],

@@ -14,7 +14,7 @@ import numpy.typing as npt
 
 from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.io import ros_messages as rm
-from doorbatch.io.annotated_mcap import Annotation
+from doorbatch.io.annotated_mcap import Annotation, on_log_clock
 from doorbatch.io.map_server import write_map
 from doorbatch.io.parquet import read_table, write_table
 from doorbatch.io.preview import PreviewDoor, render_preview, write_preview
@@ -86,6 +86,7 @@ class MappedPass:
     poses: FloatArray
     odometry: FloatArray | None
     door_angles: FloatArray
+    log_offset_ns: int = 0  # the log's recorder clock minus its scan stamps (Recording.log_offset_ns)
 
 
 def mapping_annotations(passes: Sequence[MappedPass], static_map: OccupancyMap, doors: DoorSet,
@@ -94,15 +95,17 @@ def mapping_annotations(passes: Sequence[MappedPass], static_map: OccupancyMap, 
     """The /doorbatch/* messages of a mapping run in time order: the static map at the first scan; per pass
     the doors (leaves at the pass's angles, opening ranges, hinges) at its first scan; per scan the robot pose
     and map→odom; every ``path_every`` scans (and at each pass's end) the pass's path so far."""
-    stamps = [p.stamps_ns for p in passes if p.stamps_ns.size]
-    if not stamps:
+    nonempty = [p for p in passes if p.stamps_ns.size]
+    if not nonempty:
         return
-    t0 = int(min(int(s[0]) for s in stamps))
-    yield Annotation("/doorbatch/map", "nav_msgs/msg/OccupancyGrid", t0,
+    first = min(nonempty, key=lambda p: int(p.stamps_ns[0]) + p.log_offset_ns)
+    t0 = int(first.stamps_ns[0])
+    yield Annotation("/doorbatch/map", "nav_msgs/msg/OccupancyGrid", t0 + first.log_offset_ns,
                      rm.occupancy_grid(t0, map_frame, static_map.occupancy, static_map.resolution_m,
                                        static_map.origin_x_m, static_map.origin_y_m, static_map.origin_yaw_rad))
     # passes in time order, merged by time should two of them overlap (logs that each restart a simulated clock)
-    yield from heapq.merge(*(_pass_annotations(p, doors, map_frame, odom_frame, path_every) for p in passes),
+    yield from heapq.merge(*(on_log_clock(_pass_annotations(p, doors, map_frame, odom_frame, path_every),
+                                          p.log_offset_ns) for p in passes),
                            key=lambda a: a.log_time_ns)
 
 

@@ -64,3 +64,23 @@ def test_passes_on_one_restarted_clock_come_out_in_time_order() -> None:
     stamps = [a.log_time_ns for a in mapping_annotations(passes, occ, doors)]
     assert stamps == sorted(stamps)
     assert len(stamps) == 1 + 2 + 2 * (8 + 6) + (1 + 1)  # map, doors per pass, pose + map→odom per scan, paths
+
+
+def test_passes_recorded_on_wall_clock_with_sim_time_stamps_are_logged_on_the_recorders_clock() -> None:
+    """Each pass restarts a sim clock at 0.5 s; its recorder logged it an hour apart on wall-clock time
+    (Recording.log_offset_ns). The annotations are logged on the recorder's clock, their headers keep the stamps."""
+    from dataclasses import replace
+
+    doors = DoorSet(np.array([[1.0, 1.0]]), np.array([0.9]), np.zeros(1), np.zeros(1), np.full(1, 1.5))
+    occ = OccupancyMap(np.zeros((20, 30), dtype=np.int8), 0.1, -1.0, -1.0)
+    offsets = (T0, T0 + 3600 * 10**9)
+    passes = [replace(_pass(500_000_000, 8, 0.0, [0.2]), log_offset_ns=offsets[0]),
+              replace(_pass(500_000_000, 6, 2.0, [0.4]), log_offset_ns=offsets[1])]
+    added = list(mapping_annotations(passes, occ, doors))
+    times = [a.log_time_ns for a in added]
+    assert times == sorted(times) and times[0] == T0 + 500_000_000
+    poses = [a for a in added if a.topic == "/doorbatch/pose"]
+    assert [a.log_time_ns - offsets[k >= 8] for k, a in enumerate(poses)] == [
+        500_000_000 + 100_000_000 * (k if k < 8 else k - 8) for k in range(14)]
+    stamp = poses[-1].msg.header.stamp
+    assert stamp.sec * 10**9 + stamp.nanosec == 500_000_000 + 100_000_000 * 5  # the header keeps the sim stamp

@@ -25,7 +25,7 @@ from doorbatch.errors import TransformError
 from doorbatch.geometry.camera import camera_from_info, scan_in_camera
 from doorbatch.geometry.se2 import interpolate_poses
 from doorbatch.io.doorpose_inputs import DoorPoseInputs
-from doorbatch.io.recording import PoseSeries
+from doorbatch.io.recording import PoseSeries, log_offset_ns
 from doorbatch.maps import DoorSet
 from doorbatch.pipeline.doorpose.association import associate
 from doorbatch.pipeline.doorpose.fusion import estimate_door, to_planar
@@ -195,7 +195,7 @@ def run_doorpose(log_path: Path, out: Path, config: DoorbatchConfig, map_path: P
                  progress: Callable[[int], object] | None = None) -> tuple[DoorPoses, DoorPoseRunSummary]:
     """Estimate door poses over a log and write the run directory: door_poses.parquet, annotated.mcap,
     manifest.json."""
-    from doorbatch.io.annotated_mcap import write_annotated_mcap
+    from doorbatch.io.annotated_mcap import on_log_clock, write_annotated_mcap
     from doorbatch.io.detector_model import load_detector
     from doorbatch.io.doorpose_inputs import read_doorpose_inputs
     from doorbatch.io.doorpose_rundir import doorpose_annotations, write_door_poses
@@ -224,7 +224,9 @@ def run_doorpose(log_path: Path, out: Path, config: DoorbatchConfig, map_path: P
     with timer("write"):
         out.mkdir(parents=True, exist_ok=True)
         write_door_poses(out / "door_poses.parquet", result)
-        write_annotated_mcap(log_path, out / "annotated.mcap", doorpose_annotations(result), config)
+        offset = log_offset_ns(inputs.scans, config.io.clock_mismatch_s)  # sim-time stamps: beside the input
+        write_annotated_mcap(log_path, out / "annotated.mcap", on_log_clock(doorpose_annotations(result), offset),
+                             config)
     for w in result.warnings:
         manifest.warn(w)
     matched = [e for e in result.estimates if e.door_id >= 0]

@@ -41,6 +41,7 @@ class LocalizationResult:
     converged_ns: int | None = None
     ambiguous: bool = False
     warnings: list[str] = field(default_factory=list)
+    log_offset_ns: int = 0  # the log's recorder clock minus its scan stamps (Recording.log_offset_ns)
 
     def __len__(self) -> int:
         return int(self.stamps_ns.shape[0])

@@ -220,7 +220,7 @@ class _Track:
         self.particles.append(particles)
 
     def result(self, log_name: str, method: str, n_doors: int, converged_ns: int | None, is_ambiguous: bool,
-               warnings: list[str]) -> LocalizationResult:
+               warnings: list[str], log_offset_ns: int = 0) -> LocalizationResult:
         u = len(self.stamps)
         return LocalizationResult(
             log=log_name, method=method, stamps_ns=np.asarray(self.stamps, dtype=np.int64),
@@ -229,7 +229,7 @@ class _Track:
             door_mean=np.asarray(self.dmean).reshape(u, n_doors), door_std=np.asarray(self.dstd).reshape(u, n_doors),
             door_observed=np.asarray(self.observed, dtype=bool).reshape(u, n_doors),
             particles=np.asarray(self.particles), converged_ns=converged_ns, ambiguous=is_ambiguous,
-            warnings=warnings)
+            warnings=warnings, log_offset_ns=log_offset_ns)
 
 
 def start_scan_index(rec: Recording, start: StartPose) -> int:
@@ -376,7 +376,7 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
     if not track.stamps:
         raise PipelineError(f"{log_path}: no scan had an odometry pose; nothing was localized")
     return track.result(Path(log_path).name, method, state.particles.n_doors, converged_ns,
-                        multimodal(state.particles, lc), warnings)
+                        multimodal(state.particles, lc), warnings, rec.log_offset_ns)
 
 
 @dataclass(frozen=True)
@@ -398,7 +398,7 @@ def run_localize(log_path: Path, map_path: Path, out: Path, config: DoorbatchCon
                  ) -> tuple[LocalizationResult, LocalizeRunSummary]:
     """Localize a log on a map and write the run directory: trajectory.parquet, door_states.parquet,
     trajectory.tum, annotated.mcap, manifest.json."""
-    from doorbatch.io.annotated_mcap import write_annotated_mcap
+    from doorbatch.io.annotated_mcap import on_log_clock, write_annotated_mcap
     from doorbatch.io.manifest import Manifest, StageTimer
     from doorbatch.io.rundir import run_annotations, write_run_tables
 
@@ -413,7 +413,8 @@ def run_localize(log_path: Path, map_path: Path, out: Path, config: DoorbatchCon
         files = write_run_tables(out, result)
         doors = lmap.doors if method == "rbpf" else DoorSet.empty()
         write_annotated_mcap(log_path, out / "annotated.mcap",
-                             run_annotations(result, lmap.occupancy, doors, config.frames.map, config.frames.odom),
+                             on_log_clock(run_annotations(result, lmap.occupancy, doors, config.frames.map,
+                                                          config.frames.odom), result.log_offset_ns),
                              config)
     for w in result.warnings:
         manifest.warn(w)

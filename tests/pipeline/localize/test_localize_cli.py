@@ -359,3 +359,40 @@ def test_a_run_made_with_relative_paths_evaluates_from_any_folder(sample_map: Pa
     assert set(stages) == {"map", "localize", "write"} and all(v > 0 for v in stages.values())
     assert set(json.loads((elsewhere / "report" / "manifest.json").read_text())["stage_seconds"]) == {"metrics",
                                                                                                     "report"}
+
+
+def _stamps_shifted(msg: Any, shift_ns: int) -> None:
+    """Every header stamp of ``msg`` (and of a TFMessage's transforms) moved by ``shift_ns``, in place."""
+    headers = [t.header for t in getattr(msg, "transforms", [])] + ([msg.header] if hasattr(msg, "header") else [])
+    for header in headers:
+        ns = header.stamp.sec * 10**9 + header.stamp.nanosec + shift_ns
+        header.stamp = type(header.stamp)(sec=ns // 10**9, nanosec=ns % 10**9)
+
+
+def test_a_sim_time_log_gets_its_annotations_on_the_recorders_clock(sample_map: Path, tmp_path: Path) -> None:
+    """Header stamps in sim time (from 0.5 s), log times on the recorder's wall clock, as `ros2 bag record` of a
+    Gazebo run writes them: the annotations keep the stamps in their headers and are logged beside the scans
+    they come from (before: at 0.5 s, 56 years before the input's messages on the file's timeline)."""
+    from doorbatch.io.log_writer import LogWriter
+    from doorbatch.io.reader import open_log
+
+    src = SAMPLE_LOGS / "loc_open.mcap"
+    first_scan = int(load_recording(src, DoorbatchConfig()).scans.stamps_ns[0])
+    shift = 500_000_000 - first_scan
+    log = tmp_path / "sim_time.mcap"
+    with open_log(src) as reader, LogWriter(log) as writer:
+        for raw in reader.raw_messages():
+            _stamps_shifted(raw.msg, shift)
+            writer.write(raw.topic, raw.msgtype, raw.log_time_ns, raw.msg, raw.store)
+    run = tmp_path / "run"
+    assert main(["localize", str(log), "--map", str(sample_map), "-o", str(run), "--method", "mcl", "-q"]) == 0
+    traj = read_table("trajectory", run / "trajectory.parquet").to_pydict()
+    assert min(traj["stamp_ns"]) < 10**10  # the trajectory is in the stamps' (sim) time
+    assert _errors(run, log).mean() < 0.1
+    with open_log(log) as reader:
+        span = (reader.start_ns, reader.end_ns)
+    with open_log(run / "annotated.mcap") as reader:
+        added = [(raw.log_time_ns, raw.msg) for raw in reader.raw_messages(["/doorbatch/pose"])]
+    assert added and all(span[0] <= t <= span[1] for t, _ in added)
+    stamp = added[0][1].header.stamp
+    assert stamp.sec * 10**9 + stamp.nanosec == min(traj["stamp_ns"])  # the header keeps the scan's stamp
