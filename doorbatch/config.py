@@ -638,6 +638,12 @@ class ObjectMapConfig(Section):
     beam_stride: int = Field(0, ge=0)
     kept_beams_per_s: float = Field(800.0, gt=0.0)
     max_thinning: int = Field(4, ge=1)
+    # A robot standing still: a scan within still_travel_m and still_turn_deg of the last one kept is kept only
+    # once still_interval_s have passed since it (stage.pass_scans; Cartographer's motion filter, at a scale that
+    # leaves a moving robot's scans alone: 1 cm is 1/7 of a 1 m/s, 15 Hz laser's spacing).
+    still_travel_m: float = Field(0.01, ge=0.0)
+    still_turn_deg: float = Field(0.5, ge=0.0)
+    still_interval_s: float = Field(1.0, ge=0.0)
     # Once the structure has converged: walls proposed and re-cut by eq. (9) over every final_scan_stride-th
     # scan and final_beam_stride-th beam (default all: the paper's ρ are set for full data; ~81 bytes a beam)
     # in at most this many sweeps over the walls; 0: off.

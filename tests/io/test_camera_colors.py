@@ -61,7 +61,8 @@ def test_beams_take_the_colour_of_what_the_camera_sees_there(tmp_path: Path) -> 
               for i, v in enumerate(rec.color_valid)]
     seen = np.abs(np.concatenate(angles))
     assert seen.size > 1000 and np.rad2deg(seen.max()) < 40.0
-    scans = pass_scans(rec, pass_poses(rec, "reference", config), 1, True)
+    every = config.em.model_copy(update={"still_interval_s": 0.0})
+    scans = pass_scans(rec, pass_poses(rec, "reference", config), 1, every)
     beams = beams_from_scans([scans], 20.0, 1)
     pts, ok = beams.points, np.isfinite(beams.color[:, 0]) & beams.hit
     on_south = ok & (np.abs(pts[:, 1] + 1.1) < 0.05)

@@ -37,16 +37,30 @@ FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
 
 
-def pass_scans(rec: Recording, poses: PassPoses, scan_stride: int, with_color: bool) -> list[ScanBeams]:
-    """The scans of one pass that have a pose, every ``scan_stride``-th."""
+def pass_scans(rec: Recording, poses: PassPoses, scan_stride: int, config: ObjectMapConfig) -> list[ScanBeams]:
+    """The scans of one pass that have a pose, every ``scan_stride``-th, less those of a robot standing still.
+
+    A scan within ``still_travel_m`` and ``still_turn_deg`` of the last one kept, and less than ``still_interval_s``
+    after it, is left out (Cartographer's motion filter; GMapping's linearUpdate / angularUpdate / temporalUpdate):
+    a standing robot repeats one view, and each copy would weigh that view once more against the priors ρ of
+    paper 001 (and cost its time and memory)."""
     sc = rec.scans
     out = []
+    last: int | None = None
+    interval_ns = config.still_interval_s * 1e9
     for i in range(0, len(sc), scan_stride):
         if not poses.valid[i]:
             continue
+        if last is not None:
+            step = poses.poses[i] - poses.poses[last]
+            if (math.hypot(step[0], step[1]) < config.still_travel_m
+                    and abs(float(wrap_angle(step[2]))) < math.radians(config.still_turn_deg)
+                    and sc.stamps_ns[i] - sc.stamps_ns[last] < interval_ns):
+                continue
+        last = i
         n = sc.ranges[i].shape[0]
         colors = None
-        if with_color and rec.colors is not None and rec.colors[i].shape[0] == n:
+        if config.use_color and rec.colors is not None and rec.colors[i].shape[0] == n:
             colors = rec.colors[i].astype(np.float64)
             if rec.color_valid is not None:
                 colors[~rec.color_valid[i]] = np.nan
@@ -99,7 +113,7 @@ def collect_beams(recordings: Sequence[Recording], passes: Sequence[PassPoses], 
     """All passes' kept beams in the map frame: every n-th scan and beam by ``strides`` (scan, beam), by
     default the search's (:func:`em_strides`); (1, 1): every scan and beam."""
     scan_stride, beam_stride = strides or em_strides(recordings, config)
-    scans = [pass_scans(r, p, scan_stride, config.use_color) for r, p in zip(recordings, passes, strict=True)]
+    scans = [pass_scans(r, p, scan_stride, config) for r, p in zip(recordings, passes, strict=True)]
     return beams_from_scans(scans, config.max_range_m, beam_stride)
 
 

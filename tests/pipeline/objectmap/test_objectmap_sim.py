@@ -16,7 +16,7 @@ from doorbatch.io.parquet import read_table
 from doorbatch.io.recording import load_recording
 from doorbatch.pipeline.mapping import pass_poses
 from doorbatch.pipeline.objectmap.model import ClassParams
-from doorbatch.pipeline.objectmap.stage import ObjectMapResult, build_object_map, collect_beams
+from doorbatch.pipeline.objectmap.stage import ObjectMapResult, build_object_map, collect_beams, pass_scans
 from doorbatch.sim.simulate import run_simulation
 
 WORLD = """
@@ -202,3 +202,26 @@ def test_with_a_short_range_laser_the_grid_doors_seed_the_em_search(short_range_
     assert np.hypot(seeded["hinge_x"][0] - 3.0, seeded["hinge_y"][0] - 1.1) < 0.05
     assert abs(seeded["length"][0] - 0.9) < 0.05
     assert abs(np.rad2deg(seeded["angle_max"][0]) - 100.0) < 3.0 and abs(seeded["angle_min"][0]) < np.deg2rad(3.0)
+
+
+def test_a_standing_robot_gives_the_em_stage_one_scan_a_second(tmp_path: Path) -> None:
+    """Scans of a robot standing still (a 3 s wait before the pass, 2 s after) are kept once per still_interval_s;
+    every scan of a moving robot is kept."""
+    (tmp_path / "world.yaml").write_text(WORLD)
+    (tmp_path / "scenario.yaml").write_text(SCENARIO.replace("dwell_s: 0.5, doors: closed, door_states: {d01: open}",
+                                                             "dwell_s: 3.0, end_dwell_s: 2.0, doors: closed"))
+    run_simulation(tmp_path / "world.yaml", tmp_path / "map.mcap", scenario=str(tmp_path / "scenario.yaml"), seed=3,
+                   split_passes=True)
+    config = DoorbatchConfig()
+    rec = load_recording(tmp_path / "map_pass1.mcap", config)
+    poses = pass_poses(rec, "reference", config)
+    kept = pass_scans(rec, poses, 1, config.em)
+    step = np.hypot(*np.diff(poses.poses[:, :2], axis=0).T)
+    standing = int(np.sum(step < 1e-6))
+    assert standing >= 45  # 5 s of standing at 10 Hz
+    moving = len(rec.scans) - 1 - standing
+    assert moving <= len(kept) <= moving + 8  # one scan per second of standing, at most
+    every = pass_scans(rec, poses, 1, config.em.model_copy(update={"still_interval_s": 0.0}))
+    assert len(every) == len(rec.scans)
+    twice = pass_scans(rec, poses, 1, config.em.model_copy(update={"still_interval_s": 0.5}))
+    assert 4 <= len(twice) - len(kept) <= 6  # 5 s of standing: one more scan in each of them
