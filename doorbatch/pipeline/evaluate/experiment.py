@@ -132,8 +132,7 @@ def run_point(point: SweepPoint, map_path: Path | None, run_dir: Path, config: D
         result = localize(point.log, lmap, config, point.method, parse_init(point.init))
     with timer("write"):
         write_run_tables(run_dir, result)
-    converged_s = None if result.converged_ns is None else (result.converged_ns - int(result.stamps_ns[0])) / 1e9
-    manifest.extra.update({"converged_after_s": converged_s, "ambiguous": result.ambiguous})
+    manifest.extra.update(result.manifest_extra())
     for w in result.warnings:
         manifest.warn(w)
     manifest.finish(timer)

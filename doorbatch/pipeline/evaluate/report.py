@@ -19,7 +19,8 @@ reader finds next to the run's log: ``<log stem>.truth.tum`` and ``<log stem>.tr
 Per localization run (metric names; rotations in ``evaluate.angle_unit``):
 ``ape_trans_<stat>`` and ``ape_rot_<stat>``, ``rpe_trans_<stat>`` and ``rpe_rot_<stat>`` (stat: rmse, mean,
 median, std, min, max, as evo, see :mod:`trajectory_metrics`), ``associated_poses``, ``rpe_pairs``;
-``converged`` (0/1), ``time_to_converge_s``, ``ambiguous`` (0/1) and, for global initialization,
+``converged`` (0/1), ``time_to_converge_s``, ``ambiguous`` (0/1), ``lost`` (0/1: the run found its scans no
+longer fit the map, ``localize.lost_*``), ``time_to_lost_s`` and, for global initialization,
 ``global_success`` (0/1); with a truth and a door map, ``door_state_error_mean`` / ``_max`` (rad).
 Per door map with a truth: ``door_precision``, ``door_recall``, ``door_hinge_error_mean`` (m),
 ``door_length_error_mean`` (m, absolute), ``door_range_error_mean`` (rad), ``doors_detected``, ``doors_truth``.
@@ -85,6 +86,7 @@ class RunTables:
         name: the run's label in the report (e.g. ``loc_closed/rbpf``); log, method: as in trajectory.parquet.
         stamps_ns, pose: the estimated trajectory; init: ``reference``, ``global`` or ``X,Y,YAW``.
         converged_ns: first stamp counted as converged (None: never); ambiguous: as the run reported.
+        lost_ns: stamps at which the run found itself lost (its scans stopped fitting the map).
         door_states: the RBPF's door angles (None for MCL); map_doors: the map's doors they refer to.
         reference, truth: the run's own reference trajectory and simulator truth, when known.
         params: the sweep point of an experiment (goes into metrics.parquet's params column).
@@ -105,6 +107,7 @@ class RunTables:
     truth: SimTruth | None = None
     params: dict[str, Any] = field(default_factory=dict)
     map_path: str | None = None
+    lost_ns: tuple[int, ...] = ()  # stamps at which the run reported itself lost (localize.lost_*)
 
 
 def with_setups_told_apart(runs: Sequence[RunTables]) -> list[RunTables]:
@@ -153,7 +156,7 @@ def run_tables_from_result(result: LocalizationResult, *, name: str | None = Non
         result.door_observed.ravel())
     return RunTables(name or f"{result.log}/{result.method}", result.log, result.method, result.stamps_ns,
                      result.pose, init, result.converged_ns, result.ambiguous, states, map_doors, reference, truth,
-                     dict(params or {}))
+                     dict(params or {}), lost_ns=tuple(result.lost_ns))
 
 
 @dataclass(frozen=True)
@@ -285,7 +288,10 @@ def _convergence_rows(run: RunTables, reference: ReferenceTrajectory | None,
     rows = [MetricRow(run.name, run.log, run.method, "converged", float(run.converged_ns is not None), "bool",
                       run.params),
             MetricRow(run.name, run.log, run.method, "time_to_converge_s", after, "s", run.params),
-            MetricRow(run.name, run.log, run.method, "ambiguous", float(run.ambiguous), "bool", run.params)]
+            MetricRow(run.name, run.log, run.method, "ambiguous", float(run.ambiguous), "bool", run.params),
+            MetricRow(run.name, run.log, run.method, "lost", float(bool(run.lost_ns)), "bool", run.params),
+            MetricRow(run.name, run.log, run.method, "time_to_lost_s",
+                      (run.lost_ns[0] - t0) / 1e9 if run.lost_ns else math.nan, "s", run.params)]
     if run.init == "global" and reference is not None:
         check = ConvergenceCheck(cfg.global_success_window_s, cfg.global_success_xy_m,
                                  math.radians(cfg.global_success_yaw_deg), cfg.global_success_max_reference_gap_s)

@@ -42,6 +42,14 @@ class LocalizationResult:
     ambiguous: bool = False
     warnings: list[str] = field(default_factory=list)
     log_offset_ns: int = 0  # the log's recorder clock minus its scan stamps (Recording.log_offset_ns)
+    lost_ns: list[int] = field(default_factory=list)  # stamps at which an episode of being lost began
+
+    def manifest_extra(self) -> dict[str, object]:
+        """What a run directory's manifest keeps of the run beyond its tables: seconds from the first update to
+        convergence (None: never) and to each loss, and whether global localization ended ambiguous."""
+        t0 = int(self.stamps_ns[0])
+        return {"converged_after_s": None if self.converged_ns is None else (self.converged_ns - t0) / 1e9,
+                "ambiguous": self.ambiguous, "lost_after_s": [(t - t0) / 1e9 for t in self.lost_ns]}
 
     def __len__(self) -> int:
         return int(self.stamps_ns.shape[0])

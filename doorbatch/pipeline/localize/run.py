@@ -33,6 +33,7 @@ from doorbatch.maps import DoorSet, OccupancyMap
 from doorbatch.pipeline.localize.convergence import ConvergenceMonitor, multimodal, scan_fit
 from doorbatch.pipeline.localize.door_geometry import subset_doors, with_closed_in_range
 from doorbatch.pipeline.localize.likelihood_field import (
+    OCCUPIED_AT_LEAST,
     BeamCombination,
     DistanceField,
     FreeCells,
@@ -220,7 +221,8 @@ class _Track:
         self.particles.append(particles)
 
     def result(self, log_name: str, method: str, n_doors: int, converged_ns: int | None, is_ambiguous: bool,
-               warnings: list[str], log_offset_ns: int = 0) -> LocalizationResult:
+               warnings: list[str], log_offset_ns: int = 0, lost_ns: list[int] | None = None
+               ) -> LocalizationResult:
         u = len(self.stamps)
         return LocalizationResult(
             log=log_name, method=method, stamps_ns=np.asarray(self.stamps, dtype=np.int64),
@@ -229,7 +231,7 @@ class _Track:
             door_mean=np.asarray(self.dmean).reshape(u, n_doors), door_std=np.asarray(self.dstd).reshape(u, n_doors),
             door_observed=np.asarray(self.observed, dtype=bool).reshape(u, n_doors),
             particles=np.asarray(self.particles), converged_ns=converged_ns, ambiguous=is_ambiguous,
-            warnings=warnings, log_offset_ns=log_offset_ns)
+            warnings=warnings, log_offset_ns=log_offset_ns, lost_ns=list(lost_ns or []))
 
 
 def start_scan_index(rec: Recording, start: StartPose) -> int:
@@ -271,6 +273,8 @@ def localize(log_path: Path, lmap: LocalizationMap, config: DoorbatchConfig, met
     if isinstance(init, str) and init.startswith("/"):
         start = read_start_pose(log_path, init)
     rec = load_recording(log_path, config)
+    if isinstance(init, tuple) and (note := init_cell_note(lmap.occupancy, init)):
+        rec.warnings.append(note)
     if isinstance(start, StartPose) and start.frame_id not in ("", config.frames.map):
         rec.warnings.append(f"--init {start.topic}: its pose is in frame {start.frame_id!r}, taken as the map frame "
                             f"{config.frames.map!r}")
@@ -279,6 +283,19 @@ def localize(log_path: Path, lmap: LocalizationMap, config: DoorbatchConfig, met
                             "pose, in the map frame only if the map was built from this log; else give --init "
                             "X,Y,YAW or --init global")
     return localize_recording(rec, lmap, config, method, start, progress)
+
+
+def init_cell_note(occ: OccupancyMap, init: tuple[float, float, float]) -> str | None:
+    """A warning when ``--init X,Y,YAW`` lies in a cell the map calls occupied or unknown (a robot stands in free
+    space: a start there is likely a typo, or a yaw given in degrees where radians are meant), else None."""
+    i, j = (int(v) for v in occ.world_to_cell(init[:2]))
+    value = int(occ.occupancy[i, j])
+    where = "unknown" if value < 0 else "occupied" if value >= OCCUPIED_AT_LEAST else None
+    note = f"--init {init[0]:g},{init[1]:g},{init[2]:g}: the map's cell there is {where}" if where else None
+    if abs(init[2]) > 2.0 * math.pi:
+        note = (note + "; " if note else f"--init {init[0]:g},{init[1]:g},{init[2]:g}: ") + \
+            f"yaw {init[2]:g} rad is more than a turn (yaw is in radians: {math.radians(init[2]):.4g} for degrees)"
+    return note
 
 
 def with_laser_odometry(rec: Recording, config: DoorbatchConfig) -> Recording:
@@ -331,6 +348,7 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
     monitor = ConvergenceMonitor()  # convergence claims of a global run; lost detection of every run
     warnings = list(rec.warnings)  # the run's own, not added to the caller's recording
     lost = barred = False
+    lost_ns: list[int] = []
     last_s: float | None = None
     k_draw = max(1, lc.annotate_particles)
     for i in range(len(rec.scans)):
@@ -362,6 +380,7 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
         if init == "global":
             converged_ns = None if barred else monitor.converged_ns
         if monitor.lost and (respread or not lost):  # once per episode of poor fits, unless spread anew
+            lost_ns.append(int(scan.stamp_ns))
             t_s = (scan.stamp_ns - rec.scans.stamps_ns[0]) / 1e9
             warnings.append(f"lost at {t_s:.1f} s: under {lc.lost_min_fit:.0%} of the scans' hits within "
                             f"{lc.lost_fit_distance_m} m of the map for {lc.lost_after_s} s"
@@ -376,7 +395,7 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
     if not track.stamps:
         raise PipelineError(f"{log_path}: no scan had an odometry pose; nothing was localized")
     return track.result(Path(log_path).name, method, state.particles.n_doors, converged_ns,
-                        multimodal(state.particles, lc), warnings, rec.log_offset_ns)
+                        multimodal(state.particles, lc), warnings, rec.log_offset_ns, lost_ns)
 
 
 @dataclass(frozen=True)
@@ -418,8 +437,8 @@ def run_localize(log_path: Path, map_path: Path, out: Path, config: DoorbatchCon
                              config)
     for w in result.warnings:
         manifest.warn(w)
-    converged_s = None if result.converged_ns is None else (result.converged_ns - int(result.stamps_ns[0])) / 1e9
-    manifest.extra.update({"converged_after_s": converged_s, "ambiguous": result.ambiguous})
+    manifest.extra.update(result.manifest_extra())
+    converged_s = manifest.extra["converged_after_s"]
     manifest.finish(timer)
     manifest.write(out / "manifest.json")
     summary = LocalizeRunSummary(str(out), method, len(result), float(result.n_particles.mean()),

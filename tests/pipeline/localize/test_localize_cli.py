@@ -396,3 +396,37 @@ def test_a_sim_time_log_gets_its_annotations_on_the_recorders_clock(sample_map: 
     assert added and all(span[0] <= t <= span[1] for t, _ in added)
     stamp = added[0][1].header.stamp
     assert stamp.sec * 10**9 + stamp.nanosec == min(traj["stamp_ns"])  # the header keeps the scan's stamp
+
+
+def test_a_start_in_unknown_space_is_warned_and_the_lost_run_is_scored_lost(sample_map: Path, tmp_path: Path) -> None:
+    """--init X,Y,YAW in a cell the map has never seen: a warning; the run then finds its scans do not fit and
+    says so, and evaluate's metrics carry it (before: converged 1, time_to_converge 0, nothing about the loss)."""
+    occ = load_localization_map(sample_map, LocalizeConfig()).occupancy
+    i, j = (int(v[0]) for v in np.nonzero(occ.occupancy < 0))
+    x, y = occ.cell_to_world([[i, j]])[0]
+    log = SAMPLE_LOGS / "loc_open.mcap"
+    runs = {"lost": ["--init", f"{x},{y},0"], "tracked": []}
+    for name, extra in runs.items():
+        assert main(["localize", str(log), "--map", str(sample_map), "-o", str(tmp_path / name), "--method", "mcl",
+                     "-q", *extra]) == 0
+    manifest = json.loads((tmp_path / "lost" / "manifest.json").read_text())
+    assert any("cell there is unknown" in w for w in manifest["warnings"])
+    assert manifest["extra"]["lost_after_s"] and manifest["extra"]["lost_after_s"][0] >= 2.0
+    assert main(["evaluate", str(tmp_path / "lost"), str(tmp_path / "tracked"), "--reference", str(log), "-o",
+                 str(tmp_path / "report"), "-q"]) == 0
+    table = read_table("metrics", tmp_path / "report" / "metrics.parquet").to_pydict()
+    got = {(r, m): v for r, m, v in zip(table["run"], table["metric"], table["value"], strict=True)}
+    lost_run, tracked_run = (next(r for r, _ in got if r.endswith(n)) for n in ("lost", "tracked"))
+    assert got[(lost_run, "lost")] == 1.0 and got[(lost_run, "time_to_lost_s")] >= 2.0
+    assert got[(tracked_run, "lost")] == 0.0 and np.isnan(got[(tracked_run, "time_to_lost_s")])
+
+
+def test_a_start_yaw_beyond_a_turn_is_asked_about(sample_map: Path) -> None:
+    from doorbatch.pipeline.localize.run import init_cell_note
+
+    occ = load_localization_map(sample_map, LocalizeConfig()).occupancy
+    i, j = (int(v[0]) for v in np.nonzero(occ.occupancy == 0))
+    x, y = occ.cell_to_world([[i, j]])[0]
+    assert init_cell_note(occ, (x, y, 1.5)) is None  # free, and a yaw in radians
+    note = init_cell_note(occ, (x, y, 90.0))
+    assert note is not None and "radians" in note and "1.571" in note
