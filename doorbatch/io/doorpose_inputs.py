@@ -22,7 +22,13 @@ from doorbatch.io.decode import (
     stamp_to_ns,
 )
 from doorbatch.io.reader import LogReader, RawMessage, open_log
-from doorbatch.io.recording import PoseSeries, odometry_poses, read_transforms, robot_pose_series
+from doorbatch.io.recording import (
+    PoseSeries,
+    odometry_poses,
+    read_transforms,
+    resolve_base_frame,
+    robot_pose_series,
+)
 from doorbatch.records import CameraInfo, Detection, Detections, Image, Pose2D, Role, Scan
 
 ImageDetector = Callable[[Image], tuple[Detection, ...]]
@@ -93,8 +99,10 @@ def read_doorpose_inputs(path: Path, config: DoorbatchConfig, detector: ImageDet
                 boxes.append(replace(rec, stamp_ns=rec.log_time_ns) if rec.stamp_ns == 0 else rec)
             elif isinstance(rec, Image) and detector is not None:
                 boxes.append(Detections(rec.stamp_ns, rec.log_time_ns, rec.frame_id, detector(rec)))
-        odom, notes = odometry_poses(odom, tf, reader.roles.topic(Role.ODOMETRY) is not None, config.frames)
-        odometry, reference = robot_pose_series(odom, ref, tf, config.frames)
+        frames, base_note = resolve_base_frame(tf, config.frames)
+        odom, notes = odometry_poses(odom, tf, reader.roles.topic(Role.ODOMETRY) is not None, frames)
+        odometry, reference = robot_pose_series(odom, ref, tf, frames)
+        notes = [*([base_note] if base_note else []), *notes]
         warnings = [*reader.warnings, *warnings_pre, *notes]
         if unset:
             warnings.append(f"{unset} of {len(boxes)} detection messages have header stamp 0 (unset): timed by "

@@ -28,6 +28,7 @@ from doorbatch.io.recording import (
     missing_laser_tf_hint,
     odometry_frame,
     odometry_frame_note,
+    resolve_base_frame,
     tf_odometry,
     unset_stamps,
 )
@@ -208,8 +209,10 @@ def _rate(st: _TopicStats | None) -> float:
 
 def _check_roles(report: LogReport, chosen: dict[Role, tuple[str, ...]], scan_frames: set[str], tf: TfBuffer,
                  config: DoorbatchConfig, stats: dict[str, _TopicStats]) -> None:
-    frames = config.frames
+    frames, base_note = resolve_base_frame(tf, config.frames)
     add = report.problems.append
+    if base_note:
+        add(Problem(Severity.WARNING, None, base_note))
     scan = chosen.get(Role.SCAN)
     if not scan:
         add(Problem(Severity.ERROR, None, "no sensor_msgs/LaserScan topic: doorbatch needs a 2D laser scan"))
@@ -230,7 +233,7 @@ def _check_roles(report: LogReport, chosen: dict[Role, tuple[str, ...]], scan_fr
                 add(Problem(Severity.WARNING, scan[0] if scan else None, message + "; assuming identity"))
             else:
                 add(Problem(Severity.ERROR, scan[0] if scan else None,
-                            f"{message} ({missing_laser_tf_hint(tf, frames.base_link)})"))
+                            f"{message} ({missing_laser_tf_hint(tf, frames.base_link, frame)})"))
 
 
 def _check_stamps(report: LogReport, stats: dict[str, _TopicStats], role_of: dict[str, Role],
@@ -265,7 +268,8 @@ def _check_clocks(report: LogReport, stats: dict[str, _TopicStats], role_of: dic
     of = {role_of.get(name): st for name, st in stats.items() if st.stamps}
     scan, odom = of.get(Role.SCAN), of.get(Role.ODOMETRY)
     if scan is not None and odom is None and Role.ODOMETRY not in role_of.values():
-        poses, _ = tf_odometry(tf, config.frames.odom, config.frames.base_link)
+        frames, _ = resolve_base_frame(tf, config.frames)
+        poses, _ = tf_odometry(tf, frames.odom, frames.base_link)
         odom = _TopicStats(stamps=[p.stamp_ns for p in poses], log_times=[p.log_time_ns for p in poses]) \
             if poses else None
     lags = None if scan is None or odom is None else clock_lags_s(scan.stamps, scan.log_times, odom.stamps,

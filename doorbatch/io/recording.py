@@ -152,10 +152,28 @@ def tf_odometry(tf: TfBuffer, odom: str, base: str) -> tuple[list[Pose2D], str |
     return poses, None if frame == odom else odometry_frame_note(frame, odom, base)
 
 
-def missing_laser_tf_hint(tf: TfBuffer, base: str) -> str:
-    """How to fix a scan frame with no transform to ``base``: name another base frame when the TF tree lacks
-    ``base`` itself (the robot's base is the child of its odometry edge, e.g. base_footprint), else say what
-    ``io.assume_identity_laser_tf`` does."""
+def resolve_base_frame(tf: TfBuffer, frames: FramesConfig) -> tuple[FramesConfig, str | None]:
+    """``frames`` with ``base_link`` replaced by the child of the odometry edge (``odom`` → X, the robot's base:
+    base_footprint on a TurtleBot whose /tf_static was not recorded) when the TF tree has transforms but not
+    the configured base frame, and a note saying so; else ``frames`` unchanged and None."""
+    if not tf.frames or frames.base_link in tf.frames:
+        return frames, None
+    children = sorted(child for parent, child, static in tf.edges() if not static and parent == frames.odom)
+    if len(children) != 1:
+        return frames, None
+    note = (f"the TF tree has no frame {frames.base_link!r}: the robot's base is taken to be {children[0]!r}, the "
+            f"child of {frames.odom!r} (set frames.base_link to choose)")
+    return frames.model_copy(update={"base_link": children[0]}), note
+
+
+def missing_laser_tf_hint(tf: TfBuffer, base: str, laser: str | None = None) -> str:
+    """How to fix a scan frame with no transform to ``base``: when the TF tree never names the laser's frame
+    (a recording started after /tf_static was latched), say what ``io.assume_identity_laser_tf`` does; name
+    another base frame when the tree lacks ``base`` itself (the robot's base is the child of its odometry edge,
+    e.g. base_footprint); else say what ``io.assume_identity_laser_tf`` does."""
+    if laser is not None and tf.frames and laser not in tf.frames:
+        return (f"no transform in the log names the laser frame {laser!r} (a recording started after /tf_static "
+                "was latched?): io.assume_identity_laser_tf=true takes the laser at the base's origin")
     if tf.frames and base not in tf.frames:
         dynamic = sorted((parent, child) for parent, child, static in tf.edges() if not static)
         guess = next((c for p, c in dynamic if "odom" in p), None) or next(
@@ -370,20 +388,22 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
                 ref.append(rec)
             elif item.role is Role.COLORS and isinstance(rec, BeamColors):
                 colors.append(rec)
-        odom, notes = odometry_poses(odom, tf, reader.roles.topic(Role.ODOMETRY) is not None, config.frames)
+        frames, base_note = resolve_base_frame(tf, config.frames)
+        odom, notes = odometry_poses(odom, tf, reader.roles.topic(Role.ODOMETRY) is not None, frames)
         timed = on_one_clock(scans, odom, ref, config.io.clock_mismatch_s)
         scans = timed.scans
-        odometry, reference = robot_pose_series(timed.odom, timed.ref, tf, config.frames)
-        warnings = [*reader.warnings, *(f"{path}: {n}" for n in timed.notes), *notes]
+        odometry, reference = robot_pose_series(timed.odom, timed.ref, tf, frames)
+        warnings = [*reader.warnings, *(f"{path}: {n}" for n in timed.notes), *([base_note] if base_note else []),
+                    *notes]
         camera = reader.roles.topic(Role.IMAGE) is not None and reader.roles.topic(Role.CAMERA_INFO) is not None
     if not scans:
         raise LogContentError("scan topic has no messages", path=path, topic=scan_topic)
-    base = config.frames.base_link
+    base = frames.base_link
     try:
         affines = np.stack([_planar_affine(tf, base, s.frame_id, s.stamp_ns, config.io.assume_identity_laser_tf)
                             for s in scans])
     except TransformError as err:
-        raise LogContentError(f"{err.reason} ({missing_laser_tf_hint(tf, base)})", path=path,
+        raise LogContentError(f"{err.reason} ({missing_laser_tf_hint(tf, base, scans[0].frame_id)})", path=path,
                               topic=scan_topic) from err
     range_min, range_max, note = usable_range_limits(np.array([s.range_min for s in scans]),
                                                      np.array([s.range_max for s in scans]))

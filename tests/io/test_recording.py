@@ -88,7 +88,7 @@ def test_tf_odometry_in_an_odometry_frame_of_another_name(write_log: Callable[..
     assert any("odom_combined" in w and "frames.odom" in w for w in rec.warnings)
 
 
-def test_a_tree_without_base_link_names_the_frame_to_use(write_log: Callable[..., Path]) -> None:
+def test_a_tree_without_base_link_takes_the_child_of_odom(write_log: Callable[..., Path]) -> None:
     msgs = []
     for topic, msgtype, t, msg in sample_messages(n_scans=4):
         if topic == "/tf":
@@ -98,10 +98,12 @@ def test_a_tree_without_base_link_names_the_frame_to_use(write_log: Callable[...
                 tr.header.frame_id = "base_footprint"
         msgs.append((topic, msgtype, t, msg))
     path = write_log("nobase.mcap", msgs)
-    with pytest.raises(LogContentError, match=r"no frame 'base_link'.*--set frames.base_link=base_footprint"):
-        load_recording(path)
+    guessed = load_recording(path)  # the child of odom is the robot's base, with a warning
+    assert any("no frame 'base_link'" in w and "'base_footprint'" in w for w in guessed.warnings)
     rec = load_recording(path, DoorbatchConfig.model_validate({"frames": {"base_link": "base_footprint"}}))
     np.testing.assert_allclose(rec.scans.laser_to_base[0], [[1, 0, 0.2], [0, 1, 0]], atol=1e-12)
+    np.testing.assert_array_equal(guessed.scans.laser_to_base, rec.scans.laser_to_base)
+    assert not any("no frame" in w for w in rec.warnings)
 
 
 def test_a_range_max_of_zero_or_nan_is_no_stated_maximum(write_log: Callable[..., Path]) -> None:
@@ -242,3 +244,31 @@ def test_a_copy_printed_to_six_digits_far_from_the_origin_is_still_a_copy() -> N
     assert reference_repeats_odometry(*args)
     drifted = PoseSeries(stamps, rounded_odometry * np.array([1.0005, 1.0, 1.0]), "odom")  # 0.05 % scale in x
     assert not reference_repeats_odometry(args[0], drifted, stamps, DoorbatchConfig())
+
+
+def _turtlebot_without_tf_static(messages: list) -> list:
+    """The messages as a TurtleBot's recording that started after /tf_static was latched: its base is
+    base_footprint (odom → base_footprint on /tf, Odometry child frames), and no transform names the laser."""
+    out = []
+    for name, msgtype, t, msg in messages:
+        if name == "/tf_static":
+            continue
+        for x in getattr(msg, "transforms", []):
+            x.child_frame_id = "base_footprint"
+        if hasattr(msg, "child_frame_id"):
+            msg.child_frame_id = "base_footprint"
+        out.append((name, msgtype, t, msg))
+    return out
+
+
+def test_a_log_without_base_link_and_tf_static_needs_one_setting(write_log: Callable[..., Path]) -> None:
+    """The base frame is the child of odom when the tree has no base_link (a warning says so), and the error for
+    the laser names the one setting that reads the log (before: it named frames.base_link, whose next error then
+    named the setting, and the reference was dropped on the way)."""
+    path = write_log("tb3.mcap", _turtlebot_without_tf_static(sample_messages(6)))
+    with pytest.raises(LogContentError, match="assume_identity_laser_tf=true") as err:
+        load_recording(path, DoorbatchConfig())
+    assert "frames.base_link" not in str(err.value)
+    rec = load_recording(path, DoorbatchConfig(io=IoConfig(assume_identity_laser_tf=True)))
+    assert rec.odometry is not None and rec.reference is not None
+    assert any("taken to be 'base_footprint'" in w for w in rec.warnings)
