@@ -280,3 +280,14 @@ def test_a_message_that_does_not_decode_names_its_own_topic(write_log: Callable[
                     "(SELECT id FROM topics WHERE name = '/detections')")
     code, err = _run(capsys, "inspect", str(bag))
     assert code == 3 and "topic /detections" in _one_line(err)
+
+
+def test_a_topic_override_the_log_lacks_names_the_file_and_the_closest_topic(write_log: Callable[..., Path],
+                                                                             capsys: pytest.CaptureFixture[str]
+                                                                             ) -> None:
+    path = write_log("ok.mcap")
+    code, err = _run(capsys, "inspect", str(path), "--set", "topics.scan=/scann")
+    line = _one_line(err)
+    assert code == 3 and str(path) in line and "/scann" in line and "did you mean /scan?" in line
+    code, err = _run(capsys, "inspect", str(path), "--set", "topics.detections=/boxes")
+    assert code == 3 and "/detections" in _one_line(err)

@@ -126,7 +126,12 @@ class LogReader(ABC):
     def roles(self) -> RoleAssignment:
         """The role assignment for this log (config overrides, then detection)."""
         if self._roles is None:
-            self._roles = assign_roles(self.topics, self.topics_config)
+            try:
+                self._roles = assign_roles(self.topics, self.topics_config)
+            except LogContentError as err:
+                if err.path is not None:
+                    raise
+                raise LogContentError(err.reason, path=self.path, topic=err.topic) from err
         return self._roles
 
     def messages(self, roles: Iterable[Role] | None = None, start_ns: int | None = None,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import difflib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
@@ -111,7 +112,12 @@ def assign_roles(topics: Mapping[str, TopicInfo], overrides: TopicsConfig | None
         for name in names:
             info = topics.get(name)
             if info is None:
-                raise LogContentError(f"config topics.{role.value} names a topic the log does not have", topic=name)
+                fits = sorted(t.name for t in topics.values() if t.msgtype in _TYPES[role])
+                close = difflib.get_close_matches(name, fits, n=1, cutoff=0.0)
+                hint = (f"; did you mean {close[0]}? (its {role.value} topics: {', '.join(fits)})" if close
+                        else f"; it has no topic of a {role.value} type")
+                raise LogContentError(f"config topics.{role.value} names a topic the log does not have{hint}",
+                                      topic=name)
             if info.msgtype not in _TYPES[role]:
                 raise LogContentError(
                     f"config topics.{role.value}: type {info.msgtype} cannot be the {role.value} role",

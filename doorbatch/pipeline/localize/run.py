@@ -275,6 +275,9 @@ def localize(log_path: Path, lmap: LocalizationMap, config: DoorbatchConfig, met
     rec = load_recording(log_path, config)
     if isinstance(init, tuple) and (note := init_cell_note(lmap.occupancy, init)):
         rec.warnings.append(note)
+    if method == "rbpf" and not len(lmap.doors):
+        rec.warnings.append("--method rbpf on a map without doors (no doors.parquet, or none in it): no door is "
+                            "estimated, and the filter weighs the static map only, as MCL does")
     if isinstance(start, StartPose) and start.frame_id not in ("", config.frames.map):
         rec.warnings.append(f"--init {start.topic}: its pose is in frame {start.frame_id!r}, taken as the map frame "
                             f"{config.frames.map!r}")

@@ -252,6 +252,11 @@ def test_runs_on_a_plain_map_server_map_without_doors(sample_map: Path, tmp_path
                  "--method", "mcl", "-q"])
     assert code == 0
     assert len(read_table("trajectory", run / "trajectory.parquet")) > 100
+    assert not any("without doors" in w for w in json.loads((run / "manifest.json").read_text())["warnings"])
+    rbpf = tmp_path / "rbpf"  # the RBPF on a map without doors says it has none to estimate
+    assert main(["localize", str(SAMPLE_LOGS / "loc_closed.mcap"), "--map", str(plain / "map.yaml"), "-o", str(rbpf),
+                 "--method", "rbpf", "-q"]) == 0
+    assert any("without doors" in w for w in json.loads((rbpf / "manifest.json").read_text())["warnings"])
 
 
 def test_a_map_recorded_in_a_log_localizes_as_its_yaml(sample_map: Path, tmp_path: Path,
