@@ -166,9 +166,15 @@ def _tables(evaluation: Evaluation) -> list[tuple[str, SummaryTable]]:
     return [(title, t) for title, t in out if t.rows]
 
 
+LEFT_OUT = ("These steps failed, or were blocked by one that failed: the report has no rows of them. Their errors "
+            "are in the batch's summary.json and run.log.")
+
+
 def render_markdown(evaluation: Evaluation, plots: list[Plot]) -> str:
     """report.md: title, tables, plots as image links."""
     parts = [f"# {evaluation.title}", ""]
+    if evaluation.left_out:
+        parts += ["## Left out", "", LEFT_OUT, "", *(f"- `{step}`" for step in evaluation.left_out), ""]
     for title, table in _tables(evaluation):
         parts += [f"## {title}", "", *table_lines(table), ""]
     for name, caption, _ in plots:
@@ -180,6 +186,9 @@ def render_markdown(evaluation: Evaluation, plots: list[Plot]) -> str:
 def render_html(evaluation: Evaluation, plots: list[Plot]) -> str:
     """report.html: the same content, self-contained (plots as data URIs)."""
     body = [f"<h1>{html.escape(evaluation.title)}</h1>"]
+    if evaluation.left_out:
+        body.append(f"<h2>Left out</h2><p>{html.escape(LEFT_OUT)}</p><ul>"
+                    + "".join(f"<li><code>{html.escape(step)}</code></li>" for step in evaluation.left_out) + "</ul>")
     for title, table in _tables(evaluation):
         body.append(f"<h2>{html.escape(title)}</h2><table>")
         head = [*table.label_columns, *(f"{c} ({u})" for c, u in zip(table.value_columns, table.units, strict=True))]

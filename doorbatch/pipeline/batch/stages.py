@@ -73,20 +73,27 @@ def _site_tables(site: Site, out: Path, run_dirs: Sequence[str], config: Doorbat
     return tables, [door_map]
 
 
-def evaluate_site(site: Site, out: Path, run_dirs: Sequence[str], dest: Path, config: DoorbatchConfig) -> list[str]:
-    """Metrics, plots and report of the site's map and of each run that succeeded, into ``dest``."""
+LEFT_OUT_PREFIX = "left out: "
+
+
+def evaluate_site(site: Site, out: Path, run_dirs: Sequence[str], dest: Path, config: DoorbatchConfig,
+                  left_out: Sequence[str] = ()) -> list[str]:
+    """Metrics, plots and report of the site's map and of each run that succeeded, into ``dest``; the report
+    names the runs ``left_out`` (failed or blocked), and so do the returned warnings."""
     from doorbatch.pipeline.evaluate.report import evaluate_runs
 
     tables, maps = _site_tables(site, out, run_dirs, config)
-    evaluation = evaluate_runs(tables, config, maps=maps).with_title(f"doorbatch run: site {site.name}")
+    evaluation = evaluate_runs(tables, config, maps=maps).with_title(f"doorbatch run: site {site.name}", left_out)
     _write_report(evaluation, dest)
-    return []
+    return [f"{LEFT_OUT_PREFIX}{step} (failed or blocked)" for step in left_out]
 
 
 def dataset_report(dataset: Dataset, out: Path, evaluations: Sequence[Step], dest: Path,
-                   config: DoorbatchConfig) -> list[str]:
+                   config: DoorbatchConfig, left_out: Sequence[str] = ()) -> list[str]:
     """The dataset report over every site that was evaluated, into ``dest`` (OUT/report), and the site
-    partitions of the dataset-level tables OUT/metrics/site=<site>/ and OUT/trajectories/site=<site>/."""
+    partitions of the dataset-level tables OUT/metrics/site=<site>/ and OUT/trajectories/site=<site>/. The
+    report names the steps it lacks: the evaluations ``left_out`` and the runs each site's evaluation left out."""
+    from doorbatch.io.manifest import Manifest
     from doorbatch.pipeline.evaluate.report import evaluate_runs
 
     by_name = {s.name: s for s in dataset.sites}
@@ -104,6 +111,13 @@ def dataset_report(dataset: Dataset, out: Path, evaluations: Sequence[Step], des
             site_runs, site_maps = _site_tables(site, out, run_dirs, config, prefix=f"{site.name}/")
             tables += site_runs
             maps += site_maps
-        evaluation = evaluate_runs(tables, config, maps=maps).with_title(f"doorbatch run: {dataset.root.name}")
+        missing = list(left_out)
+        for ev in evaluations:
+            manifest = out / ev.out_dir / "manifest.json"
+            warnings = Manifest.read(manifest).warnings if manifest.is_file() else []
+            missing += [w[len(LEFT_OUT_PREFIX):].removesuffix(" (failed or blocked)") for w in warnings
+                        if w.startswith(LEFT_OUT_PREFIX)]
+        evaluation = evaluate_runs(tables, config, maps=maps).with_title(f"doorbatch run: {dataset.root.name}",
+                                                                          missing)
         _write_report(evaluation, dest)
     return []

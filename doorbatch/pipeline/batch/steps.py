@@ -110,9 +110,11 @@ def _run_stage(step: Step, job: BatchJob, usable: Sequence[Step], dest: Path) ->
     if step.kind is StepKind.LOCALIZE:
         assert step.log is not None and step.method is not None
         return stages.localize_log(step.log, job.out / map_dir(str(step.site)), dest, job.config, step.method)
+    left_out = [d for d in step.uses if d not in {u.id for u in usable}]  # failed or blocked
     if step.kind is StepKind.EVALUATE:
-        return stages.evaluate_site(job.site(step.site), job.out, [u.out_dir for u in usable], dest, job.config)
-    return stages.dataset_report(job.dataset, job.out, usable, dest, job.config)
+        return stages.evaluate_site(job.site(step.site), job.out, [u.out_dir for u in usable], dest, job.config,
+                                    left_out)
+    return stages.dataset_report(job.dataset, job.out, usable, dest, job.config, left_out)
 
 
 def _execute(step: Step, job: BatchJob, usable: Sequence[Step], key: StepKey) -> list[str]:

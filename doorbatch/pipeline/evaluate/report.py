@@ -254,14 +254,15 @@ class Evaluation:
     along_corridor: list[AlongCorridor]
     success: list[SuccessCurve]
     title: str = "doorbatch evaluation"
+    left_out: tuple[str, ...] = ()  # batch steps that failed or were blocked: no rows of them (doorbatch run)
 
     def value(self, run: str, metric: str) -> float:
         """The value of one metric of one run (NaN when absent)."""
         return next((r.value for r in self.metrics if r.run == run and r.metric == metric), math.nan)
 
-    def with_title(self, title: str) -> Evaluation:
-        """The same evaluation under another title."""
-        return replace(self, title=title)
+    def with_title(self, title: str, left_out: Sequence[str] = ()) -> Evaluation:
+        """The same evaluation under another title, naming the steps whose results it lacks."""
+        return replace(self, title=title, left_out=tuple(left_out))
 
 
 def _stat_rows(run: RunTables, prefix: str, errors: FloatArray, unit: str, scale: float) -> list[MetricRow]:

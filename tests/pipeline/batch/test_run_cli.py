@@ -118,6 +118,11 @@ def test_corrupt_log_fails_its_steps_and_the_rest_completes(
     metrics = pads.dataset(out / "metrics", format="parquet", partitioning="hive").to_table()
     assert {r for r in metrics.column("run").to_pylist() if "/" in r and "map" not in r} == {
         f"loc_closed/{m}" for m in METHODS}
+    # the reports a person reads name what they lack: the site's and the dataset's, in md and html
+    for report in (out / SITE / "report", out / "report"):
+        for name in ("report.md", "report.html"):
+            text = (report / name).read_text()
+            assert "Left out" in text and all(step in text for step in failed), report / name
 
 
 def test_a_live_lock_is_exit_2_and_a_stale_one_is_taken_over(
