@@ -52,6 +52,8 @@ class TopicsConfig(Section):
     image: str | None = None
     camera_info: str | None = None
     detections: str | None = None
+    # The robot's model in a gazebo_msgs/ModelStates reference (None: the one model not named like the world's).
+    reference_model: str | None = None
 
 
 class FramesConfig(Section):

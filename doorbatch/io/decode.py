@@ -7,7 +7,7 @@ Field names of the types we read are the same in ROS 1 and ROS 2 as rosbags repr
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from typing import Any
 
 import cv2
@@ -32,6 +32,7 @@ LASERSCAN = "sensor_msgs/msg/LaserScan"
 MULTI_ECHO_LASERSCAN = "sensor_msgs/msg/MultiEchoLaserScan"
 ODOMETRY = "nav_msgs/msg/Odometry"
 POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
+MODEL_STATES = "gazebo_msgs/msg/ModelStates"  # Gazebo's poses of every model: a simulator's ground truth
 POSE_COV_STAMPED = "geometry_msgs/msg/PoseWithCovarianceStamped"
 TF_MESSAGE = "tf2_msgs/msg/TFMessage"
 TF_MESSAGE_ROS1_LEGACY = "tf/msg/tfMessage"  # /tf of ROS 1 before Hydro: the same layout
@@ -120,6 +121,41 @@ def decode_pose(msg: Any, msgtype: str, log_time_ns: int) -> Pose2D:
     if msgtype == POSE_COV_STAMPED:
         return _pose2d(msg.header, "", msg.pose.pose, log_time_ns)
     return _pose2d(msg.header, "", msg.pose, log_time_ns)
+
+
+# Names of Gazebo models that are the world around the robot, not the robot (ground_plane, turtlebot3_world, ...).
+_WORLD_MODEL_WORDS = ("ground", "plane", "world", "house", "building", "wall", "room", "door", "table", "sun",
+                      "map", "office", "floor", "shelf", "box", "person", "actor")
+
+
+def robot_model_index(names: Sequence[str], wanted: str | None) -> int:
+    """Which of a gazebo_msgs/ModelStates' models is the robot: ``wanted`` (``topics.reference_model``), else
+    the one model whose name is none of the world's (``_WORLD_MODEL_WORDS``).
+
+    Raises:
+        LogContentError: ``wanted`` is not among the models, or no single model looks like the robot.
+    """
+    if wanted is not None:
+        if wanted not in names:
+            raise LogContentError(f"ModelStates has no model {wanted!r} (topics.reference_model); it has "
+                                  f"{', '.join(names)}")
+        return list(names).index(wanted)
+    robots = [i for i, n in enumerate(names) if not any(w in n.lower() for w in _WORLD_MODEL_WORDS)]
+    if len(robots) != 1:
+        raise LogContentError(f"ModelStates holds the models {', '.join(names)}: set topics.reference_model to the "
+                              "robot's")
+    return robots[0]
+
+
+def decode_model_states(msg: Any, log_time_ns: int, wanted: str | None) -> Pose2D:
+    """gazebo_msgs/ModelStates → the robot model's planar pose in Gazebo's world frame. The message has no
+    header: the stamp is unset (0), and its log time stands in (recording.on_one_clock)."""
+    names = [str(n) for n in msg.name]
+    k = robot_model_index(names, wanted)
+    pose = msg.pose[k]
+    q = pose.orientation
+    return Pose2D(stamp_ns=0, log_time_ns=log_time_ns, frame_id="", child_frame_id=names[k],
+                  x=float(pose.position.x), y=float(pose.position.y), yaw=yaw_from_quaternion(q.x, q.y, q.z, q.w))
 
 
 def decode_transforms(msg: Any, static: bool, log_time_ns: int = 0) -> Iterator[Transform]:
@@ -330,10 +366,14 @@ def decode_detections(msg: Any, log_time_ns: int) -> Detections:
     )
 
 
-def decode(role: Role, msg: Any, msgtype: str, log_time_ns: int, topic: str) -> Iterator[Record]:
-    """Decode one message of a topic with a known role into its records (TF gives several)."""
+def decode(role: Role, msg: Any, msgtype: str, log_time_ns: int, topic: str, reference_model: str | None = None
+           ) -> Iterator[Record]:
+    """Decode one message of a topic with a known role into its records (TF gives several);
+    ``reference_model``: the robot's model in a gazebo_msgs/ModelStates (None: :func:`robot_model_index`)."""
     if role is Role.SCAN:
         yield decode_scan(msg, log_time_ns, topic, msgtype)
+    elif role is Role.REFERENCE and msgtype == MODEL_STATES:
+        yield decode_model_states(msg, log_time_ns, reference_model)
     elif role in (Role.ODOMETRY, Role.REFERENCE):
         yield decode_pose(msg, msgtype, log_time_ns)
     elif role is Role.TRANSFORMS:

@@ -155,7 +155,8 @@ class LogReader(ABC):
             role = role_of[raw.topic]
             seen[raw.topic] += 1
             try:
-                records = list(decode(role, raw.msg, raw.msgtype, raw.log_time_ns, raw.topic))
+                records = list(decode(role, raw.msg, raw.msgtype, raw.log_time_ns, raw.topic,
+                                      self.topics_config.reference_model))
             except LogContentError as err:  # one bad message: skipped, unless most of its topic is bad (below)
                 bad.setdefault(raw.topic, []).append(self._named(err))
                 continue

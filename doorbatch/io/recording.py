@@ -303,11 +303,13 @@ def unset_stamps(stamps_ns: Sequence[int]) -> npt.NDArray[np.bool_]:
     return unset
 
 
-def _log_timed(records: list[R], every: bool) -> list[R]:
+def _log_timed(records: list[R], every: bool, offset_ns: int = 0) -> list[R]:
     """The records with their log time as stamp: ``every`` one, else those whose stamp is unset
-    (:func:`unset_stamps`)."""
+    (:func:`unset_stamps`), moved onto the stamps' clock by ``offset_ns`` (the scans' log time − stamp where they
+    are on two clocks, e.g. sim time: a gazebo_msgs/ModelStates has no header)."""
     unset = unset_stamps([r.stamp_ns for r in records])
-    return [replace(r, stamp_ns=r.log_time_ns) if every or u else r for r, u in zip(records, unset, strict=True)]
+    return [replace(r, stamp_ns=r.log_time_ns) if every else replace(r, stamp_ns=r.log_time_ns - offset_ns) if u
+            else r for r, u in zip(records, unset, strict=True)]
 
 
 def on_one_clock(scans: list[Scan], odom: list[Pose2D], ref: list[Pose2D], mismatch_s: float) -> OneClock:
@@ -330,7 +332,10 @@ def on_one_clock(scans: list[Scan], odom: list[Pose2D], ref: list[Pose2D], misma
         notes.append(f"scan and odometry header stamps are on different clocks (median stamp − log time "
                      f"{lags[0]:+.3f} s and {lags[1]:+.3f} s): every scan and pose is timed by its log time")
     every = lags is not None
-    scans, odom, ref = _log_timed(scans, every), _log_timed(odom, every), _log_timed(ref, every)
+    unset_scans = unset_stamps([s.stamp_ns for s in scans])
+    offset = log_offset_ns([s for s, u in zip(scans, unset_scans, strict=True) if not u], mismatch_s)
+    scans, odom, ref = (_log_timed(scans, every, offset), _log_timed(odom, every, offset),
+                        _log_timed(ref, every, offset))
     stamps = np.array([s.stamp_ns for s in scans], dtype=np.int64)
     back = int(np.count_nonzero(np.diff(stamps) < 0))
     if back:

@@ -272,3 +272,68 @@ def test_a_log_without_base_link_and_tf_static_needs_one_setting(write_log: Call
     rec = load_recording(path, DoorbatchConfig(io=IoConfig(assume_identity_laser_tf=True)))
     assert rec.odometry is not None and rec.reference is not None
     assert any("taken to be 'base_footprint'" in w for w in rec.warnings)
+
+
+def _with_model_states(messages: list, names: list[str]) -> list:
+    """The messages with /ground_truth (Odometry) replaced by Gazebo's /gazebo/model_states: every model's pose,
+    the robot's at the ground truth's, and no header."""
+    from rosbags.typesys import get_types_from_msg
+
+    from doorbatch.io.typestore import new_ros2_typestore
+
+    store = new_ros2_typestore()
+    store.register(get_types_from_msg("string[] name\ngeometry_msgs/Pose[] pose\ngeometry_msgs/Twist[] twist",
+                                      "gazebo_msgs/msg/ModelStates"))
+    types = store.types
+    pose_t, point_t, quat_t = (types[f"geometry_msgs/msg/{n}"] for n in ("Pose", "Point", "Quaternion"))
+    twist_t, vec_t = types["geometry_msgs/msg/Twist"], types["geometry_msgs/msg/Vector3"]
+    out = []
+    for name, msgtype, t, msg in messages:
+        if name != "/ground_truth":
+            out.append((name, msgtype, t, msg))
+            continue
+        still = pose_t(position=point_t(x=-3.0, y=4.0, z=0.0), orientation=quat_t(x=0.0, y=0.0, z=0.0, w=1.0))
+        poses = [msg.pose.pose if "burger" in n else still for n in names]
+        twists = [twist_t(linear=vec_t(x=0.0, y=0.0, z=0.0), angular=vec_t(x=0.0, y=0.0, z=0.0)) for _ in names]
+        states = types["gazebo_msgs/msg/ModelStates"](name=names, pose=poses, twist=twists)
+        out.append(("/gazebo/model_states", "gazebo_msgs/msg/ModelStates", t, (states, store)))
+    return out
+
+
+def test_gazebos_model_states_are_the_reference(tmp_path: Path) -> None:
+    """A Gazebo recording's ground truth: the robot's model among the world's (no header: timed by log time)."""
+    from doorbatch.io.log_writer import LogWriter
+
+    def write(path: Path, names: list[str], sim_time: bool = False) -> Path:
+        messages = sample_messages(8)
+        if sim_time:  # header stamps from 0.5 s, log times on the recorder's wall clock
+            t0 = next(t for name, _, t, _ in messages if name == "/scan") - 500_000_000
+            for topic in ("/scan", "/odom"):
+                messages = _restamped(messages, topic, lambda k, t: t - t0)
+        with LogWriter(path) as writer:
+            for name, msgtype, t, msg in _with_model_states(messages, names):
+                msg, store = msg if isinstance(msg, tuple) else (msg, None)
+                writer.write(name, msgtype, t, msg, store)
+        return path
+
+    truth = load_recording(_gt_log(tmp_path))
+    gz = load_recording(write(tmp_path / "gz.mcap", ["ground_plane", "turtlebot3_world", "turtlebot3_burger"]))
+    assert truth.reference is not None and gz.reference is not None
+    np.testing.assert_allclose(gz.reference.poses, truth.reference.poses, atol=1e-9)
+    # sim time: the log times stand in, moved onto the scans' clock
+    sim = load_recording(write(tmp_path / "sim.mcap", ["ground_plane", "turtlebot3_burger"], sim_time=True))
+    assert sim.reference is not None and sim.log_offset_ns > 10**9
+    np.testing.assert_array_equal(sim.reference.stamps_ns, truth.reference.stamps_ns - sim.log_offset_ns)
+    np.testing.assert_allclose(sim.reference.poses, truth.reference.poses, atol=1e-9)
+    two = write(tmp_path / "two.mcap", ["ground_plane", "turtlebot3_burger", "jackal"])
+    with pytest.raises(LogContentError, match=r"topics\.reference_model"):
+        load_recording(two)
+    chosen = load_recording(two, DoorbatchConfig.model_validate({"topics": {"reference_model": "turtlebot3_burger"}}))
+    assert chosen.reference is not None
+    np.testing.assert_allclose(chosen.reference.poses, truth.reference.poses, atol=1e-9)
+
+
+def _gt_log(tmp_path: Path) -> Path:
+    from tests.conftest import write_messages
+
+    return write_messages(tmp_path / "gt.mcap", sample_messages(8), "mcap")
