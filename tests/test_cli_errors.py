@@ -291,3 +291,15 @@ def test_a_topic_override_the_log_lacks_names_the_file_and_the_closest_topic(wri
     assert code == 3 and str(path) in line and "/scann" in line and "did you mean /scan?" in line
     code, err = _run(capsys, "inspect", str(path), "--set", "topics.detections=/boxes")
     assert code == 3 and "/detections" in _one_line(err)
+
+
+def test_inspect_says_where_the_odometry_comes_from(write_log: Callable[..., Path],
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    messages = sample_messages(5)
+    for name, msgs, expected in (("topic.mcap", messages, "/odom (nav_msgs/Odometry)"),
+                                 ("tf.mcap", [x for x in messages if x[0] != "/odom"], "TF odom→base_link")):
+        path = write_log(name, msgs)
+        assert main(["inspect", str(path), "--json"]) == 0
+        assert json.loads(capsys.readouterr().out)["odometry"] == expected
+        assert main(["inspect", str(path)]) == 0
+        assert f"Odometry:   {expected}" in capsys.readouterr().out

@@ -87,6 +87,7 @@ class LogReport:
     topics: list[TopicReport]
     frames: list[str]
     problems: list[Problem] = field(default_factory=list)
+    odometry: str = "none"  # where the odometry comes from: an Odometry topic, or TF odom → base
 
     @property
     def errors(self) -> list[Problem]:
@@ -218,8 +219,12 @@ def _check_roles(report: LogReport, chosen: dict[Role, tuple[str, ...]], scan_fr
         add(Problem(Severity.ERROR, None, "no sensor_msgs/LaserScan topic: doorbatch needs a 2D laser scan"))
     elif stats.get(scan[0], _TopicStats()).count == 0:
         add(Problem(Severity.ERROR, scan[0], "scan topic has no messages"))
-    if Role.ODOMETRY not in chosen:
+    if Role.ODOMETRY in chosen:
+        report.odometry = f"{chosen[Role.ODOMETRY][0]} (nav_msgs/Odometry)"
+    else:
         odom_frame = odometry_frame(tf, frames.odom, frames.base_link)
+        if odom_frame is not None:
+            report.odometry = f"TF {odom_frame}→{frames.base_link}"
         if odom_frame is None:
             add(Problem(Severity.WARNING, None,
                         f"no odometry: no nav_msgs/Odometry topic and no TF {frames.odom}→{frames.base_link}"))
