@@ -647,7 +647,8 @@ class ObjectMapConfig(Section):
     still_turn_deg: float = Field(0.5, ge=0.0)
     still_interval_s: float = Field(1.0, ge=0.0)
     # Once the structure has converged: walls proposed and re-cut by eq. (9) over every final_scan_stride-th
-    # scan and final_beam_stride-th beam (default all: the paper's ρ are set for full data; ~81 bytes a beam)
+    # scan and final_beam_stride-th beam (default all, less a standing robot's repeats: the paper's ρ are set for
+    # full data; ~81 bytes a beam)
     # in at most this many sweeps over the walls; 0: off.
     final_recut_sweeps: int = Field(3, ge=0)
     final_scan_stride: int = Field(1, ge=1)

@@ -7,6 +7,7 @@ Field names of the types we read are the same in ROS 1 and ROS 2 as rosbags repr
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Iterator, Sequence
 from typing import Any
 
@@ -123,35 +124,39 @@ def decode_pose(msg: Any, msgtype: str, log_time_ns: int) -> Pose2D:
     return _pose2d(msg.header, "", msg.pose, log_time_ns)
 
 
-# Names of Gazebo models that are the world around the robot, not the robot (ground_plane, turtlebot3_world, ...).
-_WORLD_MODEL_WORDS = ("ground", "plane", "world", "house", "building", "wall", "room", "door", "table", "sun",
-                      "map", "office", "floor", "shelf", "box", "person", "actor")
+# Name tokens of Gazebo models that are the world around the robot, not the robot (ground_plane, turtlebot3_world,
+# unit_box, ...), matched per token (a robot called boxer is no box).
+_WORLD_MODEL_WORDS = frozenset({"ground", "plane", "world", "house", "building", "wall", "walls", "room", "door",
+                                "table", "sun", "map", "office", "floor", "shelf", "box", "person", "actor", "unit",
+                                "cylinder", "sphere", "obstacle", "cafe", "warehouse"})
 
 
-def robot_model_index(names: Sequence[str], wanted: str | None) -> int:
+def robot_model_index(names: Sequence[str], wanted: str | None) -> int | None:
     """Which of a gazebo_msgs/ModelStates' models is the robot: ``wanted`` (``topics.reference_model``), else
-    the one model whose name is none of the world's (``_WORLD_MODEL_WORDS``).
+    the one model none of whose name's tokens is a world word (``_WORLD_MODEL_WORDS``); None when no single one
+    is.
 
     Raises:
-        LogContentError: ``wanted`` is not among the models, or no single model looks like the robot.
+        LogContentError: ``wanted`` is not among the models.
     """
     if wanted is not None:
         if wanted not in names:
             raise LogContentError(f"ModelStates has no model {wanted!r} (topics.reference_model); it has "
                                   f"{', '.join(names)}")
         return list(names).index(wanted)
-    robots = [i for i, n in enumerate(names) if not any(w in n.lower() for w in _WORLD_MODEL_WORDS)]
-    if len(robots) != 1:
-        raise LogContentError(f"ModelStates holds the models {', '.join(names)}: set topics.reference_model to the "
-                              "robot's")
-    return robots[0]
+    robots = [i for i, n in enumerate(names)
+              if not _WORLD_MODEL_WORDS & set(re.split(r"[_\-/.\s]+|(?<=[a-z])(?=[0-9])", n.lower()))]
+    return robots[0] if len(robots) == 1 else None
 
 
-def decode_model_states(msg: Any, log_time_ns: int, wanted: str | None) -> Pose2D:
-    """gazebo_msgs/ModelStates → the robot model's planar pose in Gazebo's world frame. The message has no
-    header: the stamp is unset (0), and its log time stands in (recording.on_one_clock)."""
+def decode_model_states(msg: Any, log_time_ns: int, wanted: str | None) -> Pose2D | None:
+    """gazebo_msgs/ModelStates → the robot model's planar pose in Gazebo's world frame (None: no single model is
+    the robot, :func:`robot_model_index`). The message has no header: the stamp is unset (0), and its log time
+    stands in, on the scans' clock (recording.on_one_clock)."""
     names = [str(n) for n in msg.name]
     k = robot_model_index(names, wanted)
+    if k is None:
+        return None
     pose = msg.pose[k]
     q = pose.orientation
     return Pose2D(stamp_ns=0, log_time_ns=log_time_ns, frame_id="", child_frame_id=names[k],
@@ -373,7 +378,9 @@ def decode(role: Role, msg: Any, msgtype: str, log_time_ns: int, topic: str, ref
     if role is Role.SCAN:
         yield decode_scan(msg, log_time_ns, topic, msgtype)
     elif role is Role.REFERENCE and msgtype == MODEL_STATES:
-        yield decode_model_states(msg, log_time_ns, reference_model)
+        pose = decode_model_states(msg, log_time_ns, reference_model)
+        if pose is not None:
+            yield pose
     elif role in (Role.ODOMETRY, Role.REFERENCE):
         yield decode_pose(msg, msgtype, log_time_ns)
     elif role is Role.TRANSFORMS:

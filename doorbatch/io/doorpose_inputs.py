@@ -46,6 +46,7 @@ class DoorPoseInputs:
     reference: PoseSeries | None
     odometry: PoseSeries | None
     warnings: list[str] = field(default_factory=list)
+    base_link: str = "base_link"  # the robot's base frame in this log's TF tree (recording.resolve_base_frame)
 
 
 def read_doorpose_inputs(path: Path, config: DoorbatchConfig, detector: ImageDetector | None = None
@@ -115,7 +116,7 @@ def read_doorpose_inputs(path: Path, config: DoorbatchConfig, detector: ImageDet
     if not scans:
         raise LogContentError("scan topic has no messages", path=path)
     return DoorPoseInputs(str(path), tf, info, sorted(scans, key=lambda s: s.stamp_ns),
-                          sorted(boxes, key=lambda d: d.stamp_ns), reference, odometry, warnings)
+                          sorted(boxes, key=lambda d: d.stamp_ns), reference, odometry, warnings, frames.base_link)
 
 
 def _first_message(reader: LogReader, topic: str) -> RawMessage | None:

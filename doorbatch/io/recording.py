@@ -21,6 +21,7 @@ from doorbatch.errors import LogContentError, TransformError
 from doorbatch.geometry.rotations import yaw_of_matrix
 from doorbatch.geometry.se2 import compose, interpolate_poses
 from doorbatch.geometry.tf_buffer import TfBuffer
+from doorbatch.io.decode import MODEL_STATES
 from doorbatch.io.reader import LogReader, open_log
 from doorbatch.pipeline.evaluate.trajectory_error import rigid_copy_offset
 from doorbatch.records import BeamColors, Pose2D, Role, Scan, Transform
@@ -152,6 +153,18 @@ def tf_odometry(tf: TfBuffer, odom: str, base: str) -> tuple[list[Pose2D], str |
     return poses, None if frame == odom else odometry_frame_note(frame, odom, base)
 
 
+def model_states_note(reader: LogReader) -> list[str]:
+    """Why a log whose reference topic is a gazebo_msgs/ModelStates gave no reference pose: none or several of its
+    models look like the robot (:func:`~doorbatch.io.decode.robot_model_index`)."""
+    topic = reader.roles.topic(Role.REFERENCE)
+    if topic is None or reader.topics[topic].msgtype != MODEL_STATES:
+        return []
+    first = next(iter(reader.raw_messages([topic])), None)
+    names = ", ".join(str(n) for n in first.msg.name) if first is not None else ""
+    return [f"{topic}: Gazebo's model states hold {names}, and no single one looks like the robot: the log has no "
+            "reference (set topics.reference_model)"]
+
+
 def resolve_base_frame(tf: TfBuffer, frames: FramesConfig) -> tuple[FramesConfig, str | None]:
     """``frames`` with ``base_link`` replaced by the child of the odometry edge (``odom`` → X, the robot's base:
     base_footprint on a TurtleBot whose /tf_static was not recorded) when the TF tree has transforms but not
@@ -267,6 +280,7 @@ class OneClock:
     ref: list[Pose2D]
     header_stamps_ns: list[int]
     notes: list[str]
+    log_offset_ns: int = 0  # LogClock.offset_ns: the recorder's clock minus the scans' stamps (0: one clock)
 
 
 def clock_lags_s(scan_stamps_ns: Sequence[int], scan_log_ns: Sequence[int], odom_stamps_ns: Sequence[int],
@@ -284,38 +298,65 @@ def clock_lags_s(scan_stamps_ns: Sequence[int], scan_log_ns: Sequence[int], odom
 
 def unset_stamps(stamps_ns: Sequence[int]) -> npt.NDArray[np.bool_]:
     """Which header stamps (one topic, in log order) are unset: 0, unless the clock starts there. Gazebo's sim
-    time starts at 0 s, so a 0 whose nearest set stamp in log order (before or after it) lies within
-    max(1 s, 10 median intervals of the set stamps) is that clock's first instant; a 0 among stamps far from it
-    (a driver that leaves the stamp unset, on wall-clock or mid-run sim time) is unset."""
+    time starts at 0 s, so the last 0 before any set stamp, when the first set stamp after it lies within
+    max(1 s, 10 median intervals of the set stamps), is that clock's first instant; every other 0 (several
+    before the first /clock, a driver that leaves the stamp unset, a 0 in the middle of a run) is unset."""
     s = np.asarray(stamps_ns, dtype=np.int64)
     zero: npt.NDArray[np.bool_] = s == 0
     if not zero.any() or zero.all():
         return zero
-    idx = np.arange(s.size)
-    set_at = np.where(~zero, idx, -1)
-    prev = np.maximum.accumulate(set_at)  # index of the last set stamp at or before each
-    nxt = np.minimum.accumulate(np.where(~zero, idx, s.size)[::-1])[::-1]  # the first set stamp at or after
-    steps = np.diff(np.sort(s[~zero]))
-    limit = max(1e9, 10.0 * float(np.median(steps[steps > 0]))) if (steps > 0).any() else 1e9
-    padded = np.append(np.abs(s).astype(np.float64), np.inf)
-    near = np.minimum(np.where(prev >= 0, padded[np.maximum(prev, 0)], np.inf), padded[nxt])
-    unset: npt.NDArray[np.bool_] = zero & (near > limit)
+    first_set = int(np.argmax(~zero))
+    unset = zero.copy()
+    if first_set > 0:  # leading zeros: the last of them may be the clock's start
+        steps = np.diff(np.sort(s[~zero]))
+        limit = max(1e9, 10.0 * float(np.median(steps[steps > 0]))) if (steps > 0).any() else 1e9
+        unset[first_set - 1] = abs(int(s[first_set])) > limit
     return unset
 
 
-def _log_timed(records: list[R], every: bool, offset_ns: int = 0) -> list[R]:
+class LogClock:
+    """The recorder's clock against the scans' stamps: (log time, stamp) of every scan with a set stamp, when the
+    two differ by more than ``mismatch_s`` (sim time on a wall-clock recording; the gap grows or shrinks with
+    Gazebo's real-time factor); else the identity."""
+
+    def __init__(self, scans: Sequence[Scan], mismatch_s: float) -> None:
+        unset = unset_stamps([sc.stamp_ns for sc in scans])
+        pairs = sorted((sc.log_time_ns, sc.stamp_ns) for sc, u in zip(scans, unset, strict=True)
+                       if sc.log_time_ns and not u)
+        lags = [g - t for g, t in pairs]
+        self.offset_ns = int(np.median(np.asarray(lags, dtype=np.int64))) if lags else 0
+        if abs(self.offset_ns) <= mismatch_s * 1e9:
+            self.offset_ns, pairs = 0, []
+        self._log = np.array([g for g, _ in pairs], dtype=np.int64)
+        self._stamp = np.array([t for _, t in pairs], dtype=np.int64)
+
+    def stamp_at(self, log_time_ns: int) -> int:
+        """The scans' clock at a log time: interpolated between the scans logged around it (beyond them, the
+        nearest one's offset). Interpolated relative to the first scan, so that float64 keeps the nanoseconds."""
+        if not self._log.size:
+            return log_time_ns
+        if log_time_ns <= self._log[0] or log_time_ns >= self._log[-1]:
+            k = 0 if log_time_ns <= self._log[0] else -1
+            return int(log_time_ns - (int(self._log[k]) - int(self._stamp[k])))
+        g0, t0 = int(self._log[0]), int(self._stamp[0])
+        return t0 + round(float(np.interp(log_time_ns - g0, (self._log - g0).astype(np.float64),
+                                          (self._stamp - t0).astype(np.float64))))
+
+
+def _log_timed(records: list[R], every: bool, clock: LogClock | None = None) -> list[R]:
     """The records with their log time as stamp: ``every`` one, else those whose stamp is unset
-    (:func:`unset_stamps`), moved onto the stamps' clock by ``offset_ns`` (the scans' log time − stamp where they
-    are on two clocks, e.g. sim time: a gazebo_msgs/ModelStates has no header)."""
+    (:func:`unset_stamps`), put on the scans' clock by ``clock`` (sim time: a gazebo_msgs/ModelStates has no
+    header)."""
     unset = unset_stamps([r.stamp_ns for r in records])
-    return [replace(r, stamp_ns=r.log_time_ns) if every else replace(r, stamp_ns=r.log_time_ns - offset_ns) if u
+    return [replace(r, stamp_ns=r.log_time_ns) if every
+            else replace(r, stamp_ns=r.log_time_ns if clock is None else clock.stamp_at(r.log_time_ns)) if u
             else r for r, u in zip(records, unset, strict=True)]
 
 
 def on_one_clock(scans: list[Scan], odom: list[Pose2D], ref: list[Pose2D], mismatch_s: float) -> OneClock:
     """Scans and poses whose header stamps can be put on one time line, in stamp order, and notes saying what
     was done. A header stamp of 0 is unset (:func:`unset_stamps`: not where a clock starts at 0): the message's
-    log time stands in. Scans and odometry whose median
+    log time stands in, on the scans' clock (:class:`LogClock`). Scans and odometry whose median
     (stamp − log time) differ by more than ``mismatch_s`` are on two clocks (a driver stamping with its
     device's clock): every scan and pose is timed by its log time, the recorder's one clock. Scans that
     arrived out of stamp order are sorted (bags record arrival order; the stamp is the measurement's time).
@@ -327,22 +368,21 @@ def on_one_clock(scans: list[Scan], odom: list[Pose2D], ref: list[Pose2D], misma
     for name, records in (("scans", scans), ("odometry poses", odom), ("reference poses", ref)):
         unset = int(unset_stamps([r.stamp_ns for r in records]).sum())
         if unset:
-            notes.append(f"{unset} of {len(records)} {name} have header stamp 0 (unset): timed by their log time")
+            notes.append(f"{unset} of {len(records)} {name} have header stamp 0 (unset) or no header: timed by "
+                         f"their log time")
     if lags is not None:
         notes.append(f"scan and odometry header stamps are on different clocks (median stamp − log time "
                      f"{lags[0]:+.3f} s and {lags[1]:+.3f} s): every scan and pose is timed by its log time")
     every = lags is not None
-    unset_scans = unset_stamps([s.stamp_ns for s in scans])
-    offset = log_offset_ns([s for s, u in zip(scans, unset_scans, strict=True) if not u], mismatch_s)
-    scans, odom, ref = (_log_timed(scans, every, offset), _log_timed(odom, every, offset),
-                        _log_timed(ref, every, offset))
+    clock = LogClock(scans, mismatch_s)
+    scans, odom, ref = _log_timed(scans, every, clock), _log_timed(odom, every, clock), _log_timed(ref, every, clock)
     stamps = np.array([s.stamp_ns for s in scans], dtype=np.int64)
     back = int(np.count_nonzero(np.diff(stamps) < 0))
     if back:
         order = np.argsort(stamps, kind="stable")
         scans, header = [scans[i] for i in order], [header[i] for i in order]
         notes.append(f"scan header stamps go backwards {back} time(s) in log order: scans sorted by stamp")
-    return OneClock(scans, odom, ref, header, notes)
+    return OneClock(scans, odom, ref, header, notes, 0 if every else clock.offset_ns)
 
 
 def scan_colors(colors: Sequence[BeamColors], header_stamps_ns: Sequence[int], log_times_ns: Sequence[int],
@@ -395,6 +435,7 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
                 colors.append(rec)
         frames, base_note = resolve_base_frame(tf, config.frames)
         odom, notes = odometry_poses(odom, tf, reader.roles.topic(Role.ODOMETRY) is not None, frames)
+        notes += model_states_note(reader) if not ref else []
         timed = on_one_clock(scans, odom, ref, config.io.clock_mismatch_s)
         scans = timed.scans
         odometry, reference = robot_pose_series(timed.odom, timed.ref, tf, frames)
@@ -443,18 +484,12 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
                         "no independent reference (a raw CARMEN log's laser poses are its odometry; a corrected log's "
                         "odometry was replaced by its corrected poses)")
     return Recording(str(path), scan_set, odometry, reference, aligned, warnings, valid, repeats,
-                     log_offset_ns(scans, config.io.clock_mismatch_s))
+                     timed.log_offset_ns)
 
 
 def log_offset_ns(scans: Sequence[Scan], mismatch_s: float) -> int:
-    """:attr:`Recording.log_offset_ns`: the median (log time − stamp) of the scans when it exceeds ``mismatch_s``
-    (header stamps on another clock than the recorder's, e.g. sim time), else 0 (scans without a log time are
-    left out)."""
-    lags = [s.log_time_ns - s.stamp_ns for s in scans if s.log_time_ns]
-    if not lags:
-        return 0
-    lag = int(np.median(np.asarray(lags, dtype=np.int64)))
-    return lag if abs(lag) > mismatch_s * 1e9 else 0
+    """:attr:`Recording.log_offset_ns` of scans read elsewhere (doorpose): :attr:`LogClock.offset_ns`."""
+    return LogClock(scans, mismatch_s).offset_ns
 
 
 def reference_repeats_odometry(reference: PoseSeries | None, odometry: PoseSeries | None,

@@ -140,6 +140,8 @@ def assign_roles(topics: Mapping[str, TopicInfo], overrides: TopicsConfig | None
             and not _looks_like_command(t.name)
         ]
         refs = [t for t in refs if t.name not in _NAMES[Role.ODOMETRY]]
+        if any(t.msgtype != d.MODEL_STATES for t in refs):  # a header-stamped pose topic wins over Gazebo's states
+            refs = [t for t in refs if t.msgtype != d.MODEL_STATES]
         pick = _pick(Role.REFERENCE, refs)
         if pick:
             chosen[Role.REFERENCE] = (pick[0].name,)

@@ -162,7 +162,8 @@ def read_run_dir(run_dir: Path, config: DoorbatchConfig, name: str | None = None
         pose=pose, init=str(extra.get("init", "reference")),
         converged_ns=None if converged_after is None else int(stamps[0]) + round(float(converged_after) * 1e9),
         ambiguous=bool(extra.get("ambiguous", False)), door_states=_read_door_states(run_dir / "door_states.parquet"),
-        lost_ns=tuple(int(stamps[0]) + round(float(t) * 1e9) for t in extra.get("lost_after_s") or ()),
+        lost_ns=None if "lost_after_s" not in extra else tuple(  # None: a run from before the lost test
+            int(stamps[0]) + round(float(t) * 1e9) for t in extra["lost_after_s"] or ()),
         map_doors=read_door_set(maps[0]) if maps and maps[0].is_dir() else None, reference=reference, truth=truth,
         params=dict(params) if isinstance(params, dict) else {}, map_path=str(inputs[1]) if len(inputs) > 1 else None)
 

@@ -159,6 +159,8 @@ def test_unset_scan_stamps_are_their_log_times(write_log: Callable[..., Path]) -
     ([1.7e9, 0.0, 1.7e9 + 0.2], [False, True, False]),  # one unset stamp among wall-clock ones
     ([100.0, 100.2, 0.0, 100.6], [False, False, True, False]),  # an unset one in the middle of a sim run
     ([0.0, 5.0, 5.2, 5.4], [True, False, False, False]),  # sim time, but its next stamp is 25 intervals later
+    ([0.0, 0.0, 0.2, 0.4], [True, False, False, False]),  # two before the first /clock: only the last can start it
+    ([0.1, 0.3, 0.0, 0.7], [False, False, True, False]),  # a 0 within the first second, but mid-run
 ])
 def test_a_zero_stamp_is_unset_unless_the_clock_starts_there(stamps_s: list[float], unset: list[bool]) -> None:
     stamps = [round(t * 1e9) for t in stamps_s]
@@ -304,12 +306,13 @@ def test_gazebos_model_states_are_the_reference(tmp_path: Path) -> None:
     """A Gazebo recording's ground truth: the robot's model among the world's (no header: timed by log time)."""
     from doorbatch.io.log_writer import LogWriter
 
-    def write(path: Path, names: list[str], sim_time: bool = False) -> Path:
+    def write(path: Path, names: list[str], sim_time: bool = False, real_time_factor: float = 1.0) -> Path:
         messages = sample_messages(8)
         if sim_time:  # header stamps from 0.5 s, log times on the recorder's wall clock
-            t0 = next(t for name, _, t, _ in messages if name == "/scan") - 500_000_000
+            t0 = next(t for name, _, t, _ in messages if name == "/scan")
             for topic in ("/scan", "/odom"):
-                messages = _restamped(messages, topic, lambda k, t: t - t0)
+                messages = _restamped(messages, topic,
+                                      lambda k, t: 500_000_000 + round((t - t0) * real_time_factor))
         with LogWriter(path) as writer:
             for name, msgtype, t, msg in _with_model_states(messages, names):
                 msg, store = msg if isinstance(msg, tuple) else (msg, None)
@@ -325,9 +328,19 @@ def test_gazebos_model_states_are_the_reference(tmp_path: Path) -> None:
     assert sim.reference is not None and sim.log_offset_ns > 10**9
     np.testing.assert_array_equal(sim.reference.stamps_ns, truth.reference.stamps_ns - sim.log_offset_ns)
     np.testing.assert_allclose(sim.reference.poses, truth.reference.poses, atol=1e-9)
+    # Gazebo slower than real time: the offset grows; each log time is put on the scans' clock where it is
+    slow = load_recording(write(tmp_path / "slow.mcap", ["ground_plane", "turtlebot3_burger"], True, 0.8))
+    assert slow.reference is not None
+    t0 = int(truth.scans.stamps_ns[0])
+    inside = (truth.reference.stamps_ns >= t0) & (truth.reference.stamps_ns <= truth.scans.stamps_ns[-1])
+    expected = 500_000_000 + (truth.reference.stamps_ns[inside] - t0) * 0.8
+    np.testing.assert_allclose(slow.reference.stamps_ns[inside], expected, atol=1000)
     two = write(tmp_path / "two.mcap", ["ground_plane", "turtlebot3_burger", "jackal"])
-    with pytest.raises(LogContentError, match=r"topics\.reference_model"):
-        load_recording(two)
+    ambiguous = load_recording(two)  # two robots: no reference, and a warning that says how to choose
+    assert ambiguous.reference is None
+    assert any("topics.reference_model" in w and "jackal" in w for w in ambiguous.warnings)
+    with pytest.raises(LogContentError, match="no model 'husky'"):
+        load_recording(two, DoorbatchConfig.model_validate({"topics": {"reference_model": "husky"}}))
     chosen = load_recording(two, DoorbatchConfig.model_validate({"topics": {"reference_model": "turtlebot3_burger"}}))
     assert chosen.reference is not None
     np.testing.assert_allclose(chosen.reference.poses, truth.reference.poses, atol=1e-9)

@@ -95,10 +95,18 @@ def _inputs(step: Step, job: BatchJob, usable: Sequence[Step]) -> tuple[list[Pat
             assert u.log is not None
             files += _existing([out / u.out_dir / f for f in RUN_FILES])
             files += _existing([output_paths(u.log)["trajectory"], output_paths(u.log)["truth"], u.log])
-        return files, {"runs": [u.out_dir for u in usable]}
+        return files, {"runs": [u.out_dir for u in usable], "left_out": left_out(step, usable)}
     # the dataset report re-reads what each site evaluation read: their step keys stand for those inputs
     return [out / u.out_dir / "metrics.parquet" for u in usable], {
-        "sites": [u.site for u in usable], "site_keys": [recorded_key(out / u.out_dir) for u in usable]}
+        "sites": [u.site for u in usable], "site_keys": [recorded_key(out / u.out_dir) for u in usable],
+        "left_out": left_out(step, usable)}
+
+
+def left_out(step: Step, usable: Sequence[Step]) -> list[str]:
+    """The steps ``step`` would use that failed or were blocked (its report names them; part of its key, so
+    that the report is made again when they change)."""
+    ok = {u.id for u in usable}
+    return sorted(d for d in step.uses if d not in ok)
 
 
 def _run_stage(step: Step, job: BatchJob, usable: Sequence[Step], dest: Path) -> list[str]:
@@ -110,11 +118,11 @@ def _run_stage(step: Step, job: BatchJob, usable: Sequence[Step], dest: Path) ->
     if step.kind is StepKind.LOCALIZE:
         assert step.log is not None and step.method is not None
         return stages.localize_log(step.log, job.out / map_dir(str(step.site)), dest, job.config, step.method)
-    left_out = [d for d in step.uses if d not in {u.id for u in usable}]  # failed or blocked
+    missing = left_out(step, usable)
     if step.kind is StepKind.EVALUATE:
         return stages.evaluate_site(job.site(step.site), job.out, [u.out_dir for u in usable], dest, job.config,
-                                    left_out)
-    return stages.dataset_report(job.dataset, job.out, usable, dest, job.config, left_out)
+                                    missing)
+    return stages.dataset_report(job.dataset, job.out, usable, dest, job.config, missing)
 
 
 def _execute(step: Step, job: BatchJob, usable: Sequence[Step], key: StepKey) -> list[str]:

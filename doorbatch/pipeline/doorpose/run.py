@@ -77,7 +77,7 @@ def output_frame(inputs: DoorPoseInputs, config: DoorbatchConfig) -> tuple[str, 
     if want == "auto":
         want = "map" if inputs.reference is not None else "odom" if inputs.odometry is not None else "base_link"
     if want == "base_link":
-        return config.frames.base_link, None
+        return inputs.base_link, None
     series = inputs.reference if want == "map" else inputs.odometry
     if series is None:
         raise TransformError(f"doorpose.frame={want} needs {'a reference pose' if want == 'map' else 'odometry'} "
@@ -136,7 +136,7 @@ def estimate_door_poses(inputs: DoorPoseInputs, config: DoorbatchConfig, doors: 
         scan = inputs.scans[i]
         try:
             points, _ = scan_in_camera(scan, inputs.tf, camera.frame_id)
-            cam_to_base = inputs.tf.lookup(config.frames.base_link, camera.frame_id, boxes.stamp_ns)
+            cam_to_base = inputs.tf.lookup(inputs.base_link, camera.frame_id, boxes.stamp_ns)
         except TransformError as err:
             warnings.append(f"image at {boxes.stamp_ns / 1e9:.3f} s skipped: {err.reason}")
             continue
@@ -157,7 +157,7 @@ def estimate_door_poses(inputs: DoorPoseInputs, config: DoorbatchConfig, doors: 
                                     door.box, camera.frame_id))
     if len(warnings) > 3:
         warnings = [*warnings[:3], f"... and {len(warnings) - 3} more images skipped for missing transforms"]
-    tilt = camera_tilt_deg(inputs, config.frames.base_link, camera.frame_id)
+    tilt = camera_tilt_deg(inputs, inputs.base_link, camera.frame_id)
     if tilt is not None and abs(tilt) > dc.max_camera_tilt_deg:
         warnings.append(f"the camera's optical axis (z of frame {camera.frame_id!r}) points {abs(tilt):.1f} deg "
                         f"{'above' if tilt > 0 else 'below'} the horizontal: the fusion assumes a level camera, "

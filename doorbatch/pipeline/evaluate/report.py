@@ -20,7 +20,8 @@ Per localization run (metric names; rotations in ``evaluate.angle_unit``):
 ``ape_trans_<stat>`` and ``ape_rot_<stat>``, ``rpe_trans_<stat>`` and ``rpe_rot_<stat>`` (stat: rmse, mean,
 median, std, min, max, as evo, see :mod:`trajectory_metrics`), ``associated_poses``, ``rpe_pairs``;
 ``converged`` (0/1), ``time_to_converge_s``, ``ambiguous`` (0/1), ``lost`` (0/1: the run found its scans no
-longer fit the map, ``localize.lost_*``), ``time_to_lost_s`` and, for global initialization,
+longer fit the map, ``localize.lost_*``; NaN for a trajectory from another localizer, or a run from before the
+test), ``time_to_lost_s`` and, for global initialization,
 ``global_success`` (0/1); with a truth and a door map, ``door_state_error_mean`` / ``_max`` (rad).
 Per door map with a truth: ``door_precision``, ``door_recall``, ``door_hinge_error_mean`` (m),
 ``door_length_error_mean`` (m, absolute), ``door_range_error_mean`` (rad), ``doors_detected``, ``doors_truth``.
@@ -107,7 +108,7 @@ class RunTables:
     truth: SimTruth | None = None
     params: dict[str, Any] = field(default_factory=dict)
     map_path: str | None = None
-    lost_ns: tuple[int, ...] = ()  # stamps at which the run reported itself lost (localize.lost_*)
+    lost_ns: tuple[int, ...] | None = None  # stamps at which the run found itself lost; None: not known
 
 
 def with_setups_told_apart(runs: Sequence[RunTables]) -> list[RunTables]:
@@ -290,7 +291,8 @@ def _convergence_rows(run: RunTables, reference: ReferenceTrajectory | None,
                       run.params),
             MetricRow(run.name, run.log, run.method, "time_to_converge_s", after, "s", run.params),
             MetricRow(run.name, run.log, run.method, "ambiguous", float(run.ambiguous), "bool", run.params),
-            MetricRow(run.name, run.log, run.method, "lost", float(bool(run.lost_ns)), "bool", run.params),
+            MetricRow(run.name, run.log, run.method, "lost",
+                      math.nan if run.lost_ns is None else float(bool(run.lost_ns)), "bool", run.params),
             MetricRow(run.name, run.log, run.method, "time_to_lost_s",
                       (run.lost_ns[0] - t0) / 1e9 if run.lost_ns else math.nan, "s", run.params)]
     if run.init == "global" and reference is not None:

@@ -291,8 +291,8 @@ def localize(log_path: Path, lmap: LocalizationMap, config: DoorbatchConfig, met
 def init_cell_note(occ: OccupancyMap, init: tuple[float, float, float]) -> str | None:
     """A warning when ``--init X,Y,YAW`` lies in a cell the map calls occupied or unknown (a robot stands in free
     space: a start there is likely a typo, or a yaw given in degrees where radians are meant), else None."""
-    i, j = (int(v) for v in occ.world_to_cell(init[:2]))
-    value = int(occ.occupancy[i, j])
+    ij = occ.world_to_cell(init[:2])
+    value = int(occ.occupancy[int(ij[0]), int(ij[1])]) if occ.contains(ij) else -1
     where = "unknown" if value < 0 else "occupied" if value >= OCCUPIED_AT_LEAST else None
     note = f"--init {init[0]:g},{init[1]:g},{init[2]:g}: the map's cell there is {where}" if where else None
     if abs(init[2]) > 2.0 * math.pi:
@@ -384,7 +384,7 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
             converged_ns = None if barred else monitor.converged_ns
         if monitor.lost and (respread or not lost):  # once per episode of poor fits, unless spread anew
             lost_ns.append(int(scan.stamp_ns))
-            t_s = (scan.stamp_ns - rec.scans.stamps_ns[0]) / 1e9
+            t_s = (scan.stamp_ns - (track.stamps[0] if track.stamps else scan.stamp_ns)) / 1e9  # as manifest_extra
             warnings.append(f"lost at {t_s:.1f} s: under {lc.lost_min_fit:.0%} of the scans' hits within "
                             f"{lc.lost_fit_distance_m} m of the map for {lc.lost_after_s} s"
                             + ("; the cloud was spread over the free space again" if respread else ""))

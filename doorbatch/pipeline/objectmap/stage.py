@@ -111,7 +111,8 @@ def with_strides(recordings: Sequence[Recording], config: ObjectMapConfig) -> Ob
 def collect_beams(recordings: Sequence[Recording], passes: Sequence[PassPoses], config: ObjectMapConfig,
                   strides: tuple[int, int] | None = None) -> BeamSet:
     """All passes' kept beams in the map frame: every n-th scan and beam by ``strides`` (scan, beam), by
-    default the search's (:func:`em_strides`); (1, 1): every scan and beam."""
+    default the search's (:func:`em_strides`); (1, 1): every beam of every scan but a standing robot's repeats
+    (:func:`pass_scans`)."""
     scan_stride, beam_stride = strides or em_strides(recordings, config)
     scans = [pass_scans(r, p, scan_stride, config) for r, p in zip(recordings, passes, strict=True)]
     return beams_from_scans(scans, config.max_range_m, beam_stride)

@@ -123,6 +123,15 @@ def test_corrupt_log_fails_its_steps_and_the_rest_completes(
         for name in ("report.md", "report.html"):
             text = (report / name).read_text()
             assert "Left out" in text and all(step in text for step in failed), report / name
+    # the user drops the bad log: the reports are made again, without it (what they lack is part of their key)
+    dataset = yaml.safe_load((tiny / "dataset.yaml").read_text())
+    site = dataset["sites"][SITE]
+    site["localization"] = [p for p in site["localization"] if "loc_open" not in p]
+    (tiny / "dataset.yaml").write_text(yaml.safe_dump(dataset, sort_keys=False))
+    code, _ = run_json(tiny, out, capsys)
+    assert code == 0
+    for report in (out / SITE / "report", out / "report"):
+        assert "loc_open" not in (report / "report.md").read_text()
 
 
 def test_a_live_lock_is_exit_2_and_a_stale_one_is_taken_over(

@@ -183,3 +183,33 @@ def test_association_reports_the_current_angle_of_the_mapped_door() -> None:
     assert associate(np.array([2.0, 2.0]), np.array([2.9, 2.0]), doors, 0.6).door_id == -1
     closed = associate(np.array([4.1, 0.0]), np.array([5.0, 0.0]), doors, 0.6)
     assert closed.door_id == 1 and closed.angle == pytest.approx(0.0, abs=1e-9)
+
+
+def test_a_tree_whose_base_is_base_footprint_gives_the_same_door_poses(tmp_path: Path) -> None:
+    """The camera hangs off base_footprint and the robot's pose is odom → base_footprint (no base_link): the base
+    frame is resolved as the map and localize stages resolve it, and every box still gives a door pose."""
+    from doorbatch.io import ros_messages as m
+    from doorbatch.sim.door_scene import DoorSceneSpec, make_door_scene
+
+    rng = np.random.default_rng(11)
+    scene = make_door_scene(rng, DoorSceneSpec(obstacles_per_scene=(1, 1)))
+    poses = np.array([[0.1 * k - 0.3, -2.6 + 0.15 * k, math.pi / 2 + 0.03 * k] for k in range(8)])
+    src = door_log(tmp_path / "door.mcap", scene, poses, rng)
+    log = tmp_path / "footprint.mcap"
+    with open_log(src) as reader, LogWriter(log) as writer:
+        k = 0
+        for raw in reader.raw_messages():
+            for tr in getattr(raw.msg, "transforms", []):
+                if tr.header.frame_id == "base_link":
+                    tr.header.frame_id = "base_footprint"
+            if raw.topic == "/ground_truth":
+                raw.msg.child_frame_id = "base_footprint"
+                writer.write("/tf", "tf2_msgs/msg/TFMessage", raw.log_time_ns, m.tf_message(
+                    [m.planar_transform(raw.log_time_ns, "odom", "base_footprint", *poses[k])]))
+                k += 1
+            writer.write(raw.topic, raw.msgtype, raw.log_time_ns, raw.msg, raw.store)
+    counts = []
+    for path in (src, log):
+        assert main(["doorpose", str(path), "-o", str(tmp_path / path.stem), "-q"]) == 0
+        counts.append(len(read_table("door_poses", tmp_path / path.stem / "door_poses.parquet")))
+    assert counts[0] == counts[1] == len(poses)

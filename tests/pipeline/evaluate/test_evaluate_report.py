@@ -147,7 +147,7 @@ def _write_run(folder: Path, log: Path, stamps: np.ndarray, pose: np.ndarray, me
     write_run_tables(folder, _result(log, stamps, pose, method, door_angle))
     manifest = Manifest.start(DoorbatchConfig().as_dict(), [log], command="localize", method=method,
                               init="reference")
-    manifest.extra.update({"converged_after_s": 0.0, "ambiguous": False})
+    manifest.extra.update({"converged_after_s": 0.0, "ambiguous": False, "lost_after_s": []})
     manifest.write(folder / "manifest.json")
 
 

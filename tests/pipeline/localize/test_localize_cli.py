@@ -424,6 +424,12 @@ def test_a_start_in_unknown_space_is_warned_and_the_lost_run_is_scored_lost(samp
     lost_run, tracked_run = (next(r for r, _ in got if r.endswith(n)) for n in ("lost", "tracked"))
     assert got[(lost_run, "lost")] == 1.0 and got[(lost_run, "time_to_lost_s")] >= 2.0
     assert got[(tracked_run, "lost")] == 0.0 and np.isnan(got[(tracked_run, "time_to_lost_s")])
+    # another localizer's trajectory (a TUM file) says nothing about being lost: NaN, not 0
+    assert main(["evaluate", str(tmp_path / "tracked" / "trajectory.tum"), "--reference", str(log), "-o",
+                 str(tmp_path / "foreign"), "-q"]) == 0
+    table = read_table("metrics", tmp_path / "foreign" / "metrics.parquet").to_pydict()
+    lost = [v for m, v in zip(table["metric"], table["value"], strict=True) if m == "lost"]
+    assert lost and all(np.isnan(v) for v in lost)
 
 
 def test_a_start_yaw_beyond_a_turn_is_asked_about(sample_map: Path) -> None:
