@@ -94,7 +94,12 @@ def associate(ref_stamps_ns: npt.ArrayLike, est_stamps_ns: npt.ArrayLike, max_di
     else:
         est_idx, ref_idx = matching_time_indices(est, ref, max_diff_ns)
     if ref_idx.size == 0:
-        raise PipelineError(f"no reference pose within {max_diff_s} s of any estimated pose")
+        hint = ""
+        if ref.size and est.size and not (est[0] <= ref[-1] and ref[0] <= est[-1]):  # the spans do not overlap
+            gap_s = (float(np.median(est)) - float(np.median(ref))) / 1e9
+            hint = (f"; the estimate's stamps lie {gap_s:+.1f} s from the reference's: another clock (sim time "
+                    "against wall-clock time)?")
+        raise PipelineError(f"no reference pose within {max_diff_s} s of any estimated pose{hint}")
     return Association(ref_idx, est_idx)
 
 

@@ -129,3 +129,16 @@ def test_se2_alignment_recovers_a_known_rigid_offset() -> None:
     errs = trajectory_errors(stamps, est, stamps, ref, align=Alignment.SE2)
     assert errs.ape_m.max() < 1e-9 and errs.ape_rad.max() < 1e-9
     assert trajectory_errors(stamps, est, stamps, ref).ape_m.min() > 0.5
+
+
+def test_trajectories_on_two_clocks_are_an_error_that_says_so() -> None:
+    from doorbatch.errors import PipelineError
+    from doorbatch.pipeline.evaluate.trajectory_metrics import associate
+
+    sim = np.arange(10) * 100_000_000 + 500_000_000  # sim time from 0.5 s
+    wall = sim + 1_700_000_000 * 10**9  # the same instants on the wall clock
+    with pytest.raises(PipelineError, match="another clock"):
+        associate(wall, sim, 0.01)
+    with pytest.raises(PipelineError) as near:  # overlapping spans, no pair within the tolerance: no such hint
+        associate(sim + 50_000_000, sim, 0.01)
+    assert "another clock" not in str(near.value)
