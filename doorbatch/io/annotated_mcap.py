@@ -15,6 +15,7 @@ from typing import Any
 
 from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import UsageError
+from doorbatch.io.log_clock import LogClock
 from doorbatch.io.log_writer import LogFormat, LogWriter
 from doorbatch.io.reader import RawMessage, open_log
 
@@ -38,11 +39,12 @@ def _check(annotations: Iterable[Annotation]) -> Iterator[Annotation]:
         yield a
 
 
-def on_log_clock(annotations: Iterable[Annotation], offset_ns: int) -> Iterator[Annotation]:
-    """The annotations logged ``offset_ns`` after their stamps (their messages' header stamps unchanged): on the
-    recorder's clock of a log whose header stamps are on another one (sim time; ``Recording.log_offset_ns``)."""
+def on_log_clock(annotations: Iterable[Annotation], clock: LogClock | None) -> Iterator[Annotation]:
+    """The annotations logged on the recorder's clock of a log whose header stamps are on another one (sim time;
+    ``Recording.log_clock``), their messages' header stamps unchanged; as they are when ``clock`` is None or one
+    clock."""
     for a in annotations:
-        yield replace(a, log_time_ns=a.log_time_ns + offset_ns) if offset_ns else a
+        yield a if clock is None or not clock.log_ns.size else replace(a, log_time_ns=clock.log_time_at(a.log_time_ns))
 
 
 def write_annotated_mcap(source: Path | Sequence[Path], output: Path, annotations: Iterable[Annotation],

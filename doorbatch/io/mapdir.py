@@ -15,6 +15,7 @@ import numpy.typing as npt
 from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.io import ros_messages as rm
 from doorbatch.io.annotated_mcap import Annotation, on_log_clock
+from doorbatch.io.log_clock import LogClock
 from doorbatch.io.map_server import write_map
 from doorbatch.io.parquet import read_table, write_table
 from doorbatch.io.preview import PreviewDoor, render_preview, write_preview
@@ -86,7 +87,7 @@ class MappedPass:
     poses: FloatArray
     odometry: FloatArray | None
     door_angles: FloatArray
-    log_offset_ns: int = 0  # the log's recorder clock minus its scan stamps (Recording.log_offset_ns)
+    log_clock: LogClock | None = None  # the log's recorder clock against its scan stamps (Recording.log_clock)
 
 
 def mapping_annotations(passes: Sequence[MappedPass], static_map: OccupancyMap, doors: DoorSet,
@@ -98,14 +99,16 @@ def mapping_annotations(passes: Sequence[MappedPass], static_map: OccupancyMap, 
     nonempty = [p for p in passes if p.stamps_ns.size]
     if not nonempty:
         return
-    first = min(nonempty, key=lambda p: int(p.stamps_ns[0]) + p.log_offset_ns)
+    logged = {id(p): p.stamps_ns[0] if p.log_clock is None else p.log_clock.log_time_at(int(p.stamps_ns[0]))
+              for p in nonempty}
+    first = min(nonempty, key=lambda p: int(logged[id(p)]))
     t0 = int(first.stamps_ns[0])
-    yield Annotation("/doorbatch/map", "nav_msgs/msg/OccupancyGrid", t0 + first.log_offset_ns,
+    yield Annotation("/doorbatch/map", "nav_msgs/msg/OccupancyGrid", int(logged[id(first)]),
                      rm.occupancy_grid(t0, map_frame, static_map.occupancy, static_map.resolution_m,
                                        static_map.origin_x_m, static_map.origin_y_m, static_map.origin_yaw_rad))
     # passes in time order, merged by time should two of them overlap (logs that each restart a simulated clock)
     yield from heapq.merge(*(on_log_clock(_pass_annotations(p, doors, map_frame, odom_frame, path_every),
-                                          p.log_offset_ns) for p in passes),
+                                          p.log_clock) for p in passes),
                            key=lambda a: a.log_time_ns)
 
 

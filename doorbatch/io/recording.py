@@ -22,6 +22,7 @@ from doorbatch.geometry.rotations import yaw_of_matrix
 from doorbatch.geometry.se2 import compose, interpolate_poses
 from doorbatch.geometry.tf_buffer import TfBuffer
 from doorbatch.io.decode import MODEL_STATES
+from doorbatch.io.log_clock import LogClock
 from doorbatch.io.reader import LogReader, open_log
 from doorbatch.pipeline.evaluate.trajectory_error import rigid_copy_offset
 from doorbatch.records import BeamColors, Pose2D, Role, Scan, Transform
@@ -98,10 +99,10 @@ class Recording:
     color_valid: list[npt.NDArray[np.bool_]] | None = None
     # The reference is the odometry moved rigidly (io.reference_repeats_odometry_m/_deg): no independent reference.
     reference_is_odometry: bool = False
-    # The recorder's clock minus the scans' stamps (median log time − stamp) where they differ by more than
-    # io.clock_mismatch_s (a sim-time log recorded on wall-clock time), else 0: what an output message stamped
-    # at a scan's time is logged at, so that it sits beside the input's messages (annotated.mcap).
-    log_offset_ns: int = 0
+    # The recorder's clock against the scans' stamps where they differ by more than io.clock_mismatch_s (a sim-time
+    # log recorded on wall-clock time), else the identity: when an output message stamped at a scan's time is
+    # logged, so that it sits beside the input's messages (annotated.mcap).
+    log_clock: LogClock = field(default_factory=LogClock)
 
 
 def pose_series(poses: list[Pose2D]) -> PoseSeries | None:
@@ -280,7 +281,7 @@ class OneClock:
     ref: list[Pose2D]
     header_stamps_ns: list[int]
     notes: list[str]
-    log_offset_ns: int = 0  # LogClock.offset_ns: the recorder's clock minus the scans' stamps (0: one clock)
+    log_clock: LogClock = field(default_factory=LogClock)  # the recorder's clock against the scans' stamps
 
 
 def clock_lags_s(scan_stamps_ns: Sequence[int], scan_log_ns: Sequence[int], odom_stamps_ns: Sequence[int],
@@ -314,35 +315,6 @@ def unset_stamps(stamps_ns: Sequence[int]) -> npt.NDArray[np.bool_]:
     return unset
 
 
-class LogClock:
-    """The recorder's clock against the scans' stamps: (log time, stamp) of every scan with a set stamp, when the
-    two differ by more than ``mismatch_s`` (sim time on a wall-clock recording; the gap grows or shrinks with
-    Gazebo's real-time factor); else the identity."""
-
-    def __init__(self, scans: Sequence[Scan], mismatch_s: float) -> None:
-        unset = unset_stamps([sc.stamp_ns for sc in scans])
-        pairs = sorted((sc.log_time_ns, sc.stamp_ns) for sc, u in zip(scans, unset, strict=True)
-                       if sc.log_time_ns and not u)
-        lags = [g - t for g, t in pairs]
-        self.offset_ns = int(np.median(np.asarray(lags, dtype=np.int64))) if lags else 0
-        if abs(self.offset_ns) <= mismatch_s * 1e9:
-            self.offset_ns, pairs = 0, []
-        self._log = np.array([g for g, _ in pairs], dtype=np.int64)
-        self._stamp = np.array([t for _, t in pairs], dtype=np.int64)
-
-    def stamp_at(self, log_time_ns: int) -> int:
-        """The scans' clock at a log time: interpolated between the scans logged around it (beyond them, the
-        nearest one's offset). Interpolated relative to the first scan, so that float64 keeps the nanoseconds."""
-        if not self._log.size:
-            return log_time_ns
-        if log_time_ns <= self._log[0] or log_time_ns >= self._log[-1]:
-            k = 0 if log_time_ns <= self._log[0] else -1
-            return int(log_time_ns - (int(self._log[k]) - int(self._stamp[k])))
-        g0, t0 = int(self._log[0]), int(self._stamp[0])
-        return t0 + round(float(np.interp(log_time_ns - g0, (self._log - g0).astype(np.float64),
-                                          (self._stamp - t0).astype(np.float64))))
-
-
 def _log_timed(records: list[R], every: bool, clock: LogClock | None = None) -> list[R]:
     """The records with their log time as stamp: ``every`` one, else those whose stamp is unset
     (:func:`unset_stamps`), put on the scans' clock by ``clock`` (sim time: a gazebo_msgs/ModelStates has no
@@ -353,10 +325,17 @@ def _log_timed(records: list[R], every: bool, clock: LogClock | None = None) -> 
             else r for r, u in zip(records, unset, strict=True)]
 
 
+def scans_clock(scans: Sequence[Scan], mismatch_s: float) -> LogClock:
+    """The :class:`~doorbatch.io.log_clock.LogClock` of the scans with a set stamp and a log time."""
+    unset = unset_stamps([sc.stamp_ns for sc in scans])
+    pairs = [(sc.log_time_ns, sc.stamp_ns) for sc, u in zip(scans, unset, strict=True) if sc.log_time_ns and not u]
+    return LogClock.of_pairs([g for g, _ in pairs], [t for _, t in pairs], mismatch_s)
+
+
 def on_one_clock(scans: list[Scan], odom: list[Pose2D], ref: list[Pose2D], mismatch_s: float) -> OneClock:
     """Scans and poses whose header stamps can be put on one time line, in stamp order, and notes saying what
     was done. A header stamp of 0 is unset (:func:`unset_stamps`: not where a clock starts at 0): the message's
-    log time stands in, on the scans' clock (:class:`LogClock`). Scans and odometry whose median
+    log time stands in, on the scans' clock (:func:`scans_clock`). Scans and odometry whose median
     (stamp − log time) differ by more than ``mismatch_s`` are on two clocks (a driver stamping with its
     device's clock): every scan and pose is timed by its log time, the recorder's one clock. Scans that
     arrived out of stamp order are sorted (bags record arrival order; the stamp is the measurement's time).
@@ -374,7 +353,7 @@ def on_one_clock(scans: list[Scan], odom: list[Pose2D], ref: list[Pose2D], misma
         notes.append(f"scan and odometry header stamps are on different clocks (median stamp − log time "
                      f"{lags[0]:+.3f} s and {lags[1]:+.3f} s): every scan and pose is timed by its log time")
     every = lags is not None
-    clock = LogClock(scans, mismatch_s)
+    clock = scans_clock(scans, mismatch_s)
     scans, odom, ref = _log_timed(scans, every, clock), _log_timed(odom, every, clock), _log_timed(ref, every, clock)
     stamps = np.array([s.stamp_ns for s in scans], dtype=np.int64)
     back = int(np.count_nonzero(np.diff(stamps) < 0))
@@ -382,7 +361,7 @@ def on_one_clock(scans: list[Scan], odom: list[Pose2D], ref: list[Pose2D], misma
         order = np.argsort(stamps, kind="stable")
         scans, header = [scans[i] for i in order], [header[i] for i in order]
         notes.append(f"scan header stamps go backwards {back} time(s) in log order: scans sorted by stamp")
-    return OneClock(scans, odom, ref, header, notes, 0 if every else clock.offset_ns)
+    return OneClock(scans, odom, ref, header, notes, LogClock() if every else clock)
 
 
 def scan_colors(colors: Sequence[BeamColors], header_stamps_ns: Sequence[int], log_times_ns: Sequence[int],
@@ -484,12 +463,7 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
                         "no independent reference (a raw CARMEN log's laser poses are its odometry; a corrected log's "
                         "odometry was replaced by its corrected poses)")
     return Recording(str(path), scan_set, odometry, reference, aligned, warnings, valid, repeats,
-                     timed.log_offset_ns)
-
-
-def log_offset_ns(scans: Sequence[Scan], mismatch_s: float) -> int:
-    """:attr:`Recording.log_offset_ns` of scans read elsewhere (doorpose): :attr:`LogClock.offset_ns`."""
-    return LogClock(scans, mismatch_s).offset_ns
+                     timed.log_clock)
 
 
 def reference_repeats_odometry(reference: PoseSeries | None, odometry: PoseSeries | None,

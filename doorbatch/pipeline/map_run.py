@@ -52,7 +52,7 @@ def _mapped_passes(recordings: Sequence[Recording], door_map: DoorMap, door_angl
         if rec.odometry is not None:
             at, ok = interpolate_poses(rec.odometry.stamps_ns, rec.odometry.poses, stamps)
             odom = at if ok.all() else None
-        out.append(MappedPass(stamps, poses, odom, door_angles[t], rec.log_offset_ns))
+        out.append(MappedPass(stamps, poses, odom, door_angles[t], rec.log_clock))
     return out
 
 

@@ -9,6 +9,7 @@ import numpy as np
 from rosbags.highlevel import AnyReader
 
 from doorbatch.io.annotated_mcap import write_annotated_mcap
+from doorbatch.io.log_clock import LogClock
 from doorbatch.io.mapdir import MappedPass, mapping_annotations
 from doorbatch.maps import DoorSet, OccupancyMap
 from tests.conftest import T0, sample_messages, write_messages
@@ -68,14 +69,14 @@ def test_passes_on_one_restarted_clock_come_out_in_time_order() -> None:
 
 def test_passes_recorded_on_wall_clock_with_sim_time_stamps_are_logged_on_the_recorders_clock() -> None:
     """Each pass restarts a sim clock at 0.5 s; its recorder logged it an hour apart on wall-clock time
-    (Recording.log_offset_ns). The annotations are logged on the recorder's clock, their headers keep the stamps."""
+    (Recording.log_clock). The annotations are logged on the recorder's clock, their headers keep the stamps."""
     from dataclasses import replace
 
     doors = DoorSet(np.array([[1.0, 1.0]]), np.array([0.9]), np.zeros(1), np.zeros(1), np.full(1, 1.5))
     occ = OccupancyMap(np.zeros((20, 30), dtype=np.int8), 0.1, -1.0, -1.0)
     offsets = (T0, T0 + 3600 * 10**9)
-    passes = [replace(_pass(500_000_000, 8, 0.0, [0.2]), log_offset_ns=offsets[0]),
-              replace(_pass(500_000_000, 6, 2.0, [0.4]), log_offset_ns=offsets[1])]
+    passes = [replace(_pass(500_000_000, 8, 0.0, [0.2]), log_clock=LogClock.constant(offsets[0])),
+              replace(_pass(500_000_000, 6, 2.0, [0.4]), log_clock=LogClock.constant(offsets[1]))]
     added = list(mapping_annotations(passes, occ, doors))
     times = [a.log_time_ns for a in added]
     assert times == sorted(times) and times[0] == T0 + 500_000_000

@@ -325,8 +325,8 @@ def test_gazebos_model_states_are_the_reference(tmp_path: Path) -> None:
     np.testing.assert_allclose(gz.reference.poses, truth.reference.poses, atol=1e-9)
     # sim time: the log times stand in, moved onto the scans' clock
     sim = load_recording(write(tmp_path / "sim.mcap", ["ground_plane", "turtlebot3_burger"], sim_time=True))
-    assert sim.reference is not None and sim.log_offset_ns > 10**9
-    np.testing.assert_array_equal(sim.reference.stamps_ns, truth.reference.stamps_ns - sim.log_offset_ns)
+    assert sim.reference is not None and sim.log_clock.offset_ns > 10**9
+    np.testing.assert_array_equal(sim.reference.stamps_ns, truth.reference.stamps_ns - sim.log_clock.offset_ns)
     np.testing.assert_allclose(sim.reference.poses, truth.reference.poses, atol=1e-9)
     # Gazebo slower than real time: the offset grows; each log time is put on the scans' clock where it is
     slow = load_recording(write(tmp_path / "slow.mcap", ["ground_plane", "turtlebot3_burger"], True, 0.8))

@@ -7,6 +7,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from doorbatch.io.log_clock import LogClock
+
 FloatArray = npt.NDArray[np.float64]
 
 
@@ -41,7 +43,7 @@ class LocalizationResult:
     converged_ns: int | None = None
     ambiguous: bool = False
     warnings: list[str] = field(default_factory=list)
-    log_offset_ns: int = 0  # the log's recorder clock minus its scan stamps (Recording.log_offset_ns)
+    log_clock: LogClock | None = None  # the log's recorder clock against its scan stamps (Recording.log_clock)
     lost_ns: list[int] = field(default_factory=list)  # stamps at which an episode of being lost began
 
     def manifest_extra(self) -> dict[str, object]:

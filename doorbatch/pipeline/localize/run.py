@@ -24,6 +24,7 @@ import numpy.typing as npt
 from doorbatch.config import DoorbatchConfig, LocalizeConfig, parse_init
 from doorbatch.errors import PipelineError, UsageError
 from doorbatch.geometry.se2 import interpolate_poses
+from doorbatch.io.log_clock import LogClock
 from doorbatch.io.map_server import read_map
 from doorbatch.io.map_topic import read_map_topic
 from doorbatch.io.mapdir import read_door_set
@@ -221,7 +222,7 @@ class _Track:
         self.particles.append(particles)
 
     def result(self, log_name: str, method: str, n_doors: int, converged_ns: int | None, is_ambiguous: bool,
-               warnings: list[str], log_offset_ns: int = 0, lost_ns: list[int] | None = None
+               warnings: list[str], log_clock: LogClock | None = None, lost_ns: list[int] | None = None
                ) -> LocalizationResult:
         u = len(self.stamps)
         return LocalizationResult(
@@ -231,7 +232,7 @@ class _Track:
             door_mean=np.asarray(self.dmean).reshape(u, n_doors), door_std=np.asarray(self.dstd).reshape(u, n_doors),
             door_observed=np.asarray(self.observed, dtype=bool).reshape(u, n_doors),
             particles=np.asarray(self.particles), converged_ns=converged_ns, ambiguous=is_ambiguous,
-            warnings=warnings, log_offset_ns=log_offset_ns, lost_ns=list(lost_ns or []))
+            warnings=warnings, log_clock=log_clock, lost_ns=list(lost_ns or []))
 
 
 def start_scan_index(rec: Recording, start: StartPose) -> int:
@@ -398,7 +399,7 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
     if not track.stamps:
         raise PipelineError(f"{log_path}: no scan had an odometry pose; nothing was localized")
     return track.result(Path(log_path).name, method, state.particles.n_doors, converged_ns,
-                        multimodal(state.particles, lc), warnings, rec.log_offset_ns, lost_ns)
+                        multimodal(state.particles, lc), warnings, rec.log_clock, lost_ns)
 
 
 @dataclass(frozen=True)
@@ -436,7 +437,7 @@ def run_localize(log_path: Path, map_path: Path, out: Path, config: DoorbatchCon
         doors = lmap.doors if method == "rbpf" else DoorSet.empty()
         write_annotated_mcap(log_path, out / "annotated.mcap",
                              on_log_clock(run_annotations(result, lmap.occupancy, doors, config.frames.map,
-                                                          config.frames.odom), result.log_offset_ns),
+                                                          config.frames.odom), result.log_clock),
                              config)
     for w in result.warnings:
         manifest.warn(w)
