@@ -28,6 +28,8 @@ from doorbatch.io.recording import (
     read_transforms,
     resolve_base_frame,
     robot_pose_series,
+    scans_clock,
+    unset_stamps,
 )
 from doorbatch.records import CameraInfo, Detection, Detections, Image, Pose2D, Role, Scan
 
@@ -77,7 +79,7 @@ def read_doorpose_inputs(path: Path, config: DoorbatchConfig, detector: ImageDet
         box_topic = image_topic or reader.roles.topic(box_role)
         info_topic, note = _camera_info_of_boxes(reader, box_topic, config)
         warnings_pre = [note] if note else []
-        unset = 0
+        detections: list[Detections] = []  # from the detections topic, before their stamps are checked
         first_info = _first_message(reader, info_topic) if info_topic is not None else None
         if first_info is not None:
             info = decode_camera_info(first_info.msg, first_info.log_time_ns)
@@ -95,11 +97,16 @@ def read_doorpose_inputs(path: Path, config: DoorbatchConfig, detector: ImageDet
                 (ref if item.role is Role.REFERENCE else odom).append(rec)
             elif isinstance(rec, CameraInfo):
                 info = info or rec
-            elif isinstance(rec, Detections):  # an unset stamp (0): its log time, the nearest we know
-                unset += rec.stamp_ns == 0
-                boxes.append(replace(rec, stamp_ns=rec.log_time_ns) if rec.stamp_ns == 0 else rec)
+            elif isinstance(rec, Detections):
+                detections.append(rec)
             elif isinstance(rec, Image) and detector is not None:
                 boxes.append(Detections(rec.stamp_ns, rec.log_time_ns, rec.frame_id, detector(rec)))
+        # an unset stamp (recording.unset_stamps): its log time, the nearest we know, on the scans' clock
+        clock = scans_clock(scans, config.io.clock_mismatch_s)
+        is_unset = unset_stamps([d.stamp_ns for d in detections])
+        unset = int(is_unset.sum())
+        boxes += [replace(d, stamp_ns=clock.stamp_at(d.log_time_ns)) if u else d
+                  for d, u in zip(detections, is_unset, strict=True)]
         frames, base_note = resolve_base_frame(tf, config.frames)
         odom, notes = odometry_poses(odom, tf, reader.roles.topic(Role.ODOMETRY) is not None, frames)
         odometry, reference = robot_pose_series(odom, ref, tf, frames)
