@@ -436,7 +436,7 @@ def evaluate_runs(runs: Sequence[RunTables], config: DoorbatchConfig, *,
 
 
 SUMMARY_METRICS = ("ape_trans_rmse", "ape_trans_max", "ape_rot_rmse", "rpe_trans_rmse", "rpe_rot_rmse",
-                   "time_to_converge_s", "global_success", "door_state_error_mean")
+                   "time_to_converge_s", "global_success", "lost", "door_state_error_mean")
 MAP_METRICS = ("door_precision", "door_recall", "door_recall_moved", "door_recall_never_moved",
                "door_hinge_error_mean", "door_length_error_mean", "door_range_error_mean")
 # Door pose experiments (paper 003 Tables I and II; rows from doorbatch.pipeline.doorpose.experiment).
