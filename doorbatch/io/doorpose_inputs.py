@@ -21,6 +21,7 @@ from doorbatch.io.decode import (
     decode_image,
     stamp_to_ns,
 )
+from doorbatch.io.log_clock import LogClock
 from doorbatch.io.reader import LogReader, RawMessage, open_log
 from doorbatch.io.recording import (
     PoseSeries,
@@ -49,6 +50,7 @@ class DoorPoseInputs:
     odometry: PoseSeries | None
     warnings: list[str] = field(default_factory=list)
     base_link: str = "base_link"  # the robot's base frame in this log's TF tree (recording.resolve_base_frame)
+    log_clock: LogClock = field(default_factory=LogClock)  # the recorder's clock against the scans' stamps
 
 
 def read_doorpose_inputs(path: Path, config: DoorbatchConfig, detector: ImageDetector | None = None
@@ -123,7 +125,8 @@ def read_doorpose_inputs(path: Path, config: DoorbatchConfig, detector: ImageDet
     if not scans:
         raise LogContentError("scan topic has no messages", path=path)
     return DoorPoseInputs(str(path), tf, info, sorted(scans, key=lambda s: s.stamp_ns),
-                          sorted(boxes, key=lambda d: d.stamp_ns), reference, odometry, warnings, frames.base_link)
+                          sorted(boxes, key=lambda d: d.stamp_ns), reference, odometry, warnings, frames.base_link,
+                          clock)
 
 
 def _first_message(reader: LogReader, topic: str) -> RawMessage | None:

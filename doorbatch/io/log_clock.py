@@ -10,6 +10,7 @@ run. :class:`LogClock` holds the scans' (log time, stamp) pairs and maps either 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 import numpy.typing as npt
@@ -60,9 +61,12 @@ class LogClock:
         """The stamps' clock at a log time."""
         return log_time_ns if not self.log_ns.size else _map(log_time_ns, self.log_ns, self.stamp_ns)
 
+    @cached_property
+    def _by_stamp(self) -> tuple[Int64Array, Int64Array]:
+        """The pairs sorted by stamp (once: :meth:`log_time_at` runs per annotation)."""
+        order = np.argsort(self.stamp_ns, kind="stable")
+        return self.stamp_ns[order], self.log_ns[order]
+
     def log_time_at(self, stamp_ns: int) -> int:
         """The recorder's clock at a stamp."""
-        if not self.log_ns.size:
-            return stamp_ns
-        order = np.argsort(self.stamp_ns, kind="stable")
-        return _map(stamp_ns, self.stamp_ns[order], self.log_ns[order])
+        return stamp_ns if not self.log_ns.size else _map(stamp_ns, *self._by_stamp)

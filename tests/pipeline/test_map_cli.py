@@ -113,16 +113,20 @@ def test_goals_and_initial_poses_are_not_the_reference(write_log: Callable[..., 
     assert (read_map(out / "map.yaml").occupancy == 100).sum() > 100
 
 
+
+def _auto_pose_source(log: Path, out: Path, capsys: pytest.CaptureFixture[str]) -> tuple[str, str]:
+    """``doorbatch map LOG`` (grid stage) without --pose-source: the source it chose and its manifest's warnings."""
+    assert main(["map", str(log), "-o", str(out), "--stages", "grid", "--json"]) == 0
+    chosen = json.loads(capsys.readouterr().out)["pose_source"]
+    return chosen, " ".join(json.loads((out / "manifest.json").read_text()).get("warnings", []))
+
 @pytest.mark.parametrize(("every", "source"), [(1, "reference"), (2, "reference"), (10, "scanmatch")])
 def test_auto_takes_the_reference_only_where_it_covers_the_scans(write_log: Callable[..., Path], tmp_path: Path,
                                                                 capsys: pytest.CaptureFixture[str], every: int,
                                                                 source: str) -> None:
     # /amcl_pose on every scan, every 2nd (0.2 s apart: all scans within max_pose_gap_s) or every 10th (1 s gaps)
-    log = write_log("nav2.mcap", _nav2_like(every))
-    out = tmp_path / "out"
-    assert main(["map", str(log), "-o", str(out), "--stages", "grid", "--json"]) == 0
-    assert json.loads(capsys.readouterr().out)["pose_source"] == source
-    warnings = " ".join(json.loads((out / "manifest.json").read_text()).get("warnings", []))
+    chosen, warnings = _auto_pose_source(write_log("nav2.mcap", _nav2_like(every)), tmp_path / "out", capsys)
+    assert chosen == source
     assert ("cover" in warnings) == (source == "scanmatch")
 
 
@@ -243,10 +247,8 @@ def test_auto_takes_no_reference_that_repeats_the_odometry(write_log: Callable[.
                                                                                tuple[float, float, float]],
                                                            source: str) -> None:
     log = write_log("copy.mcap", _with_reference(reference))
-    out = tmp_path / "out"
-    assert main(["map", str(log), "-o", str(out), "--stages", "grid", "--json"]) == 0
-    assert json.loads(capsys.readouterr().out)["pose_source"] == source
-    warnings = " ".join(json.loads((out / "manifest.json").read_text()).get("warnings", []))
+    chosen, warnings = _auto_pose_source(log, tmp_path / "out", capsys)
+    assert chosen == source
     assert ("the odometry again" in warnings) == ("moved rigidly" in warnings) == (source == "scanmatch")
     # asked for, the reference is taken as it is (a corrected CARMEN log's poses equal its odometry too)
     assert main(["map", str(log), "-o", str(tmp_path / "asked"), "--stages", "grid", "--pose-source", "reference",

@@ -73,9 +73,6 @@ def _site_tables(site: Site, out: Path, run_dirs: Sequence[str], config: Doorbat
     return tables, [door_map]
 
 
-LEFT_OUT_PREFIX = "left out: "
-
-
 def evaluate_site(site: Site, out: Path, run_dirs: Sequence[str], dest: Path, config: DoorbatchConfig,
                   left_out: Sequence[str] = ()) -> list[str]:
     """Metrics, plots and report of the site's map and of each run that succeeded, into ``dest``; the report
@@ -85,25 +82,27 @@ def evaluate_site(site: Site, out: Path, run_dirs: Sequence[str], dest: Path, co
     tables, maps = _site_tables(site, out, run_dirs, config)
     evaluation = evaluate_runs(tables, config, maps=maps).with_title(f"doorbatch run: site {site.name}", left_out)
     _write_report(evaluation, dest)
-    return [f"{LEFT_OUT_PREFIX}{step} (failed or blocked)" for step in left_out]
+    return [f"left out: {step} (failed or blocked)" for step in left_out]
 
 
 def dataset_report(dataset: Dataset, out: Path, evaluations: Sequence[Step], dest: Path,
                    config: DoorbatchConfig, left_out: Sequence[str] = ()) -> list[str]:
     """The dataset report over every site that was evaluated, into ``dest`` (OUT/report), and the site
     partitions of the dataset-level tables OUT/metrics/site=<site>/ and OUT/trajectories/site=<site>/. The
-    report names the steps it lacks: the evaluations ``left_out`` and the runs each site's evaluation left out."""
-    from doorbatch.io.manifest import Manifest
+    report names the steps it lacks: the evaluations ``left_out`` and the runs each site's evaluation left out (its
+    step record's ``left_out``)."""
     from doorbatch.pipeline.evaluate.report import evaluate_runs
 
     by_name = {s.name: s for s in dataset.sites}
     tables: list[RunTables] = []
     maps: list[MapTables] = []
+    missing = list(left_out)
     with staged_dir(out / METRICS_DIR) as metrics, staged_dir(out / TRAJECTORIES_DIR) as trajectories:
         for ev in evaluations:
             site = by_name[str(ev.site)]
-            record = recorded_step(out / ev.out_dir) or {}
-            run_dirs = [str(r) for r in record.get("params", {}).get("runs", [])]
+            params = (recorded_step(out / ev.out_dir) or {}).get("params", {})
+            run_dirs = [str(r) for r in params.get("runs", [])]
+            missing += [str(r) for r in params.get("left_out", [])]
             write_site_partition("metrics", read_table("metrics", out / ev.out_dir / "metrics.parquet"), metrics,
                                  site.name)
             write_site_partition("trajectory", concat_tables("trajectory", [
@@ -111,12 +110,6 @@ def dataset_report(dataset: Dataset, out: Path, evaluations: Sequence[Step], des
             site_runs, site_maps = _site_tables(site, out, run_dirs, config, prefix=f"{site.name}/")
             tables += site_runs
             maps += site_maps
-        missing = list(left_out)
-        for ev in evaluations:
-            manifest = out / ev.out_dir / "manifest.json"
-            warnings = Manifest.read(manifest).warnings if manifest.is_file() else []
-            missing += [w[len(LEFT_OUT_PREFIX):].removesuffix(" (failed or blocked)") for w in warnings
-                        if w.startswith(LEFT_OUT_PREFIX)]
         evaluation = evaluate_runs(tables, config, maps=maps).with_title(f"doorbatch run: {dataset.root.name}",
                                                                           missing)
         _write_report(evaluation, dest)

@@ -25,7 +25,7 @@ from doorbatch.errors import TransformError
 from doorbatch.geometry.camera import camera_from_info, scan_in_camera
 from doorbatch.geometry.se2 import interpolate_poses
 from doorbatch.io.doorpose_inputs import DoorPoseInputs
-from doorbatch.io.recording import PoseSeries, scans_clock
+from doorbatch.io.recording import PoseSeries
 from doorbatch.maps import DoorSet
 from doorbatch.pipeline.doorpose.association import associate
 from doorbatch.pipeline.doorpose.fusion import estimate_door, to_planar
@@ -224,9 +224,8 @@ def run_doorpose(log_path: Path, out: Path, config: DoorbatchConfig, map_path: P
     with timer("write"):
         out.mkdir(parents=True, exist_ok=True)
         write_door_poses(out / "door_poses.parquet", result)
-        clock = scans_clock(inputs.scans, config.io.clock_mismatch_s)  # sim-time stamps: beside the input's
-        write_annotated_mcap(log_path, out / "annotated.mcap", on_log_clock(doorpose_annotations(result), clock),
-                             config)
+        write_annotated_mcap(log_path, out / "annotated.mcap",  # sim-time stamps: beside the input's messages
+                             on_log_clock(doorpose_annotations(result), inputs.log_clock), config)
     for w in result.warnings:
         manifest.warn(w)
     matched = [e for e in result.estimates if e.door_id >= 0]
