@@ -34,8 +34,8 @@ float32 values stay small) and gathers the distances from a copy of the field pa
 maximum distance, so that clipping indices replaces the bounds test. It works on chunks of 1024 particles
 in work arrays reused from chunk to chunk; :func:`field_log_likelihood` fuses the likelihood into the same
 loop. NumPy alone reaches 35–50 M particle-beam evaluations per second on one core (bench/bench_mcl.py), so
-there is no compiled kernel. A field built with a ``torch_device`` runs both functions in torch instead
-(:mod:`.torch_field`: the same cells, for a GPU).
+there is no compiled kernel. A field built with a ``torch_device`` runs both functions, and
+:func:`skipped_field_log_likelihood`, in torch instead (:mod:`.torch_field`: the same cells, for a GPU).
 """
 
 from __future__ import annotations
@@ -542,8 +542,7 @@ def skip_unexplained(pz: npt.ArrayLike, weight: npt.ArrayLike, pose: npt.ArrayLi
         return p, 0
     if not cloud_converged(weight, pose, config):
         return p, 0
-    sig = config.sigma_hit
-    floor = config.z_hit * math.exp(-0.5 * (config.beam_skip_distance / sig) ** 2) + config.z_rand / range_max_m
+    floor = beam_skip_floor(config, range_max_m)
     with np.errstate(invalid="ignore"):
         explained = p >= np.float32(floor)
     if config.beam_skip_support == "particles":  # nav2_amcl: the share of the particles, whatever their weight
@@ -552,6 +551,34 @@ def skip_unexplained(pz: npt.ArrayLike, weight: npt.ArrayLike, pose: npt.ArrayLi
         support = beam_support_weights(p, weight, floor, combination)
     skip = beam_skip_mask(explained, support, config.beam_skip_threshold, config.beam_skip_error_threshold)
     return drop_beams(p, skip, combination), int(skip.sum())
+
+
+def skipped_field_log_likelihood(dist_field: DistanceField, pose: npt.ArrayLike, weight: npt.ArrayLike,
+                                 points_base: npt.ArrayLike, config: LocalizeConfig, range_max_m: float,
+                                 combination: BeamCombination = BeamCombination.AMCL) -> tuple[FloatArray, int]:
+    """log p(z | x) (N,) of each particle with beam skipping, and the number of beams skipped:
+    :func:`endpoint_distances`, :func:`beam_likelihood`, :func:`skip_unexplained` (particles ``pose`` (N, 3) with
+    ``weight`` (N,)), then :func:`combine_beams`.
+
+    MCL's weighing of a converged cloud. On a field with a ``torch_device`` every step runs there
+    (:func:`.torch_field.skipped_field_log_likelihood`), so that the (N, B) likelihoods never cross to the host.
+    """
+    if dist_field.torch_device is not None:
+        from doorbatch.pipeline.localize import torch_field
+
+        return torch_field.skipped_field_log_likelihood(dist_field, pose, weight, points_base, config, range_max_m,
+                                                        combination)
+    dist = endpoint_distances(dist_field, pose, points_base)
+    pz = beam_likelihood(dist, config.z_hit, config.z_rand, config.sigma_hit, range_max_m, out=dist)
+    pz, skipped = skip_unexplained(pz, weight, pose, config, range_max_m, combination)
+    return combine_beams(pz, combination), skipped
+
+
+def beam_skip_floor(config: LocalizeConfig, range_max_m: float) -> float:
+    """The pz of an end point ``beam_skip_distance`` from the model: a beam is explained at a particle when its
+    pz is at least this (:func:`skip_unexplained`)."""
+    sig = config.sigma_hit
+    return config.z_hit * math.exp(-0.5 * (config.beam_skip_distance / sig) ** 2) + config.z_rand / range_max_m
 
 
 def drop_beams(pz: npt.ArrayLike, skip: npt.ArrayLike, combination: BeamCombination) -> Float32Array:

@@ -46,12 +46,11 @@ from doorbatch.pipeline.localize.likelihood_field import (
     BeamSet,
     DistanceField,
     FreeCells,
-    beam_likelihood,
     combine_beams,
     endpoint_distances,
     field_log_likelihood,
     select_beams,
-    skip_unexplained,
+    skipped_field_log_likelihood,
 )
 from doorbatch.pipeline.localize.motion_model import sample_motion_model_odometry, sample_motion_model_omni
 from doorbatch.pipeline.localize.particles import ParticleSet
@@ -245,10 +244,8 @@ def weigh(particles: ParticleSet, beams: BeamSet, field: DistanceField, config: 
     that has not converged goes through :func:`tempered_weighting` instead.)
     """
     if config.do_beamskip and len(beams.points_base):
-        dist = endpoint_distances(field, particles.pose, beams.points_base)
-        pz = beam_likelihood(dist, config.z_hit, config.z_rand, config.sigma_hit, beams.range_max_m, out=dist)
-        pz, _ = skip_unexplained(pz, particles.weight, particles.pose, config, beams.range_max_m, combination)
-        ll = combine_beams(pz, combination)
+        ll, _ = skipped_field_log_likelihood(field, particles.pose, particles.weight, beams.points_base, config,
+                                             beams.range_max_m, combination)
     else:
         ll = scan_log_likelihood(particles.pose, beams, field, config, combination)
     return apply_log_likelihood(particles, ll)

@@ -9,7 +9,9 @@ can move an end point lying on a cell border to the neighbouring cell; the tests
 
 The padded field goes to the device once per :class:`~.likelihood_field.DistanceField` and stays there. Each call
 sends the poses (N × 3 float64) and the end points (B × 2) and brings back the (N, B) distances or, fused, only the
-(N,) log-likelihoods. Where it pays: on a GPU; on a CPU NumPy is faster (docs/benchmarks.md).
+(N,) log-likelihoods: with beam skipping too (:func:`skipped_field_log_likelihood`, MCL's weighing of a converged
+cloud), whose support sums and exp round otherwise than NumPy's, so its log-likelihoods equal NumPy's to float32
+rounding, not to the bit. Where it pays: on a GPU; on a CPU NumPy is faster (docs/benchmarks.md).
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ import numpy.typing as npt
 from doorbatch.errors import OptionalDependencyError, UsageError
 
 if TYPE_CHECKING:
+    from doorbatch.config import LocalizeConfig
     from doorbatch.pipeline.localize.likelihood_field import BeamCombination, DistanceField
 
 FloatArray = npt.NDArray[np.float64]
@@ -125,30 +128,99 @@ def endpoint_distances(dist_field: DistanceField, pose: npt.ArrayLike, points_ba
     return out
 
 
+def _beam_likelihood(d: Any, z_hit: float, z_rand: float, sigma_hit: float, max_range: float) -> Any:
+    """pz = z_hit·exp(−d²/2σ²) + z_rand/max_range, in place of ``d`` (float32), in
+    :func:`~.likelihood_field.beam_likelihood`'s order."""
+    torch = _torch()
+    pz = d.mul_(d)
+    pz *= float(np.float32(-0.5 / (sigma_hit * sigma_hit)))
+    pz = torch.exp_(pz)
+    pz *= float(np.float32(z_hit))
+    pz += float(np.float32(z_rand / max_range))
+    return pz
+
+
+def _combine_beams(pz: Any, combination: BeamCombination) -> Any:
+    """(n,) float64 log-likelihoods of (n, B) pz (:func:`~.likelihood_field.combine_beams`)."""
+    from doorbatch.pipeline.localize.likelihood_field import BeamCombination
+
+    torch = _torch()
+    if combination is BeamCombination.AMCL:
+        return torch.log1p((pz * pz * pz).sum(dim=1, dtype=torch.float64))
+    return torch.log(pz).sum(dim=1, dtype=torch.float64)
+
+
 def field_log_likelihood(dist_field: DistanceField, pose: npt.ArrayLike, points_base: npt.ArrayLike, z_hit: float,
                          z_rand: float, sigma_hit: float, max_range: float, combination: BeamCombination
                          ) -> FloatArray:
     """log p(z | x) (N,) of each particle, fused on the field's ``torch_device``
     (:func:`~.likelihood_field.field_log_likelihood`): pz = z_hit·exp(−d²/2σ²) + z_rand/max_range per beam in
     float32, then log(1 + Σ pz³) (AMCL) or Σ log pz (PRODUCT) summed in float64."""
-    from doorbatch.pipeline.localize.likelihood_field import BeamCombination
-
-    torch = _torch()
     field, grid, cells = _blocks(dist_field, pose, points_base)
     out = np.zeros(grid.shape[0])
     if cells.shape[0] == 0:
         return out
     for start in range(0, grid.shape[0], BLOCK_PARTICLES):
         stop = min(start + BLOCK_PARTICLES, grid.shape[0])
-        d = _block_distances(field, grid[start:stop], cells)
-        pz = d * d
-        pz *= float(np.float32(-0.5 / (sigma_hit * sigma_hit)))
-        pz = torch.exp(pz)
-        pz *= float(np.float32(z_hit))
-        pz += float(np.float32(z_rand / max_range))
-        if combination is BeamCombination.AMCL:
-            ll = torch.log1p((pz * pz * pz).sum(dim=1, dtype=torch.float64))
-        else:
-            ll = torch.log(pz).sum(dim=1, dtype=torch.float64)
-        out[start:stop] = ll.cpu().numpy()
+        pz = _beam_likelihood(_block_distances(field, grid[start:stop], cells), z_hit, z_rand, sigma_hit, max_range)
+        out[start:stop] = _combine_beams(pz, combination).cpu().numpy()
     return out
+
+
+def _support_weights(pz: Any, weight: Any, floor: float, combination: BeamCombination) -> Any:
+    """Per beam, the particles' posterior weight (N, B) given the other beams, each pz clipped at ``floor``
+    (:func:`~.likelihood_field.beam_support_weights`, float32 in its order); ``weight`` (N,) float64."""
+    from doorbatch.pipeline.localize.likelihood_field import BeamCombination
+
+    torch = _torch()
+    p = torch.fmax(pz, torch.tensor(float(np.float32(floor)), dtype=torch.float32, device=pz.device))
+    log_w = torch.log(weight).float()[:, None]
+    if combination is BeamCombination.AMCL:
+        cubed = p * p * p
+        log_post = torch.log1p(cubed.sum(dim=1, keepdim=True) - cubed)
+    else:
+        log_post = torch.log_(p)
+        log_post = log_post.sum(dim=1, keepdim=True) - log_post
+    log_post += log_w
+    log_post -= log_post.max(dim=0, keepdim=True).values
+    post = torch.exp_(log_post)
+    post /= post.sum(dim=0, keepdim=True)
+    return post
+
+
+def skipped_field_log_likelihood(dist_field: DistanceField, pose: npt.ArrayLike, weight: npt.ArrayLike,
+                                 points_base: npt.ArrayLike, config: LocalizeConfig, range_max_m: float,
+                                 combination: BeamCombination) -> tuple[FloatArray, int]:
+    """log p(z | x) (N,) with beam skipping, and the number of beams skipped, every step on the field's ``torch_device``
+    (:func:`~.likelihood_field.skipped_field_log_likelihood`): the (N, B) likelihoods, the support each beam has
+    (:func:`~.likelihood_field.beam_support_weights`), the skip mask (:func:`~.likelihood_field.beam_skip_mask`)
+    and the sum stay there; N log-likelihoods come back. The whole cloud is one block (the support of a beam
+    is normalized over all particles): (N, B) float32, 12 MB at 50,000 particles and 60 beams."""
+    from doorbatch.pipeline.localize.likelihood_field import BeamCombination, beam_skip_floor, cloud_converged
+
+    torch = _torch()
+    field, grid, cells = _blocks(dist_field, pose, points_base)
+    if cells.shape[0] == 0:
+        return np.zeros(grid.shape[0]), 0
+    skipped = 0
+    pz = _beam_likelihood(_block_distances(field, grid, cells), config.z_hit, config.z_rand, config.sigma_hit,
+                          range_max_m)
+    if config.do_beamskip and cloud_converged(weight, pose, config):  # as skip_unexplained: a converged cloud only
+        floor = beam_skip_floor(config, range_max_m)
+        explained = pz >= float(np.float32(floor))
+        if config.beam_skip_support == "particles":  # nav2_amcl: the share of the particles
+            support = torch.ones((pz.shape[0], 1), dtype=torch.float32, device=pz.device)
+        else:
+            w = torch.from_numpy(np.asarray(weight, dtype=np.float64).reshape(-1)).to(pz.device)
+            support = _support_weights(pz, w, floor, combination)
+        share = (torch.where(explained, support, 0.0).sum(dim=0, dtype=torch.float64)
+                 / support.sum(dim=0, dtype=torch.float64).clamp_min(1e-300))
+        skip = share < config.beam_skip_threshold
+        neutral = 1.0 if combination is BeamCombination.PRODUCT else 0.0
+        skipped = int(skip.sum().item())
+        if skipped / skip.shape[0] > config.beam_skip_error_threshold:  # lost: nothing skipped (beam_skip_mask)
+            skipped = 0
+        elif skipped:
+            pz[:, skip] = neutral
+        pz[torch.isnan(pz)] = neutral
+    return np.asarray(_combine_beams(pz, combination).cpu().numpy()), skipped

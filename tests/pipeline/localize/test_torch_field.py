@@ -7,7 +7,7 @@ import sys
 
 import numpy as np
 import pytest
-from mcl_sim import room_map
+from mcl_sim import asymmetric_room, polyline, room_map, scan_beams
 
 from doorbatch.config import LocalizeConfig
 from doorbatch.errors import OptionalDependencyError, UsageError
@@ -17,6 +17,7 @@ from doorbatch.pipeline.localize.likelihood_field import (
     build_distance_field,
     endpoint_distances,
     field_log_likelihood,
+    skipped_field_log_likelihood,
 )
 from doorbatch.pipeline.localize.run import localization_field
 
@@ -66,6 +67,36 @@ def test_torch_log_likelihood_is_numpys(device: str, combination: BeamCombinatio
     assert np.allclose(got, reference, rtol=1e-5, atol=1e-6)
     assert field_log_likelihood(torch_field, pose[:0], pts, 0.95, 0.05, 0.1, 12.0).shape == (0,)
     assert np.all(field_log_likelihood(torch_field, pose, pts[:0], 0.95, 0.05, 0.1, 12.0) == 0.0)
+
+
+@pytest.mark.parametrize("device", DEVICES)
+@pytest.mark.parametrize("combination", list(BeamCombination))
+@pytest.mark.parametrize("support", ["posterior", "particles"])
+def test_torch_beam_skipping_is_numpys(device: str, combination: BeamCombination, support: str) -> None:
+    """MCL's weighing of a converged cloud on the device: the same beams skipped, the same log-likelihoods."""
+    truth = np.array([4.0, 2.5, 0.3])
+    person = polyline((5.6, 2.4), (5.9, 2.4), (5.9, 2.9), (5.6, 2.9), (5.6, 2.4))  # in the scan, not the map
+    beams = scan_beams(np.concatenate([asymmetric_room(), person]), truth)
+    rng = np.random.default_rng(3)
+    pose = truth + rng.normal(0.0, [0.03, 0.03, 0.01], (4000, 3))
+    weight = rng.dirichlet(np.ones(4000))
+    config = LocalizeConfig(beam_skip_support=support)  # type: ignore[arg-type]
+    numpy_field = build_distance_field(room_map(), 2.0)
+    torch_field = build_distance_field(room_map(), 2.0, torch_device=device)
+    reference, skipped = skipped_field_log_likelihood(numpy_field, pose, weight, beams.points_base, config, 12.0,
+                                                      combination)
+    got, got_skipped = skipped_field_log_likelihood(torch_field, pose, weight, beams.points_base, config, 12.0,
+                                                    combination)
+    assert skipped >= 3 and got_skipped == skipped  # the person's beams
+    assert np.ptp(reference) > 0.5
+    assert np.allclose(got, reference, rtol=1e-5, atol=1e-5)
+    # a cloud that has not converged skips nothing, on both
+    wide = truth + rng.normal(0.0, [1.0, 1.0, 0.5], (4000, 3))
+    unskipped = field_log_likelihood(numpy_field, wide, beams.points_base, config.z_hit, config.z_rand,
+                                     config.sigma_hit, 12.0, combination)
+    got, got_skipped = skipped_field_log_likelihood(torch_field, wide, weight, beams.points_base, config, 12.0,
+                                                    combination)
+    assert got_skipped == 0 and np.allclose(got, unskipped, rtol=1e-5, atol=1e-5)
 
 
 def test_the_config_picks_the_backend() -> None:
