@@ -486,6 +486,11 @@ class LocalizeConfig(Section):
     # ROS 1 amcl's selective_resampling: when the Neff test says no, nothing is resampled and no random particles
     # come in (pf.c returns before its recovery test). false: recovery resamples whenever it injects.
     neff_test_gates_recovery: bool = False
+    # AMCL's pf_update_sensor divides the mean weight w_avg once more by the particle count weighed, so that while
+    # KLD changes the count, w_fast / w_slow moves with it (fewer particles: no injection). false: w_avg = Σ wᵢ·pᵢ
+    # (Probabilistic Robotics, Table 8.3); the AMCL parameter translators set it true, so that a replay injects
+    # random particles at the updates AMCL would.
+    recovery_average_per_particle: bool = False
     # Filter update thresholds (Nav2 update_min_d / update_min_a).
     update_min_d: float = Field(0.1, ge=0.0)  # m
     update_min_a: float = Field(0.1, ge=0.0)  # rad

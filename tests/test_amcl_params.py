@@ -42,6 +42,7 @@ def test_nav2_bringups_params_file_configures_localize_as_amcl_runs(tmp_path: Pa
     assert (lc.update_min_d, lc.update_min_a, lc.resample_interval) == (0.25, 0.2, 1)
     # likelihood_field: AMCL's 1 + sum(pz^3), no beam skipping, and resampling on every update
     assert lc.beam_combination == "amcl" and not lc.do_beamskip and lc.resample_neff_ratio == 1.0
+    assert lc.recovery_average_per_particle  # pf_update_sensor's w_avg /= sample_count
     assert lc.beam_skip_support == "particles"  # if skipping is on (likelihood_field_prob): nav2's rule
     config = _load(tmp_path, NAV2_PARAMS)
     assert config.frames.base_link == "base_footprint" and config.topics.scan == "/scan"
@@ -137,6 +138,7 @@ def test_a_ros1_amcl_file_takes_ros1_names_and_ros1_defaults(tmp_path: Path, lay
     assert {k: getattr(lc, k) for k in expected} == pytest.approx(expected)
     # odom_model_type diff (the default): the alpha sums drawn as standard deviations; AMCL's likelihood_field
     assert lc.robot_model_type == "differential" and lc.alpha_sums_as_std
+    assert lc.recovery_average_per_particle and not DoorbatchConfig().localize.recovery_average_per_particle
     assert lc.beam_combination == "amcl" and not lc.do_beamskip and lc.resample_neff_ratio == 1.0
 
 

@@ -170,7 +170,8 @@ def apply_log_likelihood(particles: ParticleSet, log_likelihood: npt.ArrayLike) 
     w_avg = Σᵢ wᵢ·pᵢ with the prior weights normalized: the mean likelihood of Probabilistic Robotics Table 8.3
     ((1/M)·Σ pᵢ right after a resampling). AMCL's ``pf_update_sensor`` divides this once more by the particle
     count; with KLD changing the count between updates that factor alone moves w_fast away from w_slow, so
-    it is left out (in a steady particle count the ratio w_fast / w_slow is the same).
+    it is left out here and applied by :func:`finish_step` only with ``recovery_average_per_particle`` (in a
+    steady particle count the ratio w_fast / w_slow is the same).
     """
     ll = np.asarray(log_likelihood, dtype=np.float64)
     with np.errstate(divide="ignore"):
@@ -331,7 +332,10 @@ def finish_step(state: MclState, particles: ParticleSet, log_avg_weight: float, 
                 config: LocalizeConfig, rng: np.random.Generator, free: FreeCells | None,
                 bandwidth: Bandwidth | None) -> tuple[MclState, StepDiagnostics]:
     """The end of an update that MCL and the RBPF share once the particles are weighed: the recovery averages
-    (from the scan's mean weight), resampling with random-particle injection, the new state and diagnostics."""
+    (from the scan's mean weight; divided by the particle count with ``recovery_average_per_particle``),
+    resampling with random-particle injection, the new state and diagnostics."""
+    if config.recovery_average_per_particle:  # AMCL's w_avg /= set->sample_count (the count weighed)
+        log_avg_weight -= math.log(len(particles))
     recovery = state.recovery.update(log_avg_weight, config.recovery_alpha_slow, config.recovery_alpha_fast)
     fraction = recovery.random_fraction() if free is not None else 0.0
     neff = particles.neff()

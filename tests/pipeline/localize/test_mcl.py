@@ -33,6 +33,7 @@ from doorbatch.pipeline.localize.mcl import (
     MclState,
     apply_log_likelihood,
     beams_from_scan,
+    finish_step,
     global_particles,
     initial_particles,
     mcl_step,
@@ -241,6 +242,40 @@ def test_kidnapped_robot_gets_random_particles() -> None:
     injected = [n for _, _, _, n in updates if n > 0]
     assert len(injected) >= 1
     assert state.recovery.random_fraction() < 0.01
+
+
+def test_amcls_mean_weight_divides_by_the_particles_weighed() -> None:
+    """pf_update_sensor: w_avg = Σ wᵢ·pᵢ / N. With KLD shrinking the cloud from 5,000 to 500 particles at the same
+    mean likelihood, AMCL's w_avg grows tenfold, w_fast overtakes w_slow and nothing is injected; growing the cloud
+    back makes w_fast fall below w_slow (1 − w_fast/w_slow > 0). Without the option the count leaves both alone."""
+    rng = np.random.default_rng(0)
+    log_p = math.log(0.3)  # the mean likelihood Σ wᵢ·pᵢ of every update here
+
+    def cloud(n: int) -> ParticleSet:
+        return initial_particles(np.zeros(3), LocalizeConfig(), rng, n)
+
+    fractions = {}
+    for per_particle in (True, False):
+        config = LocalizeConfig(recovery_alpha_slow=0.1, recovery_alpha_fast=0.5, resample_interval=1000,
+                                recovery_average_per_particle=per_particle)
+        state = MclState(cloud(5000))
+        state, _ = finish_step(state, state.particles, log_p, np.zeros(3), config, rng, None, None)
+        if per_particle:  # the first update initializes both averages to w_avg itself
+            assert state.recovery.log_w_slow == pytest.approx(log_p - math.log(5000))
+        else:
+            assert state.recovery.log_w_slow == pytest.approx(log_p)
+        state, _ = finish_step(MclState(cloud(500), state.recovery, np.zeros(3)), cloud(500), log_p, np.zeros(3),
+                               config, rng, None, None)
+        shrunk = state.recovery.random_fraction()
+        for _ in range(4):  # w_fast (α 0.5) forgets the small cloud's large w_avg faster than w_slow (α 0.1)
+            state, _ = finish_step(MclState(cloud(5000), state.recovery, np.zeros(3)), cloud(5000), log_p,
+                                   np.zeros(3), config, rng, None, None)
+        fractions[per_particle] = (shrunk, state.recovery.random_fraction())
+    assert max(fractions[False]) < 1e-12
+    shrunk, grown = fractions[True]
+    # by hand, in units of p/5000: w_slow 1 → 1.9 → 1.81, 1.729, 1.656, 1.590; w_fast 1 → 5.5 → 3.25, 2.125, 1.5625,
+    # 1.281; 1 − w_fast/w_slow = 0.194
+    assert shrunk == 0.0 and grown == pytest.approx(1 - 1.28125 / 1.59049, rel=1e-9), fractions[True]
 
 
 def test_same_seed_same_result() -> None:
