@@ -47,7 +47,9 @@ def test_plicp_covariance_matches_spread_over_noise_draws() -> None:
         predicted.append(np.sqrt(np.diag(result.covariance)))
     spread = np.std(np.asarray(estimates), axis=0)
     ratio = spread / np.mean(predicted, axis=0)
-    assert np.all((ratio > 0.3) & (ratio < 3.0)), ratio
+    # Censi's covariance is that of the new scan's noise alone; here the reference is a scan just as noisy, so
+    # the spread is √2 times it. 20 draws estimate a std to ~16 %: a band of about ±2 of those around √2.
+    assert np.all((ratio > 0.95) & (ratio < 1.9)), ratio
 
 
 def test_plicp_rejects_clutter_by_gating_and_trimming() -> None:

@@ -25,13 +25,23 @@ def test_polar_error_of_known_poses() -> None:
     assert polar_error(np.array([1.0, 3.0, math.pi / 2]), goal) == pytest.approx((1.0, 0.0, 0.0, True))
 
 
-def test_command_respects_the_speed_limits_and_keeps_curvature() -> None:
+@pytest.mark.parametrize(("pose", "binding"), [
+    ((0.0, -3.0, 1.2), "linear"),  # 3 m away: k_rho·ρ = 9 m/s against 0.3, ω 2.97 rad/s against 1
+    ((0.0, -0.3, 0.3), "angular"),  # 0.3 m away, turned 73° from the goal: ω 10.2 rad/s against 1, v 0.9 against 0.3
+])
+def test_command_respects_the_speed_limits_and_keeps_curvature(pose: tuple[float, float, float],
+                                                                binding: str) -> None:
+    """The command is scaled down as a whole until the tighter limit holds with equality: the same arc, slower."""
     cfg = DoorPoseConfig()
-    pose, goal = np.array([0.0, -3.0, 1.2]), np.array([0.0, 0.0, math.pi / 2])
-    cmd = polar_command(pose, goal, cfg)
+    cmd = polar_command(np.array(pose), np.array([0.0, 0.0, math.pi / 2]), cfg)
     raw_v = cfg.k_rho * cmd.rho_m
     raw_w = cfg.k_alpha * cmd.alpha_rad + cfg.k_beta * cmd.beta_rad
     assert abs(cmd.v_mps) <= cfg.max_linear_mps + 1e-12 and abs(cmd.w_rps) <= cfg.max_angular_rps + 1e-12
+    if binding == "linear":
+        assert abs(cmd.v_mps) == pytest.approx(cfg.max_linear_mps) and abs(cmd.w_rps) < cfg.max_angular_rps
+    else:
+        assert abs(cmd.w_rps) == pytest.approx(cfg.max_angular_rps) and abs(cmd.v_mps) < cfg.max_linear_mps
+    assert cmd.v_mps > 0.0  # the goal lies ahead: forward
     assert cmd.w_rps / cmd.v_mps == pytest.approx(raw_w / raw_v)
 
 

@@ -70,7 +70,13 @@ def test_odometry_drift_moves_the_initial_only_run_off_the_goal() -> None:
     cfg = DoorPoseConfig(max_duration_s=30.0)
     init = simulate_approach(scene, start, cfg, drifting, np.random.default_rng(2), "initial")
     cont = simulate_approach(scene, start, cfg, drifting, np.random.default_rng(2), "continuous")
-    assert cont.error < init.error
+    perfect = simulate_approach(scene, start, cfg, OdometryNoise(0.0, 0.0, 0.0, 0.0), np.random.default_rng(2),
+                                "initial")
+    # the same start with perfect odometry ends on the goal; 10 % scale error and 0.05 rad/m over the ~2.5 m
+    # approach carry the initial-only run decimetres off it, and re-estimating the goal takes most of that back
+    assert perfect.error < 0.05
+    assert init.error - perfect.error > 0.2
+    assert cont.error < 0.15 and cont.error < init.error
     assert odometry_noise().alpha1 > 0.0
 
 

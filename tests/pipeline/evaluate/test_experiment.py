@@ -81,12 +81,15 @@ def test_tracking_experiment_runs_in_parallel_and_reports(tmp_path: Path) -> Non
 
 def test_global_experiment_reports_success_against_particles(tmp_path: Path) -> None:
     spec = _write(tmp_path / "global.yaml", {
-        "name": "global", "map": str(PLAIN_MAP), "logs": [str(LOGS / "loc_closed.mcap")], "methods": ["mcl"],
-        "particles": [100, 400], "seeds": [0], "init": "global"})
+        "name": "global", "map": str(PLAIN_MAP), "logs": [str(LOGS / "loc_partial.mcap")], "methods": ["mcl"],
+        "particles": [100, 2000], "seeds": [0], "init": "global"})
     out = tmp_path / "out"
     assert main(["evaluate", "--experiment", str(spec), "-o", str(out), "-q"]) == 0
     success = {r["params"]["particles"]: r["value"] for r in _rows(out) if r["metric"] == "global_success"}
-    assert set(success) == {100, 400} and set(success.values()) <= {0.0, 1.0}
+    # on the static map's 316 m² of free space, 2,000 particles (one per 0.16 m², the built map's global table
+    # in docs/results.md reaches 100 % from 2,000 on) find the robot with partially open doors; 100 (one per
+    # 3 m², whatever their headings) do not
+    assert success == {100: 0.0, 2000: 1.0}
     assert (out / "global_success.png").exists()
     assert "global_success" in (out / "report.md").read_text()
 
