@@ -276,6 +276,59 @@ def test_a_ros1_launch_file_sets_the_node_as_roslaunch_would(tmp_path: Path, cap
     assert load_config(with_omni).localize.robot_model_type == "omnidirectional"
 
 
+def test_a_launch_file_that_includes_the_amcl_launch_passes_its_args(tmp_path: Path, caplog: pytest.LogCaptureFixture,
+                                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    """A robot's navigation.launch including its package's amcl.launch (turtlebot3_navigation's layout): the included
+    file is read under the include's ns, with the args passed overriding its defaults, the others its own."""
+    launch = tmp_path / "ws" / "src" / "my_robot" / "launch"
+    _package(tmp_path / "ws")
+    launch.mkdir()
+    monkeypatch.setenv("ROS_PACKAGE_PATH", str(tmp_path / "ws" / "src"))
+    (launch / "amcl.launch").write_text("""<launch>
+  <arg name="scan_topic" default="scan"/>
+  <arg name="alpha" default="0.2"/>
+  <arg name="z_hit" default="0.6"/>
+  <arg name="x0" default="0.0"/>
+  <node pkg="amcl" type="amcl" name="amcl">
+    <remap from="scan" to="$(arg scan_topic)"/>
+    <param name="odom_alpha1" value="$(arg alpha)"/>
+    <param name="laser_z_hit" value="$(arg z_hit)"/>
+    <param name="initial_pose_x" value="$(arg x0)"/>
+    <rosparam file="$(dirname)/../config/amcl_extra.yaml" command="load"/>
+  </node>
+</launch>
+""")
+    (launch / "navigation.launch").write_text("""<launch>
+  <arg name="x0" default="3.0"/>
+  <include file="$(find my_robot)/launch/amcl.launch" ns="tb3">
+    <arg name="scan_topic" value="base_scan"/>
+    <arg name="alpha" value="0.05"/>
+  </include>
+</launch>
+""")
+    with caplog.at_level(logging.WARNING, logger="doorbatch"):
+        config = load_config(launch / "navigation.launch")
+    lc = config.localize
+    assert lc.alpha1 == 0.05 and lc.z_hit == 0.6  # passed, and the included file's own default
+    assert (lc.alpha4, lc.pf_err) == (0.05, 0.03)  # $(dirname) is the included file's folder
+    assert config.topics.scan == "/tb3/base_scan"  # the remap, in the include's namespace
+    assert "--init 0,0,0" in caplog.text  # x0 was not passed: the includer's own x0 does not leak in
+    # pass_all_args hands every arg of the includer over; a relative file name is the includer's folder's
+    (launch / "all.launch").write_text('<launch><arg name="x0" default="3.0"/><arg name="z_hit" default="0.7"/>'
+                                       '<include file="amcl.launch" pass_all_args="true"/></launch>')
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="doorbatch"):
+        config = load_config(launch / "all.launch")
+    assert config.localize.z_hit == 0.7 and "--init 3,0,0" in caplog.text
+    # an include that cannot be found is said; includes that include each other are an error, not a hang
+    (launch / "lost.launch").write_text('<launch><include file="nowhere.launch"/></launch>')
+    with pytest.raises(ConfigError, match=r"nowhere\.launch, which could not be read"):
+        load_config(launch / "lost.launch")
+    (launch / "loop.launch").write_text('<launch><include file="$(dirname)/loop.launch"/></launch>')
+    with pytest.raises(ConfigError, match="cycle"):
+        load_config(launch / "loop.launch")
+
+
 def test_the_shipped_ros1_launch_example_reads() -> None:
     config = load_config(REPO / "configs" / "amcl_ros1.example.launch")
     lc = config.localize

@@ -9,13 +9,16 @@ roslaunch's rules (``roslaunch/loader.py``, ``xmlloader.py``), as far as a file 
 - ``<param value type>``: roslaunch's ``convert_value`` (no type: a float when the text holds a ``.``, else an int,
   else ``true``/``false``, else the string). ``<rosparam>``: YAML from its text or ``file``, under ``param`` /
   ``ns``; ``subst_value`` substitutes its text.
-- ``<arg name default|value>``: scoped, a ``<group>`` works on a copy; ``$(arg NAME)``, ``$(env VAR)``,
-  ``$(optenv VAR DEFAULT)``, ``$(dirname)``, and ``$(find PKG)`` by ``ROS_PACKAGE_PATH`` (a folder holding the
-  ``package.xml`` of that name). ``$(eval ...)``, ``$(anon ...)`` need roslaunch itself: such a value is
-  *unresolved* (reported, never guessed), and so is an ``if``/``unless`` that does not resolve (its element is
-  left out). No ``name:=value`` args can be passed: their defaults stand.
+- ``<arg name default|value>``: scoped, a ``<group>`` works on a copy; ``value`` sets it, ``default`` only where it
+  has no value yet (an include passed one); ``$(arg NAME)``, ``$(env VAR)``, ``$(optenv VAR DEFAULT)``,
+  ``$(dirname)`` (the folder of the file that holds it), and ``$(find PKG)`` by ``ROS_PACKAGE_PATH`` (a folder
+  holding the ``package.xml`` of that name). ``$(eval ...)``, ``$(anon ...)`` need roslaunch itself: such a value
+  is *unresolved* (reported, never guessed), and so is an ``if``/``unless`` that does not resolve (its element is
+  left out). No ``name:=value`` args can be passed on the command line: the top file's defaults stand.
 - ``<remap from to>`` inside the node, or before it in an enclosing scope, resolved against the node's namespace.
-- ``<include>`` is not followed.
+- ``<include file ns pass_all_args>`` is followed: the file is read under ``ns`` with the args its ``<arg>``
+  children pass (and all of the includer's with ``pass_all_args``), the enclosing remaps in force. A file that
+  cannot be found or resolved is reported, as an unresolved value is.
 """
 
 from __future__ import annotations
@@ -88,15 +91,22 @@ def _packages(roots: str) -> dict[str, Path]:
     return found
 
 
+# Includes deeper than this are taken for a cycle (roslaunch itself recurses until Python's limit).
+MAX_INCLUDE_DEPTH = 16
+
+
 class _Reader:
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, parent: _Reader | None = None) -> None:
+        """A reader of ``path``; one ``parent`` shares its parameter server, nodes and reports (an include)."""
         self.path = path
         self.folder = path.resolve().parent
-        self.params: dict[str, Any] = {}
-        self.nodes: list[tuple[str, str, dict[str, str]]] = []  # (resolved name, type, remaps in force)
-        self.unresolved: list[str] = []
-        self.notes: list[str] = []
-        self.includes: list[str] = []
+        self.depth: int = 0 if parent is None else parent.depth + 1
+        self.params: dict[str, Any] = {} if parent is None else parent.params
+        # (resolved name, type, remaps in force)
+        self.nodes: list[tuple[str, str, dict[str, str]]] = [] if parent is None else parent.nodes
+        self.unresolved: list[str] = [] if parent is None else parent.unresolved
+        self.notes: list[str] = [] if parent is None else parent.notes
+        self.includes: list[str] = [] if parent is None else parent.includes  # those that could not be read
 
     def substitute(self, text: str, scope: _Scope) -> str:
         def one(match: re.Match[str]) -> str:
@@ -154,14 +164,16 @@ class _Reader:
     def element(self, element: ET.Element, scope: _Scope, base: str, node: str | None) -> None:
         tag = element.tag
         if tag == "arg" and node is None:
-            raw = element.get("value", element.get("default"))
+            name, raw = element.get("name", ""), element.get("value")
+            if raw is None and name not in scope.args:  # loader.add_arg: a default only where nothing was passed
+                raw = element.get("default")
             if raw is not None:
                 with contextlib.suppress(_UnresolvedError):  # its uses are reported where they fail
-                    scope.args[element.get("name", "")] = self.substitute(raw, scope)
+                    scope.args[name] = self.substitute(raw, scope)
         elif tag == "group" and node is None:
             self.walk(element, _Scope(_ns(scope.ns, element.get("ns")), dict(scope.args), dict(scope.remaps)))
         elif tag == "include" and node is None:
-            self.includes.append(element.get("file", "?"))
+            self.include(element, scope)
         elif tag == "node" and node is None:
             node_ns = _ns(scope.ns, element.get("ns"))
             name = node_ns + element.get("name", element.get("type", ""))
@@ -175,6 +187,35 @@ class _Reader:
             self.param(element, scope, base)
         elif tag == "rosparam" and element.get("command", "load") == "load":
             self.rosparam(element, scope, base)
+
+    def include(self, element: ET.Element, scope: _Scope) -> None:
+        """roslaunch's ``<include>``: the file under ``ns``, with the args passed (all with ``pass_all_args``)."""
+        raw = element.get("file", "")
+        try:
+            name = self.substitute(raw, scope)
+        except _UnresolvedError as why:
+            self.includes.append(raw)
+            raise _UnresolvedError(f"<include> not followed: {why}") from None
+        candidates = [Path(name)] if Path(name).is_absolute() else [Path.cwd() / name, self.folder / name]
+        path = next((c for c in candidates if c.is_file()), None)
+        if path is None:
+            self.includes.append(name)
+            raise _UnresolvedError("<include> not followed: no such file")
+        if self.depth >= MAX_INCLUDE_DEPTH:
+            raise ConfigError(f"{self.path}: includes nest deeper than {MAX_INCLUDE_DEPTH} (a cycle?) at {name}")
+        if self.substitute(element.get("pass_all_args", "false"), scope).strip().lower() in ("true", "1"):
+            args = dict(scope.args)
+        else:
+            args = {}
+        for child in element:
+            if child.tag == "arg" and child.get("value") is not None and self.enabled(child, scope):
+                with contextlib.suppress(_UnresolvedError):  # its uses are reported where they fail
+                    args[child.get("name", "")] = self.substitute(child.get("value", ""), scope)
+        try:
+            root = ET.parse(path).getroot()
+        except ET.ParseError as err:
+            raise ConfigError(f"{path} (included by {self.path}): not a valid launch file (XML): {err}") from err
+        _Reader(path, self).walk(root, _Scope(_ns(scope.ns, element.get("ns")), args, dict(scope.remaps)))
 
     def param(self, element: ET.Element, scope: _Scope, base: str) -> None:
         name = _join(base, self.substitute(element.get("name", ""), scope))
@@ -280,8 +321,8 @@ def read_launch_node(path: Path, node_type: str) -> LaunchNode:
     reader.walk(root, _Scope("/", {}, {}))
     wanted = [(name, remaps) for name, kind, remaps in reader.nodes if kind == node_type]
     if not wanted:
-        hint = f"; it includes {', '.join(reader.includes)}: give the file that holds the node" if reader.includes \
-            else ""
+        hint = (f"; it includes {', '.join(reader.includes)}, which could not be read: give the file that holds the "
+                "node, or set ROS_PACKAGE_PATH") if reader.includes else ""
         raise ConfigError(f"{path}: no <node type=\"{node_type}\"> in this launch file{hint}")
     if len(wanted) > 1:
         raise ConfigError(f"{path}: {len(wanted)} <node type=\"{node_type}\"> ({', '.join(n for n, _ in wanted)}); "
