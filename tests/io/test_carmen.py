@@ -270,16 +270,20 @@ def _mounted(robot: tuple[float, float, float], mount: tuple[float, float, float
     return (robot[0] + c * mount[0] - s * mount[1], robot[1] + s * mount[0] + c * mount[1], robot[2] + mount[2])
 
 
-def test_robotlaser1_without_offset_params_takes_the_mount_from_its_two_poses(tmp_path: Path) -> None:
-    mount = (0.2, -0.05, math.pi)  # a laser looking backwards: its yaw wraps at ±π from line to line
+@pytest.mark.parametrize("mount", [
+    (0.2, -0.05, math.pi),  # a laser looking backwards: its yaw wraps at ±π from line to line
+    (0.2, -0.05, 0.3),  # turned otherwise: a mount read the wrong way round (laser in robot, not robot in laser)
+])
+def test_robotlaser1_without_offset_params_takes_the_mount_from_its_two_poses(tmp_path: Path,
+                                                                             mount: tuple[float, float, float]) -> None:
     robots = [(0.1 * k, 0.05 * k * k, 0.5 * k - 2.9) for k in range(12)]  # turning through ±π
     lines = [robotlaser1(_mounted(r, mount), r, 3.0 + 0.1 * k) for k, r in enumerate(robots)]
     records = read_all(write_log(tmp_path / "a.clf", lines))
     few = read_all(write_log(tmp_path / "few.clf", lines[:3]))  # three lines prove no rigid mount
     np.testing.assert_allclose(next(t for t in only(Transform, few) if t.static).translation, 0.0)
     (static,) = [t for t in only(Transform, records) if t.static]
-    np.testing.assert_allclose(static.translation, [0.2, -0.05, 0.0], atol=1e-6)
-    assert abs(_wrap(_static_yaw(records) - math.pi)) < 1e-6
+    np.testing.assert_allclose(static.translation, [mount[0], mount[1], 0.0], atol=1e-6)
+    assert abs(_wrap(_static_yaw(records) - mount[2])) < 1e-6
     for ref, robot in zip(only(Pose2D, records, Role.REFERENCE), robots, strict=True):
         assert (ref.x, ref.y) == pytest.approx(robot[:2], abs=1e-6) and abs(_wrap(ref.yaw - robot[2])) < 1e-6
 

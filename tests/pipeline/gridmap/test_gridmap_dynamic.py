@@ -7,7 +7,9 @@ import numpy as np
 from doorbatch.config import GridConfig
 from doorbatch.pipeline.gridmap.dynamic import (
     begin_pass,
+    classify_and_integrate,
     classify_endpoints,
+    classify_scan,
     seen_free_grid,
     take_fallen_cells,
     take_fallen_points,
@@ -143,3 +145,7 @@ def test_points_near_structure_known_before_the_pass_are_static() -> None:
     begin_pass(grid, CFG)
     pts = [_centre(grid, 5, j) for j in (9, 11, 12)]
     assert classify_endpoints(grid, pts, CFG).tolist() == [False, False, True]
+    # the mapper's compiled paths (classify_scan's kernel, and the fused classify-and-integrate step) agree
+    assert classify_scan(grid, pts, CFG).dynamic.tolist() == [False, False, True]
+    _, classes = classify_and_integrate(grid, _centre(grid, 12, 10), pts, NO_DIRS, CFG)
+    assert classes.dynamic.tolist() == [False, False, True]

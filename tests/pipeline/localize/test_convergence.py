@@ -48,6 +48,9 @@ def test_two_clusters_with_substantial_weight_are_ambiguous_not_converged() -> N
     # a second cluster with little weight is not an ambiguity; nor is a cluster within the radius
     assert not multimodal(cloud([(1.0, 2.0, 0.0), (9.0, 2.0, np.pi)], [0.97, 0.03]), CONFIG)
     assert not multimodal(cloud([(1.0, 2.0, 0.0), (1.5, 2.0, 0.0)], [0.5, 0.5]), CONFIG)
+    # apart in position alone (a door spacing along a corridor), or in heading alone (turned in place)
+    assert multimodal(cloud([(1.0, 2.0, 0.3), (6.0, 2.0, 0.3)], [0.6, 0.4]), CONFIG)
+    assert multimodal(cloud([(1.0, 2.0, 0.0), (1.0, 2.0, np.pi)], [0.5, 0.5]), CONFIG)
 
 
 def test_a_streak_broken_by_a_wide_cloud_starts_over() -> None:
@@ -93,6 +96,10 @@ def test_no_claim_is_made_while_the_scans_fit_poorly() -> None:
     states = _fed([0.3] * 19 + [0.9] * 41)  # poor for 1.9 s (not yet lost), then fitting
     assert not any(s.lost for s in states)
     assert states[-1].converged_ns == 2_000_000_000  # the streak from t = 0, but claimed only once fitting
+    # fitting, then poor from 1.0 to 2.8 s: hold and travel are met at 2.0 s, the claim waits for the fit at 2.9 s
+    states = _fed([0.9] * 10 + [0.3] * 19 + [0.9] * 31)
+    assert not any(s.lost for s in states) and states[28].converged_ns is None
+    assert states[-1].converged_ns == 2_900_000_000
 
 
 def test_scan_fit_counts_the_hits_near_the_maps_walls() -> None:

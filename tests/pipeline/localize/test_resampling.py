@@ -83,6 +83,27 @@ def test_bins_are_counted_like_amclss_kdtree_keys() -> None:
     assert occupied_bins(np.zeros((0, 3)), 0.5, BIN_YAW) == 0
 
 
+def test_a_lattice_of_bins_is_counted_bin_by_bin() -> None:
+    """3 × 3 × 3 bin centres: 27 bins, one id each (a key that mixes the axes wrongly merges some)."""
+    centres = np.stack(np.meshgrid(*(np.arange(3) + 0.5,) * 3, indexing="ij"), -1).reshape(-1, 3)
+    pose = centres * np.array([0.5, 0.5, BIN_YAW])
+    assert occupied_bins(pose, 0.5, BIN_YAW) == 27
+    assert len(set(bin_ids(pose, 0.5, BIN_YAW).tolist())) == 27
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.integers(0, 10_000), st.floats(0.05, 2.0))
+def test_bins_equal_the_distinct_floored_keys(seed: int, spread_m: float) -> None:
+    """Two particles share an id exactly when their floored (x / bin, y / bin, yaw / bin) keys are equal."""
+    rng = np.random.default_rng(seed)
+    pose = np.column_stack([rng.normal(0, spread_m, 300), rng.normal(3, spread_m, 300),
+                            rng.uniform(-np.pi, np.pi, 300)])
+    keys = [tuple(k) for k in np.floor(pose / np.array([0.5, 0.5, BIN_YAW])).astype(int).tolist()]
+    ids = bin_ids(pose, 0.5, BIN_YAW).tolist()
+    assert occupied_bins(pose, 0.5, BIN_YAW) == len(set(keys))
+    assert len(set(zip(keys, ids, strict=True))) == len(set(keys)) == len(set(ids))
+
+
 def test_kld_draw_stops_at_amcls_limit() -> None:
     rng = np.random.default_rng(7)
     spread = np.column_stack([rng.uniform(0, 3, 4000), rng.uniform(0, 3, 4000), rng.uniform(-np.pi, np.pi, 4000)])
@@ -91,7 +112,7 @@ def test_kld_draw_stops_at_amcls_limit() -> None:
     n = len(draw)
     assert n == kld_sample_count(draw.n_bins, 0.05, 0.99, 100, 20_000) + 1  # AMCL: stop when count > limit
     assert n < 20_000
-    assert draw.n_bins == occupied_bins(draw.pose, 0.5, BIN_YAW)
+    assert draw.n_bins == len({tuple(k) for k in np.floor(draw.pose / np.array([0.5, 0.5, BIN_YAW])).tolist()})
     assert np.array_equal(draw.pose, spread[draw.index]) and not draw.random.any()
 
 
