@@ -10,15 +10,16 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from doorbatch.config import LocalizeConfig
-from doorbatch.maps import DoorSet
+from doorbatch.maps import DoorSet, OccupancyMap
 from doorbatch.pipeline.localize.door_likelihood import door_log_likelihood_at_poses
-from doorbatch.pipeline.localize.likelihood_field import beam_likelihood
+from doorbatch.pipeline.localize.likelihood_field import beam_likelihood, build_distance_field, endpoint_distances
 from doorbatch.pipeline.localize.mcl import tempered_weighting
 from doorbatch.pipeline.localize.particles import ParticleSet
 from doorbatch.pipeline.localize.smoothing import (
     Bandwidth,
     active_bandwidth,
     effective_sample_ratio,
+    endpoint_jacobians,
     endpoint_variance,
     jitter,
     particle_bandwidth,
@@ -179,3 +180,23 @@ def test_tempered_stages_apply_the_whole_likelihood(stages: int) -> None:
     else:
         assert var == pytest.approx(s**2, rel=0.25)
         assert log_z == pytest.approx(math.log(s * math.sqrt(2 * math.pi) / 10.0), abs=0.15)
+
+
+def test_endpoint_jacobians_match_finite_differences_of_the_field() -> None:
+    """A wall y = 1 (the field's distance falls by 1 m per m going up, 0 along x); a particle at the origin turned
+    by θ with end points ahead of it: ∂d/∂(x, y) = (0, −1), ∂d/∂θ = ∇d · (−r_y, r_x) = −r_x, as central
+    differences of the field itself give."""
+    occ = np.zeros((60, 100), dtype=np.int8)
+    occ[39, :] = 100  # cell centres y = 0.975: the wall 2.5 cm below y = 1 (origin −1, −1, 5 cm cells)
+    field = build_distance_field(OccupancyMap(occ, 0.05, -1.0, -1.0), 2.0)
+    pose = np.array([[0.0, 0.0, 0.1], [0.5, -0.3, -0.2]])
+    base = np.array([[2.0, 0.3], [1.5, -0.2], [2.5, 0.1]])  # end points 0.3–0.9 m below the wall
+    jac = endpoint_jacobians(field, pose, base)
+    np.testing.assert_allclose(jac[..., 0], 0.0, atol=0.05)
+    np.testing.assert_allclose(jac[..., 1], -1.0, atol=0.05)
+    eps = 0.1  # rad: end points 15–25 cm off (several cells: the field is exact only at cell centres), below the wall
+    turned = [endpoint_distances(field, pose + np.array([0.0, 0.0, e]), base) for e in (eps, -eps)]
+    finite = (turned[0] - turned[1]) / (2 * eps)
+    r_x = np.cos(pose[:, 2:3]) * base[:, 0] - np.sin(pose[:, 2:3]) * base[:, 1]
+    np.testing.assert_allclose(jac[..., 2], -r_x, atol=0.05)
+    np.testing.assert_allclose(jac[..., 2], finite, atol=0.3)  # the field steps by a cell: 0.25 per 5 cm here
