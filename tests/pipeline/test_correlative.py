@@ -96,3 +96,15 @@ def test_no_information_keeps_the_prior() -> None:
     assert np.allclose(result.pose, prior) and result.score == 0.0
     grid = build_likelihood_grid(np.array([[0.0, 0.0]]), window_m=0.5)
     assert correlative_match(grid, np.zeros((0, 2)), prior).score == 0.0
+
+
+def test_along_a_featureless_wall_the_prior_keeps_its_position() -> None:
+    """A scan of a long straight wall fixes y and yaw, not x: of the equally good poses the search keeps the one
+    nearest the prior (x unchanged), not the first it met at the window's edge."""
+    wall = np.column_stack([np.arange(-10.0, 10.0, 0.02), np.ones(1000)])
+    grid = build_likelihood_grid(wall, resolution_m=0.05, sigma_m=0.05, window_m=0.5)
+    scan = np.column_stack([np.arange(-1.0, 1.0, 0.02), np.ones(100)])  # the wall 1 m to the left, from y = 0
+    for prior in ([0.013, 0.1, 0.0], [0.3, -0.2, np.deg2rad(2.0)]):  # yaw on the 1° lattice around the prior
+        result = correlative_match(grid, scan, np.array(prior), window_m=0.5, window_deg=5.0)
+        np.testing.assert_allclose(result.pose, [prior[0], 0.0, 0.0], atol=1e-9)
+        assert result.score == 1.0

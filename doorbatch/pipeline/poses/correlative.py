@@ -267,12 +267,19 @@ def _expand(
     Returns:
         (yaw index, x shift, y shift, score) of the best fine candidate.
     """
-    order = np.argsort(-bounds, kind="stable")
     n_coarse = cx.size
-    centre = cells.shape[0] // 2  # the prior's yaw; the prior wins ties (no information: stay put)
+    centre = cells.shape[0] // 2  # the prior's yaw
+    # Ties go to the pose nearest the prior (no information along an axis: stay put, not at the window's edge):
+    # candidates of equal bound are expanded nearest first, and of equal score the nearest is kept. Distance in
+    # lattice steps, cells and yaw steps alike.
+    yaw_all, coarse_all = np.divmod(np.arange(bounds.size), n_coarse)
+    half = (grid.coarse_cells - 1) / 2.0
+    near = (cx[coarse_all] + half) ** 2 + (cy[coarse_all] + half) ** 2 + (yaw_all - centre) ** 2
+    order = np.lexsort((near, -bounds))
     zero = np.zeros((1, 1), dtype=np.int64)
     best: tuple[int, int, int, float] = (centre, 0, 0, float(_scores(grid.values, cells[centre : centre + 1],
                                                                       zero, zero)[0, 0]) if box is None else -1.0)
+    best_near = 0 if box is None else np.iinfo(np.int64).max
     for start in range(0, order.size, EXPAND_BATCH):
         batch = order[start : start + EXPAND_BATCH]
         if bounds[batch[0]] <= best[3]:
@@ -284,7 +291,10 @@ def _expand(
             inside = ((np.abs(yaw_i - centre - box[0][0]) <= box[1][0])[:, None]
                       & (np.abs(fx - box[0][1]) <= box[1][1]) & (np.abs(fy - box[0][2]) <= box[1][2]))
             scores[inside] = -1.0
-        b, k = np.unravel_index(int(np.argmax(scores)), scores.shape)
-        if scores[b, k] > best[3]:
-            best = (int(yaw_i[b]), int(fx[b, k]), int(fy[b, k]), float(scores[b, k]))
+        top = scores.max()
+        dist = np.where(scores == top, fx**2 + fy**2 + ((yaw_i - centre) ** 2)[:, None], np.iinfo(np.int64).max)
+        b, k = np.unravel_index(int(np.argmin(dist)), dist.shape)
+        if top > best[3] or (top == best[3] and dist[b, k] < best_near):
+            best = (int(yaw_i[b]), int(fx[b, k]), int(fy[b, k]), float(top))
+            best_near = int(dist[b, k])
     return best
