@@ -9,12 +9,16 @@ from hypothesis import strategies as st
 from doorbatch.geometry.se2 import compose
 from doorbatch.pipeline.evaluate.trajectory_error import rigid_copy_offset
 
+# Paths start away from the origin: with ref[0] the identity, the correction ref[0] ⊕ est[0]⁻¹ and its reversal
+# est[0]⁻¹ ⊕ ref[0] are both est[0]⁻¹, and the order of the composition would go untested.
+START = np.array([2.0, -1.0, 0.4])
+
 
 def _path(seed: int, n: int = 60) -> np.ndarray:
-    """A wandering planar path (steps of 0.05–0.3 m, turns up to 0.4 rad)."""
+    """A wandering planar path from ``START`` (steps of 0.05–0.3 m, turns up to 0.4 rad)."""
     rng = np.random.default_rng(seed)
     steps = np.column_stack([rng.uniform(0.05, 0.3, n), np.zeros(n), rng.uniform(-0.4, 0.4, n)])
-    poses = [np.zeros(3)]
+    poses = [START]
     for step in steps:
         poses.append(compose(poses[-1], step))
     return np.array(poses)
@@ -43,5 +47,7 @@ def test_odometry_that_gains_one_percent_is_no_copy() -> None:
     path = _path(3)
     drifted = path.copy()
     drifted[:, :2] *= 1.01
-    off_m, _ = rigid_copy_offset(drifted, path)
-    assert off_m > 0.01 * np.max(np.hypot(path[:, 0], path[:, 1])) - 1e-9
+    off_m, off_rad = rigid_copy_offset(drifted, path)
+    # headings unchanged, so aligning the first poses is a shift by −0.01 p_0: p_k ends 0.01 |p_k − p_0| off
+    from_start = np.hypot(path[:, 0] - START[0], path[:, 1] - START[1])
+    assert np.isclose(off_m, 0.01 * np.max(from_start), rtol=1e-9, atol=1e-12) and off_rad < 1e-12

@@ -1,0 +1,70 @@
+"""Door-map scoring: greedy hinge matching, opening-range error, static-map agreement (known answers)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from doorbatch.maps import DoorSet
+from doorbatch.pipeline.evaluate.door_map import match_by_hinge, score_doors, score_static_map
+
+
+def _doors(hinge: list[tuple[float, float]], closed_yaw: list[float], angle_min: list[float],
+           angle_max: list[float]) -> DoorSet:
+    """Doors of leaf 0.9 m."""
+    return DoorSet(np.array(hinge, dtype=np.float64).reshape(-1, 2), np.full(len(hinge), 0.9),
+                   np.array(closed_yaw), np.array(angle_min), np.array(angle_max))
+
+
+def test_hinges_match_greedily_by_increasing_distance() -> None:
+    """Detected (0, 0), (0.21, 0); truth (0.2, 0), (−0.25, 0); within 0.3 m. Distances: d1–t0 0.01, d0–t0 0.2,
+    d0–t1 0.25 (d1–t1 0.46 is too far). Closest first: d1↔t0, then d0↔t1 (t0 is taken). Matching in row order
+    would pair d0↔t0 and leave d1 with nothing."""
+    matched, dist = match_by_hinge([[0.0, 0.0], [0.21, 0.0]], [[0.2, 0.0], [-0.25, 0.0]], 0.3)
+    assert matched == [(1, 0), (0, 1)]
+    np.testing.assert_allclose(dist, [[0.2, 0.25], [0.01, 0.46]], atol=1e-12)
+
+
+def test_an_opening_range_with_swapped_ends_has_no_range_error() -> None:
+    """Truth leaf from 0 to 1.5 rad (closed_yaw 0, range [0, 1.5]); the detection gives the same two ends in the
+    other order (range [1.5, 0]). The range error takes either orientation of the range (``_range_error``), so
+    the ends coincide: error 0 (the same orientation alone would give 1.5 rad at both ends)."""
+    truth = _doors([(1.0, 2.0)], [0.0], [0.0], [1.5])
+    detected = _doors([(1.0, 2.0)], [0.0], [1.5], [0.0])
+    score = score_doors(detected, truth, [True])
+    assert score.matches == [(0, 0)] and score.precision == 1.0 and score.recall == 1.0
+    np.testing.assert_allclose(score.range_error_rad, [0.0], atol=1e-12)
+
+
+def test_range_error_is_the_larger_end_difference() -> None:
+    """Truth [0, 1.5] against detected [0.1, 1.2] (same orientation): ends 0.1 and 0.3 rad off → 0.3."""
+    truth = _doors([(0.0, 0.0)], [0.0], [0.0], [1.5])
+    detected = _doors([(0.05, 0.0)], [0.0], [0.1], [1.2])
+    score = score_doors(detected, truth, [True])
+    np.testing.assert_allclose(score.range_error_rad, [0.3], atol=1e-12)
+    np.testing.assert_allclose(score.hinge_error_m, [0.05], atol=1e-12)
+    assert math.isclose(float(score.length_error_m[0]), 0.0, abs_tol=1e-12)
+
+
+def test_occupied_cell_next_to_a_truth_wall_agrees() -> None:
+    """Truth wall in column 2 of a 5 × 5 grid; the estimate has one occupied cell in column 3 (one cell off,
+    within the tolerance of 1) and free cells in column 0: all 6 observed cells agree, none is spurious."""
+    truth = np.zeros((5, 5), dtype=np.int8)
+    truth[:, 2] = 100
+    estimate = np.full((5, 5), -1, dtype=np.int8)
+    estimate[2, 3] = 100
+    estimate[:, 0] = 0
+    score = score_static_map(estimate, truth, tolerance_cells=1)
+    assert (score.agreement, score.observed_cells, score.spurious_occupied_cells) == (1.0, 6, 0)
+
+
+def test_occupied_cell_two_cells_from_a_wall_is_spurious() -> None:
+    """Column 4 is two cells from the truth wall in column 2 (tolerance 1): 5 of 6 observed cells agree."""
+    truth = np.zeros((5, 5), dtype=np.int8)
+    truth[:, 2] = 100
+    estimate = np.full((5, 5), -1, dtype=np.int8)
+    estimate[2, 4] = 100
+    estimate[:, 0] = 0
+    score = score_static_map(estimate, truth, tolerance_cells=1)
+    assert math.isclose(score.agreement, 5 / 6) and score.spurious_occupied_cells == 1
