@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from doorbatch.maps import DoorSet
 from doorbatch.pipeline.evaluate.door_map import match_by_hinge, score_doors, score_static_map
@@ -47,24 +48,18 @@ def test_range_error_is_the_larger_end_difference() -> None:
     assert math.isclose(float(score.length_error_m[0]), 0.0, abs_tol=1e-12)
 
 
-def test_occupied_cell_next_to_a_truth_wall_agrees() -> None:
-    """Truth wall in column 2 of a 5 × 5 grid; the estimate has one occupied cell in column 3 (one cell off,
-    within the tolerance of 1) and free cells in column 0: all 6 observed cells agree, none is spurious."""
+@pytest.mark.parametrize(("column", "agreement", "spurious"), [
+    (3, 1.0, 0),  # one cell off the wall, within the tolerance of 1: all 6 observed cells agree
+    (4, 5 / 6, 1),  # two cells off: spurious, 5 of 6 agree
+])
+def test_an_occupied_cell_agrees_within_the_tolerance_of_a_truth_wall(column: int, agreement: float,
+                                                                    spurious: int) -> None:
+    """Truth wall in column 2 of a 5 × 5 grid; the estimate: free cells in column 0 and one occupied cell."""
     truth = np.zeros((5, 5), dtype=np.int8)
     truth[:, 2] = 100
     estimate = np.full((5, 5), -1, dtype=np.int8)
-    estimate[2, 3] = 100
+    estimate[2, column] = 100
     estimate[:, 0] = 0
     score = score_static_map(estimate, truth, tolerance_cells=1)
-    assert (score.agreement, score.observed_cells, score.spurious_occupied_cells) == (1.0, 6, 0)
-
-
-def test_occupied_cell_two_cells_from_a_wall_is_spurious() -> None:
-    """Column 4 is two cells from the truth wall in column 2 (tolerance 1): 5 of 6 observed cells agree."""
-    truth = np.zeros((5, 5), dtype=np.int8)
-    truth[:, 2] = 100
-    estimate = np.full((5, 5), -1, dtype=np.int8)
-    estimate[2, 4] = 100
-    estimate[:, 0] = 0
-    score = score_static_map(estimate, truth, tolerance_cells=1)
-    assert math.isclose(score.agreement, 5 / 6) and score.spurious_occupied_cells == 1
+    assert score.observed_cells == 6 and score.spurious_occupied_cells == spurious
+    assert math.isclose(score.agreement, agreement)
