@@ -29,6 +29,7 @@ def _fit_on_a_wandering_path(seed: int, spin_share: float) -> OdometryAlphas:
 
 def test_alphas_of_simulated_odometry_are_recovered() -> None:
     fit = _fit_on_a_wandering_path(3, 0.0)
+    assert fit.increments == 19999  # 20,000 poses, each step at least 5 cm: no increment left out as standing still
     np.testing.assert_allclose([fit.alpha1, fit.alpha2, fit.alpha3], [0.02, 0.005, 0.03], rtol=0.15)
     # α4 (translation noise from rotation) contributes little next to α3 on such a path: weaker identification
     np.testing.assert_allclose(fit.alpha4, 0.001, rtol=0.4)
@@ -40,8 +41,24 @@ def test_turns_in_place_do_not_count_a_millimetre_bearing_as_a_rotation_error() 
     reference's 0. Compared as pure rotations (the motion model's rule below 1 cm), the fit is unchanged; compared
     bearing by bearing, α1 came out as 5 here (and 400 on the sample's mapping passes)."""
     fit = _fit_on_a_wandering_path(5, 0.1)
+    assert fit.increments == 19999  # the turns on the spot count too (more than 1°): all 19,999 increments
     np.testing.assert_allclose([fit.alpha1, fit.alpha2, fit.alpha3], [0.02, 0.005, 0.03], rtol=0.2)
     np.testing.assert_allclose(fit.alpha4, 0.001, rtol=0.4)
+
+
+def test_alpha4_charges_both_rotations_of_an_increment() -> None:
+    """Steps that turn, drive a chord and turn again (δrot1 and δrot2 both ±20°): the translation noise from rotation
+    is α4·(δrot1² + δrot2²) (the motion model's), so α4 comes out right only when both rotations are counted."""
+    noise = OdometryNoise(alpha1=0.02, alpha2=0.005, alpha3=0.01, alpha4=0.01)
+    rng = np.random.default_rng(11)
+    n = 20000
+    rot1, trans, rot2 = rng.uniform(-0.35, 0.35, n), rng.uniform(0.05, 0.3, n), rng.uniform(-0.35, 0.35, n)
+    ref = [np.zeros(3)]
+    for r1, t, r2 in zip(rot1, trans, rot2, strict=True):
+        ref.append(compose(compose(ref[-1], [0.0, 0.0, r1]), [t, 0.0, r2]))
+    path = np.array(ref)
+    fit = estimate_alphas(drift_poses(path, noise, rng), path)
+    np.testing.assert_allclose([fit.alpha3, fit.alpha4], [0.01, 0.01], rtol=0.25)
 
 
 def test_omni_alphas_of_simulated_holonomic_odometry_are_recovered() -> None:

@@ -60,6 +60,11 @@ def test_a_streak_broken_by_a_wide_cloud_starts_over() -> None:
         p = wide if k == 15 else tight
         monitor = monitor.update(k * 100_000_000, (0.5 * k / 10, 0.0, 0.0), p, CONFIG)
     assert monitor.converged_ns == 3_600_000_000  # 2 s after the streak restarted at 1.6 s
+    monitor = ConvergenceMonitor()
+    for k in range(61):  # slower, 1/32 m a step (exact in binary): the 1 m of travel decides, from the restart only
+        p = wide if k == 15 else tight
+        monitor = monitor.update(k * 100_000_000, (k / 32, 0.0, 0.0), p, CONFIG)
+    assert monitor.converged_ns == 4_800_000_000  # 1.6 s + 32 steps of 0.1 s
 
 
 def test_a_claim_is_withdrawn_when_the_cloud_later_splits() -> None:

@@ -13,6 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from doorbatch.config import LocalizeConfig
+from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.maps import DoorSet
 from doorbatch.pipeline.localize.door_geometry import leaf_endpoints
 from doorbatch.pipeline.localize.door_likelihood import numba_available
@@ -154,6 +155,24 @@ def test_nearly_closed_door_merged_with_the_wall_uses_the_flush_fallback(backend
     assert mask[0, 0] and mask.mean() > 0.99  # a particle > 0.1 m off the wall line fails the line gate
     assert abs(math.degrees(angle[0, 0]) - 2.0) < 2.5  # the wall's direction, within the door's range sense
     assert np.all(np.abs(angle[mask] - math.radians(2.0)) < math.radians(3.5))
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("mean_deg", [5.0, 175.0])
+def test_a_flush_wall_through_a_swinging_doors_hinge_is_read_the_way_nearer_the_mean(backend: str,
+                                                                                   mean_deg: float) -> None:
+    """A door whose range is [0°, 180°] lying flush in a wall through its hinge: the wall's segment can be read
+    as the leaf at 0° (towards +x) or at 180° (towards −x); the reading nearer the particle's mean is taken."""
+    door = DoorSet(hinge=np.array([[0.0, 0.0]]), length=np.array([0.9]), closed_yaw=np.array([0.0]),
+                   angle_min=np.array([0.0]), angle_max=np.array([math.pi]))
+    wall = np.array([[[-1.2, 0.0], [1.2, 0.0]]])  # 1.2 m both ways past the hinge, no end near it
+    pose = np.array([[0.0, -1.0, 0.0]])  # base_link = map frame shifted: the wall at y = 0 is 1 m ahead-left
+    segs = wall - pose[0, :2]
+    angle, mask = associate_segments(segs, pose, door, np.array([[math.radians(mean_deg)]]), CONFIG,
+                                     backend=backend)
+    assert mask[0, 0]
+    expected = 0.0 if mean_deg < 90.0 else math.pi
+    assert abs(float(wrap_angle(angle[0, 0] - expected))) < 1e-9
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
