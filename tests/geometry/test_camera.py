@@ -100,3 +100,20 @@ def test_scan_points_reach_the_camera_frame_through_tf() -> None:
     np.testing.assert_array_equal(idx, [0, 2])
     # forward 2 m: optical z = 2 + 0.2 − 0.1, y (down) = 1.0 − 0.3; left 1 m: optical x = −1
     np.testing.assert_allclose(pts, [[0.0, 0.7, 2.1], [-1.0, 0.7, 0.1]], atol=1e-12)
+
+
+def test_in_image_covers_half_a_pixel_beyond_the_outer_pixel_centres() -> None:
+    """Pixel centres at integer (u, v) (module docstring: column i is centred on u = i), so pixel i covers
+    [i − 0.5, i + 0.5) and a W × H image covers [−0.5, W − 0.5) × [−0.5, H − 0.5)."""
+    cam = camera_from_info(_info())  # 640 × 480
+    px = np.array([
+        [-0.3, 100.0],  # inside pixel column 0
+        [639.7, 100.0],  # past the right half of column 639
+        [100.0, -0.3],  # inside pixel row 0
+        [100.0, 479.7],  # past the bottom half of row 479
+        [-0.5, -0.5],  # the image's top-left corner is in
+        [-0.7, 100.0],  # left of column 0
+        [639.3, 479.3],  # inside the bottom-right pixel
+        [639.5, 100.0],  # the right border is out
+    ])
+    np.testing.assert_array_equal(in_image(cam, px), [True, False, True, False, True, False, True, False])

@@ -14,6 +14,7 @@ from doorbatch.geometry.camera import camera_from_info, project_points
 from doorbatch.geometry.rotations import transform_matrix
 from doorbatch.pipeline.doorpose.fusion import (
     HandleSide,
+    door_points,
     estimate_door,
     handle_side,
     select_door_box,
@@ -122,3 +123,30 @@ def test_boxes_below_the_confidence_threshold_are_not_doors() -> None:
     door = estimate_door(CAMERA, boxes, points, DoorPoseConfig(), np.random.default_rng(0))
     assert door is not None and door.center_xz == pytest.approx([0.1, 2.5], abs=1e-6)
     assert estimate_door(CAMERA, boxes[:1], points, DoorPoseConfig(), np.random.default_rng(0)) is None
+
+
+def test_points_on_the_cameras_vertical_axis_are_not_door_points() -> None:
+    """x = z = 0 is not in front of the camera, though atan2(0, 0) = 0 puts it between any rays that
+    straddle the optical axis; only the z > 0 test drops it."""
+    pts = np.array([
+        [0.1, 0.8, 2.0],  # in front: β = atan2(0.1, 2.0) ≈ 0.05 rad, between the rays
+        [0.0, 0.5, 0.0],  # straight below the optical centre: β = atan2(0, 0) = 0
+        [0.0, 0.8, -1.0],  # behind: β = π
+    ])
+    np.testing.assert_array_equal(door_points(pts, -0.3, 0.3), [[0.1, 2.0]])
+
+
+def test_handle_above_the_door_box_gives_no_side() -> None:
+    """A handle box's centre must lie in the door box in v as well as u (module docstring, step 7)."""
+    door = Detection("door", 0.9, 300.0, 240.0, 100.0, 300.0)  # u ∈ [250, 350], v ∈ [90, 390]
+    above = Detection("handle", 0.9, 340.0, 60.0, 10.0, 5.0)  # in the right half's columns, 30 px above
+    below = Detection("handle", 0.9, 265.0, 400.0, 10.0, 5.0)  # in the left half's columns, 10 px below
+    assert handle_side(door, [door, above, below], "handle") is HandleSide.NONE
+
+
+def test_door_box_border_is_half_a_pixel_beyond_the_outer_pixel_centres() -> None:
+    """The image spans u ∈ [−0.5, W − 0.5] (pixel centres at integers), so with a 0.5 px margin a box is
+    whole when its edges lie strictly inside (0, W − 1)."""
+    left_in = Detection("door", 0.9, 50.15, 240.0, 99.7, 300.0)  # u ∈ [0.3, 100.0]: 0.3 > 0
+    right_cut = Detection("door", 0.95, 589.2, 240.0, 100.0, 300.0)  # u ∈ [539.2, 639.2]: 639.2 > 639
+    assert select_door_box([left_in, right_cut], 640, "door", 0.5) is left_in

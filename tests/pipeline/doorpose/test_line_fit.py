@@ -50,3 +50,29 @@ def test_degenerate_inputs_give_no_line() -> None:
     assert fit_naive(np.array([[0.1, 2.0], [0.1, 2.5]])) is None
     assert fit_lsq(np.array([[0.1, 2.0]])) is None
     assert fit_ransac(np.zeros((1, 2)), 10, 0.01, np.random.default_rng(0)) is None
+
+
+def test_ransac_refits_its_inliers_by_least_squares() -> None:
+    """The best two-point hypothesis is refitted by least squares on its inliers (module docstring)."""
+    # four door points ±4 mm about z = 2: the residual pattern (+, −, −, +) is even in x, so the
+    # least-squares line is z = 2 exactly (b = Σx·Δz / Σx² = 0, a = z̄ = 2); no line through two of them is
+    # z = 2 (each misses another by 4 mm or more). The obstacle 0.5 m in front of the door is no inlier.
+    pts = np.array([[-0.3, 2.004], [-0.1, 1.996], [0.1, 1.996], [0.3, 2.004], [0.05, 1.5]])
+    line = fit_ransac(pts, 200, 0.01, np.random.default_rng(0))
+    assert line is not None
+    assert line.intercept_m == pytest.approx(2.0, abs=1e-12)
+    assert line.slope == pytest.approx(0.0, abs=1e-12)
+    np.testing.assert_array_equal(line.inliers, [True, True, True, True, False])
+
+
+def test_ransac_ties_in_inlier_count_go_to_the_tighter_line() -> None:
+    """Equal inlier counts: the hypothesis with the smaller sum of inlier residuals wins (module docstring)."""
+    # three collinear points of the door at z = 2 (every pair's line has residuals 0) and three of a wall
+    # 0.5 m behind, the middle one 4 mm off (its pairs' lines leave 4–8 mm); lines across the 0.5 m gap have
+    # 2 inliers only. Both surfaces have 3 inliers; the door's sum is 0, so its refit is z = 2.
+    pts = np.array([[-0.4, 2.0], [-0.35, 2.0], [-0.3, 2.0], [0.3, 2.5], [0.35, 2.504], [0.4, 2.5]])
+    line = fit_ransac(pts, 500, 0.01, np.random.default_rng(1))
+    assert line is not None
+    assert line.intercept_m == pytest.approx(2.0, abs=1e-12)
+    assert line.slope == pytest.approx(0.0, abs=1e-12)
+    np.testing.assert_array_equal(line.inliers, [True, True, True, False, False, False])
