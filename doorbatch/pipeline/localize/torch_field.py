@@ -211,7 +211,7 @@ def skipped_field_log_likelihood(dist_field: DistanceField, pose: npt.ArrayLike,
         if config.beam_skip_support == "particles":  # nav2_amcl: the share of the particles
             support = torch.ones((pz.shape[0], 1), dtype=torch.float32, device=pz.device)
         else:
-            w = torch.from_numpy(np.asarray(weight, dtype=np.float64).reshape(-1)).to(pz.device)
+            w = torch.as_tensor(np.ascontiguousarray(weight, dtype=np.float64).reshape(-1), device=pz.device)
             support = _support_weights(pz, w, floor, combination)
         share = (torch.where(explained, support, 0.0).sum(dim=0, dtype=torch.float64)
                  / support.sum(dim=0, dtype=torch.float64).clamp_min(1e-300))

@@ -90,6 +90,9 @@ def test_torch_beam_skipping_is_numpys(device: str, combination: BeamCombination
     assert skipped >= 3 and got_skipped == skipped  # the person's beams
     assert np.ptp(reference) > 0.5
     assert np.allclose(got, reference, rtol=1e-5, atol=1e-5)
+    flipped, _ = skipped_field_log_likelihood(torch_field, pose[::-1], weight[::-1], beams.points_base, config, 12.0,
+                                              combination)  # views with negative strides, as NumPy takes them
+    assert np.allclose(flipped, reference[::-1], rtol=1e-5, atol=1e-5)
     # a cloud that has not converged skips nothing, on both
     wide = truth + rng.normal(0.0, [1.0, 1.0, 0.5], (4000, 3))
     unskipped = field_log_likelihood(numpy_field, wide, beams.points_base, config.z_hit, config.z_rand,
