@@ -108,3 +108,31 @@ def test_along_a_featureless_wall_the_prior_keeps_its_position() -> None:
         result = correlative_match(grid, scan, np.array(prior), window_m=0.5, window_deg=5.0)
         np.testing.assert_allclose(result.pose, [prior[0], 0.0, 0.0], atol=1e-9)
         assert result.score == 1.0
+
+
+def test_branch_and_bound_returns_the_nearest_of_tied_optima_like_an_exhaustive_search() -> None:
+    """References and scans on a 0.1 m lattice (so that equal scores are common): the search's pose has the
+    exhaustive optimum's score and, of the poses that tie with it, the least squared lattice distance from the
+    prior (cells and yaw steps alike)."""
+    from doorbatch.pipeline.poses import correlative
+
+    rng = np.random.default_rng(0)
+    nx, n_yaw = 10, 3
+    for _ in range(80):
+        pts = rng.integers(-20, 20, size=(int(rng.integers(3, 40)), 2)) * 0.1
+        grid = build_likelihood_grid(pts, resolution_m=0.05, sigma_m=0.05, window_m=0.5, coarse_cells=4)
+        scan = rng.integers(-15, 15, size=(int(rng.integers(1, 15)), 2)) * 0.1
+        prior = np.array([rng.integers(-3, 3) * 0.05, rng.integers(-3, 3) * 0.05, 0.0])
+        result = correlative_match(grid, scan, prior, window_m=0.5, window_deg=3.0, step_deg=1.0)
+        yaws = prior[2] + np.deg2rad(np.arange(-n_yaw, n_yaw + 1))
+        cells = correlative._flat_cells(grid, scan, prior[:2], yaws)
+        shifts = np.arange(-nx, nx + 1)
+        fx, fy = (a.ravel()[None, :] for a in np.meshgrid(shifts, shifts))
+        scores = correlative._scores(grid.values, cells, np.broadcast_to(fx, (len(yaws), fx.size)),
+                                     np.broadcast_to(fy, (len(yaws), fy.size)))
+        dist = fx**2 + fy**2 + ((np.arange(len(yaws)) - n_yaw) ** 2)[:, None]
+        top = scores.max()
+        assert result.score == top
+        got = np.round([(result.pose[0] - prior[0]) / 0.05, (result.pose[1] - prior[1]) / 0.05,
+                        np.rad2deg(result.pose[2] - prior[2])]).astype(int)
+        assert got[0] ** 2 + got[1] ** 2 + got[2] ** 2 == dist[scores == top].min()

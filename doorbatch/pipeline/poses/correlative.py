@@ -269,21 +269,26 @@ def _expand(
     """
     n_coarse = cx.size
     centre = cells.shape[0] // 2  # the prior's yaw
-    # Ties go to the pose nearest the prior (no information along an axis: stay put, not at the window's edge):
-    # candidates of equal bound are expanded nearest first, and of equal score the nearest is kept. Distance in
-    # lattice steps, cells and yaw steps alike.
+    # Ties go to the pose nearest the prior (no information along an axis: stay put, not at the window's edge).
+    # Distance: squared lattice steps, cells and yaw steps alike; a block's is that of its shift nearest the prior.
+    # Blocks of equal bound are expanded nearest first; once only blocks whose bound equals the best score are
+    # left, only those that could hold a nearer pose of that score are expanded, and of equal scores the nearest
+    # is kept: the optimum's score and, among its ties, the nearest pose, exactly.
     yaw_all, coarse_all = np.divmod(np.arange(bounds.size), n_coarse)
-    half = (grid.coarse_cells - 1) / 2.0
-    near = (cx[coarse_all] + half) ** 2 + (cy[coarse_all] + half) ** 2 + (yaw_all - centre) ** 2
-    order = np.lexsort((near, -bounds))
+    r1 = grid.coarse_cells - 1
+    gap_x = np.clip(0, cx[coarse_all], np.minimum(cx[coarse_all] + r1, nx))
+    gap_y = np.clip(0, cy[coarse_all], np.minimum(cy[coarse_all] + r1, ny))
+    block_near = gap_x**2 + gap_y**2 + (yaw_all - centre) ** 2
+    order = np.lexsort((block_near, -bounds))
     zero = np.zeros((1, 1), dtype=np.int64)
     best: tuple[int, int, int, float] = (centre, 0, 0, float(_scores(grid.values, cells[centre : centre + 1],
                                                                       zero, zero)[0, 0]) if box is None else -1.0)
     best_near = 0 if box is None else np.iinfo(np.int64).max
     for start in range(0, order.size, EXPAND_BATCH):
         batch = order[start : start + EXPAND_BATCH]
-        if bounds[batch[0]] <= best[3]:
+        if bounds[batch[0]] < best[3] or (bounds[batch[0]] == best[3] and block_near[batch[0]] >= best_near):
             break
+        batch = batch[(bounds[batch] > best[3]) | (block_near[batch] < best_near)]
         yaw_i, coarse_i = np.divmod(batch, n_coarse)
         fx, fy = _fine_offsets(cx[coarse_i], cy[coarse_i], nx, ny, grid.coarse_cells)
         scores = _scores(grid.values, cells[yaw_i], fx, fy)
