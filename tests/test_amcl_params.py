@@ -320,6 +320,19 @@ def test_a_launch_file_that_includes_the_amcl_launch_passes_its_args(tmp_path: P
     with caplog.at_level(logging.WARNING, logger="doorbatch"):
         config = load_config(launch / "all.launch")
     assert config.localize.z_hit == 0.7 and "--init 3,0,0" in caplog.text
+    # a multi-robot file: the namespace from an arg, a remap made above the include (the node resolves it in its
+    # own namespace), and a passed value only roslaunch can compute (said, not replaced by the file's default)
+    (launch / "plain.launch").write_text('<launch><arg name="alpha"/><node pkg="amcl" type="amcl" name="amcl">'
+                                         '<param name="odom_alpha1" value="$(arg alpha)"/></node></launch>')
+    (launch / "robots.launch").write_text('<launch><arg name="robot" default="robot2"/>'
+                                          '<remap from="scan" to="front_scan"/>'
+                                          '<include file="plain.launch" ns="$(arg robot)">'
+                                          '<arg name="alpha" value="$(eval 0.05 * 2)"/></include></launch>')
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="doorbatch"):
+        config = load_config(launch / "robots.launch")
+    assert config.topics.scan == "/robot2/front_scan"
+    assert config.localize.alpha1 == 0.2 and "odom_alpha1" in caplog.text  # ROS 1's default, and the warning
     # an include that cannot be found is said; includes that include each other are an error, not a hang
     (launch / "lost.launch").write_text('<launch><include file="nowhere.launch"/></launch>')
     with pytest.raises(ConfigError, match=r"nowhere\.launch, which could not be read"):

@@ -37,6 +37,7 @@ import yaml
 from doorbatch.errors import ConfigError
 
 _SUBSTITUTION = re.compile(r"\$\((\w+)(?:\s+([^)]*))?\)")
+_UNRESOLVED_ARG = "\x00unresolved: "  # an arg whose value needs roslaunch: its uses are unresolved too
 _PACKAGE_NAME = re.compile(rb"<name>\s*([^<\s]+)\s*</name>")
 
 
@@ -64,7 +65,7 @@ class LaunchNode:
 class _Scope:
     ns: str  # "/" or "/robot1/"
     args: dict[str, str]
-    remaps: dict[str, str]
+    remaps: dict[str, str]  # from → to as written (substituted): a node resolves them in its own namespace
 
 
 def _join(ns: str, name: str) -> str:
@@ -114,6 +115,8 @@ class _Reader:
             if kind == "arg":
                 if rest not in scope.args:
                     raise _UnresolvedError(f"$(arg {rest}) has no value")
+                if scope.args[rest].startswith(_UNRESOLVED_ARG):
+                    raise _UnresolvedError(f"$(arg {rest}): {scope.args[rest][len(_UNRESOLVED_ARG):]}")
                 return scope.args[rest]
             if kind in ("env", "optenv"):
                 name, _, default = rest.partition(" ")
@@ -168,21 +171,22 @@ class _Reader:
             if raw is None and name not in scope.args:  # loader.add_arg: a default only where nothing was passed
                 raw = element.get("default")
             if raw is not None:
-                with contextlib.suppress(_UnresolvedError):  # its uses are reported where they fail
-                    scope.args[name] = self.substitute(raw, scope)
+                scope.args[name] = self.arg_value(raw, scope)
         elif tag == "group" and node is None:
-            self.walk(element, _Scope(_ns(scope.ns, element.get("ns")), dict(scope.args), dict(scope.remaps)))
+            self.walk(element, _Scope(self.namespace(element, scope), dict(scope.args), dict(scope.remaps)))
         elif tag == "include" and node is None:
             self.include(element, scope)
         elif tag == "node" and node is None:
-            node_ns = _ns(scope.ns, element.get("ns"))
-            name = node_ns + element.get("name", element.get("type", ""))
+            node_ns = self.namespace(element, scope)
+            name = node_ns + self.substitute(element.get("name", element.get("type", "")), scope)
             inner = _Scope(node_ns, scope.args, dict(scope.remaps))
             self.walk(element, inner, name + "/")
-            self.nodes.append((name, element.get("type", ""), inner.remaps))
+            # a remap reaches the node as from:=to, which the node resolves in its own namespace
+            remaps = {_join(node_ns, source): _join(node_ns, target) for source, target in inner.remaps.items()}
+            self.nodes.append((name, element.get("type", ""), remaps))
         elif tag == "remap" and element.get("from") and element.get("to"):
             source, target = (self.substitute(element.get(k, ""), scope) for k in ("from", "to"))
-            scope.remaps[_join(scope.ns, source)] = _join(scope.ns, target)
+            scope.remaps[source] = target
         elif tag == "param" and element.get("name"):
             self.param(element, scope, base)
         elif tag == "rosparam" and element.get("command", "load") == "load":
@@ -207,15 +211,32 @@ class _Reader:
             args = dict(scope.args)
         else:
             args = {}
-        for child in element:
-            if child.tag == "arg" and child.get("value") is not None and self.enabled(child, scope):
-                with contextlib.suppress(_UnresolvedError):  # its uses are reported where they fail
-                    args[child.get("name", "")] = self.substitute(child.get("value", ""), scope)
+        for child in element:  # loader.add_arg in the include's context: a value, or a default where none passed
+            if child.tag != "arg" or not self.enabled(child, scope):
+                continue
+            arg = child.get("name", "")
+            given = child.get("value")
+            if given is None and arg not in args:
+                given = child.get("default")
+            if given is not None:
+                args[arg] = self.arg_value(given, scope)
         try:
             root = ET.parse(path).getroot()
         except ET.ParseError as err:
             raise ConfigError(f"{path} (included by {self.path}): not a valid launch file (XML): {err}") from err
-        _Reader(path, self).walk(root, _Scope(_ns(scope.ns, element.get("ns")), args, dict(scope.remaps)))
+        _Reader(path, self).walk(root, _Scope(self.namespace(element, scope), args, dict(scope.remaps)))
+
+    def arg_value(self, raw: str, scope: _Scope) -> str:
+        """An ``<arg>``'s value substituted; one that needs roslaunch is kept as unresolved, so that its uses are
+        (rather than a default taking its place)."""
+        try:
+            return self.substitute(raw, scope)
+        except _UnresolvedError as why:
+            return f"{_UNRESOLVED_ARG}{why}"
+
+    def namespace(self, element: ET.Element, scope: _Scope) -> str:
+        """The namespace an element's ``ns`` attribute (substituted, relative to the scope's) opens."""
+        return _ns(scope.ns, self.substitute(element.get("ns", ""), scope) or None)
 
     def param(self, element: ET.Element, scope: _Scope, base: str) -> None:
         name = _join(base, self.substitute(element.get("name", ""), scope))
