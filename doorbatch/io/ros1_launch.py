@@ -167,11 +167,7 @@ class _Reader:
     def element(self, element: ET.Element, scope: _Scope, base: str, node: str | None) -> None:
         tag = element.tag
         if tag == "arg" and node is None:
-            name, raw = element.get("name", ""), element.get("value")
-            if raw is None and name not in scope.args:  # loader.add_arg: a default only where nothing was passed
-                raw = element.get("default")
-            if raw is not None:
-                scope.args[name] = self.arg_value(raw, scope)
+            self.declare_arg(element, scope.args, scope)
         elif tag == "group" and node is None:
             self.walk(element, _Scope(self.namespace(element, scope), dict(scope.args), dict(scope.remaps)))
         elif tag == "include" and node is None:
@@ -200,8 +196,7 @@ class _Reader:
         except _UnresolvedError as why:
             self.includes.append(raw)
             raise _UnresolvedError(f"<include> not followed: {why}") from None
-        candidates = [Path(name)] if Path(name).is_absolute() else [Path.cwd() / name, self.folder / name]
-        path = next((c for c in candidates if c.is_file()), None)
+        path = next((c for c in self.candidates(name) if c.is_file()), None)
         if path is None:
             self.includes.append(name)
             raise _UnresolvedError("<include> not followed: no such file")
@@ -211,28 +206,33 @@ class _Reader:
             args = dict(scope.args)
         else:
             args = {}
-        for child in element:  # loader.add_arg in the include's context: a value, or a default where none passed
-            if child.tag != "arg" or not self.enabled(child, scope):
-                continue
-            arg = child.get("name", "")
-            given = child.get("value")
-            if given is None and arg not in args:
-                given = child.get("default")
-            if given is not None:
-                args[arg] = self.arg_value(given, scope)
+        for child in element:  # the include's context: its <arg>s, substituted in the includer's scope
+            if child.tag == "arg" and self.enabled(child, scope):
+                self.declare_arg(child, args, scope)
         try:
             root = ET.parse(path).getroot()
         except ET.ParseError as err:
             raise ConfigError(f"{path} (included by {self.path}): not a valid launch file (XML): {err}") from err
         _Reader(path, self).walk(root, _Scope(self.namespace(element, scope), args, dict(scope.remaps)))
 
-    def arg_value(self, raw: str, scope: _Scope) -> str:
-        """An ``<arg>``'s value substituted; one that needs roslaunch is kept as unresolved, so that its uses are
-        (rather than a default taking its place)."""
+    def declare_arg(self, element: ET.Element, args: dict[str, str], scope: _Scope) -> None:
+        """roslaunch's ``loader.add_arg`` into ``args``: ``value`` sets it, ``default`` only where nothing was passed;
+        substituted in ``scope``. A value that needs roslaunch is kept as unresolved, so that its uses are (rather
+        than a default taking its place)."""
+        name, raw = element.get("name", ""), element.get("value")
+        if raw is None and name not in args:
+            raw = element.get("default")
+        if raw is None:
+            return
         try:
-            return self.substitute(raw, scope)
+            args[name] = self.substitute(raw, scope)
         except _UnresolvedError as why:
-            return f"{_UNRESOLVED_ARG}{why}"
+            args[name] = f"{_UNRESOLVED_ARG}{why}"
+
+    def candidates(self, name: str) -> list[Path]:
+        """Where a file a launch element names may be: relative names from the working folder (roslaunch), else
+        from the launch file's own folder."""
+        return [Path(name)] if Path(name).is_absolute() else [Path.cwd() / name, self.folder / name]
 
     def namespace(self, element: ET.Element, scope: _Scope) -> str:
         """The namespace an element's ``ns`` attribute (substituted, relative to the scope's) opens."""
@@ -287,9 +287,8 @@ class _Reader:
             self.params[name] = value
 
     def read(self, name: str, element: ET.Element) -> str:
-        """A file a launch element names: relative names from the working folder (roslaunch), else the file's."""
-        candidates = [Path(name)] if Path(name).is_absolute() else [Path.cwd() / name, self.folder / name]
-        for candidate in candidates:
+        """The text of a file a launch element names (:meth:`candidates`)."""
+        for candidate in self.candidates(name):
             with contextlib.suppress(OSError):
                 return candidate.read_text()
         raise ConfigError(f"{self.path}: <{element.tag}> cannot read {name}")
