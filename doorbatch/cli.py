@@ -34,12 +34,13 @@ class Context:
     """What every command gets from the common options."""
 
     def __init__(self, config: DoorbatchConfig, as_json: bool, quiet: bool, config_file: Path | None = None,
-                 overrides: tuple[str, ...] = ()) -> None:
+                 overrides: tuple[str, ...] = (), launch_args: dict[str, str] | None = None) -> None:
         self.config = config
         self.as_json = as_json
         self.quiet = quiet
         self.config_file = config_file  # kept for commands that merge more config in (run: the dataset's)
         self.overrides = overrides
+        self.launch_args = launch_args or {}
 
     def summary(self, line: str, data: dict[str, Any]) -> None:
         """The one-line summary at the end of a command, or the JSON summary with ``--json``."""
@@ -73,22 +74,35 @@ def _output(folder: bool) -> Callable[[click.Context, click.Parameter, Path | No
     return check
 
 
+def _launch_args(_: click.Context, __: click.Parameter, values: tuple[str, ...]) -> dict[str, str]:
+    """``--launch-arg name:=value`` (roslaunch's form) into a dict; the last of a name wins, as in roslaunch."""
+    out: dict[str, str] = {}
+    for text in values:
+        name, sep, value = text.partition(":=")
+        if not sep or not name.strip():
+            raise click.BadParameter(f"{text!r} is not NAME:=VALUE")
+        out[name.strip()] = value
+    return out
+
+
 def common_options(func: F) -> F:
     """``--config``, ``--set``, ``-v/-q``, ``--json``; resolves the config into a :class:`Context`."""
 
     @click.option("--config", "config_file", type=click.Path(path_type=Path, dir_okay=False),
                   help="YAML merged over the defaults.")
     @click.option("--set", "overrides", multiple=True, metavar="SECTION.KEY=VALUE", help="Override one key.")
+    @click.option("--launch-arg", "launch_args", multiple=True, metavar="NAME:=VALUE", callback=_launch_args,
+                  help="An arg of the ROS 1 launch file given as --config, as roslaunch takes it (repeatable).")
     @click.option("-v", "--verbose", count=True, help="More log output (repeatable).")
     @click.option("-q", "--quiet", count=True, help="Less output.")
     @click.option("--json", "as_json", is_flag=True, help="Machine-readable summary on stdout.")
     @functools.wraps(func)
-    def wrapper(config_file: Path | None, overrides: tuple[str, ...], verbose: int, quiet: int, as_json: bool,
-                **kwargs: Any) -> Any:
+    def wrapper(config_file: Path | None, overrides: tuple[str, ...], launch_args: dict[str, str], verbose: int,
+                quiet: int, as_json: bool, **kwargs: Any) -> Any:
         _setup_logging(verbose - quiet)
         set_progress_enabled(not quiet and not as_json)
-        config = load_config(config_file, overrides)
-        return func(Context(config, as_json, quiet > 0, config_file, overrides), **kwargs)
+        config = load_config(config_file, overrides, launch_args=launch_args)
+        return func(Context(config, as_json, quiet > 0, config_file, overrides, launch_args), **kwargs)
 
     return wrapper  # type: ignore[return-value]
 
@@ -355,7 +369,7 @@ def run_cmd(ctx: Context, dataset: Path, output: Path, workers: int, executor: s
     from doorbatch.pipeline.batch.run import Execution, prepare_run, run_dataset
 
     execution = Execution("dask" if scheduler and executor is None else executor or "local", workers, scheduler)
-    ds, config = prepare_run(dataset, ctx.config_file, ctx.overrides)
+    ds, config = prepare_run(dataset, ctx.config_file, ctx.overrides, ctx.launch_args)
     summary = run_dataset(ds, output, config, execution, force=force)
     ctx.summary(summary.line(), asdict(summary))
     if not summary.complete:

@@ -936,11 +936,12 @@ def _explain(err: ValidationError, source: str) -> ConfigError:
     return ConfigError(f"{source}: config key {key!r}: {first['msg']} (got {first.get('input')!r})")
 
 
-def _ros1_launch_tree(path: Path) -> dict[str, Any]:
-    """The doorbatch tree of a ROS 1 launch file's amcl node (:func:`translate_ros1_amcl_parameters`): its private
-    parameters, and its ``scan`` as the node resolves it (namespace, remaps) where that is not ``/scan``. Values
-    the file alone cannot resolve are left out, with a warning."""
-    node = read_launch_node(path, AMCL_NODE)
+def _ros1_launch_tree(path: Path, args: Mapping[str, str] | None = None) -> dict[str, Any]:
+    """The doorbatch tree of a ROS 1 launch file's amcl node (:func:`translate_ros1_amcl_parameters`) with the
+    top file's ``args`` (roslaunch's ``name:=value``): its private parameters, and its ``scan`` as the node
+    resolves it (namespace, remaps) where that is not ``/scan``. Values the file alone cannot resolve are left
+    out, with a warning."""
+    node = read_launch_node(path, AMCL_NODE, args)
     if node.unresolved:
         log.warning("%s: left out, needs ROS: %s", path, "; ".join(node.unresolved))
     for note in node.notes:
@@ -957,22 +958,27 @@ def load_config(
     overrides: Iterable[str] = (),
     extra: Mapping[str, Any] | None = None,
     extra_source: str = "config",
+    launch_args: Mapping[str, str] | None = None,
 ) -> DoorbatchConfig:
     """Resolve the configuration: defaults < ``config_file`` < ``extra`` < ``overrides``. An error names the
     layers that were given (the file, ``extra_source`` for ``extra``, ``--set``).
 
     A ``config_file`` that is a ROS 2 parameter file (a Nav2 ``nav2_params.yaml``) contributes its ``amcl`` node's
     parameters, and so do a ROS 1 amcl parameter file and a ROS 1 launch file with an amcl node
-    (:mod:`doorbatch.amcl_params`).
+    (:mod:`doorbatch.amcl_params`), read with ``launch_args`` (roslaunch's ``name:=value``).
 
     Raises:
-        ConfigError: unreadable file, bad YAML, unknown key (with the closest valid one), wrong type.
+        ConfigError: unreadable file, bad YAML, unknown key (with the closest valid one), wrong type;
+            ``launch_args`` without a launch file.
     """
     tree: dict[str, Any] = {}
     source = "config"
+    if launch_args and (config_file is None or not is_launch_file(config_file)):
+        raise ConfigError("launch args are for a ROS 1 launch file given as --config")
     if config_file is not None:
         source = str(config_file)
-        tree = _ros1_launch_tree(config_file) if is_launch_file(config_file) else read_yaml_mapping(config_file)
+        tree = (_ros1_launch_tree(config_file, launch_args) if is_launch_file(config_file)
+                else read_yaml_mapping(config_file))
         own = {k: v for k, v in tree.items() if k in DoorbatchConfig.model_fields}
         if is_ros2_parameter_file(tree):  # a Nav2 params file: its amcl node, and any doorbatch sections over it
             tree = deep_merge(translate_ros2_parameter_file(tree, source).tree, own)

@@ -3,6 +3,7 @@ doorbatch key that does the same, and what a file leaves out takes that AMCL's o
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 from pathlib import Path
@@ -367,3 +368,70 @@ def test_launch_files_that_cannot_be_read_are_config_errors(tmp_path: Path, text
     path.write_text(text)
     with pytest.raises(ConfigError, match=message):
         load_config(path)
+
+
+ARGS_LAUNCH = """<launch>
+  <arg name="alpha" default="0.2"/>
+  <arg name="scan_topic" default="scan"/>
+  <arg name="map_frame" value="map"/>
+  <arg name="x0"/>
+  <node pkg="amcl" type="amcl" name="amcl">
+    <remap from="scan" to="$(arg scan_topic)"/>
+    <param name="odom_alpha1" value="$(arg alpha)"/>
+    <param name="global_frame_id" value="$(arg map_frame)"/>
+    <param name="initial_pose_x" value="$(arg x0)"/>
+  </node>
+</launch>
+"""
+
+
+def test_args_passed_as_on_roslaunchs_command_line_set_the_top_files(tmp_path: Path,
+                                                                     caplog: pytest.LogCaptureFixture) -> None:
+    """``roslaunch amcl.launch alpha:=0.05 x0:=1.5``: a passed arg replaces its default, and fills one declared
+    without a value (left out, with a warning, when not passed)."""
+    path = tmp_path / "amcl.launch"
+    path.write_text(ARGS_LAUNCH)
+    with caplog.at_level(logging.WARNING, logger="doorbatch"):
+        plain = load_config(path)
+    assert plain.localize.alpha1 == 0.2 and "left out, needs ROS: initial_pose_x" in caplog.text
+    assert plain.topics.scan is None
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="doorbatch"):
+        config = load_config(path, launch_args={"alpha": "0.05", "x0": "1.5", "scan_topic": "base_scan"})
+    assert config.localize.alpha1 == 0.05 and config.topics.scan == "/base_scan"
+    assert "left out" not in caplog.text and "--init 1.5,0,0" in caplog.text
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    ({"alpah": "0.05"}, r"unused args alpah \(the file declares: alpha, map_frame, scan_topic, x0\)"),
+    ({"map_frame": "world"}, "cannot pass arg map_frame: the file sets it with value="),
+])
+def test_args_roslaunch_would_refuse_are_config_errors(tmp_path: Path, args: dict[str, str], message: str) -> None:
+    path = tmp_path / "amcl.launch"
+    path.write_text(ARGS_LAUNCH)
+    with pytest.raises(ConfigError, match=message):
+        load_config(path, launch_args=args)
+
+
+def test_launch_args_without_a_launch_file_are_a_config_error(tmp_path: Path) -> None:
+    path = tmp_path / "amcl.yaml"
+    path.write_text("amcl:\n  ros__parameters:\n    alpha1: 0.1\n")
+    with pytest.raises(ConfigError, match="launch args are for a ROS 1 launch file"):
+        load_config(path, launch_args={"alpha": "0.1"})
+    with pytest.raises(ConfigError, match="launch args are for a ROS 1 launch file"):
+        load_config(None, launch_args={"alpha": "0.1"})
+
+
+def test_the_cli_passes_launch_args_and_refuses_malformed_ones(tmp_path: Path,
+                                                              capsys: pytest.CaptureFixture[str]) -> None:
+    from doorbatch.cli import main
+
+    path = tmp_path / "amcl.launch"
+    path.write_text(ARGS_LAUNCH)
+    assert main(["config", "--json", "--config", str(path), "--launch-arg", "alpha:=0.07",
+                 "--launch-arg", "x0:=0"]) == 0
+    assert json.loads(capsys.readouterr().out)["localize"]["alpha1"] == 0.07
+    assert main(["config", "--config", str(path), "--launch-arg", "alpha=0.07"]) == 2  # roslaunch's form only
+    assert "is not NAME:=VALUE" in capsys.readouterr().err
+    code = main(["config", "--config", str(path), "--launch-arg", "beta:=1"])
+    assert code != 0 and "unused args beta" in capsys.readouterr().err

@@ -14,7 +14,9 @@ roslaunch's rules (``roslaunch/loader.py``, ``xmlloader.py``), as far as a file 
   ``$(dirname)`` (the folder of the file that holds it), and ``$(find PKG)`` by ``ROS_PACKAGE_PATH`` (a folder
   holding the ``package.xml`` of that name). ``$(eval ...)``, ``$(anon ...)`` need roslaunch itself: such a value
   is *unresolved* (reported, never guessed), and so is an ``if``/``unless`` that does not resolve (its element is
-  left out). No ``name:=value`` args can be passed on the command line: the top file's defaults stand.
+  left out). Args passed as on roslaunch's command line (``name:=value``, :func:`read_launch_node`'s ``args``) set the
+  top file's: its ``default`` yields to them; one it does not declare, or sets with ``value``, is an error, as
+  in roslaunch.
 - ``<remap from to>`` inside the node, or before it in an enclosing scope, resolved against the node's namespace.
 - ``<include file ns pass_all_args>`` is followed: the file is read under ``ns`` with the args its ``<arg>``
   children pass (and all of the includer's with ``pass_all_args``), the enclosing remaps in force. A file that
@@ -27,6 +29,7 @@ import contextlib
 import os
 import re
 import xml.etree.ElementTree as ET
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
@@ -108,6 +111,7 @@ class _Reader:
         self.unresolved: list[str] = [] if parent is None else parent.unresolved
         self.notes: list[str] = [] if parent is None else parent.notes
         self.includes: list[str] = [] if parent is None else parent.includes  # those that could not be read
+        self.declared: set[str] = set()  # the <arg> names of this file's top level
 
     def substitute(self, text: str, scope: _Scope) -> str:
         def one(match: re.Match[str]) -> str:
@@ -167,6 +171,7 @@ class _Reader:
     def element(self, element: ET.Element, scope: _Scope, base: str, node: str | None) -> None:
         tag = element.tag
         if tag == "arg" and node is None:
+            self.declared.add(element.get("name", ""))
             self.declare_arg(element, scope.args, scope)
         elif tag == "group" and node is None:
             self.walk(element, _Scope(self.namespace(element, scope), dict(scope.args), dict(scope.remaps)))
@@ -324,12 +329,18 @@ def convert_value(value: str, kind: str) -> Any:
     raise ValueError(f"unknown type {kind!r}")
 
 
-def read_launch_node(path: Path, node_type: str) -> LaunchNode:
+def read_launch_node(path: Path, node_type: str, args: Mapping[str, str] | None = None) -> LaunchNode:
     """The private parameters, remaps and unresolved values of the one node of ``node_type`` in ``path``.
+
+    Args:
+        path: The launch file.
+        node_type: The node's ``type``, e.g. ``amcl``.
+        args: The top file's args, as ``roslaunch FILE name:=value`` passes them.
 
     Raises:
         ConfigError: unreadable or not XML; no such node, or more than one; a value of the wrong type; a
-            ``<rosparam file>`` that cannot be found or resolved.
+            ``<rosparam file>`` that cannot be found or resolved; a passed arg the top file does not declare, or
+            sets with ``value``.
     """
     try:
         root = ET.parse(path).getroot()
@@ -337,8 +348,17 @@ def read_launch_node(path: Path, node_type: str) -> LaunchNode:
         raise ConfigError(f"{path}: cannot read launch file: {err.strerror or err}") from err
     except ET.ParseError as err:
         raise ConfigError(f"{path}: not a valid launch file (XML): {err}") from err
+    passed = dict(args or {})
+    fixed = sorted(a.get("name", "") for a in root if a.tag == "arg" and a.get("name") in passed
+                   and a.get("value") is not None)
+    if fixed:
+        raise ConfigError(f"{path}: cannot pass arg {', '.join(fixed)}: the file sets it with value=")
     reader = _Reader(path)
-    reader.walk(root, _Scope("/", {}, {}))
+    reader.walk(root, _Scope("/", passed, {}))
+    unused = sorted(set(passed) - reader.declared)
+    if unused:
+        declared = ", ".join(sorted(reader.declared - {""})) or "none"
+        raise ConfigError(f"{path}: unused args {', '.join(unused)} (the file declares: {declared})")
     wanted = [(name, remaps) for name, kind, remaps in reader.nodes if kind == node_type]
     if not wanted:
         hint = (f"; it includes {', '.join(reader.includes)}, which could not be read: give the file that holds the "

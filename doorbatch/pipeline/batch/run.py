@@ -16,7 +16,7 @@ import logging
 import signal
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from contextlib import ExitStack, contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -218,10 +218,10 @@ def run_dataset(dataset: Dataset, out: Path, config: DoorbatchConfig, execution:
     return summary
 
 
-def prepare_run(dataset_path: Path, config_file: Path | None, overrides: tuple[str, ...] = ()
-                ) -> tuple[Dataset, DoorbatchConfig]:
-    """Read the dataset and resolve the config: defaults < ``config_file`` < the dataset's ``config:`` <
-    ``overrides``.
+def prepare_run(dataset_path: Path, config_file: Path | None, overrides: tuple[str, ...] = (),
+                launch_args: Mapping[str, str] | None = None) -> tuple[Dataset, DoorbatchConfig]:
+    """Read the dataset and resolve the config: defaults < ``config_file`` (a launch file read with
+    ``launch_args``) < the dataset's ``config:`` < ``overrides``.
 
     Raises:
         InputDataError: a bad dataset.yaml. ConfigError: a bad config.
@@ -231,4 +231,4 @@ def prepare_run(dataset_path: Path, config_file: Path | None, overrides: tuple[s
 
     dataset = read_dataset(Path(dataset_path).resolve())  # manifests name absolute inputs: any worker finds them
     return dataset, load_config(config_file, overrides, extra=dataset.config,
-                                extra_source=f"{dataset.root / 'dataset.yaml'} (config:)")
+                                extra_source=f"{dataset.root / 'dataset.yaml'} (config:)", launch_args=launch_args)
