@@ -658,6 +658,10 @@ class ObjectMapConfig(Section):
     final_recut_sweeps: int = Field(3, ge=0)
     final_scan_stride: int = Field(1, ge=1)
     final_beam_stride: int = Field(1, ge=1)
+    # At most this many beams in the final step (0: no limit): a longer log keeps every k-th of its scans there,
+    # k the smallest that fits. Its peak memory grows ~330 bytes a beam (8.1 M beams: 2.7 GB, docs/benchmarks.md);
+    # a log this long holds many passes' evidence per wall, far more than the few passes the ρ were set for.
+    final_max_beams: int = Field(10_000_000, ge=0)
     # Divide ρG, ρS, ρD, ρL by scan_stride·beam_stride (each kept beam stands for that many of the log's).
     stride_weighted_prior: bool = False
     use_color: bool = True  # false: range-only EM even when the log has colors

@@ -7,6 +7,7 @@
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 from collections.abc import Sequence
@@ -35,6 +36,8 @@ from doorbatch.pipeline.objectmap.search import (
 
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
+
+log = logging.getLogger(__name__)
 
 
 def pass_scans(rec: Recording, poses: PassPoses, scan_stride: int, config: ObjectMapConfig) -> list[ScanBeams]:
@@ -120,10 +123,18 @@ def collect_beams(recordings: Sequence[Recording], passes: Sequence[PassPoses], 
 
 def final_step_beams(recordings: Sequence[Recording], passes: Sequence[PassPoses], config: ObjectMapConfig
                      ) -> BeamSet | None:
-    """The beams of the final wall step (final_scan_stride, final_beam_stride); None when it is off."""
+    """The beams of the final wall step (final_scan_stride, final_beam_stride; every k-th of those scans where
+    more than ``final_max_beams`` would be kept, k the smallest that fits); None when the step is off."""
     if not config.final_recut_sweeps:
         return None
-    return collect_beams(recordings, passes, config, (config.final_scan_stride, config.final_beam_stride))
+    scans = [pass_scans(r, p, config.final_scan_stride, config) for r, p in zip(recordings, passes, strict=True)]
+    total = sum(-(-sc.ranges.shape[0] // config.final_beam_stride) for one in scans for sc in one)
+    if config.final_max_beams and total > config.final_max_beams:
+        thin = -(-total // config.final_max_beams)
+        log.warning("em: the final wall step keeps 1 scan in %d of %d (%d beams over em.final_max_beams %d)",
+                    thin, sum(map(len, scans)), total, config.final_max_beams)
+        scans = [one[::thin] for one in scans]
+    return beams_from_scans(scans, config.max_range_m, config.final_beam_stride)
 
 
 @dataclass(frozen=True)

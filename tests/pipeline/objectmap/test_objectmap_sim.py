@@ -15,6 +15,7 @@ from doorbatch.io.object_map import read_classes, read_walls, write_classes
 from doorbatch.io.parquet import read_table
 from doorbatch.io.recording import load_recording
 from doorbatch.pipeline.mapping import pass_poses
+from doorbatch.pipeline.objectmap.beams import beams_from_scans
 from doorbatch.pipeline.objectmap.model import ClassParams
 from doorbatch.pipeline.objectmap.stage import ObjectMapResult, build_object_map, collect_beams, pass_scans
 from doorbatch.sim.simulate import run_simulation
@@ -225,3 +226,28 @@ def test_a_standing_robot_gives_the_em_stage_one_scan_a_second(tmp_path: Path) -
     assert len(every) == len(rec.scans)
     twice = pass_scans(rec, poses, 1, config.em.model_copy(update={"still_interval_s": 0.5}))
     assert 4 <= len(twice) - len(kept) <= 6  # 5 s of standing: one more scan in each of them
+
+
+def test_the_final_wall_step_thins_a_log_over_its_beam_budget_to_every_kth_scan(
+        tiny_site: list[Path], caplog: pytest.LogCaptureFixture) -> None:
+    """Under em.final_max_beams every beam of every kept scan is there; over it, every k-th scan of each pass
+    for the smallest k that fits, and a warning names the budget."""
+    from doorbatch.pipeline.objectmap.stage import final_step_beams
+
+    config = DoorbatchConfig()
+    recs = [load_recording(p, config) for p in tiny_site]
+    poses = [pass_poses(r, "reference", config) for r in recs]
+    every = final_step_beams(recs, poses, config.em)
+    scans = [pass_scans(r, p, 1, config.em) for r, p in zip(recs, poses, strict=True)]
+    total = sum(sc.ranges.shape[0] for one in scans for sc in one)
+    assert every is not None and len(every) == len(collect_beams(recs, poses, config.em, (1, 1)))
+    budget = total // 3 + 1  # k = 3 fits, k = 2 does not
+    with caplog.at_level("WARNING", logger="doorbatch"):
+        thinned = final_step_beams(recs, poses, config.em.model_copy(update={"final_max_beams": budget}))
+    assert "1 scan in 3" in caplog.text and "em.final_max_beams" in caplog.text
+    expected = len(collect_beams(recs, poses, config.em, (1, 1)))
+    thirds = beams_from_scans([one[::3] for one in scans], config.em.max_range_m)
+    assert thinned is not None and len(thinned) == len(thirds) < expected
+    np.testing.assert_array_equal(thinned.origin, thirds.origin)
+    exact = final_step_beams(recs, poses, config.em.model_copy(update={"final_max_beams": total}))
+    assert exact is not None and len(exact) == expected
