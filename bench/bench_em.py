@@ -34,12 +34,12 @@ def main() -> None:
     beams = collect_beams(recs, passes, config.em)
     final_beams = final_step_beams(recs, passes, config.em)
     c0 = time.process_time()
-    searched = build_object_map(beams, config.em)  # no final_beams: the search alone
+    searched = build_object_map(beams, config.em)  # no final step: the search alone
     search_s = time.process_time() - c0
     c0 = time.process_time()
-    result = build_object_map(beams, config.em, final_beams=final_beams)
+    result = build_object_map(beams, config.em, final=final_beams)
     stage_s = time.process_time() - c0
-    n_final = len(final_beams) if final_beams is not None else 0
+    n_final = len(final_beams.beams) if final_beams is not None else 0
     print(f"em stage, sample mapping passes ({len(logs)} passes, {result.n_beams} beams; {n_final} in the "
           f"final wall step): {stage_s:.1f} s CPU; {len(result.object_map.walls)} walls, {len(result.doors)} doors, "
           f"{len(result.trace.seconds)} EM iterations; without the final wall step {search_s:.1f} s, "

@@ -79,9 +79,9 @@ def _launch_args(_: click.Context, __: click.Parameter, values: tuple[str, ...])
     out: dict[str, str] = {}
     for text in values:
         name, sep, value = text.partition(":=")
-        if not sep or not name.strip():
+        if not sep or not name.strip() or not value.strip() or ":=" in value:
             raise click.BadParameter(f"{text!r} is not NAME:=VALUE")
-        out[name.strip()] = value
+        out[name.strip()] = value.strip()
     return out
 
 

@@ -27,7 +27,7 @@ from doorbatch.io.recording import load_recording
 from doorbatch.maps import OccupancyMap
 from doorbatch.pipeline.mapping import pass_poses
 from doorbatch.pipeline.objectmap.beams import BeamSet, beams_from_scans
-from doorbatch.pipeline.objectmap.stage import build_object_map, pass_scans
+from doorbatch.pipeline.objectmap.stage import FinalStepBeams, build_object_map, pass_scans
 
 ROOT = Path(__file__).resolve().parents[1]
 CARMEN = ROOT.parent / "shared" / "datasets" / "carmen"
@@ -58,13 +58,14 @@ def main() -> None:
     for path in sorted(CARMEN.glob("*.log*")):
         rec = load_recording(path, config)
         poses = pass_poses(rec, "reference", config)
-        every_scan = pass_scans(rec, poses, 1, False)
+        every_scan = pass_scans(rec, poses, 1, em)
         passes = [[every_scan[i] for i in c] for c in np.array_split(np.arange(len(every_scan)), args.passes)]
         scans = [sc for p in passes for sc in p[::em.scan_stride]]
         beams = beams_from_scans([p[::em.scan_stride] for p in passes], em.max_range_m, em.beam_stride)
-        final = (beams_from_scans([p[::em.final_scan_stride] for p in passes], em.max_range_m, em.final_beam_stride)
-                 if em.final_recut_sweeps else None)
-        result = build_object_map(beams, em, final_beams=final)
+        final_beams = beams_from_scans([p[::em.final_scan_stride] for p in passes], em.max_range_m,
+                                       em.final_beam_stride)
+        final = FinalStepBeams(final_beams, 1, sum(map(len, passes)), len(final_beams))
+        result = build_object_map(beams, em, final=final)
         walls = [w.endpoints() for w in result.object_map.walls if w.segments.size]
         image = render_preview(points_map(beams), [d.preview for d in result.doors],
                                walls=np.concatenate(walls) if walls else None)

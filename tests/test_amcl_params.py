@@ -413,6 +413,31 @@ def test_args_roslaunch_would_refuse_are_config_errors(tmp_path: Path, args: dic
         load_config(path, launch_args=args)
 
 
+def test_passed_args_follow_roslaunchs_scopes(tmp_path: Path) -> None:
+    """A value= inside a top-level group refuses a passed arg too; one switched off by unless= does not count;
+    a wrapper that passes all its args to the file with the node uses the ones it does not declare itself."""
+    node = ('<node pkg="amcl" type="amcl" name="amcl"><param name="odom_alpha1" value="$(arg a)"/></node>')
+    grouped = tmp_path / "grouped.launch"
+    grouped.write_text(f'<launch><group><arg name="a" value="0.3"/>{node}</group></launch>')
+    with pytest.raises(ConfigError, match="cannot pass arg a"):
+        load_config(grouped, launch_args={"a": "0.05"})
+    switched = tmp_path / "switched.launch"
+    switched.write_text(f'<launch><arg name="a" value="0.3" if="false"/><arg name="a" default="0.2" unless="false"/>'
+                        f'{node}</launch>')
+    assert load_config(switched, launch_args={"a": "0.05"}).localize.alpha1 == 0.05
+    assert load_config(switched).localize.alpha1 == 0.2
+    (tmp_path / "inner.launch").write_text(f'<launch><arg name="a" default="0.2"/>{node}</launch>')
+    wrapper = tmp_path / "wrapper.launch"
+    wrapper.write_text('<launch><include file="$(dirname)/inner.launch" pass_all_args="true"/></launch>')
+    assert load_config(wrapper, launch_args={"a": "0.05"}).localize.alpha1 == 0.05
+    with pytest.raises(ConfigError, match="unused args b"):
+        load_config(wrapper, launch_args={"b": "1"})
+    plain = tmp_path / "plain.launch"  # an include without pass_all_args gets nothing from the command line
+    plain.write_text('<launch><include file="$(dirname)/inner.launch"/></launch>')
+    with pytest.raises(ConfigError, match=r"unused args a \(the file declares: none\)"):
+        load_config(plain, launch_args={"a": "0.05"})
+
+
 def test_launch_args_without_a_launch_file_are_a_config_error(tmp_path: Path) -> None:
     path = tmp_path / "amcl.yaml"
     path.write_text("amcl:\n  ros__parameters:\n    alpha1: 0.1\n")
@@ -431,7 +456,10 @@ def test_the_cli_passes_launch_args_and_refuses_malformed_ones(tmp_path: Path,
     assert main(["config", "--json", "--config", str(path), "--launch-arg", "alpha:=0.07",
                  "--launch-arg", "x0:=0"]) == 0
     assert json.loads(capsys.readouterr().out)["localize"]["alpha1"] == 0.07
-    assert main(["config", "--config", str(path), "--launch-arg", "alpha=0.07"]) == 2  # roslaunch's form only
-    assert "is not NAME:=VALUE" in capsys.readouterr().err
+    for bad in ("alpha=0.07", "alpha:=", "alpha:=0.1:=0.2", ":=0.1"):  # roslaunch's form, one value
+        assert main(["config", "--config", str(path), "--launch-arg", bad]) == 2
+        assert "is not NAME:=VALUE" in capsys.readouterr().err
+    assert main(["config", "--json", "--config", str(path), "--launch-arg", " alpha := 0.08 "]) == 0
+    assert json.loads(capsys.readouterr().out)["localize"]["alpha1"] == 0.08
     code = main(["config", "--config", str(path), "--launch-arg", "beta:=1"])
     assert code != 0 and "unused args beta" in capsys.readouterr().err

@@ -15,8 +15,9 @@ roslaunch's rules (``roslaunch/loader.py``, ``xmlloader.py``), as far as a file 
   holding the ``package.xml`` of that name). ``$(eval ...)``, ``$(anon ...)`` need roslaunch itself: such a value
   is *unresolved* (reported, never guessed), and so is an ``if``/``unless`` that does not resolve (its element is
   left out). Args passed as on roslaunch's command line (``name:=value``, :func:`read_launch_node`'s ``args``) set the
-  top file's: its ``default`` yields to them; one it does not declare, or sets with ``value``, is an error, as
-  in roslaunch.
+  top file's: its ``default`` yields to them, and one it sets with ``value`` is an error, as in roslaunch; one no
+  file declares (the top file, or one it passes all its args to) is an error too, where roslaunch ignores it
+  (a typo must not run with the default).
 - ``<remap from to>`` inside the node, or before it in an enclosing scope, resolved against the node's namespace.
 - ``<include file ns pass_all_args>`` is followed: the file is read under ``ns`` with the args its ``<arg>``
   children pass (and all of the includer's with ``pass_all_args``), the enclosing remaps in force. A file that
@@ -111,7 +112,8 @@ class _Reader:
         self.unresolved: list[str] = [] if parent is None else parent.unresolved
         self.notes: list[str] = [] if parent is None else parent.notes
         self.includes: list[str] = [] if parent is None else parent.includes  # those that could not be read
-        self.declared: set[str] = set()  # the <arg> names of this file's top level
+        self.declared: set[str] = set()  # the <arg> names of this file (and of those it passes all its args to)
+        self.passed: frozenset[str] = frozenset()  # the args passed on the command line (the top file's reader)
 
     def substitute(self, text: str, scope: _Scope) -> str:
         def one(match: re.Match[str]) -> str:
@@ -171,7 +173,10 @@ class _Reader:
     def element(self, element: ET.Element, scope: _Scope, base: str, node: str | None) -> None:
         tag = element.tag
         if tag == "arg" and node is None:
-            self.declared.add(element.get("name", ""))
+            name = element.get("name", "")
+            if name in self.passed and element.get("value") is not None:  # roslaunch's add_arg: already set
+                raise ConfigError(f"{self.path}: cannot pass arg {name}: the file sets it with value=")
+            self.declared.add(name)
             self.declare_arg(element, scope.args, scope)
         elif tag == "group" and node is None:
             self.walk(element, _Scope(self.namespace(element, scope), dict(scope.args), dict(scope.remaps)))
@@ -207,10 +212,8 @@ class _Reader:
             raise _UnresolvedError("<include> not followed: no such file")
         if self.depth >= MAX_INCLUDE_DEPTH:
             raise ConfigError(f"{self.path}: includes nest deeper than {MAX_INCLUDE_DEPTH} (a cycle?) at {name}")
-        if self.substitute(element.get("pass_all_args", "false"), scope).strip().lower() in ("true", "1"):
-            args = dict(scope.args)
-        else:
-            args = {}
+        pass_all = self.substitute(element.get("pass_all_args", "false"), scope).strip().lower() in ("true", "1")
+        args = dict(scope.args) if pass_all else {}
         for child in element:  # the include's context: its <arg>s, substituted in the includer's scope
             if child.tag == "arg" and self.enabled(child, scope):
                 self.declare_arg(child, args, scope)
@@ -218,7 +221,10 @@ class _Reader:
             root = ET.parse(path).getroot()
         except ET.ParseError as err:
             raise ConfigError(f"{path} (included by {self.path}): not a valid launch file (XML): {err}") from err
-        _Reader(path, self).walk(root, _Scope(self.namespace(element, scope), args, dict(scope.remaps)))
+        reader = _Reader(path, self)
+        if pass_all:  # the args it is handed are used (or not) there
+            reader.declared = self.declared
+        reader.walk(root, _Scope(self.namespace(element, scope), args, dict(scope.remaps)))
 
     def declare_arg(self, element: ET.Element, args: dict[str, str], scope: _Scope) -> None:
         """roslaunch's ``loader.add_arg`` into ``args``: ``value`` sets it, ``default`` only where nothing was passed;
@@ -349,14 +355,11 @@ def read_launch_node(path: Path, node_type: str, args: Mapping[str, str] | None 
     except ET.ParseError as err:
         raise ConfigError(f"{path}: not a valid launch file (XML): {err}") from err
     passed = dict(args or {})
-    fixed = sorted(a.get("name", "") for a in root if a.tag == "arg" and a.get("name") in passed
-                   and a.get("value") is not None)
-    if fixed:
-        raise ConfigError(f"{path}: cannot pass arg {', '.join(fixed)}: the file sets it with value=")
     reader = _Reader(path)
+    reader.passed = frozenset(passed)
     reader.walk(root, _Scope("/", passed, {}))
     unused = sorted(set(passed) - reader.declared)
-    if unused:
+    if unused:  # roslaunch ignores them; here a typo must not run with the default
         declared = ", ".join(sorted(reader.declared - {""})) or "none"
         raise ConfigError(f"{path}: unused args {', '.join(unused)} (the file declares: {declared})")
     wanted = [(name, remaps) for name, kind, remaps in reader.nodes if kind == node_type]

@@ -141,7 +141,11 @@ def run_map(logs: Sequence[Path], out: Path, config: DoorbatchConfig, stages: Se
                                 "grid_doors": len(door_map.doors),
                                 "grid_doors_kept": sum(r.source == "grid" for r in rows),
                                 "classes_given": classes is not None,
-                                "scan_stride": em.strides[0], "beam_stride": em.strides[1]}
+                                "scan_stride": em.strides[0], "beam_stride": em.strides[1],
+                                "final_beams": em.final_beams, "final_scan_thinning": em.final_scan_thinning}
+        if em.final_scan_thinning > 1:
+            manifest.warn(f"em: the final wall step kept 1 scan in {em.final_scan_thinning} ({em.final_beams} beams; "
+                          f"em.final_max_beams {config.em.final_max_beams})")
     if mcap and recordings is not None:
         files.append(_write_mapping_mcap(logs, recordings, door_map, rows, out / "annotated.mcap", config))
     _remove_stale_map_files(out, files, logs)

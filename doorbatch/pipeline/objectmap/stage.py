@@ -7,7 +7,6 @@
 
 from __future__ import annotations
 
-import logging
 import math
 import time
 from collections.abc import Sequence
@@ -36,8 +35,6 @@ from doorbatch.pipeline.objectmap.search import (
 
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
-
-log = logging.getLogger(__name__)
 
 
 def pass_scans(rec: Recording, poses: PassPoses, scan_stride: int, config: ObjectMapConfig) -> list[ScanBeams]:
@@ -121,20 +118,38 @@ def collect_beams(recordings: Sequence[Recording], passes: Sequence[PassPoses], 
     return beams_from_scans(scans, config.max_range_m, beam_stride)
 
 
+@dataclass(frozen=True)
+class FinalStepBeams:
+    """The final wall step's beams, and 1 in how many of its scans they keep (:func:`final_step_beams`)."""
+
+    beams: BeamSet
+    scan_thinning: int  # 1: every scan (after final_scan_stride and the standing robot's repeats)
+    scans: int  # the scans before thinning
+    beams_before: int  # their beams (after final_beam_stride)
+
+
 def final_step_beams(recordings: Sequence[Recording], passes: Sequence[PassPoses], config: ObjectMapConfig
-                     ) -> BeamSet | None:
-    """The beams of the final wall step (final_scan_stride, final_beam_stride; every k-th of those scans where
-    more than ``final_max_beams`` would be kept, k the smallest that fits); None when the step is off."""
+                     ) -> FinalStepBeams | None:
+    """The beams of the final wall step (final_scan_stride, final_beam_stride); where more than
+    ``final_max_beams`` would be kept, 1 scan in k of each pass, k the smallest for which they fit. None when the
+    step is off."""
     if not config.final_recut_sweeps:
         return None
     scans = [pass_scans(r, p, config.final_scan_stride, config) for r, p in zip(recordings, passes, strict=True)]
-    total = sum(-(-sc.ranges.shape[0] // config.final_beam_stride) for one in scans for sc in one)
-    if config.final_max_beams and total > config.final_max_beams:
-        thin = -(-total // config.final_max_beams)
-        log.warning("em: the final wall step keeps 1 scan in %d of %d (%d beams over em.final_max_beams %d)",
-                    thin, sum(map(len, scans)), total, config.final_max_beams)
-        scans = [one[::thin] for one in scans]
-    return beams_from_scans(scans, config.max_range_m, config.final_beam_stride)
+
+    def count(thin: int) -> int:
+        return sum(-(-sc.ranges.shape[0] // config.final_beam_stride) for one in scans for sc in one[::thin])
+
+    total = count(1)
+    budget = config.final_max_beams
+    thin = 1
+    if budget and total > budget:
+        thin = -(-total // budget)  # a lower bound: passes keep ceil(n / k) scans, and scans differ in size
+        while count(thin) > budget and thin < max(map(len, scans)):
+            thin += 1
+    kept = scans if thin == 1 else [one[::thin] for one in scans]
+    return FinalStepBeams(beams_from_scans(kept, config.max_range_m, config.final_beam_stride), thin,
+                          sum(map(len, scans)), total)
 
 
 @dataclass(frozen=True)
@@ -158,6 +173,8 @@ class ObjectMapResult:
     trace: EmTrace
     seconds: float
     strides: tuple[int, int]  # the search's (scan, beam) strides; 0: not resolved (beams given directly)
+    final_beams: int = 0  # beams of the final wall step (0: none)
+    final_scan_thinning: int = 1  # its 1 scan in k (em.final_max_beams)
 
 
 def _covered_fraction(wall: Wall, s0: float, s1: float) -> float:
@@ -339,9 +356,9 @@ def stride_weighted(config: ObjectMapConfig) -> ObjectMapConfig:
 
 
 def build_object_map(beams: BeamSet, config: ObjectMapConfig, classes: ClassParams | None = None,
-                     final_beams: BeamSet | None = None, seeds: Sequence[DoorCandidate] = ()) -> ObjectMapResult:
+                     final: FinalStepBeams | None = None, seeds: Sequence[DoorCandidate] = ()) -> ObjectMapResult:
     """The em stage on beams (see :func:`collect_beams`); ``classes`` given: applied without relearning.
-    ``final_beams`` (:func:`final_step_beams`) given and ``config.final_recut_sweeps`` > 0: the converged
+    ``final`` (:func:`final_step_beams`) given and ``config.final_recut_sweeps`` > 0: the converged
     walls are proposed and re-cut once more over them (:func:`final_walls`). ``seeds``: doors found by motion
     (:func:`~doorbatch.pipeline.objectmap.search.search_structure`)."""
     t0 = time.perf_counter()
@@ -349,11 +366,13 @@ def build_object_map(beams: BeamSet, config: ObjectMapConfig, classes: ClassPara
     if config.stride_weighted_prior:
         config = stride_weighted(config)
     state = search_structure(beams, config, classes, trace, seeds)
-    if final_beams is not None and config.final_recut_sweeps > 0:
-        state = evaluate(beams, final_walls(final_beams, state.obj_map, config), config)
+    final = final if config.final_recut_sweeps > 0 else None
+    if final is not None:
+        state = evaluate(beams, final_walls(final.beams, state.obj_map, config), config)
     state, doors = without_plain_still_doors(beams, state, describe_doors(beams, state, config), config)
     return ObjectMapResult(state.obj_map, doors, state.log_posterior, len(beams), trace, time.perf_counter() - t0,
-                           (config.scan_stride, config.beam_stride))
+                           (config.scan_stride, config.beam_stride), len(final.beams) if final else 0,
+                           final.scan_thinning if final else 1)
 
 
 def em_stage(recordings: Sequence[Recording], passes: Sequence[PassPoses], config: DoorbatchConfig,

@@ -152,9 +152,18 @@ def test_map_cli_writes_the_em_outputs_and_applies_classes(tiny_site: list[Path]
     assert sum(w.segments.shape[0] for w in walls) == len(read_table("walls", out / "walls.parquet"))
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["extra"]["stages"] == ["grid", "em"] and manifest["extra"]["em"]["doors"] == 2
+    em = manifest["extra"]["em"]
+    assert em["final_beams"] >= em["beams"] > 0 and em["final_scan_thinning"] == 1
+    assert not any("final wall step" in w for w in manifest["warnings"])
     out2 = tmp_path / "map2"
     assert main(["map", logs[1], "-o", str(out2), "--classes", str(out / "classes.json"), *sets, "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["doors"] == 2  # pass 2: both doors closed, found by colour
+    out4 = tmp_path / "map4"  # a beam budget for the final step: the manifest says what was left out
+    assert main(["map", logs[1], "-o", str(out4), "--classes", str(out / "classes.json"), *sets,
+                 "--set", "em.final_max_beams=20000", "-q"]) == 0
+    thinned = json.loads((out4 / "manifest.json").read_text())
+    assert thinned["extra"]["em"]["final_scan_thinning"] > 1 and thinned["extra"]["em"]["final_beams"] <= 20000
+    assert any("final wall step kept 1 scan in" in w for w in thinned["warnings"])
     bad = tmp_path / "bad.json"
     bad.write_text("{}")
     assert main(["map", logs[1], "-o", str(tmp_path / "m3"), "--classes", str(bad)]) == 3
@@ -228,26 +237,30 @@ def test_a_standing_robot_gives_the_em_stage_one_scan_a_second(tmp_path: Path) -
     assert 4 <= len(twice) - len(kept) <= 6  # 5 s of standing: one more scan in each of them
 
 
-def test_the_final_wall_step_thins_a_log_over_its_beam_budget_to_every_kth_scan(
-        tiny_site: list[Path], caplog: pytest.LogCaptureFixture) -> None:
-    """Under em.final_max_beams every beam of every kept scan is there; over it, every k-th scan of each pass
-    for the smallest k that fits, and a warning names the budget."""
+def test_the_final_wall_step_thins_a_log_over_its_beam_budget_to_every_kth_scan(tiny_site: list[Path]) -> None:
+    """Under em.final_max_beams every beam of every kept scan is there; over it, 1 scan in k of each pass for the
+    smallest k whose beams fit (each pass keeps ⌈n / k⌉ of its n scans, so k may exceed ⌈total / budget⌉)."""
     from doorbatch.pipeline.objectmap.stage import final_step_beams
 
     config = DoorbatchConfig()
     recs = [load_recording(p, config) for p in tiny_site]
     poses = [pass_poses(r, "reference", config) for r in recs]
-    every = final_step_beams(recs, poses, config.em)
     scans = [pass_scans(r, p, 1, config.em) for r, p in zip(recs, poses, strict=True)]
     total = sum(sc.ranges.shape[0] for one in scans for sc in one)
-    assert every is not None and len(every) == len(collect_beams(recs, poses, config.em, (1, 1)))
-    budget = total // 3 + 1  # k = 3 fits, k = 2 does not
-    with caplog.at_level("WARNING", logger="doorbatch"):
-        thinned = final_step_beams(recs, poses, config.em.model_copy(update={"final_max_beams": budget}))
-    assert "1 scan in 3" in caplog.text and "em.final_max_beams" in caplog.text
     expected = len(collect_beams(recs, poses, config.em, (1, 1)))
-    thirds = beams_from_scans([one[::3] for one in scans], config.em.max_range_m)
-    assert thinned is not None and len(thinned) == len(thirds) < expected
-    np.testing.assert_array_equal(thinned.origin, thirds.origin)
+    every = final_step_beams(recs, poses, config.em)
+    assert every is not None and len(every.beams) == expected and every.scan_thinning == 1
+    assert every.beams_before == total and every.scans == sum(map(len, scans))
+
+    def kept(k: int) -> int:
+        return sum(sc.ranges.shape[0] for one in scans for sc in one[::k])
+
+    for budget in (total // 3 + 1, kept(3), kept(3) - 1, total // 7):
+        k = next(k for k in range(1, total) if kept(k) <= budget)
+        thinned = final_step_beams(recs, poses, config.em.model_copy(update={"final_max_beams": budget}))
+        assert thinned is not None and thinned.scan_thinning == k > 1
+        reference = beams_from_scans([one[::k] for one in scans], config.em.max_range_m)
+        assert len(thinned.beams) == len(reference) < expected
+        np.testing.assert_array_equal(thinned.beams.origin, reference.origin)
     exact = final_step_beams(recs, poses, config.em.model_copy(update={"final_max_beams": total}))
-    assert exact is not None and len(exact) == expected
+    assert exact is not None and len(exact.beams) == expected and exact.scan_thinning == 1
