@@ -345,8 +345,8 @@ def read_launch_node(path: Path, node_type: str, args: Mapping[str, str] | None 
 
     Raises:
         ConfigError: unreadable or not XML; no such node, or more than one; a value of the wrong type; a
-            ``<rosparam file>`` that cannot be found or resolved; a passed arg the top file does not declare, or
-            sets with ``value``.
+            ``<rosparam file>`` that cannot be found or resolved; a passed arg that no file declares (the top file,
+            or one it passes all its args to), or that the top file sets with ``value``.
     """
     try:
         root = ET.parse(path).getroot()

@@ -371,8 +371,8 @@ def build_object_map(beams: BeamSet, config: ObjectMapConfig, classes: ClassPara
         state = evaluate(beams, final_walls(final.beams, state.obj_map, config), config)
     state, doors = without_plain_still_doors(beams, state, describe_doors(beams, state, config), config)
     return ObjectMapResult(state.obj_map, doors, state.log_posterior, len(beams), trace, time.perf_counter() - t0,
-                           (config.scan_stride, config.beam_stride), len(final.beams) if final else 0,
-                           final.scan_thinning if final else 1)
+                           (config.scan_stride, config.beam_stride), 0 if final is None else len(final.beams),
+                           1 if final is None else final.scan_thinning)
 
 
 def em_stage(recordings: Sequence[Recording], passes: Sequence[PassPoses], config: DoorbatchConfig,
