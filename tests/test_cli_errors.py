@@ -303,3 +303,22 @@ def test_inspect_says_where_the_odometry_comes_from(write_log: Callable[..., Pat
         assert json.loads(capsys.readouterr().out)["odometry"] == expected
         assert main(["inspect", str(path)]) == 0
         assert f"Odometry:   {expected}" in capsys.readouterr().out
+
+
+def test_inspect_says_where_the_reference_comes_from(write_log: Callable[..., Path],
+                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """A reference topic; else a localizer's moving map → odom on /tf; else none."""
+    from doorbatch.io import ros_messages as m
+
+    messages = sample_messages(5)
+    no_truth = [x for x in messages if x[0] != "/ground_truth"]
+    scan_times = [x[2] for x in no_truth if x[0] == "/scan"]
+    localized = [*no_truth, *(("/tf", "tf2_msgs/msg/TFMessage", t, m.tf_message([m.planar_transform(
+        t, "map", "odom", 1.0 + 0.01 * k, 0.0, 0.1)])) for k, t in enumerate(scan_times))]
+    for name, msgs, expected in (("truth.mcap", messages, "/ground_truth (nav_msgs/Odometry)"),
+                                 ("amcl.mcap", sorted(localized, key=lambda x: x[2]),
+                                  "TF map→base_link (a localizer's or SLAM's moving map→odom)"),
+                                 ("none.mcap", no_truth, "none")):
+        path = write_log(name, msgs)
+        assert main(["inspect", str(path), "--json"]) == 0
+        assert json.loads(capsys.readouterr().out)["reference"] == expected

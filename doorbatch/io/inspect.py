@@ -30,6 +30,7 @@ from doorbatch.io.recording import (
     odometry_frame_note,
     resolve_base_frame,
     tf_odometry,
+    tf_reference,
     unset_stamps,
 )
 from doorbatch.io.roles import TopicInfo
@@ -88,6 +89,7 @@ class LogReport:
     frames: list[str]
     problems: list[Problem] = field(default_factory=list)
     odometry: str = "none"  # where the odometry comes from: an Odometry topic, or TF odom → base
+    reference: str = "none"  # where the reference comes from: a pose topic, or TF map → base (a localizer's)
 
     @property
     def errors(self) -> list[Problem]:
@@ -219,6 +221,12 @@ def _check_roles(report: LogReport, chosen: dict[Role, tuple[str, ...]], scan_fr
         add(Problem(Severity.ERROR, None, "no sensor_msgs/LaserScan topic: doorbatch needs a 2D laser scan"))
     elif stats.get(scan[0], _TopicStats()).count == 0:
         add(Problem(Severity.ERROR, scan[0], "scan topic has no messages"))
+    if Role.REFERENCE in chosen:
+        name = chosen[Role.REFERENCE][0]
+        kind = next((t.msgtype for t in report.topics if t.name == name), "")
+        report.reference = f"{name} ({kind.replace('/msg/', '/')})" if kind else name
+    elif tf_reference(tf, frames)[0]:
+        report.reference = f"TF {frames.map}→{frames.base_link} (a localizer's or SLAM's moving map→odom)"
     if Role.ODOMETRY in chosen:
         report.odometry = f"{chosen[Role.ODOMETRY][0]} (nav_msgs/Odometry)"
     else:

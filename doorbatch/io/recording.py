@@ -130,17 +130,12 @@ def _planar(mat: FloatArray) -> FloatArray:
     return np.array([mat[0, 3], mat[1, 3], yaw_of_matrix(mat)])
 
 
-def tf_odometry(tf: TfBuffer, odom: str, base: str) -> tuple[list[Pose2D], str | None]:
-    """Odometry from the TF tree (DESIGN.md, Inputs: TF odom→base_link): ``base``'s pose in
-    :func:`odometry_frame` at every stamp of the dynamic edges between them, through static edges too
-    (odom → base_footprint → base_link). And a note when the frame is not ``odom``.
-    """
-    frame = odometry_frame(tf, odom, base)
-    if frame is None:
-        return [], None
+def _tf_poses(tf: TfBuffer, frame: str, base: str) -> list[Pose2D]:
+    """``base``'s pose in ``frame`` (an ancestor) at every stamp of the dynamic edges between them, through static
+    edges too, each with the log time of its transform (for the clock check, :func:`on_one_clock`)."""
     chain = tf.chain(base)
     edges = [c for c in chain[:chain.index(frame)] if not tf.is_static(c)]
-    logged: dict[int, int] = {}  # stamp → when the log recorded it (for the clock check, on_one_clock)
+    logged: dict[int, int] = {}  # stamp → when the log recorded it
     for c in edges:
         for t, g in zip(tf.stamps(c), tf.log_times(c), strict=True):
             logged.setdefault(t, g)
@@ -151,7 +146,38 @@ def tf_odometry(tf: TfBuffer, odom: str, base: str) -> tuple[list[Pose2D], str |
         except TransformError:  # another dynamic edge of the chain has no data near this stamp
             continue
         poses.append(Pose2D(t, logged[t], frame, base, float(x), float(y), float(yaw)))
-    return poses, None if frame == odom else odometry_frame_note(frame, odom, base)
+    return poses
+
+
+def tf_odometry(tf: TfBuffer, odom: str, base: str) -> tuple[list[Pose2D], str | None]:
+    """Odometry from the TF tree (DESIGN.md, Inputs: TF odom→base_link): ``base``'s pose in
+    :func:`odometry_frame` at every stamp of the dynamic edges between them, through static edges too
+    (odom → base_footprint → base_link). And a note when the frame is not ``odom``.
+    """
+    frame = odometry_frame(tf, odom, base)
+    if frame is None:
+        return [], None
+    return _tf_poses(tf, frame, base), None if frame == odom else odometry_frame_note(frame, odom, base)
+
+
+def tf_reference(tf: TfBuffer, frames: FramesConfig) -> tuple[list[Pose2D], str | None]:
+    """A reference from the TF tree, for a log without a reference topic: ``base``'s pose in ``frames.map`` where a
+    dynamic edge lies above the odometry frame (REP 105's map→odom, which a localizer such as AMCL or a SLAM node
+    publishes), at every stamp of the dynamic edges between map and base (:func:`_tf_poses`); and a note saying
+    where it came from. Nothing where the map frame is not above base, or only static edges join it to the
+    odometry frame (that map pose is the odometry moved rigidly)."""
+    base, target = frames.base_link, frames.map
+    odom = odometry_frame(tf, frames.odom, base)
+    if odom is None or odom == target:
+        return [], None
+    chain = tf.chain(base)
+    if target not in chain or chain.index(target) < chain.index(odom):
+        return [], None
+    if all(tf.is_static(c) for c in chain[chain.index(odom):chain.index(target)]):
+        return [], None
+    poses = _tf_poses(tf, target, base)
+    return poses, (f"reference poses from TF {target}→{base}: no reference topic, so the log's own localizer or "
+                   f"SLAM ({target}→{odom}) stands in" if poses else None)
 
 
 def model_states_note(reader: LogReader) -> list[str]:
@@ -415,6 +441,9 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
         frames, base_note = resolve_base_frame(tf, config.frames)
         odom, notes = odometry_poses(odom, tf, reader.roles.topic(Role.ODOMETRY) is not None, frames)
         notes += model_states_note(reader) if not ref else []
+        if reader.roles.topic(Role.REFERENCE) is None:
+            ref, note = tf_reference(tf, frames)
+            notes += [note] if note else []
         timed = on_one_clock(scans, odom, ref, config.io.clock_mismatch_s)
         scans = timed.scans
         odometry, reference = robot_pose_series(timed.odom, timed.ref, tf, frames)

@@ -350,3 +350,46 @@ def _gt_log(tmp_path: Path) -> Path:
     from tests.conftest import write_messages
 
     return write_messages(tmp_path / "gt.mcap", sample_messages(8), "mcap")
+
+
+def _localized_robot(n_scans: int, map_to_odom: Callable[[int], tuple[float, float, float]],
+                     static: bool = False) -> list[tuple[str, str, int, object]]:
+    """sample_messages without /ground_truth, with a localizer's map → odom on /tf (AMCL republishes it with
+    every scan), or one static map → odom."""
+    msgs = []
+    for topic, msgtype, t, msg in sample_messages(n_scans=n_scans):
+        if topic == "/ground_truth":
+            continue
+        msgs.append((topic, msgtype, t, msg))
+        if topic == "/tf" and not static:
+            k = (t - msgs[0][2]) // 100_000_000 - 1
+            msgs.append(("/tf", msgtype, t, m.tf_message([m.planar_transform(t, "map", "odom", *map_to_odom(k))])))
+    if static:
+        msgs.insert(1, ("/tf_static", "tf2_msgs/msg/TFMessage", msgs[0][2],
+                        m.tf_message([m.planar_transform(msgs[0][2], "map", "odom", *map_to_odom(0))])))
+    return msgs
+
+
+def test_a_localizers_map_to_odom_on_tf_is_the_reference_of_a_log_without_one(
+        write_log: Callable[..., Path]) -> None:
+    """base_link in map = (map → odom) ∘ (odom → base_link) at each stamp, by hand; said in a warning. A static
+    map → odom is no reference (it is the odometry moved rigidly), and a reference topic wins over TF."""
+    def correction(k: int) -> tuple[float, float, float]:
+        return 2.0 + 0.01 * k, -1.0, 0.5 + 0.002 * k
+
+    rec = load_recording(write_log("amcl.mcap", _localized_robot(8, correction)))
+    assert rec.reference is not None and rec.reference.poses.shape == (8, 3)
+    k = np.arange(8)
+    x, y, yaw = 0.1 * k, 0.02 * k, 0.01 * k  # odom → base_link as sample_messages writes it
+    cx, cy, cyaw = 2.0 + 0.01 * k, -1.0, 0.5 + 0.002 * k
+    np.testing.assert_allclose(rec.reference.poses[:, 0], cx + np.cos(cyaw) * x - np.sin(cyaw) * y, atol=1e-9)
+    np.testing.assert_allclose(rec.reference.poses[:, 1], cy + np.sin(cyaw) * x + np.cos(cyaw) * y, atol=1e-9)
+    np.testing.assert_allclose(rec.reference.poses[:, 2], cyaw + yaw, atol=1e-9)
+    assert any("reference poses from TF map→base_link" in w for w in rec.warnings)
+    assert not rec.reference_is_odometry
+    still = load_recording(write_log("static.mcap", _localized_robot(8, correction, static=True)))
+    assert still.reference is None
+    truth = load_recording(write_log("truth.mcap", [*sample_messages(n_scans=8),
+                                                    *_localized_robot(8, correction)[-1:]]))
+    assert truth.reference is not None
+    np.testing.assert_allclose(truth.reference.poses[:, 0], 0.1 * k + 1, atol=1e-9)  # /ground_truth's

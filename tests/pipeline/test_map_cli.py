@@ -265,3 +265,61 @@ def test_a_robot_that_barely_moved_cannot_tell_its_reference_from_its_odometry(w
     assert not load_recording(write_log("short.mcap", short), DoorbatchConfig()).reference_is_odometry
     assert load_recording(write_log("long.mcap", _with_reference(_turned_and_moved)),
                           DoorbatchConfig()).reference_is_odometry
+
+
+def _under_a_localizer(path: Path, out: Path) -> Path:
+    """A sample pass as a robot without ground truth records it under AMCL: odometry from zero at the pass's start,
+    the localizer's map → odom on /tf (here exact: truth ∘ odometry⁻¹ at each odometry stamp), no /ground_truth."""
+    from doorbatch.geometry.se2 import compose, interpolate_poses, inverse, relative
+    from doorbatch.io.reader import open_log
+    from tests.conftest import write_messages
+
+    config = DoorbatchConfig()
+    with open_log(path, config) as reader:
+        raws = list(reader.raw_messages())
+
+    def planar(msg: object) -> tuple[int, tuple[float, float, float]]:
+        p = msg.pose.pose  # type: ignore[attr-defined]
+        yaw = 2 * np.arctan2(p.orientation.z, p.orientation.w)
+        return msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec, (p.position.x, p.position.y, yaw)  # type: ignore[attr-defined]
+
+    truth = [planar(r.msg) for r in raws if r.topic == "/ground_truth"]
+    truth_ns = np.array([t for t, _ in truth])
+    truth_poses = np.array([p for _, p in truth])
+    first = next(np.array(planar(r.msg)[1]) for r in raws if r.topic == "/odom")
+    msgs = []
+    for r in raws:
+        if r.topic == "/ground_truth" or (r.topic == "/tf" and r.msg.transforms[0].child_frame_id == "base_link"):
+            continue
+        if r.topic == "/odom":
+            t, pose = planar(r.msg)
+            x, y, yaw = relative(first, np.array(pose))
+            msgs.append(("/odom", r.msgtype, r.log_time_ns, m.odometry(t, "odom", "base_link", x, y, yaw)))
+            msgs.append(("/tf", "tf2_msgs/msg/TFMessage", r.log_time_ns,
+                         m.tf_message([m.planar_transform(t, "odom", "base_link", x, y, yaw)])))
+            at, ok = interpolate_poses(truth_ns, truth_poses, np.array([t]))
+            if ok[0]:
+                cx, cy, cyaw = compose(at[0], inverse(np.array([x, y, yaw])))
+                msgs.append(("/tf", "tf2_msgs/msg/TFMessage", r.log_time_ns,
+                             m.tf_message([m.planar_transform(t, "map", "odom", cx, cy, cyaw)])))
+            continue
+        msgs.append((r.topic, r.msgtype, r.log_time_ns, r.msg))
+    return write_messages(out, msgs)
+
+
+def test_passes_recorded_apart_under_a_localizer_map_in_its_map_frame(tmp_path: Path,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """Two sample passes, each with its odometry from zero and no ground truth, but AMCL's map → odom on /tf:
+    auto takes base_link in map as the reference, and the doors come where the ground truth puts them."""
+    logs = [SAMPLE_LOGS / f"map_pass{k}.mcap" for k in (1, 2)]
+    apart = [_under_a_localizer(p, tmp_path / p.name) for p in logs]
+    assert main(["map", *map(str, apart), "-o", str(tmp_path / "apart"), "--stages", "grid", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["pose_source"] == "reference"
+    assert main(["map", *map(str, logs), "-o", str(tmp_path / "truth"), "--stages", "grid", "--json"]) == 0
+    capsys.readouterr()
+    got = read_table("doors", tmp_path / "apart" / "doors.parquet").to_pydict()
+    want = read_table("doors", tmp_path / "truth" / "doors.parquet").to_pydict()
+    assert len(got["door_id"]) == len(want["door_id"]) >= 2
+    np.testing.assert_allclose(sorted(got["hinge_x"]), sorted(want["hinge_x"]), atol=0.02)
+    assert main(["map", *(str(p) for p in apart), "-o", str(tmp_path / "odom"), "--pose-source", "odometry"]) == 3
+    assert "disjoint coordinate frames" in capsys.readouterr().err  # without the localizer: refused, as before
