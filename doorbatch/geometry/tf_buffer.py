@@ -3,6 +3,8 @@
 Each child frame has one parent (as in tf2). A dynamic edge keeps its stamped transforms sorted by
 time; a lookup at time t interpolates translation linearly and rotation by slerp between the two
 neighbouring stamps, and clamps to the end stamp within ``extrapolation_limit_ns`` (tf2 would refuse).
+A dynamic edge whose every transform is the same (a mount logged once, or again and again, on a dynamic
+topic: writers without ROS's /tf_static do so, and Foxglove clamps such lookups) holds at any time.
 """
 
 from __future__ import annotations
@@ -25,8 +27,12 @@ class _Edge:
     translations: list[FloatArray] = field(default_factory=list)
     rotations: list[FloatArray] = field(default_factory=list)
     log_times: list[int] = field(default_factory=list)  # when the log recorded each (0: not known)
+    constant: bool = True  # every transform added so far is the same
 
     def add(self, tf: Transform) -> None:
+        if self.translations and not (np.array_equal(tf.translation, self.translations[0])
+                                      and np.array_equal(tf.rotation_xyzw, self.rotations[0])):
+            self.constant = False
         i = bisect.bisect_right(self.stamps, tf.stamp_ns)
         if i > 0 and self.stamps[i - 1] == tf.stamp_ns:
             self.translations[i - 1], self.rotations[i - 1] = tf.translation, tf.rotation_xyzw
@@ -38,7 +44,7 @@ class _Edge:
         self.log_times.insert(i, tf.log_time_ns)
 
     def at(self, stamp_ns: int, limit_ns: int, child: str) -> FloatArray:
-        if self.static or (len(self.stamps) == 1 and self.static):
+        if self.static or self.constant:
             return transform_matrix(self.translations[-1], self.rotations[-1])
         stamps = self.stamps
         i = bisect.bisect_left(stamps, stamp_ns)
