@@ -8,6 +8,7 @@ from typing import Any
 from rosbags.highlevel import AnyReader
 
 from doorbatch.errors import LogReadError
+from doorbatch.io import foxglove
 from doorbatch.io.reader import LogReader, RawMessage
 from doorbatch.io.roles import TopicInfo
 from doorbatch.io.typestore import normalize_msgtype, ros1_typestore, ros2_typestore
@@ -26,8 +27,10 @@ class _AnyBagReader(LogReader):
         for conn in self._reader.connections:
             prev = topics.get(conn.topic)
             count = conn.msgcount + (prev.count if prev else 0)
-            topics[conn.topic] = TopicInfo(conn.topic, normalize_msgtype(conn.msgtype), count,
-                                           "ros1" if self._ros1 else "cdr")
+            name = normalize_msgtype(conn.msgtype)
+            shown = foxglove.ros_type(name)  # foxglove_msgs, as a Foxglove bridge records them: read as ROS 2's
+            topics[conn.topic] = TopicInfo(conn.topic, shown or name, count, "ros1" if self._ros1 else "cdr",
+                                           name if shown else "")
         self._topics = topics
 
     def _storage_name(self) -> str:
@@ -66,8 +69,12 @@ class _AnyBagReader(LogReader):
                 raise LogReadError(f"cannot decode a {conn.msgtype} message ({type(err).__name__}: {err}); its "
                                    f"definition may differ from ROS 2 Humble's", path=self.path,
                                    topic=conn.topic) from err
-            yield RawMessage(conn.topic, normalize_msgtype(conn.msgtype), int(log_time), msg, self._ros1,
-                             reader.typestore)
+            name = normalize_msgtype(conn.msgtype)
+            kind = foxglove.foxglove_kind(name)
+            if kind is None:
+                yield RawMessage(conn.topic, name, int(log_time), msg, self._ros1, reader.typestore)
+            else:
+                yield foxglove.as_ros_message(kind, msg, conn.topic, int(log_time), self.io_config)
 
 
 class Rosbag1Reader(_AnyBagReader):

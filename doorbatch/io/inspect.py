@@ -62,6 +62,14 @@ def _unused_hint(info: TopicInfo) -> str | None:
     return None
 
 
+def _read_as(info: TopicInfo, why: str | None) -> str | None:
+    """``why`` with, for a topic of a Foxglove schema, the ROS type its messages are read as."""
+    if not info.schema:
+        return why
+    note = f"{info.schema} read as {info.msgtype}"
+    return f"{why}; {note}" if why else note
+
+
 @dataclass
 class TopicReport:
     """Per-topic statistics."""
@@ -185,9 +193,9 @@ def inspect_log(path: Path, config: DoorbatchConfig | None = None,
                                                               f"skipped (first: {bad_scans[0]})"))
         problems.extend(Problem(Severity.WARNING, None, w) for w in reader.warnings)
         topics = [
-            TopicReport(info.name, info.msgtype, stats.get(info.name, _TopicStats()).count,
+            TopicReport(info.name, info.schema or info.msgtype, stats.get(info.name, _TopicStats()).count,
                         _rate(stats.get(info.name)), role_of[info.name].value if info.name in role_of else None,
-                        roles.reasons.get(info.name) if info.name in role_of else _unused_hint(info))
+                        _read_as(info, roles.reasons.get(info.name) if info.name in role_of else _unused_hint(info)))
             for info in sorted(reader.topics.values(), key=lambda t: t.name)
         ]
         report = LogReport(

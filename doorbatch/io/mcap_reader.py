@@ -1,14 +1,16 @@
 """MCAP logs through the ``mcap`` library; ROS 2 CDR and ROS 1 payloads deserialized by rosbags.
 
 Each channel's schema (``ros2msg`` or ``ros1msg`` text, or ``ros2idl``) is parsed with rosbags into a typestore of
-the reader's own; channels whose encoding is not ROS (json, protobuf, ...) are listed but not decoded.
+the reader's own. Channels of Foxglove's schemas (``foxglove.LaserScan``, ... in protobuf or JSON, as the Foxglove SDK
+writes them; ``foxglove_msgs/msg/...`` in CDR or ROS 1) are read as the ROS 2 messages they stand for
+(:mod:`doorbatch.io.foxglove`); other channels whose encoding is not ROS are listed but not decoded.
 """
 
 from __future__ import annotations
 
 import heapq
 import logging
-from collections.abc import Collection, Iterator
+from collections.abc import Callable, Collection, Iterator
 from typing import IO, Any
 
 from mcap.exceptions import McapError
@@ -19,6 +21,7 @@ from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
 
 from doorbatch.errors import LogReadError
+from doorbatch.io import foxglove
 from doorbatch.io.reader import LogReader, RawMessage
 from doorbatch.io.roles import TopicInfo
 from doorbatch.io.typestore import normalize_msgtype, ros1_typestore, ros2_typestore, types_from_schema
@@ -47,6 +50,8 @@ class McapLogReader(LogReader):
         self._store_of: dict[int, Typestore] = {}
         self._msgtype: dict[int, str] = {}
         self._ros1: dict[int, bool] = {}
+        self._foxglove: dict[int, str] = {}  # channel → its Foxglove schema's kind (read as a ROS 2 message)
+        self._payload: dict[int, Callable[[bytes], Any]] = {}  # protobuf and JSON channels' decoders
         if summary is None:
             schemas, channels, counts, self._start, self._end = self._scan_unindexed()
         else:
@@ -60,15 +65,23 @@ class McapLogReader(LogReader):
         for cid, channel in channels.items():
             schema = schemas.get(channel.schema_id)
             name = normalize_msgtype(schema.name) if schema else ""
+            kind = foxglove.foxglove_kind(name)
             if channel.message_encoding in _ROS_ENCODINGS and schema is not None:
                 ros1 = _ROS_ENCODINGS[channel.message_encoding]
                 self._store_of[cid] = self._register_schema(ros1, name, schema.data.decode("utf-8", "replace"),
                                                             schema.encoding)
                 self._msgtype[cid] = name
                 self._ros1[cid] = ros1
+            elif kind is not None and schema is not None:
+                self._payload[cid] = foxglove.payload_decoder(schema, channel.message_encoding)
+                self._msgtype[cid] = name
+            if kind is not None and cid in self._msgtype:
+                self._foxglove[cid] = kind
+            shown = foxglove.ros_type(name) if cid in self._foxglove else None
             prev = topics.get(channel.topic)
             count = counts.get(cid, 0) + (prev.count if prev else 0)
-            topics[channel.topic] = TopicInfo(channel.topic, name, count, channel.message_encoding)
+            topics[channel.topic] = TopicInfo(channel.topic, shown or name, count, channel.message_encoding,
+                                              name if shown else "")
         self._topics = topics
 
     def _linear_messages(self, topics: list[str] | None, start_ns: int | None, stop_ns: int | None
@@ -182,9 +195,18 @@ class McapLogReader(LogReader):
             msgtype = self._msgtype.get(cid)
             if msgtype is None:
                 continue
-            ros1, store = self._ros1[cid], self._store_of[cid]
-            msg: Any = (store.deserialize_ros1 if ros1 else store.deserialize_cdr)(message.data, msgtype)
-            yield RawMessage(channel.topic, msgtype, message.log_time, msg, ros1, store)
+            payload = self._payload.get(cid)
+            msg: Any
+            if payload is not None:
+                msg = payload(message.data)
+            else:
+                ros1, store = self._ros1[cid], self._store_of[cid]
+                msg = (store.deserialize_ros1 if ros1 else store.deserialize_cdr)(message.data, msgtype)
+            kind = self._foxglove.get(cid)
+            if kind is None:
+                yield RawMessage(channel.topic, msgtype, message.log_time, msg, ros1, store)
+            else:
+                yield foxglove.as_ros_message(kind, msg, channel.topic, message.log_time, self.io_config)
 
 
 def _same_definition(store: Typestore, name: str, text: str, ros1: bool, encoding: str) -> bool:

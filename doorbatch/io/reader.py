@@ -116,8 +116,8 @@ class LogReader(ABC):
             for raw in self._raw(topics, start_ns, stop_ns):
                 topic = raw.topic
                 yield raw
-        except DoorbatchError:
-            raise
+        except DoorbatchError as err:
+            raise self._named(err) from None
         except Exception as err:
             raise LogReadError(f"log is truncated or corrupt ({type(err).__name__}: {err})",
                                path=self.path, topic=topic) from err

@@ -14,12 +14,15 @@ from doorbatch.records import Role
 
 @dataclass(frozen=True, slots=True)
 class TopicInfo:
-    """One topic of a log: name, normalized message type (``pkg/msg/Name``), message count, encoding."""
+    """One topic of a log: name, normalized message type (``pkg/msg/Name``), message count, encoding; ``schema``:
+    the log's own type name where its messages are read as ``msgtype`` (a Foxglove schema,
+    :mod:`~doorbatch.io.foxglove`), else empty."""
 
     name: str
     msgtype: str
     count: int
     encoding: str
+    schema: str = ""
 
 
 @dataclass(frozen=True)

@@ -207,23 +207,40 @@ def image_rgb8(stamp_ns: int, frame_id: str, pixels: npt.NDArray[np.uint8]) -> A
     """sensor_msgs/Image, encoding rgb8 (or mono8 for a 2-D array)."""
     h, w = pixels.shape[:2]
     mono = pixels.ndim == 2
+    return image(stamp_ns, frame_id, w, h, "mono8" if mono else "rgb8", w * (1 if mono else 3),
+                 np.ascontiguousarray(pixels).ravel())
+
+
+def image(stamp_ns: int, frame_id: str, width: int, height: int, encoding: str, step: int,
+          data: npt.ArrayLike) -> Any:
+    """sensor_msgs/Image of any encoding, its bytes as given (``step`` bytes per row)."""
     return _t("sensor_msgs/msg/Image")(
-        header=header(stamp_ns, frame_id), height=h, width=w, encoding="mono8" if mono else "rgb8",
-        is_bigendian=0, step=w * (1 if mono else 3), data=np.ascontiguousarray(pixels).ravel(),
+        header=header(stamp_ns, frame_id), height=int(height), width=int(width), encoding=encoding, is_bigendian=0,
+        step=int(step), data=np.asarray(data, dtype=np.uint8).ravel(),
     )
 
 
+def compressed_image(stamp_ns: int, frame_id: str, image_format: str, data: npt.ArrayLike) -> Any:
+    """sensor_msgs/CompressedImage (``image_format``: jpeg, png, ...)."""
+    return _t("sensor_msgs/msg/CompressedImage")(header=header(stamp_ns, frame_id), format=image_format,
+                                                 data=np.asarray(data, dtype=np.uint8).ravel())
+
+
 def camera_info(stamp_ns: int, frame_id: str, width: int, height: int, k: npt.ArrayLike,
-                d: npt.ArrayLike = (0.0, 0.0, 0.0, 0.0, 0.0), distortion_model: str = "plumb_bob") -> Any:
-    """sensor_msgs/CameraInfo of a pinhole camera (P = [K | 0], R = I)."""
+                d: npt.ArrayLike = (0.0, 0.0, 0.0, 0.0, 0.0), distortion_model: str = "plumb_bob",
+                p: npt.ArrayLike | None = None, r: npt.ArrayLike | None = None) -> Any:
+    """sensor_msgs/CameraInfo of a pinhole camera (P = [K | 0] and R = I unless given)."""
     kk = np.asarray(k, dtype=np.float64).reshape(3, 3)
-    p = np.zeros((3, 4))
-    p[:, :3] = kk
+    if p is None:
+        p = np.zeros((3, 4))
+        p[:, :3] = kk
+    p = np.asarray(p, dtype=np.float64).reshape(3, 4)
+    r = np.eye(3) if r is None else np.asarray(r, dtype=np.float64).reshape(3, 3)
     roi = _t("sensor_msgs/msg/RegionOfInterest")(x_offset=0, y_offset=0, height=0, width=0, do_rectify=False)
     return _t("sensor_msgs/msg/CameraInfo")(
         header=header(stamp_ns, frame_id), height=int(height), width=int(width),
         distortion_model=distortion_model, d=np.asarray(d, dtype=np.float64), k=kk.ravel(),
-        r=np.eye(3).ravel(), p=p.ravel(), binning_x=0, binning_y=0, roi=roi,
+        r=r.ravel(), p=p.ravel(), binning_x=0, binning_y=0, roi=roi,
     )
 
 

@@ -1,0 +1,245 @@
+"""Foxglove's message schemas read as the ROS 2 messages they stand for.
+
+Logs written without ROS, by the Foxglove SDK or by hand with ``mcap``, carry Foxglove's own schemas
+(https://docs.foxglove.dev/docs/visualization/message-schemas): ``foxglove.LaserScan``, ``foxglove.FrameTransform``
+and so on, encoded as protobuf (the SDK's choice) or JSON; ROS logs recorded through a Foxglove bridge carry the
+same schemas as ``foxglove_msgs/msg/...`` in CDR or ROS 1. Each message becomes the ROS 2 message (rosbags' class
+of :func:`~doorbatch.io.typestore.ros2_typestore`) that plays its role, so that roles, decoding, ``convert`` and the
+annotated MCAP treat it as any ROS log's:
+
+=====================  ==================================  ==============================================
+Foxglove schema        ROS 2 message                       notes
+=====================  ==================================  ==============================================
+LaserScan              sensor_msgs/msg/LaserScan           see :func:`laser_scan`
+Odometry               nav_msgs/msg/Odometry               planar: x, y, yaw of ``pose``, its covariance
+PoseInFrame            geometry_msgs/msg/PoseStamped       planar
+FrameTransform(s)      tf2_msgs/msg/TFMessage              every transform, 3D
+CompressedImage        sensor_msgs/msg/CompressedImage
+RawImage               sensor_msgs/msg/Image
+CameraCalibration      sensor_msgs/msg/CameraInfo          D, K, R, P as given
+=====================  ==================================  ==============================================
+
+One message reaches us in three shapes: a protobuf message (``timestamp.seconds``/``nanos``, ``bytes``), a JSON
+object (``timestamp.sec``/``nsec``, bytes as base64 text) or a rosbags object (``timestamp.sec``/``nanosec``,
+``uint8`` arrays); the accessors below read all three.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import math
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from mcap.records import Schema
+
+from doorbatch.config import IoConfig
+from doorbatch.errors import LogContentError, LogReadError
+from doorbatch.geometry.rotations import quaternion_to_matrix
+from doorbatch.io import ros_messages as rm
+from doorbatch.io.decode import (
+    CAMERA_INFO,
+    COMPRESSED_IMAGE,
+    IMAGE,
+    LASERSCAN,
+    ODOMETRY,
+    POSE_STAMPED,
+    TF_MESSAGE,
+    yaw_from_quaternion,
+)
+from doorbatch.io.reader import RawMessage
+
+_ROS_TYPE = {
+    "LaserScan": LASERSCAN,
+    "Odometry": ODOMETRY,
+    "PoseInFrame": POSE_STAMPED,
+    "FrameTransform": TF_MESSAGE,
+    "FrameTransforms": TF_MESSAGE,
+    "CompressedImage": COMPRESSED_IMAGE,
+    "RawImage": IMAGE,
+    "CameraCalibration": CAMERA_INFO,
+}
+# The names a schema has in each encoding: protobuf, JSON and FlatBuffers ``foxglove.X``, ROS ``foxglove_msgs/msg/X``.
+_PREFIXES = ("foxglove.", "foxglove_msgs/msg/")
+# A scan's origin may lie off the xy-plane by this much (rad of tilt, m of offset) and still be the plane's.
+_PLANAR_TOLERANCE = 1e-6
+
+
+def foxglove_kind(schema_name: str) -> str | None:
+    """``LaserScan`` for ``foxglove.LaserScan`` or ``foxglove_msgs/msg/LaserScan`` (a name :func:`ros_type` knows),
+    else None."""
+    for prefix in _PREFIXES:
+        if schema_name.startswith(prefix) and schema_name[len(prefix):] in _ROS_TYPE:
+            return schema_name[len(prefix):]
+    return None
+
+
+def ros_type(schema_name: str) -> str | None:
+    """The ROS 2 message type a Foxglove schema is read as (None: not one we read)."""
+    kind = foxglove_kind(schema_name)
+    return None if kind is None else _ROS_TYPE[kind]
+
+
+def payload_decoder(schema: Schema, message_encoding: str) -> Callable[[bytes], Any]:
+    """Bytes → the message of a protobuf or JSON channel: a protobuf message built by ``mcap-protobuf-support``
+    from the schema's FileDescriptorSet, or the parsed JSON object.
+
+    Raises:
+        LogReadError: an encoding other than protobuf or JSON, or a schema the protobuf library cannot load.
+    """
+    if message_encoding == "json":
+        return json.loads
+    if message_encoding == "protobuf":
+        from mcap_protobuf.decoder import DecoderFactory
+
+        try:
+            decoder = DecoderFactory().decoder_for(message_encoding, schema)
+        except Exception as err:  # a FileDescriptorSet that does not parse or resolve
+            raise LogReadError(f"cannot load the protobuf schema {schema.name} ({type(err).__name__}: {err})"
+                               ) from err
+        if decoder is None:
+            raise LogReadError(f"channel of {schema.name} is protobuf but its schema is {schema.encoding!r}")
+        return decoder
+    raise LogReadError(f"{schema.name} messages in {message_encoding!r} encoding are not read (protobuf, JSON, "
+                       "CDR and ROS 1 are)")
+
+
+def _get(msg: Any, name: str, default: Any = None) -> Any:
+    """Field ``name`` of a protobuf message, JSON object or rosbags message (``default`` where absent)."""
+    if isinstance(msg, dict):
+        return msg.get(name, default)
+    return getattr(msg, name, default)
+
+
+def _stamp_ns(msg: Any) -> int:
+    """The ``timestamp`` field in ns: protobuf ``seconds``/``nanos``, JSON ``sec``/``nsec``, ROS ``sec``/``nanosec``."""
+    t = _get(msg, "timestamp")
+    if t is None:
+        return 0
+    sec = _get(t, "sec", _get(t, "seconds", 0))
+    nsec = _get(t, "nanosec", _get(t, "nsec", _get(t, "nanos", 0)))
+    return int(sec) * 1_000_000_000 + int(nsec)
+
+
+def _floats(values: Any) -> npt.NDArray[np.float64]:
+    """A repeated number field as float64 (JSON writes non-finite numbers as null or as text such as "Infinity")."""
+    if values is None:
+        return np.zeros(0)
+    if isinstance(values, list) and any(v is None or isinstance(v, str) for v in values):
+        return np.array([math.nan if v is None else float(v) for v in values], dtype=np.float64)
+    return np.asarray(values, dtype=np.float64).ravel()
+
+
+def _bytes(values: Any) -> npt.NDArray[np.uint8]:
+    """A bytes field: protobuf ``bytes``, JSON base64 text, or a ROS ``uint8`` array."""
+    if values is None:
+        return np.zeros(0, dtype=np.uint8)
+    if isinstance(values, str):
+        return np.frombuffer(base64.b64decode(values), dtype=np.uint8)
+    if isinstance(values, bytes | bytearray | memoryview):
+        return np.frombuffer(bytes(values), dtype=np.uint8)
+    return np.asarray(values, dtype=np.uint8).ravel()
+
+
+def _xyz(v: Any) -> tuple[float, float, float]:
+    return (float(_get(v, "x", 0.0) or 0.0), float(_get(v, "y", 0.0) or 0.0), float(_get(v, "z", 0.0) or 0.0))
+
+
+def _quaternion(q: Any) -> npt.NDArray[np.float64]:
+    """(x, y, z, w) normalized; an unset quaternion (all zero, as protobuf leaves it) is the identity."""
+    if q is None:
+        return np.array([0.0, 0.0, 0.0, 1.0])
+    xyzw = np.array([*_xyz(q), float(_get(q, "w", 0.0) or 0.0)])
+    norm = float(np.linalg.norm(xyzw))
+    return xyzw / norm if norm > 0.0 else np.array([0.0, 0.0, 0.0, 1.0])
+
+
+def _planar(pose: Any) -> tuple[float, float, float]:
+    """x, y, yaw of a ``foxglove.Pose`` (``position``, ``orientation``)."""
+    x, y, _ = _xyz(_get(pose, "position"))
+    q = _quaternion(_get(pose, "orientation"))
+    return x, y, yaw_from_quaternion(*q)
+
+
+def laser_scan(msg: Any, topic: str, range_min_m: float) -> Any:
+    """``foxglove.LaserScan`` → sensor_msgs/LaserScan.
+
+    Beam i of n lies at ``start_angle + i · (end_angle − start_angle) / (n − 1)`` about the z axis of ``pose``, the
+    scan's origin in ``frame_id`` (Foxglove's schema). A rotation of that origin about z, upside down or not, is
+    folded into the angles: a beam at angle a in the origin points at φ + s·a in the frame, φ the origin's heading
+    and s = ±1 the sign of its z axis. An origin offset from the frame cannot be written as a LaserScan: it is an
+    error (log the scan in the laser's own frame, with the mount as a FrameTransform). The schema states no range
+    limits: ``range_min_m`` (``io.foxglove_range_min_m``) drops zeros, which drivers report for no echo, and
+    range_max is +inf, "not stated" to every stage (e.g. ``localize.laser_max_range_fallback``).
+
+    Raises:
+        LogContentError: an origin off the frame's origin or tilted out of its xy-plane.
+    """
+    pose = _get(msg, "pose")
+    origin = np.array(_xyz(_get(pose, "position"))) if pose is not None else np.zeros(3)
+    rot = quaternion_to_matrix(_quaternion(_get(pose, "orientation") if pose is not None else None))
+    if float(np.abs(origin).max()) > _PLANAR_TOLERANCE:
+        raise LogContentError(f"foxglove.LaserScan whose origin lies at ({origin[0]:.3f}, {origin[1]:.3f}, "
+                              f"{origin[2]:.3f}) m in its frame {_get(msg, 'frame_id', '')!r}: doorbatch needs the "
+                              "scan in the laser's own frame, with the mount as a FrameTransform", topic=topic)
+    if abs(abs(rot[2, 2]) - 1.0) > _PLANAR_TOLERANCE:
+        raise LogContentError("foxglove.LaserScan whose origin is tilted out of its frame's xy-plane", topic=topic)
+    sign = 1.0 if rot[2, 2] > 0.0 else -1.0
+    heading = math.atan2(rot[1, 0], rot[0, 0])
+    ranges = _floats(_get(msg, "ranges"))
+    n = ranges.shape[0]
+    start, end = float(_get(msg, "start_angle", 0.0) or 0.0), float(_get(msg, "end_angle", 0.0) or 0.0)
+    increment = (end - start) / (n - 1) if n > 1 else 0.0
+    intensities = _floats(_get(msg, "intensities"))
+    return rm.laser_scan(_stamp_ns(msg), str(_get(msg, "frame_id", "")), heading + sign * start, sign * increment,
+                         range_min_m, math.inf, ranges,
+                         intensities if intensities.shape[0] == n else None)
+
+
+def _transform(msg: Any) -> Any:
+    return rm.transform_stamped(_stamp_ns(msg), str(_get(msg, "parent_frame_id", "")),
+                                str(_get(msg, "child_frame_id", "")), _xyz(_get(msg, "translation")),
+                                _quaternion(_get(msg, "rotation")).tolist())
+
+
+def as_ros(kind: str, msg: Any, topic: str, range_min_m: float) -> Any:
+    """The ROS 2 message of ``msg``, a Foxglove message of schema ``kind`` (:func:`foxglove_kind`).
+
+    Raises:
+        LogContentError: a message that has no ROS form (:func:`laser_scan`).
+    """
+    if kind == "LaserScan":
+        return laser_scan(msg, topic, range_min_m)
+    if kind == "FrameTransform":
+        return rm.tf_message([_transform(msg)])
+    if kind == "FrameTransforms":
+        return rm.tf_message([_transform(t) for t in _get(msg, "transforms", None) or []])
+    stamp, frame = _stamp_ns(msg), str(_get(msg, "frame_id", ""))
+    if kind == "Odometry":
+        covariance = _floats(_get(msg, "pose_covariance"))
+        return rm.odometry(stamp, frame, str(_get(msg, "body_frame_id", "")), *_planar(_get(msg, "pose")),
+                           covariance=covariance if covariance.shape[0] == 36 else None)
+    if kind == "PoseInFrame":
+        return rm.pose_stamped(stamp, frame, *_planar(_get(msg, "pose")))
+    if kind == "CompressedImage":
+        return rm.compressed_image(stamp, frame, str(_get(msg, "format", "")), _bytes(_get(msg, "data")))
+    if kind == "RawImage":
+        return rm.image(stamp, frame, int(_get(msg, "width", 0)), int(_get(msg, "height", 0)),
+                        str(_get(msg, "encoding", "")), int(_get(msg, "step", 0)), _bytes(_get(msg, "data")))
+    if kind == "CameraCalibration":
+        k, p, r = (_floats(_get(msg, name)) for name in ("K", "P", "R"))
+        if k.shape[0] != 9:
+            raise LogContentError(f"foxglove.CameraCalibration with {k.shape[0]} values of K, not 9", topic=topic)
+        return rm.camera_info(stamp, frame, int(_get(msg, "width", 0)), int(_get(msg, "height", 0)), k,
+                              _floats(_get(msg, "D")), str(_get(msg, "distortion_model", "")),
+                              p=p if p.shape[0] == 12 else None, r=r if r.shape[0] == 9 else None)
+    raise ValueError(f"not a Foxglove schema doorbatch reads: {kind}")
+
+
+def as_ros_message(kind: str, msg: Any, topic: str, log_time_ns: int, config: IoConfig) -> RawMessage:
+    """A Foxglove message of one log's channel as the :class:`RawMessage` of its ROS 2 message (:func:`as_ros`)."""
+    return RawMessage(topic, _ROS_TYPE[kind], log_time_ns, as_ros(kind, msg, topic, config.foxglove_range_min_m),
+                      False, None)

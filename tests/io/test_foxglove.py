@@ -1,0 +1,330 @@
+"""Logs written without ROS: Foxglove's schemas in MCAP, as the Foxglove SDK writes them (protobuf) and as a
+hand-written writer does with ``mcap`` (JSON), read as the same log in ROS messages reads."""
+
+from __future__ import annotations
+
+import base64
+import json
+import math
+from collections.abc import Callable, Iterable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+from mcap.writer import Writer
+
+from doorbatch.cli import main
+from doorbatch.errors import LogContentError
+from doorbatch.geometry.laser import beam_masks
+from doorbatch.geometry.rotations import quaternion_to_matrix
+from doorbatch.io import foxglove as fx
+from doorbatch.io.decode import decode_scan
+from doorbatch.io.reader import open_log
+from doorbatch.io.recording import load_recording
+from doorbatch.records import CameraInfo, Image, Role, Scan, Transform
+from tests.conftest import REPO, Message, sample_messages
+
+foxglove = pytest.importorskip("foxglove")  # the test extra's Foxglove SDK: the writer these logs come from
+
+KEPT = ("/tf_static", "/tf", "/odom", "/ground_truth", "/scan", "/camera/image_raw", "/camera/camera_info")
+
+
+def _time(stamp: Any) -> dict[str, int]:
+    return {"sec": int(stamp.sec), "nsec": int(stamp.nanosec)}
+
+
+def _xyz(v: Any) -> dict[str, float]:
+    return {"x": float(v.x), "y": float(v.y), "z": float(v.z)}
+
+
+def _quat(q: Any) -> dict[str, float]:
+    return {**_xyz(q), "w": float(q.w)}
+
+
+def _pose(p: Any) -> dict[str, Any]:
+    return {"position": _xyz(p.position), "orientation": _quat(p.orientation)}
+
+
+def as_foxglove(msgs: Iterable[Message]) -> list[tuple[str, str, int, dict[str, Any]]]:
+    """The sample log as a non-ROS robot logs it with Foxglove's schemas, in their JSON form (bytes as base64):
+    every transform on /tf (the mounts once, at the start), odometry as foxglove.Odometry, the reference as
+    foxglove.PoseInFrame, scans, raw images and calibrations. Colors and detections have no Foxglove schema."""
+    out: list[tuple[str, str, int, dict[str, Any]]] = []
+    for topic, _msgtype, t, msg in msgs:
+        if topic not in KEPT:
+            continue
+        if topic in ("/tf", "/tf_static"):
+            out.append(("/tf", "FrameTransforms", t, {"transforms": [
+                {"timestamp": _time(ts.header.stamp), "parent_frame_id": ts.header.frame_id,
+                 "child_frame_id": ts.child_frame_id, "translation": _xyz(ts.transform.translation),
+                 "rotation": _quat(ts.transform.rotation)} for ts in msg.transforms]}))
+        elif topic == "/odom":
+            out.append((topic, "Odometry", t, {"timestamp": _time(msg.header.stamp), "frame_id": msg.header.frame_id,
+                                               "body_frame_id": msg.child_frame_id, "pose": _pose(msg.pose.pose)}))
+        elif topic == "/ground_truth":
+            out.append(("/pose", "PoseInFrame", t, {"timestamp": _time(msg.header.stamp),
+                                                    "frame_id": msg.header.frame_id, "pose": _pose(msg.pose.pose)}))
+        elif topic == "/scan":
+            n = len(msg.ranges)
+            out.append((topic, "LaserScan", t, {
+                "timestamp": _time(msg.header.stamp), "frame_id": msg.header.frame_id,
+                "start_angle": float(msg.angle_min), "end_angle": float(msg.angle_min + msg.angle_increment * (n - 1)),
+                "ranges": [float(r) for r in msg.ranges], "intensities": []}))
+        elif topic == "/camera/image_raw":
+            out.append(("/camera/image", "RawImage", t, {
+                "timestamp": _time(msg.header.stamp), "frame_id": msg.header.frame_id, "width": int(msg.width),
+                "height": int(msg.height), "encoding": msg.encoding, "step": int(msg.step),
+                "data": base64.b64encode(np.asarray(msg.data, dtype=np.uint8).tobytes()).decode()}))
+        else:
+            out.append(("/camera/calibration", "CameraCalibration", t, {
+                "timestamp": _time(msg.header.stamp), "frame_id": msg.header.frame_id, "width": int(msg.width),
+                "height": int(msg.height), "distortion_model": msg.distortion_model,
+                "D": [float(v) for v in msg.d], "K": [float(v) for v in msg.k], "R": [float(v) for v in msg.r],
+                "P": [float(v) for v in msg.p]}))
+    return out
+
+
+def _sdk_message(kind: str, d: dict[str, Any]) -> Any:
+    """The Foxglove SDK's message of a JSON-form dict."""
+    m = foxglove.messages
+
+    def build(name: str, value: Any) -> Any:
+        if name == "timestamp":
+            return m.Timestamp(**value)
+        if name in ("translation",):
+            return m.Vector3(**value)
+        if name in ("rotation", "orientation"):
+            return m.Quaternion(**value)
+        if name == "position":
+            return m.Vector3(**value)
+        if name == "pose":
+            return m.Pose(**{k: build(k, v) for k, v in value.items()})
+        if name == "transforms":
+            return [m.FrameTransform(**{k: build(k, v) for k, v in tf.items()}) for tf in value]
+        if name == "data":
+            return base64.b64decode(value)
+        return value
+
+    return getattr(m, kind)(**{k: build(k, v) for k, v in d.items()})
+
+
+def write_sdk(path: Path, msgs: list[tuple[str, str, int, dict[str, Any]]]) -> Path:
+    """An MCAP written by the Foxglove SDK (protobuf), each message at its log time."""
+    ctx = foxglove.Context()
+    writer = foxglove.open_mcap(path, allow_overwrite=True, context=ctx)
+    channels: dict[str, Any] = {}
+    for topic, kind, t, d in msgs:
+        if topic not in channels:
+            channels[topic] = getattr(foxglove.channels, f"{kind}Channel")(topic, context=ctx)
+        channels[topic].log(_sdk_message(kind, d), log_time=t)
+    for ch in channels.values():
+        ch.close()
+    writer.close()
+    return path
+
+
+def write_json(path: Path, msgs: list[tuple[str, str, int, dict[str, Any]]]) -> Path:
+    """An MCAP written by hand with ``mcap``: JSON messages under Foxglove's schema names (the schema text is the
+    writer's business; the name is what readers go by)."""
+    with path.open("wb") as f:
+        writer = Writer(f)
+        writer.start(profile="", library="hand-written")
+        schemas: dict[str, int] = {}
+        channels: dict[str, int] = {}
+        for topic, kind, t, d in msgs:
+            if kind not in schemas:
+                schemas[kind] = writer.register_schema(f"foxglove.{kind}", "jsonschema",
+                                                       json.dumps({"type": "object"}).encode())
+            if topic not in channels:
+                channels[topic] = writer.register_channel(topic, "json", schemas[kind])
+            writer.add_message(channels[topic], log_time=t, data=json.dumps(d).encode(), publish_time=t)
+        writer.finish()
+    return path
+
+
+@pytest.fixture(params=["protobuf", "json"])
+def foxglove_log(request: pytest.FixtureRequest, write_log: Callable[..., Path], tmp_path: Path
+                 ) -> tuple[Path, Path]:
+    """(the sample log in ROS messages, the same log in Foxglove's schemas)."""
+    msgs = sample_messages(12)
+    ros = write_log("ros.mcap", msgs)
+    write = write_sdk if request.param == "protobuf" else write_json
+    return ros, write(tmp_path / f"fox_{request.param}.mcap", as_foxglove(msgs))
+
+
+def test_a_foxglove_log_loads_as_the_same_recording(foxglove_log: tuple[Path, Path]) -> None:
+    ros, fox = foxglove_log
+    a, b = load_recording(ros), load_recording(fox)
+    np.testing.assert_array_equal(a.scans.stamps_ns, b.scans.stamps_ns)
+    for ra, rb in zip(a.scans.ranges, b.scans.ranges, strict=True):
+        np.testing.assert_array_equal(ra, rb)  # NaN (no information) and inf (no return) kept as they were
+    np.testing.assert_allclose(a.scans.angle_min, b.scans.angle_min, atol=1e-6)
+    np.testing.assert_allclose(a.scans.angle_increment, b.scans.angle_increment, atol=1e-7)
+    # The laser mount, logged once on /tf as Foxglove logs it, holds at every scan (a constant edge).
+    np.testing.assert_allclose(a.scans.laser_to_base, b.scans.laser_to_base, atol=1e-12)
+    assert a.odometry is not None and b.odometry is not None
+    np.testing.assert_array_equal(a.odometry.stamps_ns, b.odometry.stamps_ns)
+    np.testing.assert_allclose(a.odometry.poses, b.odometry.poses, atol=1e-9)
+    assert a.reference is not None and b.reference is not None
+    np.testing.assert_allclose(a.reference.poses, b.reference.poses, atol=1e-9)
+    assert np.isinf(b.scans.range_max).all()  # the schema states no maximum range
+
+
+def test_foxglove_images_and_calibrations_read_as_ros_ones(foxglove_log: tuple[Path, Path]) -> None:
+    ros, fox = foxglove_log
+
+    def records(path: Path) -> tuple[list[Image], list[CameraInfo]]:
+        with open_log(path) as reader:
+            got = [item.record for item in reader.messages([Role.IMAGE, Role.CAMERA_INFO])]
+        return [r for r in got if isinstance(r, Image)], [r for r in got if isinstance(r, CameraInfo)]
+
+    (ia, ca), (ib, cb) = records(ros), records(fox)
+    assert len(ia) == len(ib) == 12 and len(ca) == len(cb) == 1
+    for x, y in zip(ia, ib, strict=True):
+        assert (x.stamp_ns, x.frame_id, x.encoding) == (y.stamp_ns, y.frame_id, y.encoding)
+        np.testing.assert_array_equal(x.pixels, y.pixels)
+    np.testing.assert_array_equal(ca[0].k, cb[0].k)
+    np.testing.assert_array_equal(ca[0].p, cb[0].p)
+
+
+def test_inspect_names_the_foxglove_schema_and_the_role(foxglove_log: tuple[Path, Path],
+                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    _, fox = foxglove_log
+    assert main(["inspect", str(fox), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    topics = {t["name"]: t for t in report["topics"]}
+    assert topics["/scan"]["msgtype"] == "foxglove.LaserScan" and topics["/scan"]["role"] == "scan"
+    assert "read as sensor_msgs/msg/LaserScan" in topics["/scan"]["why"]
+    assert topics["/odom"]["role"] == "odometry" and topics["/pose"]["role"] == "reference"
+
+
+def test_convert_writes_a_foxglove_log_as_ros_messages(foxglove_log: tuple[Path, Path], tmp_path: Path) -> None:
+    _, fox = foxglove_log
+    out = tmp_path / "converted.mcap"
+    assert main(["convert", str(fox), "-o", str(out)]) == 0
+    a, b = load_recording(fox), load_recording(out)
+    for ra, rb in zip(a.scans.ranges, b.scans.ranges, strict=True):
+        np.testing.assert_array_equal(ra, rb)
+    assert a.odometry is not None and b.odometry is not None
+    np.testing.assert_allclose(a.odometry.poses, b.odometry.poses, atol=1e-9)
+
+
+def _scan_endpoints(scan: Scan) -> np.ndarray:
+    hit = np.isfinite(scan.ranges)
+    return np.stack([scan.ranges[hit] * np.cos(scan.angles[hit]), scan.ranges[hit] * np.sin(scan.angles[hit])], 1)
+
+
+@pytest.mark.parametrize("axis,angle", [((0, 0, 1), 0.7), ((0, 0, 1), -2.5), ((1, 0, 0), math.pi),
+                                        ((0, 1, 0), math.pi)])
+def test_a_scan_origin_rotated_in_its_plane_puts_every_point_where_foxglove_draws_it(
+        axis: tuple[int, int, int], angle: float) -> None:
+    """Foxglove draws beam i at R(pose)·(r cos a_i, r sin a_i, 0): about z (any heading) or upside down (half turns
+    about x or y), the scan read as a LaserScan puts each point there."""
+    rng = np.random.default_rng(3)
+    ranges = rng.uniform(0.5, 8.0, 37)
+    ranges[5] = np.inf
+    start, end = -1.9, 2.2
+    s, c = math.sin(angle / 2), math.cos(angle / 2)
+    q = {"x": axis[0] * s, "y": axis[1] * s, "z": axis[2] * s, "w": c}
+    msg = {"timestamp": {"sec": 1, "nsec": 5}, "frame_id": "laser", "pose": {"orientation": q},
+           "start_angle": start, "end_angle": end, "ranges": [float(r) for r in ranges]}
+    scan = decode_scan(fx.as_ros("LaserScan", msg, "/scan", 0.02), 0, "/scan")
+    a = np.linspace(start, end, 37)
+    local = np.stack([ranges * np.cos(a), ranges * np.sin(a), np.zeros(37)], 1)[np.isfinite(ranges)]
+    drawn = local @ quaternion_to_matrix([q["x"], q["y"], q["z"], q["w"]]).T
+    np.testing.assert_allclose(_scan_endpoints(scan), drawn[:, :2], atol=1e-5)
+    assert scan.stamp_ns == 1_000_000_005
+
+
+def test_a_scan_origin_off_its_frame_is_a_clear_error(write_log: Callable[..., Path], tmp_path: Path) -> None:
+    msgs = as_foxglove(sample_messages(3))
+    for topic, _kind, _t, d in msgs:
+        if topic == "/scan":
+            d["pose"] = {"position": {"x": 0.2, "y": 0.0, "z": 0.3}, "orientation": {"w": 1.0}}
+    fox = write_json(tmp_path / "offset.mcap", msgs)
+    with pytest.raises(LogContentError, match=r"origin lies at \(0.200, 0.000, 0.300\).*FrameTransform") as err:
+        load_recording(fox)
+    assert str(fox) in str(err.value)
+
+
+def test_json_nulls_and_zero_ranges_carry_no_hit() -> None:
+    """Strict JSON writes NaN as null; a zero reading (a driver's "no echo") is below the default range_min."""
+    msg = {"frame_id": "laser", "start_angle": 0.0, "end_angle": 1.0, "ranges": [1.0, None, 0.0, 2.0, 1e9]}
+    hit, no_return = beam_masks(decode_scan(fx.as_ros("LaserScan", msg, "/scan", 0.02), 0, "/scan"))
+    assert hit.tolist() == [True, False, False, True, True]  # no maximum stated: any finite reading is a hit
+    assert not no_return.any()
+
+
+def test_the_sample_passes_logged_by_the_foxglove_sdk_map_to_the_same_doors(tmp_path: Path) -> None:
+    """End to end: the three sample mapping passes rewritten as a robot without ROS logs them (protobuf, the mount
+    once on /tf, the reference as foxglove.PoseInFrame) give `doorbatch map` the same grid and the same doors."""
+    logs = sorted((REPO / "datasets" / "sample" / "logs").glob("map_pass*.mcap"))
+    fox = []
+    for log in logs:
+        with open_log(log) as reader:
+            msgs = [(r.topic, r.msgtype, r.log_time_ns, r.msg) for r in reader.raw_messages()]
+        fox.append(write_sdk(tmp_path / log.name, as_foxglove(msgs)))
+    for name, inputs in (("ros", logs), ("fox", fox)):
+        assert main(["map", *map(str, inputs), "-o", str(tmp_path / name), "--stages", "grid", "-q"]) == 0
+    doors = [pq.read_table(tmp_path / name / "doors.parquet") for name in ("ros", "fox")]
+    assert doors[0].num_rows >= 5 and doors[0].equals(doors[1])
+    assert (tmp_path / "ros" / "map.pgm").read_bytes() == (tmp_path / "fox" / "map.pgm").read_bytes()
+    manifest = json.loads((tmp_path / "fox" / "manifest.json").read_text())
+    assert manifest["extra"]["pose_source"] == "reference"
+
+
+_FOXGLOVE_MSGS = {  # foxglove_msgs 3.x, as ros2 bag record puts their definitions in an MCAP
+    "foxglove_msgs/msg/LaserScan": "builtin_interfaces/Time timestamp\nstring frame_id\ngeometry_msgs/Pose pose\n"
+                                   "float64 start_angle\nfloat64 end_angle\nfloat64[] ranges\nfloat64[] intensities\n",
+    "foxglove_msgs/msg/FrameTransform": "builtin_interfaces/Time timestamp\nstring parent_frame_id\n"
+                                        "string child_frame_id\ngeometry_msgs/Vector3 translation\n"
+                                        "geometry_msgs/Quaternion rotation\n",
+}
+
+
+def test_foxglove_msgs_recorded_by_ros2_read_like_their_protobuf_form(tmp_path: Path) -> None:
+    """A ROS 2 recording through a Foxglove bridge holds foxglove_msgs/msg/... in CDR: read as the same messages."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    for name, text in _FOXGLOVE_MSGS.items():
+        store.register(get_types_from_msg(text, name))
+    t = store.types
+    stamp = t["builtin_interfaces/msg/Time"](sec=7, nanosec=250)
+    quat = t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=math.sin(0.3), w=math.cos(0.3))
+    ranges = np.array([1.0, np.inf, 2.5, np.nan, 3.0])
+    scan = t["foxglove_msgs/msg/LaserScan"](
+        timestamp=stamp, frame_id="laser",
+        pose=t["geometry_msgs/msg/Pose"](position=t["geometry_msgs/msg/Point"](x=0.0, y=0.0, z=0.0), orientation=quat),
+        start_angle=-1.0, end_angle=1.0, ranges=ranges, intensities=np.zeros(0))
+    mount = t["foxglove_msgs/msg/FrameTransform"](
+        timestamp=stamp, parent_frame_id="base_link", child_frame_id="laser",
+        translation=t["geometry_msgs/msg/Vector3"](x=0.1, y=0.0, z=0.2), rotation=quat)
+    path = tmp_path / "bridge.mcap"
+    with path.open("wb") as f:
+        writer = Writer(f)
+        writer.start(profile="ros2", library="test")
+        for topic, name, msg in (("/tf", "foxglove_msgs/msg/FrameTransform", mount),
+                                 ("/scan", "foxglove_msgs/msg/LaserScan", scan)):
+            sid = writer.register_schema(name, "ros2msg", store.generate_msgdef(name, ros_version=2)[0].encode())
+            cid = writer.register_channel(topic, "cdr", sid)
+            writer.add_message(cid, log_time=7_000_000_250, data=bytes(store.serialize_cdr(msg, name)),
+                               publish_time=7_000_000_250)
+        writer.finish()
+    with open_log(path) as reader:
+        assert reader.topics["/scan"].msgtype == "sensor_msgs/msg/LaserScan"
+        assert reader.topics["/scan"].schema == "foxglove_msgs/msg/LaserScan"
+        got = [item.record for item in reader.messages([Role.SCAN, Role.TRANSFORMS])]
+    scans = [r for r in got if isinstance(r, Scan)]
+    expected = decode_scan(fx.as_ros("LaserScan", {
+        "timestamp": {"sec": 7, "nsec": 250}, "frame_id": "laser", "start_angle": -1.0, "end_angle": 1.0,
+        "pose": {"orientation": {"z": math.sin(0.3), "w": math.cos(0.3)}}, "ranges": ranges.tolist()}, "/scan", 0.02),
+        0, "/scan")
+    assert len(scans) == 1 and scans[0].stamp_ns == 7_000_000_250
+    np.testing.assert_array_equal(scans[0].ranges, expected.ranges)
+    assert scans[0].angle_min == pytest.approx(-1.0 + 0.6) and expected.angle_min == pytest.approx(-1.0 + 0.6)
+    tfs = [r for r in got if isinstance(r, Transform)]
+    assert [(x.parent, x.child) for x in tfs] == [("base_link", "laser")]
+    np.testing.assert_allclose(tfs[0].translation, [0.1, 0.0, 0.2])
