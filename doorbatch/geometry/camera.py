@@ -184,7 +184,7 @@ def scan_in_camera(scan: Scan, tf: TfBuffer, camera_frame: str) -> tuple[FloatAr
         TransformError: no transform from the laser frame to the camera frame at the scan's stamp.
     """
     pts, idx = scan_points_3d(scan)
-    return transform_points(tf.lookup(camera_frame, scan.frame_id, scan.stamp_ns), pts), idx
+    return transform_points(tf.lookup(camera_frame, scan.frame_id, scan.stamp_ns, hold_constant=True), pts), idx
 
 
 def in_image(camera: PinholeCamera, pixels: FloatArray) -> npt.NDArray[np.bool_]:

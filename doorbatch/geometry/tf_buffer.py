@@ -3,8 +3,10 @@
 Each child frame has one parent (as in tf2). A dynamic edge keeps its stamped transforms sorted by
 time; a lookup at time t interpolates translation linearly and rotation by slerp between the two
 neighbouring stamps, and clamps to the end stamp within ``extrapolation_limit_ns`` (tf2 would refuse).
-A dynamic edge whose every transform is the same (a mount logged once, or again and again, on a dynamic
-topic: writers without ROS's /tf_static do so, and Foxglove clamps such lookups) holds at any time.
+A sensor-mount lookup (``hold_constant``) takes a dynamic edge whose every transform is the same (a mount
+logged once, or again and again, on a dynamic topic: writers without ROS's /tf_static do so, and Foxglove
+clamps such lookups) as holding at any time; a pose lookup keeps the limit, so that no pose is made up
+where the edge has no data.
 """
 
 from __future__ import annotations
@@ -43,8 +45,8 @@ class _Edge:
         self.rotations.insert(i, tf.rotation_xyzw)
         self.log_times.insert(i, tf.log_time_ns)
 
-    def at(self, stamp_ns: int, limit_ns: int, child: str) -> FloatArray:
-        if self.static or self.constant:
+    def at(self, stamp_ns: int, limit_ns: int, child: str, hold_constant: bool = False) -> FloatArray:
+        if self.static or (hold_constant and self.constant):
             return transform_matrix(self.translations[-1], self.rotations[-1])
         stamps = self.stamps
         i = bisect.bisect_left(stamps, stamp_ns)
@@ -126,8 +128,9 @@ class TfBuffer:
             return True
         return bool(set(self.chain(target)) & set(self.chain(source)))
 
-    def lookup(self, target: str, source: str, stamp_ns: int) -> FloatArray:
-        """4×4 transform taking points in ``source`` to ``target`` at ``stamp_ns``.
+    def lookup(self, target: str, source: str, stamp_ns: int, hold_constant: bool = False) -> FloatArray:
+        """4×4 transform taking points in ``source`` to ``target`` at ``stamp_ns``; ``hold_constant``: a sensor
+        mount's lookup, for which a dynamic edge that never changed holds at any time.
 
         Raises:
             TransformError: the frames are not connected, or a dynamic edge has no data near the time.
@@ -140,8 +143,10 @@ class TfBuffer:
             raise TransformError(f"no transform from frame {source!r} to {target!r}")
         src_to_common = np.eye(4)
         for child in up_src[: up_src.index(common)]:
-            src_to_common = self._edges[child].at(stamp_ns, self.extrapolation_limit_ns, child) @ src_to_common
+            src_to_common = self._edges[child].at(stamp_ns, self.extrapolation_limit_ns, child,
+                                                  hold_constant) @ src_to_common
         tgt_to_common = np.eye(4)
         for child in up_tgt[: up_tgt.index(common)]:
-            tgt_to_common = self._edges[child].at(stamp_ns, self.extrapolation_limit_ns, child) @ tgt_to_common
+            tgt_to_common = self._edges[child].at(stamp_ns, self.extrapolation_limit_ns, child,
+                                                  hold_constant) @ tgt_to_common
         return invert_transform(tgt_to_common) @ src_to_common

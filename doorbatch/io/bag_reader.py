@@ -69,12 +69,8 @@ class _AnyBagReader(LogReader):
                 raise LogReadError(f"cannot decode a {conn.msgtype} message ({type(err).__name__}: {err}); its "
                                    f"definition may differ from ROS 2 Humble's", path=self.path,
                                    topic=conn.topic) from err
-            name = normalize_msgtype(conn.msgtype)
-            kind = foxglove.foxglove_kind(name)
-            if kind is None:
-                yield RawMessage(conn.topic, name, int(log_time), msg, self._ros1, reader.typestore)
-            else:
-                yield foxglove.as_ros_message(kind, msg, conn.topic, int(log_time), self.io_config)
+            yield RawMessage(conn.topic, normalize_msgtype(conn.msgtype), int(log_time), msg, self._ros1,
+                             reader.typestore)
 
 
 class Rosbag1Reader(_AnyBagReader):

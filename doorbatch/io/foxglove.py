@@ -30,6 +30,7 @@ import base64
 import json
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -50,7 +51,6 @@ from doorbatch.io.decode import (
     TF_MESSAGE,
     yaw_from_quaternion,
 )
-from doorbatch.io.reader import RawMessage
 
 _ROS_TYPE = {
     "LaserScan": LASERSCAN,
@@ -64,7 +64,8 @@ _ROS_TYPE = {
 }
 # The names a schema has in each encoding: protobuf, JSON and FlatBuffers ``foxglove.X``, ROS ``foxglove_msgs/msg/X``.
 _PREFIXES = ("foxglove.", "foxglove_msgs/msg/")
-# A scan's origin may lie off the xy-plane by this much (rad of tilt, m of offset) and still be the plane's.
+# Round-off allowed in a scan origin: its offset (m) from the frame's origin, and 1 − |R_zz| (a tilt of
+# √(2·1e-6) ≈ 1.4 mrad) out of the frame's xy-plane.
 _PLANAR_TOLERANCE = 1e-6
 
 
@@ -108,10 +109,9 @@ def payload_decoder(schema: Schema, message_encoding: str) -> Callable[[bytes], 
 
 
 def _get(msg: Any, name: str, default: Any = None) -> Any:
-    """Field ``name`` of a protobuf message, JSON object or rosbags message (``default`` where absent)."""
-    if isinstance(msg, dict):
-        return msg.get(name, default)
-    return getattr(msg, name, default)
+    """Field ``name`` of a protobuf message, JSON object or rosbags message (``default`` where absent or null)."""
+    value = msg.get(name) if isinstance(msg, dict) else getattr(msg, name, None)
+    return default if value is None else value  # JSON's null is an absent field
 
 
 def _stamp_ns(msg: Any) -> int:
@@ -138,21 +138,21 @@ def _bytes(values: Any) -> npt.NDArray[np.uint8]:
     if values is None:
         return np.zeros(0, dtype=np.uint8)
     if isinstance(values, str):
-        return np.frombuffer(base64.b64decode(values), dtype=np.uint8)
+        return np.frombuffer(base64.b64decode(values, validate=True), dtype=np.uint8)
     if isinstance(values, bytes | bytearray | memoryview):
         return np.frombuffer(bytes(values), dtype=np.uint8)
     return np.asarray(values, dtype=np.uint8).ravel()
 
 
 def _xyz(v: Any) -> tuple[float, float, float]:
-    return (float(_get(v, "x", 0.0) or 0.0), float(_get(v, "y", 0.0) or 0.0), float(_get(v, "z", 0.0) or 0.0))
+    return (float(_get(v, "x", 0.0)), float(_get(v, "y", 0.0)), float(_get(v, "z", 0.0)))
 
 
 def _quaternion(q: Any) -> npt.NDArray[np.float64]:
     """(x, y, z, w) normalized; an unset quaternion (all zero, as protobuf leaves it) is the identity."""
     if q is None:
         return np.array([0.0, 0.0, 0.0, 1.0])
-    xyzw = np.array([*_xyz(q), float(_get(q, "w", 0.0) or 0.0)])
+    xyzw = np.array([*_xyz(q), float(_get(q, "w", 0.0))])
     norm = float(np.linalg.norm(xyzw))
     return xyzw / norm if norm > 0.0 else np.array([0.0, 0.0, 0.0, 1.0])
 
@@ -191,8 +191,10 @@ def laser_scan(msg: Any, topic: str, range_min_m: float) -> Any:
     heading = math.atan2(rot[1, 0], rot[0, 0])
     ranges = _floats(_get(msg, "ranges"))
     n = ranges.shape[0]
-    start, end = float(_get(msg, "start_angle", 0.0) or 0.0), float(_get(msg, "end_angle", 0.0) or 0.0)
-    increment = (end - start) / (n - 1) if n > 1 else 0.0
+    if n == 0:
+        raise LogContentError("foxglove.LaserScan with no ranges", topic=topic)
+    start, end = float(_get(msg, "start_angle", 0.0)), float(_get(msg, "end_angle", 0.0))
+    increment = (end - start) / (n - 1) if n > 1 else 1.0  # one beam: any increment describes it
     intensities = _floats(_get(msg, "intensities"))
     return rm.laser_scan(_stamp_ns(msg), str(_get(msg, "frame_id", "")), heading + sign * start, sign * increment,
                          range_min_m, math.inf, ranges,
@@ -230,16 +232,38 @@ def as_ros(kind: str, msg: Any, topic: str, range_min_m: float) -> Any:
         return rm.image(stamp, frame, int(_get(msg, "width", 0)), int(_get(msg, "height", 0)),
                         str(_get(msg, "encoding", "")), int(_get(msg, "step", 0)), _bytes(_get(msg, "data")))
     if kind == "CameraCalibration":
-        k, p, r = (_floats(_get(msg, name)) for name in ("K", "P", "R"))
+        k, p, r, d = (_floats(_get(msg, name, _get(msg, name.lower()))) for name in ("K", "P", "R", "D"))
         if k.shape[0] != 9:
             raise LogContentError(f"foxglove.CameraCalibration with {k.shape[0]} values of K, not 9", topic=topic)
         return rm.camera_info(stamp, frame, int(_get(msg, "width", 0)), int(_get(msg, "height", 0)), k,
-                              _floats(_get(msg, "D")), str(_get(msg, "distortion_model", "")),
+                              d, str(_get(msg, "distortion_model", "")),
                               p=p if p.shape[0] == 12 else None, r=r if r.shape[0] == 9 else None)
     raise ValueError(f"not a Foxglove schema doorbatch reads: {kind}")
 
 
-def as_ros_message(kind: str, msg: Any, topic: str, log_time_ns: int, config: IoConfig) -> RawMessage:
-    """A Foxglove message of one log's channel as the :class:`RawMessage` of its ROS 2 message (:func:`as_ros`)."""
-    return RawMessage(topic, _ROS_TYPE[kind], log_time_ns, as_ros(kind, msg, topic, config.foxglove_range_min_m),
-                      False, None)
+@dataclass(frozen=True, slots=True)
+class Payload:
+    """A protobuf or JSON message not decoded yet: its channel's decoder (:func:`payload_decoder`) and its bytes."""
+
+    decode: Callable[[bytes], Any]
+    data: bytes
+
+
+def as_ros_message(kind: str, msg: Any, topic: str, config: IoConfig) -> tuple[str, Any]:
+    """(ROS 2 message type, ROS 2 message) of one Foxglove message of schema ``kind``: a rosbags object of
+    ``foxglove_msgs``, or a :class:`Payload` decoded here (:func:`as_ros`).
+
+    Raises:
+        LogContentError: a message that does not decode, is not an object, or has no ROS form.
+    """
+    try:
+        if isinstance(msg, Payload):
+            msg = msg.decode(msg.data)
+        if isinstance(msg, list | str | int | float | bool) or msg is None:  # JSON that is not an object
+            raise LogContentError(f"foxglove.{kind} message is JSON {type(msg).__name__}, not an object", topic=topic)
+        return _ROS_TYPE[kind], as_ros(kind, msg, topic, config.foxglove_range_min_m)
+    except LogContentError:
+        raise
+    except Exception as err:  # bad JSON, protobuf bytes, base64, or field values of the wrong kind
+        raise LogContentError(f"unreadable foxglove.{kind} message ({type(err).__name__}: {err})",
+                              topic=topic) from err

@@ -50,7 +50,6 @@ class McapLogReader(LogReader):
         self._store_of: dict[int, Typestore] = {}
         self._msgtype: dict[int, str] = {}
         self._ros1: dict[int, bool] = {}
-        self._foxglove: dict[int, str] = {}  # channel → its Foxglove schema's kind (read as a ROS 2 message)
         self._payload: dict[int, Callable[[bytes], Any]] = {}  # protobuf and JSON channels' decoders
         if summary is None:
             schemas, channels, counts, self._start, self._end = self._scan_unindexed()
@@ -73,11 +72,12 @@ class McapLogReader(LogReader):
                 self._msgtype[cid] = name
                 self._ros1[cid] = ros1
             elif kind is not None and schema is not None:
-                self._payload[cid] = foxglove.payload_decoder(schema, channel.message_encoding)
-                self._msgtype[cid] = name
-            if kind is not None and cid in self._msgtype:
-                self._foxglove[cid] = kind
-            shown = foxglove.ros_type(name) if cid in self._foxglove else None
+                try:
+                    self._payload[cid] = foxglove.payload_decoder(schema, channel.message_encoding)
+                    self._msgtype[cid] = name
+                except LogReadError as err:  # the channel is listed, unread, as any channel we cannot decode
+                    self.warnings.append(f"{self.path}: {channel.topic}: {err.reason}; not read")
+            shown = foxglove.ros_type(name) if cid in self._msgtype else None
             prev = topics.get(channel.topic)
             count = counts.get(cid, 0) + (prev.count if prev else 0)
             topics[channel.topic] = TopicInfo(channel.topic, shown or name, count, channel.message_encoding,
@@ -196,17 +196,13 @@ class McapLogReader(LogReader):
             if msgtype is None:
                 continue
             payload = self._payload.get(cid)
-            msg: Any
-            if payload is not None:
-                msg = payload(message.data)
-            else:
-                ros1, store = self._ros1[cid], self._store_of[cid]
-                msg = (store.deserialize_ros1 if ros1 else store.deserialize_cdr)(message.data, msgtype)
-            kind = self._foxglove.get(cid)
-            if kind is None:
-                yield RawMessage(channel.topic, msgtype, message.log_time, msg, ros1, store)
-            else:
-                yield foxglove.as_ros_message(kind, msg, channel.topic, message.log_time, self.io_config)
+            if payload is not None:  # a Foxglove schema in protobuf or JSON: decoded where it is read as ROS
+                yield RawMessage(channel.topic, msgtype, message.log_time, foxglove.Payload(payload, message.data),
+                                 False, None)
+                continue
+            ros1, store = self._ros1[cid], self._store_of[cid]
+            msg: Any = (store.deserialize_ros1 if ros1 else store.deserialize_cdr)(message.data, msgtype)
+            yield RawMessage(channel.topic, msgtype, message.log_time, msg, ros1, store)
 
 
 def _same_definition(store: Typestore, name: str, text: str, ros1: bool, encoding: str) -> bool:

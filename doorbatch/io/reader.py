@@ -22,6 +22,7 @@ from rosbags.typesys.store import Typestore
 
 from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import DoorbatchError, LogContentError, LogReadError
+from doorbatch.io import foxglove
 from doorbatch.io.decode import decode
 from doorbatch.io.roles import RoleAssignment, TopicInfo, assign_roles
 from doorbatch.records import Role, RoleMessage
@@ -110,17 +111,40 @@ class LogReader(ABC):
 
     def raw_messages(self, topics: Collection[str] | None = None, start_ns: int | None = None,
                      stop_ns: int | None = None) -> Iterator[RawMessage]:
-        """Deserialized messages in log-time order; library errors become :class:`LogReadError`."""
+        """Deserialized messages in log-time order; library errors become :class:`LogReadError`. A message of a
+        Foxglove schema comes as the ROS 2 message it stands for (:mod:`doorbatch.io.foxglove`); one that cannot
+        be read is skipped as :meth:`messages` skips one that cannot be decoded."""
         topic = None
+        seen: Counter[str] = Counter()
+        bad: dict[str, list[LogContentError]] = {}
         try:
             for raw in self._raw(topics, start_ns, stop_ns):
                 topic = raw.topic
+                kind = foxglove.foxglove_kind(raw.msgtype)
+                if kind is not None:
+                    seen[topic] += 1
+                    try:
+                        msgtype, msg = foxglove.as_ros_message(kind, raw.msg, topic, self.io_config)
+                    except LogContentError as err:
+                        bad.setdefault(topic, []).append(self._named(err))
+                        continue
+                    raw = RawMessage(topic, msgtype, raw.log_time_ns, msg, False, None)
                 yield raw
         except DoorbatchError as err:
             raise self._named(err) from None
         except Exception as err:
             raise LogReadError(f"log is truncated or corrupt ({type(err).__name__}: {err})",
                                path=self.path, topic=topic) from err
+        self._skipped(bad, seen)
+
+    def _skipped(self, bad: dict[str, list[LogContentError]], seen: Counter[str]) -> None:
+        """After a complete pass: a topic whose messages could not be read raises the first one's error when they
+        are most of its messages (:func:`most_are_bad`), else gets a warning in ``warnings``."""
+        for topic, errors in bad.items():
+            if most_are_bad(len(errors), seen[topic]):
+                raise errors[0]
+            self.warnings.append(f"{self.path}: {len(errors)} of {seen[topic]} messages on {topic} skipped, "
+                                 f"unusable (first: {errors[0].reason})")
 
     @property
     def roles(self) -> RoleAssignment:
@@ -164,11 +188,7 @@ class LogReader(ABC):
                 raise self._named(err) from None
             for record in records:
                 yield RoleMessage(role, raw.topic, record)
-        for topic, errors in bad.items():
-            if most_are_bad(len(errors), seen[topic]):
-                raise errors[0]
-            self.warnings.append(f"{self.path}: {len(errors)} of {seen[topic]} messages on {topic} skipped, "
-                                 f"unusable (first: {errors[0].reason})")
+        self._skipped(bad, seen)
 
     def _named(self, err: E) -> E:
         """``err`` naming this log's file when it names none yet."""

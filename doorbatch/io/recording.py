@@ -252,7 +252,8 @@ def base_pose_series(poses: list[Pose2D], tf: TfBuffer, base: str) -> PoseSeries
             kept.append(p)
         elif how:
             try:
-                x, y, yaw = compose((p.x, p.y, p.yaw), _planar(tf.lookup(child, base, p.stamp_ns)))
+                x, y, yaw = compose((p.x, p.y, p.yaw), _planar(tf.lookup(child, base, p.stamp_ns,
+                                                                                  hold_constant=True)))
             except TransformError:
                 continue
             kept.append(replace(p, child_frame_id=base, x=float(x), y=float(y), yaw=float(yaw)))
@@ -279,7 +280,7 @@ def _planar_affine(tf: TfBuffer, base: str, frame: str, stamp_ns: int, assume_id
     if frame == base:
         return np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
     try:
-        mat = tf.lookup(base, frame, stamp_ns)
+        mat = tf.lookup(base, frame, stamp_ns, hold_constant=True)
     except TransformError:
         if assume_identity:
             return np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])

@@ -16,6 +16,7 @@ import pytest
 from mcap.writer import Writer
 
 from doorbatch.cli import main
+from doorbatch.config import IoConfig
 from doorbatch.errors import LogContentError
 from doorbatch.geometry.laser import beam_masks
 from doorbatch.geometry.rotations import quaternion_to_matrix
@@ -24,7 +25,7 @@ from doorbatch.io.decode import decode_scan
 from doorbatch.io.reader import open_log
 from doorbatch.io.recording import load_recording
 from doorbatch.records import CameraInfo, Image, Role, Scan, Transform
-from tests.conftest import REPO, Message, sample_messages
+from tests.conftest import REPO, T0, Message, sample_messages
 
 foxglove = pytest.importorskip("foxglove")  # the test extra's Foxglove SDK: the writer these logs come from
 
@@ -125,23 +126,36 @@ def write_sdk(path: Path, msgs: list[tuple[str, str, int, dict[str, Any]]]) -> P
     return path
 
 
-def write_json(path: Path, msgs: list[tuple[str, str, int, dict[str, Any]]]) -> Path:
-    """An MCAP written by hand with ``mcap``: JSON messages under Foxglove's schema names (the schema text is the
-    writer's business; the name is what readers go by)."""
+Entry = tuple[str, str, str, bytes, str, int, bytes]  # topic, schema, its encoding and data, encoding, time, payload
+
+
+def write_mcap(path: Path, entries: Iterable[Entry]) -> Path:
+    """An MCAP written by hand with ``mcap``: (topic, schema name, schema encoding, schema data, message encoding,
+    log time, payload) per message, one schema and channel per topic."""
     with path.open("wb") as f:
         writer = Writer(f)
         writer.start(profile="", library="hand-written")
-        schemas: dict[str, int] = {}
         channels: dict[str, int] = {}
-        for topic, kind, t, d in msgs:
-            if kind not in schemas:
-                schemas[kind] = writer.register_schema(f"foxglove.{kind}", "jsonschema",
-                                                       json.dumps({"type": "object"}).encode())
+        for topic, name, schema_encoding, schema_data, encoding, t, data in entries:
             if topic not in channels:
-                channels[topic] = writer.register_channel(topic, "json", schemas[kind])
-            writer.add_message(channels[topic], log_time=t, data=json.dumps(d).encode(), publish_time=t)
+                channels[topic] = writer.register_channel(
+                    topic, encoding, writer.register_schema(name, schema_encoding, schema_data))
+            writer.add_message(channels[topic], log_time=t, data=data, publish_time=t)
         writer.finish()
     return path
+
+
+def json_entries(msgs: list[tuple[str, str, int, dict[str, Any]]]) -> list[Entry]:
+    """JSON messages under Foxglove's schema names (the schema text is the writer's business; the name is what
+    readers go by)."""
+    schema = json.dumps({"type": "object"}).encode()
+    return [(topic, f"foxglove.{kind}", "jsonschema", schema, "json", t, json.dumps(d).encode())
+            for topic, kind, t, d in msgs]
+
+
+def write_json(path: Path, msgs: list[tuple[str, str, int, dict[str, Any]]]) -> Path:
+    """The messages as JSON in an MCAP written by hand (:func:`json_entries`)."""
+    return write_mcap(path, json_entries(msgs))
 
 
 @pytest.fixture(params=["protobuf", "json"])
@@ -281,6 +295,9 @@ _FOXGLOVE_MSGS = {  # foxglove_msgs 3.x, as ros2 bag record puts their definitio
     "foxglove_msgs/msg/FrameTransform": "builtin_interfaces/Time timestamp\nstring parent_frame_id\n"
                                         "string child_frame_id\ngeometry_msgs/Vector3 translation\n"
                                         "geometry_msgs/Quaternion rotation\n",
+    "foxglove_msgs/msg/CameraCalibration": "builtin_interfaces/Time timestamp\nstring frame_id\nuint32 width\n"
+                                           "uint32 height\nstring distortion_model\nfloat64[] d\nfloat64[9] k\n"
+                                           "float64[9] r\nfloat64[12] p\n",  # ROS 2's are lowercase
 }
 
 
@@ -302,12 +319,17 @@ def test_foxglove_msgs_recorded_by_ros2_read_like_their_protobuf_form(tmp_path: 
     mount = t["foxglove_msgs/msg/FrameTransform"](
         timestamp=stamp, parent_frame_id="base_link", child_frame_id="laser",
         translation=t["geometry_msgs/msg/Vector3"](x=0.1, y=0.0, z=0.2), rotation=quat)
+    k = np.array([500.0, 0.0, 320.0, 0.0, 505.0, 240.0, 0.0, 0.0, 1.0])
+    calibration = t["foxglove_msgs/msg/CameraCalibration"](
+        timestamp=stamp, frame_id="camera", width=640, height=480, distortion_model="plumb_bob", d=np.zeros(5),
+        k=k, r=np.eye(3).ravel(), p=np.concatenate([k.reshape(3, 3), np.zeros((3, 1))], 1).ravel())
     path = tmp_path / "bridge.mcap"
     with path.open("wb") as f:
         writer = Writer(f)
         writer.start(profile="ros2", library="test")
         for topic, name, msg in (("/tf", "foxglove_msgs/msg/FrameTransform", mount),
-                                 ("/scan", "foxglove_msgs/msg/LaserScan", scan)):
+                                 ("/scan", "foxglove_msgs/msg/LaserScan", scan),
+                                 ("/camera/calibration", "foxglove_msgs/msg/CameraCalibration", calibration)):
             sid = writer.register_schema(name, "ros2msg", store.generate_msgdef(name, ros_version=2)[0].encode())
             cid = writer.register_channel(topic, "cdr", sid)
             writer.add_message(cid, log_time=7_000_000_250, data=bytes(store.serialize_cdr(msg, name)),
@@ -316,7 +338,7 @@ def test_foxglove_msgs_recorded_by_ros2_read_like_their_protobuf_form(tmp_path: 
     with open_log(path) as reader:
         assert reader.topics["/scan"].msgtype == "sensor_msgs/msg/LaserScan"
         assert reader.topics["/scan"].schema == "foxglove_msgs/msg/LaserScan"
-        got = [item.record for item in reader.messages([Role.SCAN, Role.TRANSFORMS])]
+        got = [item.record for item in reader.messages([Role.SCAN, Role.TRANSFORMS, Role.CAMERA_INFO])]
     scans = [r for r in got if isinstance(r, Scan)]
     expected = decode_scan(fx.as_ros("LaserScan", {
         "timestamp": {"sec": 7, "nsec": 250}, "frame_id": "laser", "start_angle": -1.0, "end_angle": 1.0,
@@ -328,3 +350,53 @@ def test_foxglove_msgs_recorded_by_ros2_read_like_their_protobuf_form(tmp_path: 
     tfs = [r for r in got if isinstance(r, Transform)]
     assert [(x.parent, x.child) for x in tfs] == [("base_link", "laser")]
     np.testing.assert_allclose(tfs[0].translation, [0.1, 0.0, 0.2])
+    infos = [r for r in got if isinstance(r, CameraInfo)]
+    assert len(infos) == 1 and (infos[0].width, infos[0].height) == (640, 480)
+    np.testing.assert_array_equal(infos[0].k, k.reshape(3, 3))
+
+
+def test_a_foxglove_channel_that_cannot_be_read_is_listed_with_a_warning(tmp_path: Path,
+                                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    """FlatBuffers, or a protobuf schema that does not parse: the channel stays unread, the log reads."""
+    extra = [("/flat_scan", "foxglove.LaserScan", "flatbuffer", b"\x00" * 8, "flatbuffer", T0, b"\x00" * 8),
+             ("/pb_scan", "foxglove.LaserScan", "protobuf", b"not a descriptor set", "protobuf", T0, b"\x01")]
+    path = write_mcap(tmp_path / "mixed.mcap", [*json_entries(as_foxglove(sample_messages(4))), *extra])
+    rec = load_recording(path)
+    assert len(rec.scans) == 4
+    assert any("/flat_scan" in w and "flatbuffer" in w for w in rec.warnings)
+    assert any("/pb_scan" in w and "protobuf schema" in w for w in rec.warnings)
+    assert main(["inspect", str(path), "--json"]) == 0
+    topics = {t["name"]: t for t in json.loads(capsys.readouterr().out)["topics"]}
+    assert topics["/flat_scan"]["role"] is None and topics["/scan"]["role"] == "scan"
+
+
+def test_an_unreadable_foxglove_message_is_skipped_and_a_topic_of_them_is_an_error(tmp_path: Path) -> None:
+    """As for ROS messages that do not decode: one bad scan of twelve is skipped with a warning; when most are
+    bad, the first one's error names the file and the topic."""
+    entries = json_entries(as_foxglove(sample_messages(12)))
+    scans = [i for i, e in enumerate(entries) if e[0] == "/scan"]
+    one = list(entries)
+    one[scans[3]] = (*one[scans[3]][:6], b"{not json")
+    rec = load_recording(write_mcap(tmp_path / "one.mcap", one))
+    assert len(rec.scans) == 11
+    assert any("1 of 12 messages on /scan skipped" in w and "JSONDecodeError" in w for w in rec.warnings)
+    most = [(*e[:6], b"[1, 2]") if i in scans[:7] else e for i, e in enumerate(entries)]
+    path = write_mcap(tmp_path / "most.mcap", most)
+    with pytest.raises(LogContentError, match="JSON list, not an object") as err:
+        load_recording(path)
+    assert err.value.topic == "/scan" and str(path) in str(err.value)
+
+
+def test_json_nulls_are_absent_fields_and_scans_of_one_or_no_beam() -> None:
+    config = IoConfig()
+    msgtype, scan = fx.as_ros_message("LaserScan", {"timestamp": {"sec": 3, "nsec": None}, "frame_id": None,
+                                                    "start_angle": 0.5, "end_angle": None, "ranges": [2.0]},
+                                      "/scan", config)
+    assert msgtype == "sensor_msgs/msg/LaserScan" and scan.header.frame_id == ""
+    one = decode_scan(scan, 0, "/scan")
+    assert one.stamp_ns == 3_000_000_000 and one.angle_min == pytest.approx(0.5) and one.ranges.tolist() == [2.0]
+    with pytest.raises(LogContentError, match="no ranges"):
+        fx.as_ros_message("LaserScan", {"ranges": []}, "/scan", config)
+    with pytest.raises(LogContentError, match=r"unreadable foxglove\.RawImage"):
+        fx.as_ros_message("RawImage", {"width": 2, "height": 1, "encoding": "mono8", "step": 2, "data": "%%"},
+                          "/img", config)

@@ -12,7 +12,7 @@ from doorbatch.config import DoorbatchConfig, IoConfig
 from doorbatch.errors import LogContentError
 from doorbatch.io import ros_messages as m
 from doorbatch.io.recording import load_recording, unset_stamps
-from tests.conftest import sample_messages
+from tests.conftest import T0, sample_messages
 
 
 def test_recording_holds_scans_poses_and_colors(write_log: Callable[..., Path]) -> None:
@@ -393,3 +393,14 @@ def test_a_localizers_map_to_odom_on_tf_is_the_reference_of_a_log_without_one(
                                                     *_localized_robot(8, correction)[-1:]]))
     assert truth.reference is not None
     np.testing.assert_allclose(truth.reference.poses[:, 0], 0.1 * k + 1, atol=1e-9)  # /ground_truth's
+
+
+def test_a_localizer_that_started_late_gives_no_reference_before_it_started(write_log: Callable[..., Path]) -> None:
+    """A map → odom that never changes (a localizer that held its correction) is no mount: before its first
+    transform the reference has no pose (only the 100 ms extrapolation limit reaches back), however constant."""
+    msgs = [x for x in _localized_robot(20, lambda k: (2.0, -1.0, 0.5))
+            if not (x[0] == "/tf" and x[3].transforms[0].header.frame_id == "map" and x[2] < T0 + 1_100_000_000)]
+    first = min(x[2] for x in msgs if x[0] == "/tf" and x[3].transforms[0].header.frame_id == "map")
+    rec = load_recording(write_log("late.mcap", msgs))
+    assert rec.reference is not None
+    assert rec.reference.stamps_ns.min() >= first - 100_000_000 and len(rec.reference) == 11

@@ -101,7 +101,7 @@ def camera_tilt_deg(inputs: DoorPoseInputs, base_link: str, camera_frame: str) -
     if not inputs.detections:
         return None
     try:
-        mat = inputs.tf.lookup(base_link, camera_frame, inputs.detections[0].stamp_ns)
+        mat = inputs.tf.lookup(base_link, camera_frame, inputs.detections[0].stamp_ns, hold_constant=True)
     except TransformError:
         return None
     return math.degrees(math.asin(max(-1.0, min(1.0, float(mat[2, 2])))))
@@ -136,7 +136,7 @@ def estimate_door_poses(inputs: DoorPoseInputs, config: DoorbatchConfig, doors: 
         scan = inputs.scans[i]
         try:
             points, _ = scan_in_camera(scan, inputs.tf, camera.frame_id)
-            cam_to_base = inputs.tf.lookup(inputs.base_link, camera.frame_id, boxes.stamp_ns)
+            cam_to_base = inputs.tf.lookup(inputs.base_link, camera.frame_id, boxes.stamp_ns, hold_constant=True)
         except TransformError as err:
             warnings.append(f"image at {boxes.stamp_ns / 1e9:.3f} s skipped: {err.reason}")
             continue
