@@ -51,6 +51,7 @@ from doorbatch.io.decode import (
     TF_MESSAGE,
     yaw_from_quaternion,
 )
+from doorbatch.records import Transform
 
 _ROS_TYPE = {
     "LaserScan": LASERSCAN,
@@ -164,31 +165,69 @@ def _planar(pose: Any) -> tuple[float, float, float]:
     return x, y, yaw_from_quaternion(*q)
 
 
-def laser_scan(msg: Any, topic: str, range_min_m: float) -> Any:
+def origin_frame(frame_id: str, topic: str) -> str:
+    """The frame doorbatch gives the origin of a topic's Foxglove scans where it lies off their frame's origin."""
+    return f"{frame_id}/{topic.strip('/').replace('/', '_')}_origin"
+
+
+def _scan_origin(msg: Any, topic: str) -> tuple[npt.NDArray[np.float64], float, float]:
+    """(offset (3,), heading φ, sign s) of a Foxglove scan's origin in its frame: a beam at angle a in the origin
+    points at φ + s·a in the frame.
+
+    Raises:
+        LogContentError: an origin tilted out of the frame's xy-plane.
+    """
+    pose = _get(msg, "pose")
+    offset = np.array(_xyz(_get(pose, "position"))) if pose is not None else np.zeros(3)
+    rot = quaternion_to_matrix(_quaternion(_get(pose, "orientation") if pose is not None else None))
+    if abs(abs(rot[2, 2]) - 1.0) > _PLANAR_TOLERANCE:
+        raise LogContentError("foxglove.LaserScan whose origin is tilted out of its frame's xy-plane", topic=topic)
+    return offset, math.atan2(rot[1, 0], rot[0, 0]), 1.0 if rot[2, 2] > 0.0 else -1.0
+
+
+def scan_mount(msg: Any, topic: str) -> Transform | None:
+    """The static transform from a Foxglove scan's frame to its origin (:func:`origin_frame`; the rotation is folded
+    into the beam angles, :func:`laser_scan`), or None where the origin lies at the frame's origin or the message
+    cannot be read. Taken from a topic's first scan, like a sensor mount."""
+    try:
+        if isinstance(msg, Payload):
+            msg = msg.decode(msg.data)
+        offset, _, _ = _scan_origin(msg, topic)
+    except Exception:  # an unreadable first message: its topic's own reading reports it
+        return None
+    if float(np.abs(offset).max()) <= _PLANAR_TOLERANCE:
+        return None
+    frame = str(_get(msg, "frame_id", ""))
+    return Transform(stamp_ns=0, parent=frame, child=origin_frame(frame, topic), translation=offset,
+                     rotation_xyzw=np.array([0.0, 0.0, 0.0, 1.0]), static=True)
+
+
+def laser_scan(msg: Any, topic: str, range_min_m: float, mount: Transform | None = None) -> Any:
     """``foxglove.LaserScan`` → sensor_msgs/LaserScan.
 
     Beam i of n lies at ``start_angle + i · (end_angle − start_angle) / (n − 1)`` about the z axis of ``pose``, the
     scan's origin in ``frame_id`` (Foxglove's schema). A rotation of that origin about z, upside down or not, is
     folded into the angles: a beam at angle a in the origin points at φ + s·a in the frame, φ the origin's heading
-    and s = ±1 the sign of its z axis. An origin offset from the frame cannot be written as a LaserScan: it is an
-    error (log the scan in the laser's own frame, with the mount as a FrameTransform). The schema states no range
-    limits: ``range_min_m`` (``io.foxglove_range_min_m``) drops zeros, which drivers report for no echo, and
-    range_max is +inf, "not stated" to every stage (e.g. ``localize.laser_max_range_fallback``).
+    and s = ±1 the sign of its z axis. An origin offset from the frame's origin is a mount: the scan is put in
+    :func:`origin_frame`, which ``mount`` (:func:`scan_mount` of the topic's first scan) places in the frame. The
+    schema states no range limits: ``range_min_m`` (``io.foxglove_range_min_m``) drops zeros, which drivers report
+    for no echo, and range_max is +inf, "not stated" to every stage (e.g. ``localize.laser_max_range_fallback``).
 
     Raises:
-        LogContentError: an origin off the frame's origin or tilted out of its xy-plane.
+        LogContentError: an origin tilted out of the frame's xy-plane, one offset other than ``mount`` (the
+            topic's first scan's), or no ranges.
     """
-    pose = _get(msg, "pose")
-    origin = np.array(_xyz(_get(pose, "position"))) if pose is not None else np.zeros(3)
-    rot = quaternion_to_matrix(_quaternion(_get(pose, "orientation") if pose is not None else None))
-    if float(np.abs(origin).max()) > _PLANAR_TOLERANCE:
-        raise LogContentError(f"foxglove.LaserScan whose origin lies at ({origin[0]:.3f}, {origin[1]:.3f}, "
-                              f"{origin[2]:.3f}) m in its frame {_get(msg, 'frame_id', '')!r}: doorbatch needs the "
-                              "scan in the laser's own frame, with the mount as a FrameTransform", topic=topic)
-    if abs(abs(rot[2, 2]) - 1.0) > _PLANAR_TOLERANCE:
-        raise LogContentError("foxglove.LaserScan whose origin is tilted out of its frame's xy-plane", topic=topic)
-    sign = 1.0 if rot[2, 2] > 0.0 else -1.0
-    heading = math.atan2(rot[1, 0], rot[0, 0])
+    offset, heading, sign = _scan_origin(msg, topic)
+    frame = str(_get(msg, "frame_id", ""))
+    if float(np.abs(offset).max()) > _PLANAR_TOLERANCE:
+        if mount is None or mount.parent != frame or not np.allclose(mount.translation, offset, rtol=0.0,
+                                                                     atol=_PLANAR_TOLERANCE):
+            held = ("none" if mount is None
+                    else f"({', '.join(f'{v:.3f}' for v in mount.translation)}) in {mount.parent!r}")
+            raise LogContentError(f"foxglove.LaserScan whose origin ({', '.join(f'{v:.3f}' for v in offset)}) m in "
+                                  f"{frame!r} differs from the topic's first scan's ({held}): doorbatch reads a "
+                                  "scan's origin as a fixed mount", topic=topic)
+        frame = mount.child
     ranges = _floats(_get(msg, "ranges"))
     n = ranges.shape[0]
     if n == 0:
@@ -196,9 +235,8 @@ def laser_scan(msg: Any, topic: str, range_min_m: float) -> Any:
     start, end = float(_get(msg, "start_angle", 0.0)), float(_get(msg, "end_angle", 0.0))
     increment = (end - start) / (n - 1) if n > 1 else 1.0  # one beam: any increment describes it
     intensities = _floats(_get(msg, "intensities"))
-    return rm.laser_scan(_stamp_ns(msg), str(_get(msg, "frame_id", "")), heading + sign * start, sign * increment,
-                         range_min_m, math.inf, ranges,
-                         intensities if intensities.shape[0] == n else None)
+    return rm.laser_scan(_stamp_ns(msg), frame, heading + sign * start, sign * increment, range_min_m, math.inf,
+                         ranges, intensities if intensities.shape[0] == n else None)
 
 
 def _transform(msg: Any) -> Any:
@@ -207,14 +245,14 @@ def _transform(msg: Any) -> Any:
                                 _quaternion(_get(msg, "rotation")).tolist())
 
 
-def as_ros(kind: str, msg: Any, topic: str, range_min_m: float) -> Any:
+def as_ros(kind: str, msg: Any, topic: str, range_min_m: float, mount: Transform | None = None) -> Any:
     """The ROS 2 message of ``msg``, a Foxglove message of schema ``kind`` (:func:`foxglove_kind`).
 
     Raises:
         LogContentError: a message that has no ROS form (:func:`laser_scan`).
     """
     if kind == "LaserScan":
-        return laser_scan(msg, topic, range_min_m)
+        return laser_scan(msg, topic, range_min_m, mount)
     if kind == "FrameTransform":
         return rm.tf_message([_transform(msg)])
     if kind == "FrameTransforms":
@@ -249,9 +287,11 @@ class Payload:
     data: bytes
 
 
-def as_ros_message(kind: str, msg: Any, topic: str, config: IoConfig) -> tuple[str, Any]:
+def as_ros_message(kind: str, msg: Any, topic: str, config: IoConfig, mount: Transform | None = None
+                   ) -> tuple[str, Any]:
     """(ROS 2 message type, ROS 2 message) of one Foxglove message of schema ``kind``: a rosbags object of
-    ``foxglove_msgs``, or a :class:`Payload` decoded here (:func:`as_ros`).
+    ``foxglove_msgs``, or a :class:`Payload` decoded here (:func:`as_ros`; ``mount``: its topic's
+    :func:`scan_mount`).
 
     Raises:
         LogContentError: a message that does not decode, is not an object, or has no ROS form.
@@ -261,7 +301,7 @@ def as_ros_message(kind: str, msg: Any, topic: str, config: IoConfig) -> tuple[s
             msg = msg.decode(msg.data)
         if isinstance(msg, list | str | int | float | bool) or msg is None:  # JSON that is not an object
             raise LogContentError(f"foxglove.{kind} message is JSON {type(msg).__name__}, not an object", topic=topic)
-        return _ROS_TYPE[kind], as_ros(kind, msg, topic, config.foxglove_range_min_m)
+        return _ROS_TYPE[kind], as_ros(kind, msg, topic, config.foxglove_range_min_m, mount)
     except LogContentError:
         raise
     except Exception as err:  # bad JSON, protobuf bytes, base64, or field values of the wrong kind

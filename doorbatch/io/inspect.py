@@ -154,6 +154,8 @@ def inspect_log(path: Path, config: DoorbatchConfig | None = None,
         role_of = roles.role_of()
         scan_topic = roles.topic(Role.SCAN)
         bad_scans: list[str] = []  # reasons, one per scan that cannot be decoded
+        for mount in reader.scan_origin_mounts().values():  # as read_transforms adds them
+            tf.add(mount)
         for raw in reader.raw_messages():
             st = stats.setdefault(raw.topic, _TopicStats())
             st.count += 1

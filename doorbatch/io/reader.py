@@ -25,7 +25,7 @@ from doorbatch.errors import DoorbatchError, LogContentError, LogReadError
 from doorbatch.io import foxglove
 from doorbatch.io.decode import decode
 from doorbatch.io.roles import RoleAssignment, TopicInfo, assign_roles
-from doorbatch.records import Role, RoleMessage
+from doorbatch.records import Role, RoleMessage, Transform
 
 log = logging.getLogger(__name__)
 E = TypeVar("E", bound=DoorbatchError)
@@ -64,6 +64,7 @@ class LogReader(ABC):
         self.frames = config.frames
         self.io_config = config.io
         self._roles: RoleAssignment | None = None
+        self._scan_mounts: dict[str, Transform] | None = None
         self.warnings: list[str] = []  # repairs a reader made (e.g. CARMEN stamps), shown by inspect
 
     def __enter__(self) -> Self:
@@ -117,6 +118,7 @@ class LogReader(ABC):
         topic = None
         seen: Counter[str] = Counter()
         bad: dict[str, list[LogContentError]] = {}
+        mounts = self.scan_origin_mounts()  # before the pass: it reads each such topic's first message
         try:
             for raw in self._raw(topics, start_ns, stop_ns):
                 topic = raw.topic
@@ -124,7 +126,8 @@ class LogReader(ABC):
                 if kind is not None:
                     seen[topic] += 1
                     try:
-                        msgtype, msg = foxglove.as_ros_message(kind, raw.msg, topic, self.io_config)
+                        msgtype, msg = foxglove.as_ros_message(kind, raw.msg, topic, self.io_config,
+                                                               mounts.get(topic))
                     except LogContentError as err:
                         bad.setdefault(topic, []).append(self._named(err))
                         continue
@@ -136,6 +139,24 @@ class LogReader(ABC):
             raise LogReadError(f"log is truncated or corrupt ({type(err).__name__}: {err})",
                                path=self.path, topic=topic) from err
         self._skipped(bad, seen)
+
+    def scan_origin_mounts(self) -> dict[str, Transform]:
+        """Per topic of Foxglove scans whose origin lies off their frame's origin, the static transform to that
+        origin (:func:`~doorbatch.io.foxglove.scan_mount`, from the topic's first message); the readers of TF add
+        these to the log's own transforms."""
+        if self._scan_mounts is None:
+            self._scan_mounts = {}
+            for topic, info in self.topics.items():
+                if foxglove.foxglove_kind(info.schema) != "LaserScan":
+                    continue
+                try:
+                    first = next(iter(self._raw([topic], None, None)), None)
+                except Exception:  # an unreadable first message: the topic's own reading reports it
+                    first = None
+                mount = None if first is None else foxglove.scan_mount(first.msg, topic)
+                if mount is not None:
+                    self._scan_mounts[topic] = mount
+        return self._scan_mounts
 
     def _skipped(self, bad: dict[str, list[LogContentError]], seen: Counter[str]) -> None:
         """After a complete pass: a topic whose messages could not be read raises the first one's error when they

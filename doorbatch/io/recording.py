@@ -295,6 +295,8 @@ def read_transforms(reader: LogReader, config: DoorbatchConfig) -> TfBuffer:
     for item in reader.messages([Role.TRANSFORMS]):
         if isinstance(item.record, Transform):
             tf.add(item.record)
+    for mount in reader.scan_origin_mounts().values():  # Foxglove scans whose origin is off their frame's
+        tf.add(mount)
     return tf
 
 

@@ -252,13 +252,52 @@ def test_a_scan_origin_rotated_in_its_plane_puts_every_point_where_foxglove_draw
     assert scan.stamp_ns == 1_000_000_005
 
 
-def test_a_scan_origin_off_its_frame_is_a_clear_error(write_log: Callable[..., Path], tmp_path: Path) -> None:
-    msgs = as_foxglove(sample_messages(3))
-    for topic, _kind, _t, d in msgs:
+def _scans_in_base_link(msgs: list[tuple[str, str, int, dict[str, Any]]], yaw: float
+                        ) -> list[tuple[str, str, int, dict[str, Any]]]:
+    """The scans logged in base_link with the laser mount (0.2, 0, 0.3) as their origin, turned by ``yaw`` (the
+    beam angles turned back, so the beams point where they did), and no base_link → laser transform."""
+    out = []
+    for topic, kind, t, d in msgs:
+        if topic == "/tf":
+            d = {"transforms": [x for x in d["transforms"] if x["child_frame_id"] != "laser"]}
+            if not d["transforms"]:
+                continue
         if topic == "/scan":
-            d["pose"] = {"position": {"x": 0.2, "y": 0.0, "z": 0.3}, "orientation": {"w": 1.0}}
-    fox = write_json(tmp_path / "offset.mcap", msgs)
-    with pytest.raises(LogContentError, match=r"origin lies at \(0.200, 0.000, 0.300\).*FrameTransform") as err:
+            d = {**d, "frame_id": "base_link", "start_angle": d["start_angle"] - yaw,
+                 "end_angle": d["end_angle"] - yaw,
+                 "pose": {"position": {"x": 0.2, "y": 0.0, "z": 0.3},
+                          "orientation": {"x": 0.0, "y": 0.0, "z": math.sin(yaw / 2), "w": math.cos(yaw / 2)}}}
+        out.append((topic, kind, t, d))
+    return out
+
+
+@pytest.mark.parametrize("writer", ["protobuf", "json"])
+def test_a_scan_origin_off_its_frame_is_its_mount(write_log: Callable[..., Path], tmp_path: Path,
+                                                  writer: str) -> None:
+    """Scans logged in base_link with the mount as their origin (turned, too) put every hit where the log with a
+    laser frame and a base_link → laser transform puts it; `convert` writes the mount as /tf_static."""
+    msgs = sample_messages(6)
+    ros = load_recording(write_log("ros.mcap", msgs))
+    write = write_sdk if writer == "protobuf" else write_json
+    path = write(tmp_path / f"origin_{writer}.mcap", _scans_in_base_link(as_foxglove(msgs), 0.4))
+    converted = tmp_path / "converted.mcap"
+    assert main(["convert", str(path), "-o", str(converted)]) == 0
+    for fox in (load_recording(path), load_recording(converted)):
+        assert fox.scans.frame_id == "base_link/scan_origin"
+        for i in range(len(ros.scans)):
+            a, b = ros.scans.endpoints_base(i), fox.scans.endpoints_base(i)
+            np.testing.assert_array_equal(a[1], b[1])
+            np.testing.assert_allclose(a[0][a[1]], b[0][b[1]], atol=1e-5)
+
+
+def test_a_scan_origin_that_moves_is_a_clear_error(tmp_path: Path) -> None:
+    msgs = _scans_in_base_link(as_foxglove(sample_messages(3)), 0.0)
+    scans = [d for topic, _, _, d in msgs if topic == "/scan"]
+    for d in scans[1:]:
+        d["pose"] = {**d["pose"], "position": {"x": 0.25, "y": 0.0, "z": 0.3}}
+    fox = write_json(tmp_path / "moving.mcap", msgs)
+    with pytest.raises(LogContentError, match=r"origin \(0.250, 0.000, 0.300\) m in 'base_link' differs from the "
+                                              r"topic's first scan's \(\(0.200, 0.000, 0.300\)") as err:
         load_recording(fox)
     assert str(fox) in str(err.value)
 
