@@ -94,9 +94,6 @@ class IoConfig(Section):
     carmen_range_min_m: float = Field(0.0, ge=0.0)
     # CARMEN: nominal scan period used to synthesize stamps when the logged ones are unusable.
     carmen_scan_period_s: float = Field(0.2, gt=0.0)
-    # foxglove.LaserScan states no range limits: readings below this are dropped (drivers report 0 for no echo; every
-    # 2D lidar we know measures from 2 cm or more). Its range_max is left unstated (+inf).
-    foxglove_range_min_m: float = Field(0.02, ge=0.0)
 
 
 class LaserConfig(Section):

@@ -37,7 +37,6 @@ import numpy as np
 import numpy.typing as npt
 from mcap.records import Schema
 
-from doorbatch.config import IoConfig
 from doorbatch.errors import LogContentError, LogReadError
 from doorbatch.geometry.rotations import quaternion_to_matrix
 from doorbatch.io import ros_messages as rm
@@ -202,7 +201,7 @@ def scan_mount(msg: Any, topic: str) -> Transform | None:
                      rotation_xyzw=np.array([0.0, 0.0, 0.0, 1.0]), static=True)
 
 
-def laser_scan(msg: Any, topic: str, range_min_m: float, mount: Transform | None = None) -> Any:
+def laser_scan(msg: Any, topic: str, mount: Transform | None = None) -> Any:
     """``foxglove.LaserScan`` → sensor_msgs/LaserScan.
 
     Beam i of n lies at ``start_angle + i · (end_angle − start_angle) / (n − 1)`` about the z axis of ``pose``, the
@@ -210,8 +209,9 @@ def laser_scan(msg: Any, topic: str, range_min_m: float, mount: Transform | None
     folded into the angles: a beam at angle a in the origin points at φ + s·a in the frame, φ the origin's heading
     and s = ±1 the sign of its z axis. An origin offset from the frame's origin is a mount: the scan is put in
     :func:`origin_frame`, which ``mount`` (:func:`scan_mount` of the topic's first scan) places in the frame. The
-    schema states no range limits: ``range_min_m`` (``io.foxglove_range_min_m``) drops zeros, which drivers report
-    for no echo, and range_max is +inf, "not stated" to every stage (e.g. ``localize.laser_max_range_fallback``).
+    schema states no range limits: range_min is 0 (a reading of 0, which drivers write for no echo, is then no hit,
+    as in any log: :func:`~doorbatch.io.recording.usable_range_limits`) and range_max +inf, "not stated" to every
+    stage (the localizers take ``localize.laser_max_range_fallback``).
 
     Raises:
         LogContentError: an origin tilted out of the frame's xy-plane, one offset other than ``mount`` (the
@@ -235,7 +235,7 @@ def laser_scan(msg: Any, topic: str, range_min_m: float, mount: Transform | None
     start, end = float(_get(msg, "start_angle", 0.0)), float(_get(msg, "end_angle", 0.0))
     increment = (end - start) / (n - 1) if n > 1 else 1.0  # one beam: any increment describes it
     intensities = _floats(_get(msg, "intensities"))
-    return rm.laser_scan(_stamp_ns(msg), frame, heading + sign * start, sign * increment, range_min_m, math.inf,
+    return rm.laser_scan(_stamp_ns(msg), frame, heading + sign * start, sign * increment, 0.0, math.inf,
                          ranges, intensities if intensities.shape[0] == n else None)
 
 
@@ -245,14 +245,14 @@ def _transform(msg: Any) -> Any:
                                 _quaternion(_get(msg, "rotation")).tolist())
 
 
-def as_ros(kind: str, msg: Any, topic: str, range_min_m: float, mount: Transform | None = None) -> Any:
+def as_ros(kind: str, msg: Any, topic: str, mount: Transform | None = None) -> Any:
     """The ROS 2 message of ``msg``, a Foxglove message of schema ``kind`` (:func:`foxglove_kind`).
 
     Raises:
         LogContentError: a message that has no ROS form (:func:`laser_scan`).
     """
     if kind == "LaserScan":
-        return laser_scan(msg, topic, range_min_m, mount)
+        return laser_scan(msg, topic, mount)
     if kind == "FrameTransform":
         return rm.tf_message([_transform(msg)])
     if kind == "FrameTransforms":
@@ -287,8 +287,7 @@ class Payload:
     data: bytes
 
 
-def as_ros_message(kind: str, msg: Any, topic: str, config: IoConfig, mount: Transform | None = None
-                   ) -> tuple[str, Any]:
+def as_ros_message(kind: str, msg: Any, topic: str, mount: Transform | None = None) -> tuple[str, Any]:
     """(ROS 2 message type, ROS 2 message) of one Foxglove message of schema ``kind``: a rosbags object of
     ``foxglove_msgs``, or a :class:`Payload` decoded here (:func:`as_ros`; ``mount``: its topic's
     :func:`scan_mount`).
@@ -301,7 +300,7 @@ def as_ros_message(kind: str, msg: Any, topic: str, config: IoConfig, mount: Tra
             msg = msg.decode(msg.data)
         if isinstance(msg, list | str | int | float | bool) or msg is None:  # JSON that is not an object
             raise LogContentError(f"foxglove.{kind} message is JSON {type(msg).__name__}, not an object", topic=topic)
-        return _ROS_TYPE[kind], as_ros(kind, msg, topic, config.foxglove_range_min_m, mount)
+        return _ROS_TYPE[kind], as_ros(kind, msg, topic, mount)
     except LogContentError:
         raise
     except Exception as err:  # bad JSON, protobuf bytes, base64, or field values of the wrong kind

@@ -126,8 +126,7 @@ class LogReader(ABC):
                 if kind is not None:
                     seen[topic] += 1
                     try:
-                        msgtype, msg = foxglove.as_ros_message(kind, raw.msg, topic, self.io_config,
-                                                               mounts.get(topic))
+                        msgtype, msg = foxglove.as_ros_message(kind, raw.msg, topic, mounts.get(topic))
                     except LogContentError as err:
                         bad.setdefault(topic, []).append(self._named(err))
                         continue

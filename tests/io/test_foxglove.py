@@ -16,9 +16,7 @@ import pytest
 from mcap.writer import Writer
 
 from doorbatch.cli import main
-from doorbatch.config import IoConfig
 from doorbatch.errors import LogContentError
-from doorbatch.geometry.laser import beam_masks
 from doorbatch.geometry.rotations import quaternion_to_matrix
 from doorbatch.io import foxglove as fx
 from doorbatch.io.decode import decode_scan
@@ -244,7 +242,7 @@ def test_a_scan_origin_rotated_in_its_plane_puts_every_point_where_foxglove_draw
     q = {"x": axis[0] * s, "y": axis[1] * s, "z": axis[2] * s, "w": c}
     msg = {"timestamp": {"sec": 1, "nsec": 5}, "frame_id": "laser", "pose": {"orientation": q},
            "start_angle": start, "end_angle": end, "ranges": [float(r) for r in ranges]}
-    scan = decode_scan(fx.as_ros("LaserScan", msg, "/scan", 0.02), 0, "/scan")
+    scan = decode_scan(fx.as_ros("LaserScan", msg, "/scan"), 0, "/scan")
     a = np.linspace(start, end, 37)
     local = np.stack([ranges * np.cos(a), ranges * np.sin(a), np.zeros(37)], 1)[np.isfinite(ranges)]
     drawn = local @ quaternion_to_matrix([q["x"], q["y"], q["z"], q["w"]]).T
@@ -302,12 +300,17 @@ def test_a_scan_origin_that_moves_is_a_clear_error(tmp_path: Path) -> None:
     assert str(fox) in str(err.value)
 
 
-def test_json_nulls_and_zero_ranges_carry_no_hit() -> None:
-    """Strict JSON writes NaN as null; a zero reading (a driver's "no echo") is below the default range_min."""
-    msg = {"frame_id": "laser", "start_angle": 0.0, "end_angle": 1.0, "ranges": [1.0, None, 0.0, 2.0, 1e9]}
-    hit, no_return = beam_masks(decode_scan(fx.as_ros("LaserScan", msg, "/scan", 0.02), 0, "/scan"))
-    assert hit.tolist() == [True, False, False, True, True]  # no maximum stated: any finite reading is a hit
-    assert not no_return.any()
+def test_json_nulls_and_zero_ranges_carry_no_hit(tmp_path: Path) -> None:
+    """Strict JSON writes NaN as null; a zero reading (a driver's "no echo") is no hit, as in any log whose
+    range_min is 0; with no maximum stated, any other finite reading is one."""
+    msgs = as_foxglove(sample_messages(2))
+    for topic, _, _, d in msgs:
+        if topic == "/scan":
+            d["ranges"] = [1.0, None, 0.0, 2.0, 1e9, *d["ranges"][5:]]
+    rec = load_recording(write_json(tmp_path / "zeros.mcap", msgs))
+    for i in range(2):
+        _, hit = rec.scans.endpoints_base(i)
+        assert hit[:5].tolist() == [True, False, False, True, True]
 
 
 def test_the_sample_passes_logged_by_the_foxglove_sdk_map_to_the_same_doors(tmp_path: Path) -> None:
@@ -381,7 +384,7 @@ def test_foxglove_msgs_recorded_by_ros2_read_like_their_protobuf_form(tmp_path: 
     scans = [r for r in got if isinstance(r, Scan)]
     expected = decode_scan(fx.as_ros("LaserScan", {
         "timestamp": {"sec": 7, "nsec": 250}, "frame_id": "laser", "start_angle": -1.0, "end_angle": 1.0,
-        "pose": {"orientation": {"z": math.sin(0.3), "w": math.cos(0.3)}}, "ranges": ranges.tolist()}, "/scan", 0.02),
+        "pose": {"orientation": {"z": math.sin(0.3), "w": math.cos(0.3)}}, "ranges": ranges.tolist()}, "/scan"),
         0, "/scan")
     assert len(scans) == 1 and scans[0].stamp_ns == 7_000_000_250
     np.testing.assert_array_equal(scans[0].ranges, expected.ranges)
@@ -427,15 +430,14 @@ def test_an_unreadable_foxglove_message_is_skipped_and_a_topic_of_them_is_an_err
 
 
 def test_json_nulls_are_absent_fields_and_scans_of_one_or_no_beam() -> None:
-    config = IoConfig()
     msgtype, scan = fx.as_ros_message("LaserScan", {"timestamp": {"sec": 3, "nsec": None}, "frame_id": None,
                                                     "start_angle": 0.5, "end_angle": None, "ranges": [2.0]},
-                                      "/scan", config)
+                                      "/scan")
     assert msgtype == "sensor_msgs/msg/LaserScan" and scan.header.frame_id == ""
     one = decode_scan(scan, 0, "/scan")
     assert one.stamp_ns == 3_000_000_000 and one.angle_min == pytest.approx(0.5) and one.ranges.tolist() == [2.0]
     with pytest.raises(LogContentError, match="no ranges"):
-        fx.as_ros_message("LaserScan", {"ranges": []}, "/scan", config)
+        fx.as_ros_message("LaserScan", {"ranges": []}, "/scan")
     with pytest.raises(LogContentError, match=r"unreadable foxglove\.RawImage"):
         fx.as_ros_message("RawImage", {"width": 2, "height": 1, "encoding": "mono8", "step": 2, "data": "%%"},
-                          "/img", config)
+                          "/img")
