@@ -24,6 +24,7 @@ from doorbatch.io.map_topic import OCCUPANCY_GRID
 from doorbatch.io.pose_topic import POSE_TYPES
 from doorbatch.io.reader import most_are_bad, open_log
 from doorbatch.io.recording import (
+    buffered_transforms,
     clock_lags_s,
     missing_laser_tf_hint,
     odometry_frame,
@@ -34,7 +35,7 @@ from doorbatch.io.recording import (
     unset_stamps,
 )
 from doorbatch.io.roles import TopicInfo
-from doorbatch.records import Role
+from doorbatch.records import Role, Transform
 
 
 class Severity(StrEnum):
@@ -147,15 +148,13 @@ def inspect_log(path: Path, config: DoorbatchConfig | None = None,
     path = Path(path)
     problems: list[Problem] = []
     stats: dict[str, _TopicStats] = {}
-    tf = TfBuffer(int(config.io.tf_extrapolation_limit_s * 1e9))  # as load_recording reads them
+    transforms: list[Transform] = []  # buffered as load_recording buffers them, after the pass
     scan_frames: set[str] = set()
     with open_log(path, config) as reader:
         roles = reader.roles
         role_of = roles.role_of()
         scan_topic = roles.topic(Role.SCAN)
         bad_scans: list[str] = []  # reasons, one per scan that cannot be decoded
-        for mount in reader.scan_origin_mounts().values():  # as read_transforms adds them
-            tf.add(mount)
         for raw in reader.raw_messages():
             st = stats.setdefault(raw.topic, _TopicStats())
             st.count += 1
@@ -164,8 +163,8 @@ def inspect_log(path: Path, config: DoorbatchConfig | None = None,
             st.first_ns = raw.log_time_ns if st.first_ns is None else st.first_ns
             st.last_ns = raw.log_time_ns
             if role_of.get(raw.topic) is Role.TRANSFORMS:
-                for t in decode_transforms(raw.msg, raw.topic.rstrip("/").endswith("tf_static"), raw.log_time_ns):
-                    tf.add(t)
+                transforms.extend(decode_transforms(raw.msg, raw.topic.rstrip("/").endswith("tf_static"),
+                                                    raw.log_time_ns))
                 continue
             stamp = _header_stamp(raw.msg)
             if stamp is not None:
@@ -193,7 +192,8 @@ def inspect_log(path: Path, config: DoorbatchConfig | None = None,
             problems.append(Problem(Severity.ERROR if most else Severity.WARNING, scan_topic,
                                     bad_scans[0] if most else f"{len(bad_scans)} of {n_scans} scans are unusable and "
                                                               f"skipped (first: {bad_scans[0]})"))
-        problems.extend(Problem(Severity.WARNING, None, w) for w in reader.warnings)
+        tf, tf_note = buffered_transforms(transforms, reader.scan_origin_mounts().values(), config)
+        problems.extend(Problem(Severity.WARNING, None, w) for w in [*reader.warnings, *([tf_note] if tf_note else [])])
         topics = [
             TopicReport(info.name, info.schema or info.msgtype, stats.get(info.name, _TopicStats()).count,
                         _rate(stats.get(info.name)), role_of[info.name].value if info.name in role_of else None,

@@ -8,7 +8,7 @@ Images are never loaded here; stages that need them stream the log themselves.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TypeVar
@@ -290,14 +290,43 @@ def _planar_affine(tf: TfBuffer, base: str, frame: str, stamp_ns: int, assume_id
 
 def read_transforms(reader: LogReader, config: DoorbatchConfig) -> TfBuffer:
     """Every transform of an open log (a pass over its TF topics only), buffered so that a lookup at any
-    stamp sees the transforms that arrive later in the log too."""
-    tf = TfBuffer(int(config.io.tf_extrapolation_limit_s * 1e9))
-    for item in reader.messages([Role.TRANSFORMS]):
-        if isinstance(item.record, Transform):
-            tf.add(item.record)
-    for mount in reader.scan_origin_mounts().values():  # Foxglove scans whose origin is off their frame's
-        tf.add(mount)
+    stamp sees the transforms that arrive later in the log too (:func:`buffered_transforms`; its note goes to the
+    reader's warnings)."""
+    records = [item.record for item in reader.messages([Role.TRANSFORMS]) if isinstance(item.record, Transform)]
+    tf, note = buffered_transforms(records, reader.scan_origin_mounts().values(), config)
+    if note:
+        reader.warnings.append(f"{reader.path}: {note}")
     return tf
+
+
+def buffered_transforms(transforms: Sequence[Transform], mounts: Iterable[Transform], config: DoorbatchConfig
+                        ) -> tuple[TfBuffer, str | None]:
+    """A log's transforms (in log order) in a buffer, with the scan-origin ``mounts`` of Foxglove scans
+    (:meth:`~doorbatch.io.reader.LogReader.scan_origin_mounts`); and a note where stamps were unset.
+
+    A dynamic edge whose transforms are stamped 0 (:func:`unset_stamps`, per edge: a writer that leaves
+    the stamp unset, as a Foxglove FrameTransform without ``timestamp``) would hold one transform at 0, the
+    last logged: each such transform is timed by its log time, as unset stamps of every other message are."""
+    edges: dict[str, list[int]] = {}
+    for k, t in enumerate(transforms):
+        if not t.static:
+            edges.setdefault(t.child, []).append(k)
+    timed = list(transforms)
+    moved: dict[str, int] = {}
+    for child, ks in edges.items():
+        unset = unset_stamps([transforms[k].stamp_ns for k in ks])
+        for k, u in zip(ks, unset, strict=True):
+            if u and transforms[k].log_time_ns > 0:
+                timed[k] = replace(transforms[k], stamp_ns=transforms[k].log_time_ns)
+                moved[child] = moved.get(child, 0) + 1
+    tf = TfBuffer(int(config.io.tf_extrapolation_limit_s * 1e9))
+    for t in (*timed, *mounts):
+        tf.add(t)
+    note = None
+    if moved:
+        which = ", ".join(f"{transforms[edges[c][0]].parent}→{c} ({n} of {len(edges[c])})" for c, n in moved.items())
+        note = f"transforms with header stamp 0 (unset): timed by their log time: {which}"
+    return tf, note
 
 
 @dataclass(frozen=True)

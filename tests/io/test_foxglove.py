@@ -441,3 +441,26 @@ def test_json_nulls_are_absent_fields_and_scans_of_one_or_no_beam() -> None:
     with pytest.raises(LogContentError, match=r"unreadable foxglove\.RawImage"):
         fx.as_ros_message("RawImage", {"width": 2, "height": 1, "encoding": "mono8", "step": 2, "data": "%%"},
                           "/img")
+
+
+def test_transforms_without_timestamps_are_timed_by_their_log_time(write_log: Callable[..., Path], tmp_path: Path,
+                                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """A FrameTransform logged without ``timestamp`` (odometry from TF only): stamped 0, every odom → base_link
+    would be one transform at 0; each is timed by its log time instead, as unset stamps of other messages are,
+    and inspect says so."""
+    msgs = [x for x in sample_messages(10) if x[0] != "/odom"]
+    ros = load_recording(write_log("tf_odometry.mcap", msgs))
+    fox_msgs = as_foxglove(msgs)
+    for topic, _, _, d in fox_msgs:
+        if topic == "/tf":
+            for tf in d["transforms"]:
+                tf.pop("timestamp")
+    path = write_json(tmp_path / "unstamped_tf.mcap", fox_msgs)
+    fox = load_recording(path)
+    assert ros.odometry is not None and fox.odometry is not None and len(fox.odometry) == len(ros.odometry) == 10
+    np.testing.assert_array_equal(fox.odometry.stamps_ns, ros.odometry.stamps_ns)
+    np.testing.assert_allclose(fox.odometry.poses, ros.odometry.poses, atol=1e-9)
+    assert any("header stamp 0 (unset): timed by their log time" in w and "odom→base_link (10 of 10)" in w
+               for w in fox.warnings)
+    assert main(["inspect", str(path)]) == 0
+    assert "odom→base_link (10 of 10)" in capsys.readouterr().out
