@@ -323,3 +323,32 @@ def test_passes_recorded_apart_under_a_localizer_map_in_its_map_frame(tmp_path: 
     np.testing.assert_allclose(sorted(got["hinge_x"]), sorted(want["hinge_x"]), atol=0.02)
     assert main(["map", *(str(p) for p in apart), "-o", str(tmp_path / "odom"), "--pose-source", "odometry"]) == 3
     assert "disjoint coordinate frames" in capsys.readouterr().err  # without the localizer: refused, as before
+
+
+def test_scan_matched_poses_go_into_the_frame_of_a_reference_that_repeats_the_odometry(
+        write_log: Callable[..., Path]) -> None:
+    """A simulator's perfect odometry beside its ground truth (here the truth is the odometry turned by 0.5 rad and
+    moved by (3, −2) m): auto matches scans, and the poses it gets in the odometry's frame are moved by that rigid
+    motion into the reference's, so that the map lies where the truth says. A raw CARMEN log (reference = odometry)
+    is left as it is."""
+    from doorbatch.geometry.se2 import interpolate_poses
+    from doorbatch.io.recording import load_recording
+    from doorbatch.pipeline.mapping import PassPoses, in_reference_frame
+
+    config = DoorbatchConfig()
+    rec = load_recording(write_log("perfect.mcap", _with_reference(_turned_and_moved)), config)
+    assert rec.reference_is_odometry and rec.odometry is not None and rec.reference is not None
+    stamps = rec.scans.stamps_ns
+    odo, ok = interpolate_poses(rec.odometry.stamps_ns, rec.odometry.poses, stamps)
+    matched = PassPoses(rec.path, stamps, odo, ok, "scanmatch")  # matching that kept the odometry
+    (moved,), note = in_reference_frame([matched], rec, config)
+    ref, ref_ok = interpolate_poses(rec.reference.stamps_ns, rec.reference.poses, stamps)
+    both = ok & ref_ok
+    assert both.sum() >= 25
+    np.testing.assert_allclose(moved.poses[both, :2], ref[both, :2], atol=1e-6)
+    np.testing.assert_allclose(np.angle(np.exp(1j * (moved.poses[both, 2] - ref[both, 2]))), 0.0, atol=1e-6)
+    assert note is not None and "(3.000 m, -2.000 m, 28.65°)" in note
+    same = load_recording(write_log("raw.mcap", _with_reference(lambda x, y, yaw: (x, y, yaw))), config)
+    assert same.reference_is_odometry
+    (kept,), note = in_reference_frame([matched], same, config)
+    assert note is None and kept is matched

@@ -67,7 +67,7 @@ def test_a_raw_log_localizes_on_its_own_map_and_says_where_its_start_comes_from(
     run = tmp_path / "run"
     assert main(["localize", str(raw_orebro), "--map", str(tmp_path / "map"), "-o", str(run), "-q"]) == 0
     warnings = json.loads((run / "manifest.json").read_text())["warnings"]
-    assert any(w.startswith("--init reference: the reference is the odometry") for w in warnings)
+    assert any(w.startswith("--init reference: the reference repeats the odometry") for w in warnings)
     truth = load_recording(carmen_log("orebro"), DoorbatchConfig()).reference
     assert truth is not None
     estimate = read_tum(run / "trajectory.tum")

@@ -283,9 +283,10 @@ def localize(log_path: Path, lmap: LocalizationMap, config: DoorbatchConfig, met
         rec.warnings.append(f"--init {start.topic}: its pose is in frame {start.frame_id!r}, taken as the map frame "
                             f"{config.frames.map!r}")
     if start == "reference" and rec.reference_is_odometry:
-        rec.warnings.append("--init reference: the reference is the odometry, so the start is the odometry's first "
-                            "pose, in the map frame only if the map was built from this log; else give --init "
-                            "X,Y,YAW or --init global")
+        rec.warnings.append("--init reference: the reference repeats the odometry (moved rigidly), so it may be no "
+                            "map frame at all (a raw CARMEN log's): the start is its first pose, right where the map "
+                            "lies in the reference's frame (doorbatch map puts it there from such logs); else give "
+                            "--init X,Y,YAW or --init global")
     return localize_recording(rec, lmap, config, method, start, progress)
 
 
