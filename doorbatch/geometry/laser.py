@@ -37,6 +37,26 @@ def beam_masks(scan: Scan) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_]
     return hit, no_return
 
 
+def dropouts(no_return: npt.ArrayLike, hit: npt.ArrayLike, max_beams: int) -> npt.NDArray[np.bool_]:
+    """The no-return beams that are dropouts: runs of at most ``max_beams`` no-return beams (in beam order) with a
+    hit on each side. A beam that returns nothing between two that hit a surface met that surface and lost its echo
+    (a dark or glossy patch): it says nothing about the space behind, which clearing to the no-return distance would
+    claim through the wall. Longer runs (an opening, a corridor beyond range) and runs at a scan's ends are kept."""
+    nr = np.asarray(no_return, dtype=bool).reshape(-1)
+    h = np.asarray(hit, dtype=bool).reshape(-1)
+    out = np.zeros(nr.shape[0], dtype=bool)
+    if max_beams <= 0 or not nr.any():
+        return out
+    edges = np.diff(np.concatenate([[0], nr.astype(np.int8), [0]]))
+    starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    inner = (starts > 0) & (stops < nr.shape[0])
+    starts, stops = starts[inner], stops[inner]
+    short = (stops - starts <= max_beams) & h[starts - 1] & h[stops]
+    for a, b in zip(starts[short], stops[short], strict=True):
+        out[a:b] = True
+    return out
+
+
 def scan_points(scan: Scan, transform: FloatArray) -> ScanPoints:
     """Beam end points moved by a 4×4 transform (laser frame → target frame), projected to the plane.
 

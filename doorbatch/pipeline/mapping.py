@@ -26,6 +26,7 @@ import numpy.typing as npt
 
 from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import PipelineError
+from doorbatch.geometry.laser import dropouts
 from doorbatch.geometry.se2 import compose, interpolate_poses, inverse, rotation_matrix
 from doorbatch.io.preview import PreviewDoor
 from doorbatch.io.recording import Recording, load_recording
@@ -206,8 +207,10 @@ def in_reference_frame(passes: list[PassPoses], first: Recording, config: Doorba
                    "with it into the reference's frame")
 
 
-def map_scans(rec: Recording, poses: PassPoses, stride: int = 1) -> Iterator[MapScan]:
-    """Every ``stride``-th scan of a pass with a valid pose, in the map frame (the grid stage's input)."""
+def map_scans(rec: Recording, poses: PassPoses, stride: int = 1, dropout_max_beams: int = 0) -> Iterator[MapScan]:
+    """Every ``stride``-th scan of a pass with a valid pose, in the map frame (the grid stage's input); no-return
+    beams that are dropouts (:func:`~doorbatch.geometry.laser.dropouts`, ``grid.dropout_max_beams``) clear
+    nothing."""
     scans = rec.scans
     for i in range(0, len(scans), stride):
         if not poses.valid[i]:
@@ -220,14 +223,16 @@ def map_scans(rec: Recording, poses: PassPoses, stride: int = 1) -> Iterator[Map
         r = scans.ranges[i]
         with np.errstate(invalid="ignore"):
             no_return = np.isposinf(r) | (np.isfinite(r) & (r >= scans.range_max[i]))
+        no_return &= ~dropouts(no_return, hit, dropout_max_beams)
         angles = scans.angle_min[i] + scans.angle_increment[i] * np.flatnonzero(no_return)
         dirs = np.stack([np.cos(angles), np.sin(angles)], axis=1) @ (rot @ affine[:, :2]).T
         yield MapScan(origin, pts[hit] @ rot.T + pose[:2], dirs, float(scans.range_max[i]))
 
 
-def integrate_pass(mapper: GridMapper, rec: Recording, poses: PassPoses, stride: int) -> None:
+def integrate_pass(mapper: GridMapper, rec: Recording, poses: PassPoses, stride: int, dropout_max_beams: int = 0
+                   ) -> None:
     """Add every valid scan of one pass to the mapper (map frame), then close the pass."""
-    for scan in map_scans(rec, poses, stride):
+    for scan in map_scans(rec, poses, stride, dropout_max_beams):
         mapper.add_scan(*scan)
     mapper.end_pass()
 
@@ -274,7 +279,7 @@ def build_map(logs: Sequence[Path], config: DoorbatchConfig | None = None,
     t0 = time.perf_counter()
     mapper = GridMapper(config.grid, config.doors)
     for rec, poses in zip(recordings, passes, strict=True):
-        integrate_pass(mapper, rec, poses, config.mapping.scan_stride)
+        integrate_pass(mapper, rec, poses, config.mapping.scan_stride, config.grid.dropout_max_beams)
         if progress is not None:
             progress(1)
     result = mapper.finish()

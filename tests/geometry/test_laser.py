@@ -8,7 +8,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from doorbatch.geometry.laser import beam_masks, scan_points
+from doorbatch.geometry.laser import beam_masks, dropouts, scan_points
 from doorbatch.geometry.rotations import transform_matrix
 from doorbatch.records import Scan
 
@@ -49,3 +49,30 @@ def test_points_of_a_known_scan() -> None:
     scan = _scan(np.array([1.0, 2.0, 3.0]), -math.pi / 2, math.pi / 2)
     pts = scan_points(scan, transform_matrix([1.0, 0.0, 0.0], [0, 0, 0, 1])).points
     np.testing.assert_allclose(pts, [[1.0, -1.0], [3.0, 0.0], [1.0, 3.0]], atol=1e-12)
+
+
+def test_dropouts_are_short_runs_of_no_return_between_two_hits() -> None:
+    h, n = True, False  # hit / no return, beam by beam; 2 beams at most
+    hit = np.array([n, h, n, h, n, n, h, n, n, n, h, n, h, h, n])
+    no_return = ~hit
+    assert np.flatnonzero(dropouts(no_return, hit, 2)).tolist() == [2, 4, 5, 11]  # not the ends, not the 3-run
+    assert np.flatnonzero(dropouts(no_return, hit, 3)).tolist() == [2, 4, 5, 7, 8, 9, 11]
+    assert not dropouts(no_return, hit, 0).any()
+    nan_between = np.array([h, n, h])  # a NaN beam is neither hit nor no return: no run flanked by hits
+    assert not dropouts(np.array([False, False, False]), nan_between, 2).any()
+
+
+@given(st.lists(st.sampled_from(["hit", "none", "nan"]), min_size=1, max_size=40), st.integers(0, 4))
+def test_dropouts_lie_in_no_return_runs_flanked_by_hits(kinds: list[str], max_beams: int) -> None:
+    hit = np.array([k == "hit" for k in kinds])
+    no_return = np.array([k == "none" for k in kinds])
+    d = dropouts(no_return, hit, max_beams)
+    assert not (d & ~no_return).any()
+    for i in np.flatnonzero(d):
+        left, right = i, i
+        while left > 0 and no_return[left - 1]:
+            left -= 1
+        while right < len(kinds) - 1 and no_return[right + 1]:
+            right += 1
+        assert left > 0 and right < len(kinds) - 1 and hit[left - 1] and hit[right + 1]
+        assert right - left + 1 <= max_beams

@@ -352,3 +352,38 @@ def test_scan_matched_poses_go_into_the_frame_of_a_reference_that_repeats_the_od
     assert same.reference_is_odometry
     (kept,), note = in_reference_frame([matched], same, config)
     assert note is None and kept is matched
+
+
+def test_a_dropout_between_two_hits_clears_nothing_behind_the_wall(write_log: Callable[..., Path],
+                                                                  tmp_path: Path) -> None:
+    """A robot standing in a 4 m square room whose laser loses single echoes at random (+inf between two hits on the
+    wall): with grid.dropout_max_beams 0 those beams clear 5 m, through the walls; by default no free cell lies
+    outside the room."""
+    from doorbatch.maps import FREE
+
+    rng = np.random.default_rng(4)
+    angles = np.deg2rad(np.arange(-180.0, 180.0, 1.0))
+    wall = 2.0 / np.maximum(np.abs(np.cos(angles)), np.abs(np.sin(angles)))  # square of half-side 2 m
+    msgs = [("/tf_static", "tf2_msgs/msg/TFMessage", T0,
+             m.tf_message([m.planar_transform(T0, "base_link", "laser", 0.0, 0.0, 0.0)]))]
+    for k in range(20):
+        t = T0 + 100_000_000 * (k + 1)
+        ranges = (wall + 0.005 * rng.standard_normal(angles.size)).astype(np.float32)
+        lost = np.flatnonzero(rng.random(angles.size) < 0.03)
+        ranges[lost[(lost > 0) & (lost < angles.size - 1)]] = np.inf
+        msgs += [("/odom", "nav_msgs/msg/Odometry", t, m.odometry(t, "odom", "base_link", 0.0, 0.0, 0.0)),
+                 ("/ground_truth", "nav_msgs/msg/Odometry", t, m.odometry(t, "map", "base_link", 0.0, 0.0, 0.0)),
+                 ("/scan", "sensor_msgs/msg/LaserScan", t,
+                  m.laser_scan(t, "laser", float(angles[0]), float(np.deg2rad(1.0)), 0.05, 10.0, ranges))]
+    log = write_log("room.mcap", msgs)
+
+    def free_outside(out: Path, *sets: str) -> int:
+        args = [a for kv in sets for a in ("--set", kv)]
+        assert main(["map", str(log), "-o", str(out), "--stages", "grid", "--pose-source", "reference", "-q",
+                     *args]) == 0
+        occ = read_map(out / "map.yaml")
+        xy = occ.cell_to_world(np.argwhere(occ.occupancy == FREE))
+        return int((np.abs(xy).max(axis=1) > 2.2).sum())
+
+    assert free_outside(tmp_path / "all", "grid.dropout_max_beams=0") > 0
+    assert free_outside(tmp_path / "default") == 0
