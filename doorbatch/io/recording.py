@@ -304,9 +304,11 @@ def buffered_transforms(transforms: Sequence[Transform], mounts: Iterable[Transf
     """A log's transforms (in log order) in a buffer, with the scan-origin ``mounts`` of Foxglove scans
     (:meth:`~doorbatch.io.reader.LogReader.scan_origin_mounts`); and a note where stamps were unset.
 
-    A dynamic edge whose transforms are stamped 0 (:func:`unset_stamps`, per edge: a writer that leaves
-    the stamp unset, as a Foxglove FrameTransform without ``timestamp``) would hold one transform at 0, the
-    last logged: each such transform is timed by its log time, as unset stamps of every other message are."""
+    A dynamic edge whose transforms are all stamped 0 (a writer that leaves the stamp unset, as a Foxglove
+    FrameTransform without ``timestamp``) would hold one transform at 0, the last logged: each is timed by its log
+    time, the only time the edge has (the scans' clock may differ: :func:`on_one_clock` compares the odometry it
+    gives with the scans). An edge with some stamps set keeps them all, so that one clock times it (a few zeros
+    before a simulator's first /clock collapse into one transform at 0, far from any scan)."""
     edges: dict[str, list[int]] = {}
     for k, t in enumerate(transforms):
         if not t.static:
@@ -314,11 +316,11 @@ def buffered_transforms(transforms: Sequence[Transform], mounts: Iterable[Transf
     timed = list(transforms)
     moved: dict[str, int] = {}
     for child, ks in edges.items():
-        unset = unset_stamps([transforms[k].stamp_ns for k in ks])
-        for k, u in zip(ks, unset, strict=True):
-            if u and transforms[k].log_time_ns > 0:
-                timed[k] = replace(transforms[k], stamp_ns=transforms[k].log_time_ns)
-                moved[child] = moved.get(child, 0) + 1
+        if any(transforms[k].stamp_ns != 0 or transforms[k].log_time_ns <= 0 for k in ks):
+            continue
+        for k in ks:
+            timed[k] = replace(transforms[k], stamp_ns=transforms[k].log_time_ns)
+        moved[child] = len(ks)
     tf = TfBuffer(int(config.io.tf_extrapolation_limit_s * 1e9))
     for t in (*timed, *mounts):
         tf.add(t)

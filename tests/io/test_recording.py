@@ -404,3 +404,22 @@ def test_a_localizer_that_started_late_gives_no_reference_before_it_started(writ
     rec = load_recording(write_log("late.mcap", msgs))
     assert rec.reference is not None
     assert rec.reference.stamps_ns.min() >= first - 100_000_000 and len(rec.reference) == 11
+
+
+def test_only_an_edge_whose_every_stamp_is_unset_is_timed_by_log_time() -> None:
+    """All zero: the log time is the edge's only time. Some set (a simulator's first transforms before /clock): the
+    edge keeps its own clock, so that no lookup mixes the two."""
+    from doorbatch.io.recording import buffered_transforms
+    from doorbatch.records import Transform
+
+    def tf(child: str, stamp: int, log: int, x: float) -> Transform:
+        return Transform(stamp, "odom", child, np.array([x, 0.0, 0.0]), np.array([0.0, 0.0, 0.0, 1.0]), False, log)
+
+    unset = [tf("base_link", 0, T0 + k * 100_000_000, 0.1 * k) for k in range(5)]
+    mixed = [tf("other", 0, T0, 9.0), *(tf("other", 2_000_000_000 + k * 100_000_000, T0 + k, 0.1 * k)
+                                        for k in range(1, 5))]
+    buf, note = buffered_transforms([*unset, *mixed], [], DoorbatchConfig())
+    assert buf.stamps("base_link") == [T0 + k * 100_000_000 for k in range(5)]
+    np.testing.assert_allclose(buf.lookup("odom", "base_link", T0 + 250_000_000)[0, 3], 0.25)
+    assert buf.stamps("other") == [0, *(2_000_000_000 + k * 100_000_000 for k in range(1, 5))]
+    assert note is not None and "odom→base_link (5 of 5)" in note and "other" not in note
