@@ -27,10 +27,9 @@ class _AnyBagReader(LogReader):
         for conn in self._reader.connections:
             prev = topics.get(conn.topic)
             count = conn.msgcount + (prev.count if prev else 0)
-            name = normalize_msgtype(conn.msgtype)
-            shown = foxglove.ros_type(name)  # foxglove_msgs, as a Foxglove bridge records them: read as ROS 2's
-            topics[conn.topic] = TopicInfo(conn.topic, shown or name, count, "ros1" if self._ros1 else "cdr",
-                                           name if shown else "")
+            # foxglove_msgs, as a Foxglove bridge records them, are listed under the ROS 2 type they are read as
+            topics[conn.topic] = foxglove.topic_info(conn.topic, normalize_msgtype(conn.msgtype), count,
+                                                     "ros1" if self._ros1 else "cdr")
         self._topics = topics
 
     def _storage_name(self) -> str:

@@ -50,6 +50,7 @@ from doorbatch.io.decode import (
     TF_MESSAGE,
     yaw_from_quaternion,
 )
+from doorbatch.io.roles import TopicInfo
 from doorbatch.records import Transform
 
 _ROS_TYPE = {
@@ -82,6 +83,13 @@ def ros_type(schema_name: str) -> str | None:
     """The ROS 2 message type a Foxglove schema is read as (None: not one we read)."""
     kind = foxglove_kind(schema_name)
     return None if kind is None else _ROS_TYPE[kind]
+
+
+def topic_info(topic: str, msgtype: str, count: int, encoding: str, readable: bool = True) -> TopicInfo:
+    """A log's topic of type ``msgtype`` as the readers list it: a Foxglove schema we read (``readable``) under the ROS
+    type its messages are read as, with the schema kept beside it (``TopicInfo.schema``); any other as it is."""
+    shown = ros_type(msgtype) if readable else None
+    return TopicInfo(topic, shown or msgtype, count, encoding, msgtype if shown else "")
 
 
 def payload_decoder(schema: Schema, message_encoding: str) -> Callable[[bytes], Any]:
@@ -176,9 +184,9 @@ def _scan_origin(msg: Any, topic: str) -> tuple[npt.NDArray[np.float64], float, 
     Raises:
         LogContentError: an origin tilted out of the frame's xy-plane.
     """
-    pose = _get(msg, "pose")
-    offset = np.array(_xyz(_get(pose, "position"))) if pose is not None else np.zeros(3)
-    rot = quaternion_to_matrix(_quaternion(_get(pose, "orientation") if pose is not None else None))
+    pose = _get(msg, "pose")  # absent: None, whose position and orientation read as absent too (the identity)
+    offset = np.array(_xyz(_get(pose, "position")))
+    rot = quaternion_to_matrix(_quaternion(_get(pose, "orientation")))
     if abs(abs(rot[2, 2]) - 1.0) > _PLANAR_TOLERANCE:
         raise LogContentError("foxglove.LaserScan whose origin is tilted out of its frame's xy-plane", topic=topic)
     return offset, math.atan2(rot[1, 0], rot[0, 0]), 1.0 if rot[2, 2] > 0.0 else -1.0
@@ -189,8 +197,7 @@ def scan_mount(msg: Any, topic: str) -> Transform | None:
     into the beam angles, :func:`laser_scan`), or None where the origin lies at the frame's origin or the message
     cannot be read. Taken from a topic's first scan, like a sensor mount."""
     try:
-        if isinstance(msg, Payload):
-            msg = msg.decode(msg.data)
+        msg = _decoded(msg)
         offset, _, _ = _scan_origin(msg, topic)
     except Exception:  # an unreadable first message: its topic's own reading reports it
         return None
@@ -287,6 +294,11 @@ class Payload:
     data: bytes
 
 
+def _decoded(msg: Any) -> Any:
+    """A :class:`Payload` decoded; any other message as it is."""
+    return msg.decode(msg.data) if isinstance(msg, Payload) else msg
+
+
 def as_ros_message(kind: str, msg: Any, topic: str, mount: Transform | None = None) -> tuple[str, Any]:
     """(ROS 2 message type, ROS 2 message) of one Foxglove message of schema ``kind``: a rosbags object of
     ``foxglove_msgs``, or a :class:`Payload` decoded here (:func:`as_ros`; ``mount``: its topic's
@@ -296,8 +308,7 @@ def as_ros_message(kind: str, msg: Any, topic: str, mount: Transform | None = No
         LogContentError: a message that does not decode, is not an object, or has no ROS form.
     """
     try:
-        if isinstance(msg, Payload):
-            msg = msg.decode(msg.data)
+        msg = _decoded(msg)
         if isinstance(msg, list | str | int | float | bool) or msg is None:  # JSON that is not an object
             raise LogContentError(f"foxglove.{kind} message is JSON {type(msg).__name__}, not an object", topic=topic)
         return _ROS_TYPE[kind], as_ros(kind, msg, topic, mount)

@@ -77,11 +77,10 @@ class McapLogReader(LogReader):
                     self._msgtype[cid] = name
                 except LogReadError as err:  # the channel is listed, unread, as any channel we cannot decode
                     self.warnings.append(f"{self.path}: {channel.topic}: {err.reason}; not read")
-            shown = foxglove.ros_type(name) if cid in self._msgtype else None
             prev = topics.get(channel.topic)
             count = counts.get(cid, 0) + (prev.count if prev else 0)
-            topics[channel.topic] = TopicInfo(channel.topic, shown or name, count, channel.message_encoding,
-                                              name if shown else "")
+            topics[channel.topic] = foxglove.topic_info(channel.topic, name, count, channel.message_encoding,
+                                                        cid in self._msgtype)
         self._topics = topics
 
     def _linear_messages(self, topics: list[str] | None, start_ns: int | None, stop_ns: int | None
