@@ -50,7 +50,8 @@ def on_log_clock(annotations: Iterable[Annotation], clock: LogClock | None) -> I
 def write_annotated_mcap(source: Path | Sequence[Path], output: Path, annotations: Iterable[Annotation],
                          config: DoorbatchConfig | None = None) -> int:
     """Copy ``source`` (one log, or several, e.g. the passes of a mapping run) into ``output`` with
-    ``annotations`` merged by log time; returns messages written.
+    ``annotations`` merged by log time; returns messages written. The copy is
+    :meth:`~doorbatch.io.reader.LogReader.copied_messages`: Foxglove scans come with the mounts their frames need.
 
     ``annotations`` must come in non-decreasing log time (each stage produces them in time order).
     """
@@ -61,7 +62,7 @@ def write_annotated_mcap(source: Path | Sequence[Path], output: Path, annotation
         readers = [stack.enter_context(open_log(path, config)) for path in sources]
         writer = stack.enter_context(LogWriter(output, LogFormat.MCAP))
         inputs: Iterator[tuple[int, int, RawMessage | Annotation]] = heapq.merge(
-            *(((raw.log_time_ns, 0, raw) for raw in reader.raw_messages()) for reader in readers),
+            *(((raw.log_time_ns, 0, raw) for raw in reader.copied_messages()) for reader in readers),
             key=lambda t: t[0])
         added: Iterator[tuple[int, int, RawMessage | Annotation]] = (
             (a.log_time_ns, 1, a) for a in _check(annotations)

@@ -6,8 +6,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from doorbatch.config import DoorbatchConfig
-from doorbatch.io import ros_messages as rm
-from doorbatch.io.decode import TF_MESSAGE
 from doorbatch.io.log_writer import LogFormat, LogWriter
 from doorbatch.io.reader import open_log
 from doorbatch.progress import progress_bar
@@ -27,7 +25,8 @@ class ConvertSummary:
 
 def convert_log(source: Path, output: Path, config: DoorbatchConfig | None = None,
                 fmt: LogFormat = LogFormat.MCAP) -> ConvertSummary:
-    """Copy every message of ``source`` into ``output``; ROS 1 messages become ROS 2 CDR.
+    """Copy every message of ``source`` into ``output``; ROS 1 and Foxglove messages become ROS 2 CDR, with the
+    mounts of Foxglove scans on /tf_static (:meth:`~doorbatch.io.reader.LogReader.copied_messages`).
 
     Raises:
         LogReadError: the source cannot be read.
@@ -37,13 +36,7 @@ def convert_log(source: Path, output: Path, config: DoorbatchConfig | None = Non
     with open_log(source, config) as reader:
         total = sum(t.count for t in reader.topics.values())
         with LogWriter(output, fmt) as writer, progress_bar(total, f"convert {source.name}") as bar:
-            mounts = list(reader.scan_origin_mounts().values())
-            if mounts:  # Foxglove scans whose origin is off their frame's: the mount their frame needs
-                writer.write("/tf_static", TF_MESSAGE, reader.start_ns, rm.tf_message(
-                    [rm.transform_stamped(reader.start_ns, t.parent, t.child, t.translation.tolist(),
-                                          t.rotation_xyzw.tolist()) for t in mounts]))
-                counts["/tf_static"] = 1
-            for raw in reader.raw_messages():
+            for raw in reader.copied_messages():
                 writer.write_raw(raw)
                 counts[raw.topic] = counts.get(raw.topic, 0) + 1
                 bar.update(1)

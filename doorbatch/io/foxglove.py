@@ -172,9 +172,15 @@ def _planar(pose: Any) -> tuple[float, float, float]:
     return x, y, yaw_from_quaternion(*q)
 
 
+def _frame(msg: Any, name: str = "frame_id") -> str:
+    """A frame name field, without the leading "/" of ROS 1 names (as :mod:`doorbatch.io.decode` reads them)."""
+    return str(_get(msg, name, "")).lstrip("/")
+
+
 def origin_frame(frame_id: str, topic: str) -> str:
     """The frame doorbatch gives the origin of a topic's Foxglove scans where it lies off their frame's origin."""
-    return f"{frame_id}/{topic.strip('/').replace('/', '_')}_origin"
+    name = f"{topic.strip('/').replace('/', '_')}_origin"
+    return f"{frame_id}/{name}" if frame_id else name
 
 
 def _scan_origin(msg: Any, topic: str) -> tuple[npt.NDArray[np.float64], float, float]:
@@ -194,16 +200,17 @@ def _scan_origin(msg: Any, topic: str) -> tuple[npt.NDArray[np.float64], float, 
 
 def scan_mount(msg: Any, topic: str) -> Transform | None:
     """The static transform from a Foxglove scan's frame to its origin (:func:`origin_frame`; the rotation is folded
-    into the beam angles, :func:`laser_scan`), or None where the origin lies at the frame's origin or the message
-    cannot be read. Taken from a topic's first scan, like a sensor mount."""
-    try:
-        msg = _decoded(msg)
-        offset, _, _ = _scan_origin(msg, topic)
-    except Exception:  # an unreadable first message: its topic's own reading reports it
-        return None
+    into the beam angles, :func:`laser_scan`), or None where the origin lies at the frame's origin. Taken from a
+    topic's first readable scan, like a sensor mount.
+
+    Raises:
+        Exception: a message that cannot be read (of any kind: bad bytes, JSON, or a tilted origin).
+    """
+    msg = _decoded(msg)
+    offset, _, _ = _scan_origin(msg, topic)
     if float(np.abs(offset).max()) <= _PLANAR_TOLERANCE:
         return None
-    frame = str(_get(msg, "frame_id", ""))
+    frame = _frame(msg)
     return Transform(stamp_ns=0, parent=frame, child=origin_frame(frame, topic), translation=offset,
                      rotation_xyzw=np.array([0.0, 0.0, 0.0, 1.0]), static=True)
 
@@ -215,17 +222,18 @@ def laser_scan(msg: Any, topic: str, mount: Transform | None = None) -> Any:
     scan's origin in ``frame_id`` (Foxglove's schema). A rotation of that origin about z, upside down or not, is
     folded into the angles: a beam at angle a in the origin points at φ + s·a in the frame, φ the origin's heading
     and s = ±1 the sign of its z axis. An origin offset from the frame's origin is a mount: the scan is put in
-    :func:`origin_frame`, which ``mount`` (:func:`scan_mount` of the topic's first scan) places in the frame. The
+    :func:`origin_frame`, which ``mount`` (:func:`scan_mount` of the topic's first readable scan) places in the
+    frame. The
     schema states no range limits: range_min is 0 (a reading of 0, which drivers write for no echo, is then no hit,
     as in any log: :func:`~doorbatch.io.recording.usable_range_limits`) and range_max +inf, "not stated" to every
     stage (the localizers take ``localize.laser_max_range_fallback``).
 
     Raises:
         LogContentError: an origin tilted out of the frame's xy-plane, one offset other than ``mount`` (the
-            topic's first scan's), or no ranges.
+            topic's first readable scan's), or no ranges.
     """
     offset, heading, sign = _scan_origin(msg, topic)
-    frame = str(_get(msg, "frame_id", ""))
+    frame = _frame(msg)
     if float(np.abs(offset).max()) > _PLANAR_TOLERANCE:
         if mount is None or mount.parent != frame or not np.allclose(mount.translation, offset, rtol=0.0,
                                                                      atol=_PLANAR_TOLERANCE):
@@ -247,8 +255,8 @@ def laser_scan(msg: Any, topic: str, mount: Transform | None = None) -> Any:
 
 
 def _transform(msg: Any) -> Any:
-    return rm.transform_stamped(_stamp_ns(msg), str(_get(msg, "parent_frame_id", "")),
-                                str(_get(msg, "child_frame_id", "")), _xyz(_get(msg, "translation")),
+    return rm.transform_stamped(_stamp_ns(msg), _frame(msg, "parent_frame_id"),
+                                _frame(msg, "child_frame_id"), _xyz(_get(msg, "translation")),
                                 _quaternion(_get(msg, "rotation")).tolist())
 
 
@@ -264,10 +272,10 @@ def as_ros(kind: str, msg: Any, topic: str, mount: Transform | None = None) -> A
         return rm.tf_message([_transform(msg)])
     if kind == "FrameTransforms":
         return rm.tf_message([_transform(t) for t in _get(msg, "transforms", None) or []])
-    stamp, frame = _stamp_ns(msg), str(_get(msg, "frame_id", ""))
+    stamp, frame = _stamp_ns(msg), _frame(msg)
     if kind == "Odometry":
         covariance = _floats(_get(msg, "pose_covariance"))
-        return rm.odometry(stamp, frame, str(_get(msg, "body_frame_id", "")), *_planar(_get(msg, "pose")),
+        return rm.odometry(stamp, frame, _frame(msg, "body_frame_id"), *_planar(_get(msg, "pose")),
                            covariance=covariance if covariance.shape[0] == 36 else None)
     if kind == "PoseInFrame":
         return rm.pose_stamped(stamp, frame, *_planar(_get(msg, "pose")))

@@ -23,7 +23,8 @@ from rosbags.typesys.store import Typestore
 from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import DoorbatchError, LogContentError, LogReadError
 from doorbatch.io import foxglove
-from doorbatch.io.decode import decode
+from doorbatch.io import ros_messages as rm
+from doorbatch.io.decode import TF_MESSAGE, decode
 from doorbatch.io.roles import RoleAssignment, TopicInfo, assign_roles
 from doorbatch.records import Role, RoleMessage, Transform
 
@@ -44,6 +45,9 @@ class RawMessage:
     msg: Any
     ros1: bool
     store: Typestore | None = None  # the typestore whose classes built ``msg`` (None: ROS 2 Humble's)
+
+
+MOUNTS_TOPIC = "/tf_static"  # where a copy of a log carries the mounts doorbatch reads off Foxglove scans
 
 
 def most_are_bad(n_bad: int, n: int) -> bool:
@@ -141,21 +145,40 @@ class LogReader(ABC):
 
     def scan_origin_mounts(self) -> dict[str, Transform]:
         """Per topic of Foxglove scans whose origin lies off their frame's origin, the static transform to that
-        origin (:func:`~doorbatch.io.foxglove.scan_mount`, from the topic's first message); the readers of TF add
-        these to the log's own transforms."""
+        origin (:func:`~doorbatch.io.foxglove.scan_mount`, from the topic's first readable message: an unreadable
+        one before it is skipped here as the topic's own reading skips it); the readers of TF add these to the
+        log's own transforms."""
         if self._scan_mounts is None:
             self._scan_mounts = {}
             for topic, info in self.topics.items():
-                if foxglove.foxglove_kind(info.schema) != "LaserScan":
-                    continue
-                try:
-                    first = next(iter(self._raw([topic], None, None)), None)
-                except Exception:  # an unreadable first message: the topic's own reading reports it
-                    first = None
-                mount = None if first is None else foxglove.scan_mount(first.msg, topic)
-                if mount is not None:
+                if foxglove.foxglove_kind(info.schema) == "LaserScan" and (mount := self._first_mount(topic)):
                     self._scan_mounts[topic] = mount
         return self._scan_mounts
+
+    def copied_messages(self) -> Iterator[RawMessage]:
+        """Every message (:meth:`raw_messages`) for a copy of the log (``doorbatch convert``, annotated.mcap),
+        preceded, where Foxglove scans have an origin off their frame's, by one ``/tf_static`` message at the log's
+        start holding those mounts (:meth:`scan_origin_mounts`): a copy's scans are in the origin frames, which only
+        these transforms place."""
+        mounts = list(self.scan_origin_mounts().values())
+        if mounts:
+            yield RawMessage(MOUNTS_TOPIC, TF_MESSAGE, self.start_ns, rm.tf_message(
+                [rm.transform_stamped(self.start_ns, t.parent, t.child, t.translation.tolist(),
+                                      t.rotation_xyzw.tolist()) for t in mounts]), False, None)
+        yield from self.raw_messages()
+
+    def _first_mount(self, topic: str) -> Transform | None:
+        """:func:`~doorbatch.io.foxglove.scan_mount` of the first scan of ``topic`` that can be read (None: none
+        can, or the log cannot be read: the topic's own reading reports either)."""
+        try:
+            for raw in self._raw([topic], None, None):
+                try:
+                    return foxglove.scan_mount(raw.msg, topic)
+                except Exception:  # an unreadable scan: the topic's own reading counts it
+                    continue
+        except Exception:
+            return None
+        return None
 
     def _skipped(self, bad: dict[str, list[LogContentError]], seen: Counter[str]) -> None:
         """After a complete pass: a topic whose messages could not be read raises the first one's error when they

@@ -19,9 +19,10 @@ from doorbatch.cli import main
 from doorbatch.errors import LogContentError
 from doorbatch.geometry.rotations import quaternion_to_matrix
 from doorbatch.io import foxglove as fx
+from doorbatch.io.annotated_mcap import write_annotated_mcap
 from doorbatch.io.decode import decode_scan
 from doorbatch.io.reader import open_log
-from doorbatch.io.recording import load_recording
+from doorbatch.io.recording import Recording, load_recording
 from doorbatch.records import CameraInfo, Image, Role, Scan, Transform
 from tests.conftest import REPO, T0, Message, sample_messages
 
@@ -250,10 +251,11 @@ def test_a_scan_origin_rotated_in_its_plane_puts_every_point_where_foxglove_draw
     assert scan.stamp_ns == 1_000_000_005
 
 
-def _scans_in_base_link(msgs: list[tuple[str, str, int, dict[str, Any]]], yaw: float
+def _scans_in_base_link(msgs: list[tuple[str, str, int, dict[str, Any]]], yaw: float, frame: str = "base_link"
                         ) -> list[tuple[str, str, int, dict[str, Any]]]:
-    """The scans logged in base_link with the laser mount (0.2, 0, 0.3) as their origin, turned by ``yaw`` (the
-    beam angles turned back, so the beams point where they did), and no base_link → laser transform."""
+    """The scans logged in base_link (named ``frame``) with the laser mount (0.2, 0, 0.3) as their origin, turned
+    by ``yaw`` (the beam angles turned back, so the beams point where they did), and no base_link → laser
+    transform."""
     out = []
     for topic, kind, t, d in msgs:
         if topic == "/tf":
@@ -261,7 +263,7 @@ def _scans_in_base_link(msgs: list[tuple[str, str, int, dict[str, Any]]], yaw: f
             if not d["transforms"]:
                 continue
         if topic == "/scan":
-            d = {**d, "frame_id": "base_link", "start_angle": d["start_angle"] - yaw,
+            d = {**d, "frame_id": frame, "start_angle": d["start_angle"] - yaw,
                  "end_angle": d["end_angle"] - yaw,
                  "pose": {"position": {"x": 0.2, "y": 0.0, "z": 0.3},
                           "orientation": {"x": 0.0, "y": 0.0, "z": math.sin(yaw / 2), "w": math.cos(yaw / 2)}}}
@@ -282,10 +284,63 @@ def test_a_scan_origin_off_its_frame_is_its_mount(write_log: Callable[..., Path]
     assert main(["convert", str(path), "-o", str(converted)]) == 0
     for fox in (load_recording(path), load_recording(converted)):
         assert fox.scans.frame_id == "base_link/scan_origin"
-        for i in range(len(ros.scans)):
-            a, b = ros.scans.endpoints_base(i), fox.scans.endpoints_base(i)
-            np.testing.assert_array_equal(a[1], b[1])
+        _assert_same_hits(ros, fox)
+
+
+def _assert_same_hits(ros: Recording, fox: Recording) -> None:
+    assert len(fox.scans) == len(ros.scans)
+    for i in range(len(ros.scans)):
+        a, b = ros.scans.endpoints_base(i), fox.scans.endpoints_base(i)
+        np.testing.assert_array_equal(a[1], b[1])
+        np.testing.assert_allclose(a[0][a[1]], b[0][b[1]], atol=1e-5)
+
+
+def test_a_ros1_style_frame_name_keeps_the_scan_origin_mount(write_log: Callable[..., Path], tmp_path: Path) -> None:
+    """A frame named "/base_link" (a ROS 1 habit) is base_link, as in ROS messages: the origin frame hangs under
+    base_link, and the scans read as with "base_link"."""
+    msgs = sample_messages(6)
+    ros = load_recording(write_log("ros.mcap", msgs))
+    fox = load_recording(write_json(tmp_path / "slash.mcap", _scans_in_base_link(as_foxglove(msgs), 0.4,
+                                                                                 "/base_link")))
+    assert fox.scans.frame_id == "base_link/scan_origin"
+    _assert_same_hits(ros, fox)
+
+
+def test_the_mount_comes_from_the_first_scan_that_reads(write_log: Callable[..., Path], tmp_path: Path) -> None:
+    """An unreadable first scan (bad JSON, or an origin tilted out of the plane) is skipped as any unreadable
+    message is, and the mount comes from the next scan: the topic is not refused."""
+    msgs = sample_messages(8)
+    ros = load_recording(write_log("ros.mcap", msgs))
+    entries = json_entries(_scans_in_base_link(as_foxglove(msgs), 0.4))
+    first = next(i for i, e in enumerate(entries) if e[0] == "/scan")
+    tilted = json.loads(entries[first][6])
+    tilted["pose"]["orientation"] = {"x": math.sin(0.2), "y": 0.0, "z": 0.0, "w": math.cos(0.2)}
+    for bad in (b"{not json", json.dumps(tilted).encode()):
+        broken = list(entries)
+        broken[first] = (*entries[first][:6], bad)
+        fox = load_recording(write_mcap(tmp_path / "first_bad.mcap", broken))
+        assert fox.scans.frame_id == "base_link/scan_origin"
+        assert any("1 of 8 messages on /scan skipped" in w for w in fox.warnings)
+        assert fox.scans.stamps_ns.tolist() == ros.scans.stamps_ns[1:].tolist()
+        for i in range(len(fox.scans)):
+            a, b = ros.scans.endpoints_base(i + 1), fox.scans.endpoints_base(i)
             np.testing.assert_allclose(a[0][a[1]], b[0][b[1]], atol=1e-5)
+
+
+def test_the_annotated_copy_of_a_log_carries_the_scan_origin_mount(write_log: Callable[..., Path],
+                                                                  tmp_path: Path) -> None:
+    """annotated.mcap copies the log in ROS messages: its scans are in the origin frame, so it holds the mount on
+    /tf_static, and reads as the log does."""
+    msgs = sample_messages(6)
+    ros = load_recording(write_log("ros.mcap", msgs))
+    path = write_json(tmp_path / "origin.mcap", _scans_in_base_link(as_foxglove(msgs), 0.4))
+    out = tmp_path / "annotated.mcap"
+    write_annotated_mcap(path, out, [])
+    with open_log(out) as reader:
+        assert reader.topics["/tf_static"].msgtype == "tf2_msgs/msg/TFMessage"
+    copy = load_recording(out)
+    assert copy.scans.frame_id == "base_link/scan_origin"
+    _assert_same_hits(ros, copy)
 
 
 def test_a_scan_origin_that_moves_is_a_clear_error(tmp_path: Path) -> None:
