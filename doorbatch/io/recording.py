@@ -24,7 +24,7 @@ from doorbatch.geometry.tf_buffer import TfBuffer
 from doorbatch.io.decode import MODEL_STATES
 from doorbatch.io.log_clock import LogClock
 from doorbatch.io.reader import LogReader, open_log
-from doorbatch.pipeline.evaluate.trajectory_error import rigid_copy_offset
+from doorbatch.pipeline.evaluate.trajectory_error import first_pose_correction, rigid_copy_offset
 from doorbatch.records import BeamColors, Pose2D, Role, Scan, Transform
 
 FloatArray = npt.NDArray[np.float64]
@@ -97,12 +97,18 @@ class Recording:
     colors: list[npt.NDArray[np.uint8]] | None = None
     warnings: list[str] = field(default_factory=list)
     color_valid: list[npt.NDArray[np.bool_]] | None = None
-    # The reference is the odometry moved rigidly (io.reference_repeats_odometry_m/_deg): no independent reference.
-    reference_is_odometry: bool = False
+    # Where the reference is the odometry moved rigidly (io.reference_repeats_odometry_m/_deg: no independent
+    # reference), that motion (x, y, yaw), which takes odometry poses into the reference's frame; else None.
+    odometry_to_reference: FloatArray | None = None
     # The recorder's clock against the scans' stamps where they differ by more than io.clock_mismatch_s (a sim-time
     # log recorded on wall-clock time), else the identity: when an output message stamped at a scan's time is
     # logged, so that it sits beside the input's messages (annotated.mcap).
     log_clock: LogClock = field(default_factory=LogClock)
+
+    @property
+    def reference_is_odometry(self) -> bool:
+        """The reference is the odometry moved rigidly (:attr:`odometry_to_reference`): no independent one."""
+        return self.odometry_to_reference is not None
 
 
 def pose_series(poses: list[Pose2D]) -> PoseSeries | None:
@@ -519,8 +525,8 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
         aligned, valid = camera_beam_colors(path, scans, tf, config)
         if not any(v.any() for v in valid):
             aligned, valid = None, None
-    repeats = reference_repeats_odometry(reference, odometry, scan_set.stamps_ns, config)
-    if repeats:
+    repeats = odometry_to_reference(reference, odometry, scan_set.stamps_ns, config)
+    if repeats is not None:
         warnings.append(f"{path}: the reference poses are the odometry moved rigidly (within "
                         f"{config.io.reference_repeats_odometry_m} m and {config.io.reference_repeats_odometry_deg}°): "
                         "no independent reference (a raw CARMEN log's laser poses are its odometry; a corrected log's "
@@ -529,29 +535,33 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
                      timed.log_clock)
 
 
-def reference_repeats_odometry(reference: PoseSeries | None, odometry: PoseSeries | None,
-                               stamps_ns: Int64Array, config: DoorbatchConfig) -> bool:
-    """Whether the reference, at ``stamps_ns`` (the scans'), is the odometry moved rigidly
-    (:func:`~doorbatch.pipeline.evaluate.trajectory_error.rigid_copy_offset` within
-    ``io.reference_repeats_odometry_m`` plus the printed precision of the coordinates, 1e-5 of their magnitude, and
-    ``_deg``), over at least ``io.reference_repeats_min_path_m`` of odometry path (False below: no telling). A
-    CARMEN log's laser poses are its odometry unless the log was corrected, and a corrected log's odometry was
-    replaced by the corrected poses, so the reader cannot tell the two apart; a robot may also republish its
-    odometry as a pose topic.
+def odometry_to_reference(reference: PoseSeries | None, odometry: PoseSeries | None,
+                          stamps_ns: Int64Array, config: DoorbatchConfig) -> FloatArray | None:
+    """Where the reference, at ``stamps_ns`` (the scans'), is the odometry moved rigidly, that motion T (x, y, yaw;
+    r = T ⊕ o, taken at the first scan that has both: :func:`~doorbatch.pipeline.evaluate.trajectory_error.
+    first_pose_correction`), else None. A copy is one within
+    (:func:`~doorbatch.pipeline.evaluate.trajectory_error.rigid_copy_offset`) ``io.reference_repeats_odometry_m``
+    plus the printed precision of the coordinates, 1e-5 of their magnitude, and ``_deg``, over at least
+    ``io.reference_repeats_min_path_m`` of odometry path (None below: no telling). A CARMEN log's laser poses are
+    its odometry unless the log was corrected, and a corrected log's odometry was replaced by the corrected poses,
+    so the reader cannot tell the two apart; a robot may also republish its odometry as a pose topic. The poses are
+    interpolated over any gap: a sparse reference repeats the odometry as a dense one does.
     """
     if reference is None or odometry is None:
-        return False
+        return None
     ref, ref_ok = interpolate_poses(reference.stamps_ns, reference.poses, stamps_ns)
     odo, odo_ok = interpolate_poses(odometry.stamps_ns, odometry.poses, stamps_ns)
     both = ref_ok & odo_ok
     ref, odo = ref[both], odo[both]
     io = config.io
     if ref.shape[0] < 2 or float(np.hypot(*np.diff(odo[:, :2], axis=0).T).sum()) < io.reference_repeats_min_path_m:
-        return False  # too little motion for any odometry to have drifted from a true reference
+        return None  # too little motion for any odometry to have drifted from a true reference
     # printed precision: a CARMEN log writes 6 significant digits, a millimetre at 100 m
     tolerance_m = io.reference_repeats_odometry_m + 1e-5 * float(np.abs(np.concatenate([ref[:, :2], odo[:, :2]])).max())
     off_m, off_rad = rigid_copy_offset(odo, ref)
-    return off_m <= tolerance_m and math.degrees(off_rad) <= io.reference_repeats_odometry_deg
+    if off_m > tolerance_m or math.degrees(off_rad) > io.reference_repeats_odometry_deg:
+        return None
+    return first_pose_correction(odo, ref)
 
 
 # No lidar measures below a millimetre; a 0.0 reading is a driver's "no data".

@@ -27,7 +27,7 @@ import numpy.typing as npt
 from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import PipelineError
 from doorbatch.geometry.laser import dropouts
-from doorbatch.geometry.se2 import compose, interpolate_poses, inverse, rotation_matrix
+from doorbatch.geometry.se2 import compose, interpolate_poses, rotation_matrix
 from doorbatch.io.preview import PreviewDoor
 from doorbatch.io.recording import Recording, load_recording
 from doorbatch.maps import OccupancyMap
@@ -182,23 +182,17 @@ def _chain_scanmatch(recordings: Sequence[Recording], config: DoorbatchConfig) -
     return out, warnings
 
 
-def in_reference_frame(passes: list[PassPoses], first: Recording, config: DoorbatchConfig
+def in_reference_frame(passes: list[PassPoses], recordings: Sequence[Recording]
                        ) -> tuple[list[PassPoses], str | None]:
-    """Scan-matched passes (in the first pass's odometry frame) moved into the first pass's reference frame where
-    that reference is its odometry moved rigidly (``Recording.reference_is_odometry``: a raw CARMEN log, or a
-    simulator's perfect odometry beside its ground truth), so that the map lies where the reference says, as
-    with ``--pose-source reference``; and a note. The motion T = r₀ ⊕ o₀⁻¹ takes the odometry's pose at the first
-    scan with both onto the reference's (the identity for a raw CARMEN log). Passes unchanged otherwise."""
-    if not first.reference_is_odometry or first.reference is None or first.odometry is None:
+    """Scan-matched passes (in the passes' common odometry frame) moved into the reference frame of the first pass
+    whose reference is its odometry moved rigidly (``Recording.odometry_to_reference``: a raw CARMEN log, or a
+    simulator's perfect odometry beside its ground truth), so that the map lies where the reference says, as with
+    ``--pose-source reference``, whatever the order of the passes; and a note. That motion T takes the odometry's
+    poses onto the reference's (the identity for a raw CARMEN log). Passes unchanged where no pass has one."""
+    first = next((r for r in recordings if r.odometry_to_reference is not None), None)
+    if first is None or first.odometry_to_reference is None:
         return passes, None
-    stamps = first.scans.stamps_ns
-    gap_ns = int(config.mapping.max_pose_gap_s * 1e9)
-    ref, ref_ok = interpolate_poses(first.reference.stamps_ns, first.reference.poses, stamps, gap_ns)
-    odo, odo_ok = interpolate_poses(first.odometry.stamps_ns, first.odometry.poses, stamps, gap_ns)
-    both = np.flatnonzero(ref_ok & odo_ok)
-    if both.size == 0:
-        return passes, None
-    motion = compose(ref[both[0]], inverse(odo[both[0]]))
+    motion = first.odometry_to_reference
     if float(np.hypot(motion[0], motion[1])) < 1e-9 and abs(float(motion[2])) < 1e-12:
         return passes, None
     moved = [replace(p, poses=compose(np.broadcast_to(motion, p.poses.shape), p.poses)) for p in passes]
@@ -262,7 +256,7 @@ def build_map(logs: Sequence[Path], config: DoorbatchConfig | None = None,
     t0 = time.perf_counter()
     if source == "scanmatch":
         passes, matching_notes = _chain_scanmatch(recordings, config)
-        passes, moved = in_reference_frame(passes, recordings[0], config)
+        passes, moved = in_reference_frame(passes, recordings)
         warnings += matching_notes + ([moved] if moved else [])
     else:
         passes = [pass_poses(rec, source, config) for rec in recordings]

@@ -341,7 +341,7 @@ def test_scan_matched_poses_go_into_the_frame_of_a_reference_that_repeats_the_od
     stamps = rec.scans.stamps_ns
     odo, ok = interpolate_poses(rec.odometry.stamps_ns, rec.odometry.poses, stamps)
     matched = PassPoses(rec.path, stamps, odo, ok, "scanmatch")  # matching that kept the odometry
-    (moved,), note = in_reference_frame([matched], rec, config)
+    (moved,), note = in_reference_frame([matched], [rec])
     ref, ref_ok = interpolate_poses(rec.reference.stamps_ns, rec.reference.poses, stamps)
     both = ok & ref_ok
     assert both.sum() >= 25
@@ -350,8 +350,47 @@ def test_scan_matched_poses_go_into_the_frame_of_a_reference_that_repeats_the_od
     assert note is not None and "(3.000 m, -2.000 m, 28.65°)" in note
     same = load_recording(write_log("raw.mcap", _with_reference(lambda x, y, yaw: (x, y, yaw))), config)
     assert same.reference_is_odometry
-    (kept,), note = in_reference_frame([matched], same, config)
+    (kept,), note = in_reference_frame([matched], [same])
     assert note is None and kept is matched
+
+
+def test_the_reference_frame_is_the_first_repeating_pass_s_whatever_the_order(
+        write_log: Callable[..., Path]) -> None:
+    """Passes in one odometry frame, one with an independent reference (no motion to take) and one whose
+    reference repeats the odometry turned and moved: the scan-matched poses go into the latter's frame in either
+    order; and a sparse such reference (one pose every 0.7 s, gaps beyond mapping.max_pose_gap_s) gives the
+    same motion as a dense one (the old check, with that gap limit, moved nothing)."""
+    from dataclasses import replace
+
+    from doorbatch.geometry.se2 import interpolate_poses
+    from doorbatch.io.recording import load_recording
+    from doorbatch.pipeline.mapping import PassPoses, in_reference_frame
+
+    config = DoorbatchConfig()
+    msgs = _with_reference(_turned_and_moved)
+    truth = [t for topic, _, t, _ in msgs if topic == "/ground_truth"]
+    sparse = [x for x in msgs if x[0] != "/ground_truth"]  # between scans, where the sample's motion is linear
+    for k in range(0, 29, 7):
+        sparse.append(("/ground_truth", "nav_msgs/msg/Odometry", (truth[k] + truth[k + 1]) // 2, m.odometry(
+            (truth[k] + truth[k + 1]) // 2, "map", "base_link", *_turned_and_moved(0.1 * k + 0.05, 0.02 * k + 0.01,
+                                                                                  0.01 * k + 0.005))))
+    sparse.sort(key=lambda x: x[2])
+    assert (truth[7] - truth[0]) / 1e9 > config.mapping.max_pose_gap_s
+    repeating, thin = (load_recording(write_log(name, m), config) for name, m in
+                       (("dense.mcap", msgs), ("sparse.mcap", sparse)))
+    assert thin.odometry_to_reference is not None and repeating.odometry_to_reference is not None
+    np.testing.assert_allclose(thin.odometry_to_reference, [3.0, -2.0, 0.5], atol=1e-6)
+    independent = replace(repeating, odometry_to_reference=None)
+    assert repeating.odometry is not None
+    stamps = repeating.scans.stamps_ns
+    odo, ok = interpolate_poses(repeating.odometry.stamps_ns, repeating.odometry.poses, stamps)
+    matched = PassPoses(repeating.path, stamps, odo, ok, "scanmatch")
+    for order in ([independent, repeating], [repeating, independent], [independent, thin]):
+        moved, note = in_reference_frame([matched, matched], order)
+        assert note is not None and "(3.000 m, -2.000 m, 28.65°)" in note
+        want = _turned_and_moved(*odo[ok][0])
+        np.testing.assert_allclose(moved[0].poses[ok][0], want, atol=1e-6)
+        np.testing.assert_allclose(moved[1].poses, moved[0].poses)
 
 
 def test_a_dropout_between_two_hits_clears_nothing_behind_the_wall(write_log: Callable[..., Path],

@@ -11,13 +11,18 @@ from doorbatch.geometry.se2 import compose, inverse
 FloatArray = npt.NDArray[np.float64]
 
 
-def align_first_pose(estimate: npt.ArrayLike, reference: npt.ArrayLike) -> FloatArray:
-    """The estimate moved rigidly so that its first pose equals the reference's (odometry-style evaluation:
-    both start at the same pose)."""
+def first_pose_correction(estimate: npt.ArrayLike, reference: npt.ArrayLike) -> FloatArray:
+    """The rigid motion T = r₀ ⊕ e₀⁻¹ (x, y, yaw) that takes the estimate's first pose onto the reference's."""
     est = np.asarray(estimate, dtype=np.float64).reshape(-1, 3)
     ref = np.asarray(reference, dtype=np.float64).reshape(-1, 3)
-    correction = compose(ref[0], inverse(est[0]))
-    return compose(np.broadcast_to(correction, est.shape), est)
+    return compose(ref[0], inverse(est[0]))
+
+
+def align_first_pose(estimate: npt.ArrayLike, reference: npt.ArrayLike) -> FloatArray:
+    """The estimate moved rigidly so that its first pose equals the reference's (odometry-style evaluation:
+    both start at the same pose; :func:`first_pose_correction`)."""
+    est = np.asarray(estimate, dtype=np.float64).reshape(-1, 3)
+    return compose(np.broadcast_to(first_pose_correction(est, reference), est.shape), est)
 
 
 def position_errors(estimate: npt.ArrayLike, reference: npt.ArrayLike) -> FloatArray:
