@@ -99,7 +99,8 @@ def read_passes(logs: list[str], config: DoorbatchConfig) -> list[list[MapScan]]
     for log in logs:
         rec = load_recording(log, config)
         passes.append([scan._replace(points=np.ascontiguousarray(scan.points))
-                       for scan in map_scans(rec, pass_poses(rec, "reference", config))])
+                       for scan in map_scans(rec, pass_poses(rec, "reference", config), config.mapping.scan_stride,
+                                             config.grid.dropout_max_beams)])
     return passes
 
 

@@ -37,24 +37,36 @@ def beam_masks(scan: Scan) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_]
     return hit, no_return
 
 
-def dropouts(no_return: npt.ArrayLike, hit: npt.ArrayLike, max_beams: int) -> npt.NDArray[np.bool_]:
-    """The no-return beams that are dropouts: runs of at most ``max_beams`` no-return beams (in beam order) with a
-    hit on each side. A beam that returns nothing between two that hit a surface met that surface and lost its echo
-    (a dark or glossy patch): it says nothing about the space behind, which clearing to the no-return distance would
-    claim through the wall. Longer runs (an opening, a corridor beyond range) and runs at a scan's ends are kept."""
+def wraps_around(angle_increment_rad: float, beams: int) -> bool:
+    """Whether a scan's beams go all the way round (a 360° laser): its last beam then neighbours its first. Within
+    half a beam of a full turn, or past it (lasers that repeat a beam)."""
+    step = abs(float(angle_increment_rad))
+    return beams * step >= 2.0 * np.pi - 0.5 * step
+
+
+def dropouts(no_return: npt.ArrayLike, hit: npt.ArrayLike, max_beams: int, wraps: bool = False
+             ) -> npt.NDArray[np.bool_]:
+    """The no-return beams that are dropouts: those in runs of at most ``max_beams`` beams without a hit (no
+    return, NaN, or below range_min: each a lost echo) with a hit on each side, in beam order, across the first and
+    last beams where the scan ``wraps`` (:func:`wraps_around`). A beam that returns nothing between two that hit a
+    surface met that surface and lost its echo (a dark or glossy patch): it says nothing about the space behind,
+    which clearing to the no-return distance would claim through the wall. Longer runs (an opening, a corridor
+    beyond range) and runs at the ends of a scan that does not wrap are kept."""
     nr = np.asarray(no_return, dtype=bool).reshape(-1)
     h = np.asarray(hit, dtype=bool).reshape(-1)
-    out = np.zeros(nr.shape[0], dtype=bool)
-    if max_beams <= 0 or not nr.any():
+    n = nr.shape[0]
+    out = np.zeros(n, dtype=bool)
+    if max_beams <= 0 or not nr.any() or not h.any():
         return out
-    edges = np.diff(np.concatenate([[0], nr.astype(np.int8), [0]]))
+    shift = int(np.argmax(h)) if wraps else 0  # start a full circle at a hit: a run across beam 0 is then one run
+    nr, h = np.roll(nr, -shift), np.roll(h, -shift)
+    edges = np.diff(np.concatenate([[0], (~h).astype(np.int8), [0]]))
     starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-    inner = (starts > 0) & (stops < nr.shape[0])
-    starts, stops = starts[inner], stops[inner]
-    short = (stops - starts <= max_beams) & h[starts - 1] & h[stops]
-    for a, b in zip(starts[short], stops[short], strict=True):
-        out[a:b] = True
-    return out
+    flanked = (starts > 0) & ((stops < n) | wraps)  # wrapping, a run that reaches the end ends at beam 0, a hit
+    for a, b in zip(starts[flanked], stops[flanked], strict=True):
+        if b - a <= max_beams:
+            out[a:b] = True
+    return np.roll(out & nr, shift)
 
 
 def scan_points(scan: Scan, transform: FloatArray) -> ScanPoints:

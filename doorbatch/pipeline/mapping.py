@@ -26,7 +26,7 @@ import numpy.typing as npt
 
 from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import PipelineError
-from doorbatch.geometry.laser import dropouts
+from doorbatch.geometry.laser import dropouts, wraps_around
 from doorbatch.geometry.se2 import compose, interpolate_poses, rotation_matrix
 from doorbatch.io.preview import PreviewDoor
 from doorbatch.io.recording import Recording, load_recording
@@ -201,7 +201,7 @@ def in_reference_frame(passes: list[PassPoses], recordings: Sequence[Recording]
                    "with it into the reference's frame")
 
 
-def map_scans(rec: Recording, poses: PassPoses, stride: int = 1, dropout_max_beams: int = 0) -> Iterator[MapScan]:
+def map_scans(rec: Recording, poses: PassPoses, stride: int, dropout_max_beams: int) -> Iterator[MapScan]:
     """Every ``stride``-th scan of a pass with a valid pose, in the map frame (the grid stage's input); no-return
     beams that are dropouts (:func:`~doorbatch.geometry.laser.dropouts`, ``grid.dropout_max_beams``) clear
     nothing."""
@@ -217,13 +217,13 @@ def map_scans(rec: Recording, poses: PassPoses, stride: int = 1, dropout_max_bea
         r = scans.ranges[i]
         with np.errstate(invalid="ignore"):
             no_return = np.isposinf(r) | (np.isfinite(r) & (r >= scans.range_max[i]))
-        no_return &= ~dropouts(no_return, hit, dropout_max_beams)
+        no_return &= ~dropouts(no_return, hit, dropout_max_beams, wraps_around(scans.angle_increment[i], r.shape[0]))
         angles = scans.angle_min[i] + scans.angle_increment[i] * np.flatnonzero(no_return)
         dirs = np.stack([np.cos(angles), np.sin(angles)], axis=1) @ (rot @ affine[:, :2]).T
         yield MapScan(origin, pts[hit] @ rot.T + pose[:2], dirs, float(scans.range_max[i]))
 
 
-def integrate_pass(mapper: GridMapper, rec: Recording, poses: PassPoses, stride: int, dropout_max_beams: int = 0
+def integrate_pass(mapper: GridMapper, rec: Recording, poses: PassPoses, stride: int, dropout_max_beams: int
                    ) -> None:
     """Add every valid scan of one pass to the mapper (map frame), then close the pass."""
     for scan in map_scans(rec, poses, stride, dropout_max_beams):

@@ -8,7 +8,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from doorbatch.geometry.laser import beam_masks, dropouts, scan_points
+from doorbatch.geometry.laser import beam_masks, dropouts, scan_points, wraps_around
 from doorbatch.geometry.rotations import transform_matrix
 from doorbatch.records import Scan
 
@@ -58,21 +58,58 @@ def test_dropouts_are_short_runs_of_no_return_between_two_hits() -> None:
     assert np.flatnonzero(dropouts(no_return, hit, 2)).tolist() == [2, 4, 5, 11]  # not the ends, not the 3-run
     assert np.flatnonzero(dropouts(no_return, hit, 3)).tolist() == [2, 4, 5, 7, 8, 9, 11]
     assert not dropouts(no_return, hit, 0).any()
-    nan_between = np.array([h, n, h])  # a NaN beam is neither hit nor no return: no run flanked by hits
+    nan_between = np.array([h, n, h])  # a NaN beam is neither hit nor no return: nothing to keep from clearing
     assert not dropouts(np.array([False, False, False]), nan_between, 2).any()
 
 
-@given(st.lists(st.sampled_from(["hit", "none", "nan"]), min_size=1, max_size=40), st.integers(0, 4))
-def test_dropouts_lie_in_no_return_runs_flanked_by_hits(kinds: list[str], max_beams: int) -> None:
+def test_a_nan_beam_is_a_lost_echo_in_the_run_it_lies_in() -> None:
+    """hit, no return, NaN, hit: two beams lost between two hits, so the no-return one is a dropout (with one
+    beam at most, the run is too long); hit, no return, NaN, NaN, hit: three, none with two at most."""
+    nan = float("nan")
+    for ranges, max_beams, want in (([1.0, np.inf, nan, 1.0], 2, [1]), ([1.0, np.inf, nan, 1.0], 1, []),
+                                    ([1.0, nan, np.inf, nan, 1.0], 3, [2]), ([1.0, np.inf, nan, nan, 1.0], 2, [])):
+        r = np.array(ranges)
+        assert np.flatnonzero(dropouts(np.isposinf(r), np.isfinite(r), max_beams)).tolist() == want
+
+
+def test_a_run_across_the_first_beam_of_a_full_circle_is_one_run() -> None:
+    """A 360° laser: beams 0 and 359 are neighbours, so no return on 359 and 0 between hits on 358 and 1 is a
+    two-beam run, a dropout; a 270° laser's ends are ends."""
+    ranges = np.full(360, 2.0)
+    ranges[[359, 0]] = np.inf
+    nr, hit = np.isposinf(ranges), np.isfinite(ranges)
+    assert wraps_around(np.radians(1.0), 360) and not wraps_around(np.radians(0.25), 1081)
+    assert np.flatnonzero(dropouts(nr, hit, 2, wraps=True)).tolist() == [0, 359]
+    assert not dropouts(nr, hit, 1, wraps=True).any()
+    assert not dropouts(nr, hit, 2, wraps=False).any()
+
+
+def _run_around(gap: np.ndarray, i: int, wraps: bool) -> tuple[int, bool]:
+    """Length of the run of beams without a hit that holds beam i, and whether a hit lies on each side of it."""
+    n = gap.shape[0]
+    length, flanked = 1, True
+    for step in (-1, 1):
+        j = i + step
+        while True:
+            if not wraps and not 0 <= j < n:
+                flanked = False
+                break
+            if not gap[j % n]:
+                break
+            length += 1
+            if length >= n:
+                return n, False
+            j += step
+    return length, flanked
+
+
+@given(st.lists(st.sampled_from(["hit", "none", "nan"]), min_size=1, max_size=40), st.integers(0, 4),
+       st.booleans())
+def test_dropouts_are_exactly_the_no_returns_in_short_runs_flanked_by_hits(kinds: list[str], max_beams: int,
+                                                                           wraps: bool) -> None:
     hit = np.array([k == "hit" for k in kinds])
     no_return = np.array([k == "none" for k in kinds])
-    d = dropouts(no_return, hit, max_beams)
-    assert not (d & ~no_return).any()
-    for i in np.flatnonzero(d):
-        left, right = i, i
-        while left > 0 and no_return[left - 1]:
-            left -= 1
-        while right < len(kinds) - 1 and no_return[right + 1]:
-            right += 1
-        assert left > 0 and right < len(kinds) - 1 and hit[left - 1] and hit[right + 1]
-        assert right - left + 1 <= max_beams
+    d = dropouts(no_return, hit, max_beams, wraps)
+    for i in range(len(kinds)):
+        length, flanked = _run_around(~hit, i, wraps) if not hit[i] else (0, False)
+        assert d[i] == (bool(no_return[i]) and flanked and length <= max_beams)
