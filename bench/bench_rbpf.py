@@ -10,9 +10,12 @@ Particle-beam evaluations/s = N·B / (time of the whole update).
 Memory: peak traced NumPy memory of one update at 50,000 particles, the particle set included (tracemalloc),
 and the process's peak RSS.
 
+Also the tracked cloud's weighing alone (``tracked_log_likelihood``: static field, door terms, beam skipping, the
+sum), the part ``localize.backend: torch`` runs on the device.
+
 Run: ``taskset -c 0 python bench/bench_rbpf.py [--particles 10000 50000] [--repeats 5] [--torch-device cuda]``
-(``--torch-device``: the static field's lookups in torch there, ``localize.backend: torch``; the door terms stay in
-NumPy/numba).
+(``--torch-device``: ``localize.backend: torch`` there: the tracked weighing on the device; the door update and
+the conditioning on the beams stay in NumPy/numba).
 """
 
 from __future__ import annotations
@@ -31,10 +34,10 @@ from bench_rbpf_doors import RANGE_MAX_M, scan, scene
 from doorbatch.config import LocalizeConfig
 from doorbatch.maps import OccupancyMap
 from doorbatch.pipeline.localize.door_likelihood import numba_available
-from doorbatch.pipeline.localize.likelihood_field import BeamSet, build_distance_field
+from doorbatch.pipeline.localize.likelihood_field import BeamCombination, BeamSet, build_distance_field
 from doorbatch.pipeline.localize.mcl import MclState
 from doorbatch.pipeline.localize.particles import ParticleSet
-from doorbatch.pipeline.localize.rbpf import rbpf_step
+from doorbatch.pipeline.localize.rbpf import rbpf_step, tracked_log_likelihood
 
 RES = 0.05
 TORCH_DEVICE: list[str | None] = [None]  # set from --torch-device
@@ -95,6 +98,21 @@ def time_step(name: str, n: int, repeats: int) -> None:
           f"{evals / best / 1e6:5.2f} M particle-beams/s (N after: {len(out.particles)})")
 
 
+def time_weigh(name: str, n: int, repeats: int) -> None:
+    rng = np.random.default_rng(0)
+    state, beams, _, field, doors, config = setup(name, n, rng)
+    combination = BeamCombination(config.beam_combination)
+    args = (state.particles, beams, field, doors, config, combination)
+    tracked_log_likelihood(*args)  # type: ignore[arg-type]  # compile / warm up, the field to the device
+    best = math.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        tracked_log_likelihood(*args)  # type: ignore[arg-type]
+        best = min(best, time.perf_counter() - t0)
+    evals = n * len(beams.points_base)
+    print(f"[{name}] N={n}: tracked weighing {best * 1e3:7.1f} ms = {evals / best / 1e6:5.2f} M particle-beams/s")
+
+
 def memory(n: int) -> None:
     rng = np.random.default_rng(0)
     tracemalloc.start()
@@ -114,7 +132,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--particles", type=int, nargs="+", default=[10000, 50000])
     parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--torch-device", default=None, help="run the static field's lookups in torch on this device")
+    parser.add_argument("--torch-device", default=None, help="localize.backend: torch on this device")
     args = parser.parse_args()
     TORCH_DEVICE[0] = args.torch_device
     print(f"backend: {'numpy' if args.torch_device is None else 'torch on ' + args.torch_device}")
@@ -124,6 +142,7 @@ def main() -> None:
     for name in ("dense", "corridor"):
         for n in args.particles:
             time_step(name, n, args.repeats)
+            time_weigh(name, n, args.repeats)
     memory(max(args.particles))
 
 

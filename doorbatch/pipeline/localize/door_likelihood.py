@@ -88,17 +88,24 @@ class DoorLikelihood(NamedTuple):
     beam_likelihood: npt.NDArray[np.float32]
 
 
-class _Model(NamedTuple):
+class BeamModel(NamedTuple):
+    """The beam model's constants as the door likelihood uses them."""
+
     z_hit: float
     rand_term: float  # z_rand / range_max
     sigma2: float  # σ_hit²
     max_dist: float
 
 
-def _model(config: LocalizeConfig, range_max_m: float) -> _Model:
+def beam_model(config: LocalizeConfig, range_max_m: float) -> BeamModel:
+    """The config's beam model for a laser of ``range_max_m``.
+
+    Raises:
+        ValueError: range_max_m not positive and finite.
+    """
     if not (math.isfinite(range_max_m) and range_max_m > 0.0):
         raise ValueError(f"range_max_m must be positive and finite, got {range_max_m}")
-    return _Model(config.z_hit, config.z_rand / range_max_m, config.sigma_hit**2, config.laser_likelihood_max_dist)
+    return BeamModel(config.z_hit, config.z_rand / range_max_m, config.sigma_hit**2, config.laser_likelihood_max_dist)
 
 
 def door_log_likelihood(static_dist: npt.ArrayLike, points: npt.ArrayLike, doors: DoorSet,
@@ -174,7 +181,7 @@ def _door_log_likelihood(dist: npt.NDArray[np.float32], pts: FloatArray | None, 
                          extra: npt.NDArray[np.float32] | None = None,
                          unobserved_var: npt.ArrayLike | None = None, prior: DoorPrior = UNIFORM) -> DoorLikelihood:
     """Checks, then the kernel or the reference, then the beam likelihoods."""
-    model = _model(config, range_max_m)
+    model = beam_model(config, range_max_m)
     uni = np.full(len(doors), np.inf) if unobserved_var is None else np.ascontiguousarray(
         np.broadcast_to(np.asarray(unobserved_var, dtype=np.float64), (len(doors),)))
     mean = np.ascontiguousarray(door_mean, dtype=np.float64)
@@ -212,7 +219,7 @@ def _door_log_likelihood(dist: npt.NDArray[np.float32], pts: FloatArray | None, 
     return DoorLikelihood(loglik, assoc, pz)
 
 
-def _likelihoods(score: npt.NDArray[np.float32], model: _Model) -> tuple[FloatArray, npt.NDArray[np.float32]]:
+def _likelihoods(score: npt.NDArray[np.float32], model: BeamModel) -> tuple[FloatArray, npt.NDArray[np.float32]]:
     """pz = z_hit·exp(−score/2) + z_rand/range_max per beam, and Σ_beams log pz per particle (NaN: skipped).
 
     float32 per beam (SIMD exp and log), float64 sums: the error is ~1e-7 relative per beam, far below what
@@ -227,7 +234,7 @@ def _likelihoods(score: npt.NDArray[np.float32], model: _Model) -> tuple[FloatAr
 
 
 def _numpy_scores(dist: npt.NDArray[np.float32], pts: FloatArray, doors: DoorSet, mean: FloatArray, var: FloatArray,
-                  model: _Model, extra: npt.NDArray[np.float32] | None = None, uni: FloatArray | None = None,
+                  model: BeamModel, extra: npt.NDArray[np.float32] | None = None, uni: FloatArray | None = None,
                   prior: DoorPrior = UNIFORM) -> tuple[npt.NDArray[np.float32], Int16Array]:
     """NumPy reference: score −2·log(g/z_hit) of the chosen model and the association, per particle chunk."""
     n, b = dist.shape
@@ -260,7 +267,7 @@ def _numpy_scores(dist: npt.NDArray[np.float32], pts: FloatArray, doors: DoorSet
     return score.astype(np.float32), assoc
 
 
-def _uniform_scores(pts: FloatArray, doors: DoorSet, s0: FloatArray, model: _Model, prior: DoorPrior = UNIFORM
+def _uniform_scores(pts: FloatArray, doors: DoorSet, s0: FloatArray, model: BeamModel, prior: DoorPrior = UNIFORM
                     ) -> FloatArray:
     """Score −2·log(g_k) of each door under its prior over the range (module docstring: uniform, or the closed /
     open mixture), (..., D).

@@ -56,10 +56,10 @@ from doorbatch.pipeline.localize.likelihood_field import (
     BeamSet,
     DistanceField,
     FreeCells,
-    beam_likelihood,
     combine_beams,
     endpoint_distances,
     skip_unexplained,
+    skipped_field_log_likelihood,
 )
 from doorbatch.pipeline.localize.mcl import (
     MclState,
@@ -134,17 +134,8 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
 
         particles, log_avg, bandwidth = tempered_weighting(particles, region, spread, rng)
     else:
-        static = endpoint_distances(field, particles.pose, beams.points_base)
-        if n_doors:
-            unobserved = unobserved_door_variance(doors, config) if config.tracking_door_prior else None
-            dl = door_log_likelihood_at_poses(static, particles.pose, beams.points_base, doors, particles.door_mean,
-                                              particles.door_var, config, beams.range_max_m,
-                                              unobserved_var=unobserved)
-            pz, association = dl.beam_likelihood, dl.association
-        else:
-            pz = beam_likelihood(static, config.z_hit, config.z_rand, config.sigma_hit, beams.range_max_m)
-        pz, _ = skip_unexplained(pz, particles.weight, particles.pose, config, beams.range_max_m, combination)
-        weighting = apply_log_likelihood(particles, combine_beams(pz, combination))
+        log_likelihood, association = tracked_log_likelihood(particles, beams, field, doors, config, combination)
+        weighting = apply_log_likelihood(particles, log_likelihood)
         particles, log_avg = with_log_weights(particles, weighting.log_weight), weighting.log_avg_weight
 
     observed = none
@@ -163,6 +154,34 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
 
     new_state, diag = finish_step(state, particles, log_avg, odom, config, rng, free, bandwidth)
     return new_state, diag, observed
+
+
+def tracked_log_likelihood(particles: ParticleSet, beams: BeamSet, field: DistanceField, doors: DoorSet,
+                           config: LocalizeConfig, combination: BeamCombination
+                           ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int16] | None]:
+    """log p(z | x) (N,) of a tracked cloud, eq. (6) with ML association between the static map and each door
+    leaf (:mod:`.door_likelihood`; a door not observed yet under its prior with ``tracking_door_prior``), beams
+    skipped as MCL skips them (:func:`~.likelihood_field.skip_unexplained`); and the (N, B) beam association (None
+    without doors: MCL's weighing). On a field with a ``torch_device`` every step runs there
+    (:func:`.torch_door_likelihood.skipped_door_log_likelihood`)."""
+    if not len(doors):
+        log_likelihood, _ = skipped_field_log_likelihood(field, particles.pose, particles.weight, beams.points_base,
+                                                         config, beams.range_max_m, combination)
+        return log_likelihood, None
+    unobserved = unobserved_door_variance(doors, config) if config.tracking_door_prior else None
+    if field.torch_device is not None:
+        from doorbatch.pipeline.localize.torch_door_likelihood import skipped_door_log_likelihood
+
+        log_likelihood, association, _ = skipped_door_log_likelihood(
+            field, particles.pose, particles.weight, beams.points_base, doors, particles.door_mean,
+            particles.door_var, config, beams.range_max_m, combination, unobserved)
+        return log_likelihood, association
+    static = endpoint_distances(field, particles.pose, beams.points_base)
+    dl = door_log_likelihood_at_poses(static, particles.pose, beams.points_base, doors, particles.door_mean,
+                                      particles.door_var, config, beams.range_max_m, unobserved_var=unobserved)
+    pz, _ = skip_unexplained(dl.beam_likelihood, particles.weight, particles.pose, config, beams.range_max_m,
+                             combination)
+    return combine_beams(pz, combination), dl.association
 
 
 def global_door_log_likelihood(particles: ParticleSet, bandwidth: Bandwidth, beams: BeamSet,

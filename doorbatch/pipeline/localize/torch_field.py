@@ -34,7 +34,7 @@ Float32Array = npt.NDArray[np.float32]
 BLOCK_PARTICLES = 65536
 
 
-def _torch() -> Any:
+def import_torch() -> Any:
     try:
         import torch
     except ImportError as err:
@@ -49,7 +49,7 @@ def check_device(device: str) -> None:
         OptionalDependencyError: torch is not installed.
         UsageError: the device name is not one torch knows, or it is a CUDA device and none is available.
     """
-    torch = _torch()
+    torch = import_torch()
     try:
         dev = torch.device(device)
     except RuntimeError as err:
@@ -73,17 +73,17 @@ def _device_field(dist_field: DistanceField, device: str) -> _DeviceField:
     cached = dist_field.device_cache.get(device)
     if isinstance(cached, _DeviceField):
         return cached
-    torch = _torch()
+    torch = import_torch()
     padded = torch.from_numpy(np.ascontiguousarray(dist_field.padded).ravel()).to(device)
     made = _DeviceField(padded, dist_field.width + 2, dist_field.height + 2)
     dist_field.device_cache[device] = made
     return made
 
 
-def _block_distances(field: _DeviceField, grid: Any, cells: Any) -> Any:
+def block_distances(field: _DeviceField, grid: Any, cells: Any) -> Any:
     """(n, B) float32 distances for grid-frame poses (n, 3, float64) and end points in cell units (B, 2, float32),
     in the order of ``likelihood_field._chunk_distances`` and ``_gather``."""
-    torch = _torch()
+    torch = import_torch()
     c = torch.cos(grid[:, 2:3]).float()
     s = torch.sin(grid[:, 2:3]).float()
     gx, gy = grid[:, 0:1].float(), grid[:, 1:2].float()
@@ -103,11 +103,11 @@ def _block_distances(field: _DeviceField, grid: Any, cells: Any) -> Any:
     return field.padded[flat]
 
 
-def _blocks(dist_field: DistanceField, pose: npt.ArrayLike, points_base: npt.ArrayLike
+def device_blocks(dist_field: DistanceField, pose: npt.ArrayLike, points_base: npt.ArrayLike
             ) -> tuple[_DeviceField, Any, Any]:
     """The field on its device, the poses in grid units (N, 3, float64) and the end points in cell units (B, 2,
     float32) there."""
-    torch = _torch()
+    torch = import_torch()
     device = dist_field.torch_device
     if device is None:
         raise ValueError("the distance field has no torch_device")
@@ -120,18 +120,18 @@ def _blocks(dist_field: DistanceField, pose: npt.ArrayLike, points_base: npt.Arr
 def endpoint_distances(dist_field: DistanceField, pose: npt.ArrayLike, points_base: npt.ArrayLike) -> Float32Array:
     """(N, B) float32 field distances of every beam end point of every particle, computed on the field's
     ``torch_device`` (:func:`~.likelihood_field.endpoint_distances`)."""
-    field, grid, cells = _blocks(dist_field, pose, points_base)
+    field, grid, cells = device_blocks(dist_field, pose, points_base)
     out = np.empty((grid.shape[0], cells.shape[0]), dtype=np.float32)
     for start in range(0, grid.shape[0], BLOCK_PARTICLES):
         stop = min(start + BLOCK_PARTICLES, grid.shape[0])
-        out[start:stop] = _block_distances(field, grid[start:stop], cells).cpu().numpy()
+        out[start:stop] = block_distances(field, grid[start:stop], cells).cpu().numpy()
     return out
 
 
 def _beam_likelihood(d: Any, z_hit: float, z_rand: float, sigma_hit: float, max_range: float) -> Any:
     """pz = z_hit·exp(−d²/2σ²) + z_rand/max_range, in place of ``d`` (float32), in
     :func:`~.likelihood_field.beam_likelihood`'s order."""
-    torch = _torch()
+    torch = import_torch()
     pz = d.mul_(d)
     pz *= float(np.float32(-0.5 / (sigma_hit * sigma_hit)))
     pz = torch.exp_(pz)
@@ -144,7 +144,7 @@ def _combine_beams(pz: Any, combination: BeamCombination) -> Any:
     """(n,) float64 log-likelihoods of (n, B) pz (:func:`~.likelihood_field.combine_beams`)."""
     from doorbatch.pipeline.localize.likelihood_field import BeamCombination
 
-    torch = _torch()
+    torch = import_torch()
     if combination is BeamCombination.AMCL:
         return torch.log1p((pz * pz * pz).sum(dim=1, dtype=torch.float64))
     return torch.log(pz).sum(dim=1, dtype=torch.float64)
@@ -156,13 +156,13 @@ def field_log_likelihood(dist_field: DistanceField, pose: npt.ArrayLike, points_
     """log p(z | x) (N,) of each particle, fused on the field's ``torch_device``
     (:func:`~.likelihood_field.field_log_likelihood`): pz = z_hit·exp(−d²/2σ²) + z_rand/max_range per beam in
     float32, then log(1 + Σ pz³) (AMCL) or Σ log pz (PRODUCT) summed in float64."""
-    field, grid, cells = _blocks(dist_field, pose, points_base)
+    field, grid, cells = device_blocks(dist_field, pose, points_base)
     out = np.zeros(grid.shape[0])
     if cells.shape[0] == 0:
         return out
     for start in range(0, grid.shape[0], BLOCK_PARTICLES):
         stop = min(start + BLOCK_PARTICLES, grid.shape[0])
-        pz = _beam_likelihood(_block_distances(field, grid[start:stop], cells), z_hit, z_rand, sigma_hit, max_range)
+        pz = _beam_likelihood(block_distances(field, grid[start:stop], cells), z_hit, z_rand, sigma_hit, max_range)
         out[start:stop] = _combine_beams(pz, combination).cpu().numpy()
     return out
 
@@ -172,7 +172,7 @@ def _support_weights(pz: Any, weight: Any, floor: float, combination: BeamCombin
     (:func:`~.likelihood_field.beam_support_weights`, float32 in its order); ``weight`` (N,) float64."""
     from doorbatch.pipeline.localize.likelihood_field import BeamCombination
 
-    torch = _torch()
+    torch = import_torch()
     p = torch.fmax(pz, torch.tensor(float(np.float32(floor)), dtype=torch.float32, device=pz.device))
     log_w = torch.log(weight).float()[:, None]
     if combination is BeamCombination.AMCL:
@@ -196,15 +196,24 @@ def skipped_field_log_likelihood(dist_field: DistanceField, pose: npt.ArrayLike,
     (:func:`~.likelihood_field.beam_support_weights`), the skip mask (:func:`~.likelihood_field.beam_skip_mask`)
     and the sum stay there; N log-likelihoods come back. The whole cloud is one block (the support of a beam
     is normalized over all particles): (N, B) float32, 12 MB at 50,000 particles and 60 beams."""
-    from doorbatch.pipeline.localize.likelihood_field import BeamCombination, beam_skip_floor, cloud_converged
-
-    torch = _torch()
-    field, grid, cells = _blocks(dist_field, pose, points_base)
+    field, grid, cells = device_blocks(dist_field, pose, points_base)
     if cells.shape[0] == 0:
         return np.zeros(grid.shape[0]), 0
-    skipped = 0
-    pz = _beam_likelihood(_block_distances(field, grid, cells), config.z_hit, config.z_rand, config.sigma_hit,
+    pz = _beam_likelihood(block_distances(field, grid, cells), config.z_hit, config.z_rand, config.sigma_hit,
                           range_max_m)
+    loglik, skipped = skip_and_combine(pz, pose, weight, config, range_max_m, combination)
+    return np.asarray(loglik.cpu().numpy()), skipped
+
+
+def skip_and_combine(pz: Any, pose: npt.ArrayLike, weight: npt.ArrayLike, config: LocalizeConfig,
+                     range_max_m: float, combination: BeamCombination) -> tuple[Any, int]:
+    """(N,) float64 log-likelihoods on the device of (N, B) float32 per-beam likelihoods there, with beam skipping
+    (:func:`~.likelihood_field.skip_unexplained`, then :func:`~.likelihood_field.combine_beams`); ``pz`` is
+    changed in place. The number of beams skipped."""
+    from doorbatch.pipeline.localize.likelihood_field import BeamCombination, beam_skip_floor, cloud_converged
+
+    torch = import_torch()
+    skipped = 0
     if config.do_beamskip and cloud_converged(weight, pose, config):  # as skip_unexplained: a converged cloud only
         floor = beam_skip_floor(config, range_max_m)
         explained = pz >= float(np.float32(floor))
@@ -223,4 +232,4 @@ def skipped_field_log_likelihood(dist_field: DistanceField, pose: npt.ArrayLike,
         elif skipped:
             pz[:, skip] = neutral
         pz[torch.isnan(pz)] = neutral
-    return np.asarray(_combine_beams(pz, combination).cpu().numpy()), skipped
+    return _combine_beams(pz, combination), skipped
