@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -124,7 +125,7 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
     # else MCL's static model.
     global_phase = bandwidth is not None and len(beams.points_base) > 0
     spread = spread_cloud_config(config, state.global_start) if global_phase else config
-    association = None  # the tracked weighting's beam association, which the beam conditioning reuses
+    evidence = None  # the tracked weighting's beams on the doors, which the beam conditioning reuses
     if global_phase:
 
         def region(p: ParticleSet, h: Bandwidth) -> npt.NDArray[np.float64]:
@@ -134,7 +135,7 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
 
         particles, log_avg, bandwidth = tempered_weighting(particles, region, spread, rng)
     else:
-        log_likelihood, association = tracked_log_likelihood(particles, beams, field, doors, config, combination)
+        log_likelihood, evidence = tracked_log_likelihood(particles, beams, field, doors, config, combination)
         weighting = apply_log_likelihood(particles, log_likelihood)
         particles, log_avg = with_log_weights(particles, weighting.log_weight), weighting.log_avg_weight
 
@@ -149,7 +150,7 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
         if spread.global_door_term if global_phase else config.tracking_door_prior:
             prior = DoorPrior.from_config(config) if global_phase else None
             mean, var = condition_doors_on_beams(particles, beams, field, doors, config, prior,
-                                                 skip=update.observed, association=association)
+                                                 skip=update.observed, evidence=evidence)
             particles = replace(particles, door_mean=mean, door_var=var)
 
     new_state, diag = finish_step(state, particles, log_avg, odom, config, rng, free, bandwidth)
@@ -158,11 +159,12 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
 
 def tracked_log_likelihood(particles: ParticleSet, beams: BeamSet, field: DistanceField, doors: DoorSet,
                            config: LocalizeConfig, combination: BeamCombination
-                           ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int16] | None]:
+                           ) -> tuple[npt.NDArray[np.float64], DoorEvidence | None]:
     """log p(z | x) (N,) of a tracked cloud, eq. (6) with ML association between the static map and each door
     leaf (:mod:`.door_likelihood`; a door not observed yet under its prior with ``tracking_door_prior``), beams
-    skipped as MCL skips them (:func:`~.likelihood_field.skip_unexplained`); and the (N, B) beam association (None
-    without doors: MCL's weighing). On a field with a ``torch_device`` every step runs there
+    skipped as MCL skips them (:func:`~.likelihood_field.skip_unexplained`); and the beams' evidence on the doors
+    (None without doors: MCL's weighing): their (N, B) association on the host, what they say of each door's angle
+    (:func:`door_beam_information`, summed there) on a field with a ``torch_device``, where every step runs
     (:func:`.torch_door_likelihood.skipped_door_log_likelihood`)."""
     if not len(doors):
         log_likelihood, _ = skipped_field_log_likelihood(field, particles.pose, particles.weight, beams.points_base,
@@ -172,10 +174,10 @@ def tracked_log_likelihood(particles: ParticleSet, beams: BeamSet, field: Distan
     if field.torch_device is not None:
         from doorbatch.pipeline.localize.torch_door_likelihood import skipped_door_log_likelihood
 
-        log_likelihood, association, _ = skipped_door_log_likelihood(
-            field, particles.pose, particles.weight, beams.points_base, doors, particles.door_mean,
-            particles.door_var, config, beams.range_max_m, combination, unobserved)
-        return log_likelihood, association
+        weighed = skipped_door_log_likelihood(field, particles.pose, particles.weight, beams.points_base, doors,
+                                              particles.door_mean, particles.door_var, config, beams.range_max_m,
+                                              combination, unobserved)
+        return weighed.log_likelihood, weighed.information
     static = endpoint_distances(field, particles.pose, beams.points_base)
     dl = door_log_likelihood_at_poses(static, particles.pose, beams.points_base, doors, particles.door_mean,
                                       particles.door_var, config, beams.range_max_m, unobserved_var=unobserved)
@@ -287,10 +289,59 @@ def door_update_log_factor(prior: ParticleSet, update: DoorUpdate, doors: DoorSe
     return out
 
 
+class DoorBeamInformation(NamedTuple):
+    """What the beams each door's leaf explains say of its angle, per particle and door (N, D): the information
+    Σ c_b/σ_hit² and the information-weighted angle Σ c_b·φ_b/σ_hit² (:func:`condition_doors_on_beams`)."""
+
+    info: npt.NDArray[np.float64]
+    info_angle: npt.NDArray[np.float64]
+
+
+def door_beam_information(association: npt.NDArray[np.int16], pose: npt.ArrayLike, points_base: npt.ArrayLike,
+                          doors: DoorSet, config: LocalizeConfig, keep: npt.NDArray[np.bool_] | None = None
+                          ) -> DoorBeamInformation:
+    """The angle measurements of the beams associated with doors (:func:`condition_doors_on_beams`), summed per
+    particle and door: a beam b of particle i on door k, its end point at distance r from the hinge in direction
+    φ_b (relative to closed_yaw, unwrapped about the range's middle), carries c_b/σ_hit², c = r² on the leaf's disc
+    and r·L beyond it, when φ_b lies in the sector the leaf can sweep (the range ± ``door_angle_margin_deg``: the
+    door update's gate; an end point beside the hinge on the far side would put the angle outside the range), else
+    nothing. ``association`` (N, B): −1 static, k ≥ 0 door k (:mod:`.door_likelihood`); ``keep`` (N, D): the
+    particles' doors to sum (others 0; all when None). A torch device computes the same where the association
+    lies (:func:`.torch_door_likelihood.skipped_door_log_likelihood`)."""
+    poses = np.asarray(pose, dtype=np.float64).reshape(-1, 3)
+    base = np.asarray(points_base, dtype=np.float64).reshape(-1, 2)
+    n, d = poses.shape[0], len(doors)
+    i, b = np.nonzero(association >= 0)
+    k = association[i, b].astype(np.intp)
+    if keep is not None:
+        kept = keep[i, k]
+        i, b, k = i[kept], b[kept], k[kept]
+    p = poses[i]
+    c, s = np.cos(p[:, 2]), np.sin(p[:, 2])
+    vx = p[:, 0] + c * base[b, 0] - s * base[b, 1] - doors.hinge[k, 0]
+    vy = p[:, 1] + s * base[b, 0] + c * base[b, 1] - doors.hinge[k, 1]
+    r = np.hypot(vx, vy)
+    length = doors.length[k]
+    mid = (doors.angle_min[k] + doors.angle_max[k]) / 2
+    phi = mid + wrap_angle(np.arctan2(vy, vx) - doors.closed_yaw[k] - mid)
+    margin = math.radians(config.door_angle_margin_deg)
+    inside = (phi >= doors.angle_min[k] - margin) & (phi <= doors.angle_max[k] + margin)
+    info = np.where(inside, np.where(r <= length, r * r, r * length), 0.0) / config.sigma_hit**2
+    flat = i * d + k
+    sums = [np.asarray(np.bincount(flat, weights=w, minlength=n * d), dtype=np.float64).reshape(n, d)
+            for w in (info, info * phi)]
+    return DoorBeamInformation(*sums)
+
+
+# The beams' evidence on the doors that the tracked weighting leaves to the conditioning: their association (N, B),
+# or what they say of each door's angle, summed (a torch device sums where the association lies).
+DoorEvidence = npt.NDArray[np.int16] | DoorBeamInformation
+
+
 def condition_doors_on_beams(particles: ParticleSet, beams: BeamSet, field: DistanceField, doors: DoorSet,
                              config: LocalizeConfig, prior: DoorPrior | None = None,
                              skip: npt.NDArray[np.bool_] | None = None,
-                             association: npt.NDArray[np.int16] | None = None
+                             evidence: DoorEvidence | None = None
                              ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """Each particle's doors conditioned on the beams that their leaves explain (global phase with the door term;
     tracking with ``tracking_door_prior``).
@@ -311,8 +362,8 @@ def condition_doors_on_beams(particles: ParticleSet, beams: BeamSet, field: Dist
     a Gaussian truncated at the closed end of the range, would put a closed door's mean a fraction of the
     measurement's std open, and the linearized model would then draw its leaf there (measured: closed-log
     tracking 0.060-0.068 m against 0.039-0.056 m). Doors in ``skip`` (N, D) (the polygon's update of this scan
-    observed them) are left alone. ``association`` (N, B): the beams' association from this scan's weighting,
-    whose doors outside ``skip`` are unchanged since (tracking; saves a second door likelihood).
+    observed them) are left alone. ``evidence``: this scan's weighting's (:func:`tracked_log_likelihood`), whose
+    doors outside ``skip`` are unchanged since (tracking; saves a second door likelihood).
 
     Returns:
         (N, D) means and variances.
@@ -322,36 +373,18 @@ def condition_doors_on_beams(particles: ParticleSet, beams: BeamSet, field: Dist
     unobserved = np.ones_like(var, dtype=bool) if skip is None else ~skip
     if not unobserved.any():
         return mean, var
-    if association is None:
+    if evidence is None:
         static = endpoint_distances(field, particles.pose, beams.points_base)
-        association = door_log_likelihood_at_poses(static, particles.pose, beams.points_base, doors, mean, var,
-                                                   config, beams.range_max_m, unobserved_var=thr,
-                                                   prior=UNIFORM if prior is None else prior).association
-    i, b = np.nonzero(association >= 0)
-    k = association[i, b].astype(np.intp)
-    keep = unobserved[i, k]
-    i, b, k = i[keep], b[keep], k[keep]
-    if not i.size:
-        return mean, var
-    pose = particles.pose[i]
-    c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
-    bx, by = beams.points_base[b, 0], beams.points_base[b, 1]
-    vx = pose[:, 0] + c * bx - s * by - doors.hinge[k, 0]
-    vy = pose[:, 1] + s * bx + c * by - doors.hinge[k, 1]
-    r = np.hypot(vx, vy)
-    length = doors.length[k]
-    mid = (doors.angle_min[k] + doors.angle_max[k]) / 2
-    phi = mid + wrap_angle(np.arctan2(vy, vx) - doors.closed_yaw[k] - mid)
-    # only end points inside the sector the leaf can sweep (the door update's gate: the range ± the margin) say
-    # where the leaf is; one beside the hinge on the far side would put the angle outside the range
-    margin = math.radians(config.door_angle_margin_deg)
-    inside = (phi >= doors.angle_min[k] - margin) & (phi <= doors.angle_max[k] + margin)
-    info = np.where(inside, np.where(r <= length, r * r, r * length), 0.0) / config.sigma_hit**2
-    n, d = mean.shape
-    flat = i * d + k
-    info_sum = np.bincount(flat, weights=info, minlength=n * d).reshape(n, d)
-    phi_sum = np.bincount(flat, weights=info * phi, minlength=n * d).reshape(n, d)
+        evidence = door_log_likelihood_at_poses(static, particles.pose, beams.points_base, doors, mean, var,
+                                                config, beams.range_max_m, unobserved_var=thr,
+                                                prior=UNIFORM if prior is None else prior).association
+    if not isinstance(evidence, DoorBeamInformation):  # an association: the doors left alone need no sums
+        evidence = door_beam_information(evidence, particles.pose, beams.points_base, doors, config, unobserved)
+    info_sum = np.where(unobserved, evidence.info, 0.0)
+    phi_sum = np.where(unobserved, evidence.info_angle, 0.0)
     hit = info_sum > 0
+    if not hit.any():
+        return mean, var
     z = np.where(hit, phi_sum / np.where(hit, info_sum, 1.0), mean)
     meas_var = np.where(hit, 1.0 / np.where(hit, info_sum, 1.0), 1.0)
     # a door the beams put far from its estimate was moved: the polygon update's gate (kalman_update)

@@ -14,7 +14,7 @@ to the bit (the tests bound both).
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -22,6 +22,7 @@ import numpy.typing as npt
 from doorbatch.pipeline.localize.door_geometry import doors_in_reach
 from doorbatch.pipeline.localize.door_likelihood import STATIC, BeamModel, beam_model
 from doorbatch.pipeline.localize.door_prior import UNIFORM, DoorPrior
+from doorbatch.pipeline.localize.rbpf import DoorBeamInformation
 from doorbatch.pipeline.localize.torch_field import block_distances, device_blocks, import_torch, skip_and_combine
 
 if TYPE_CHECKING:
@@ -124,23 +125,61 @@ def door_scores(dist: Any, pts: Any, doors: DoorSet, mean: Any, var: Any, model:
     return score.float(), assoc
 
 
+class TrackedWeighing(NamedTuple):
+    """The tracked cloud's log-likelihoods (N,), what its beams say of the doors (:func:`.rbpf.door_beam_information`)
+    and the number of beams skipped."""
+
+    log_likelihood: FloatArray
+    information: DoorBeamInformation
+    skipped: int
+
+
+def door_beam_information(assoc: Any, poses: Any, base: Any, doors: DoorSet, config: LocalizeConfig
+                          ) -> DoorBeamInformation:
+    """:func:`.rbpf.door_beam_information` of an association (N, B) on the device, summed there; the (N, D) sums
+    come back."""
+    torch = import_torch()
+    device = assoc.device
+    n, d = poses.shape[0], len(doors)
+    i, b = torch.nonzero(assoc >= 0, as_tuple=True)
+    k = assoc[i, b].long()
+    door = _door_arrays(doors, np.arange(d), device)
+    p = poses[i]
+    c, s = torch.cos(p[:, 2]), torch.sin(p[:, 2])
+    vx = p[:, 0] + c * base[b, 0] - s * base[b, 1] - door["hx"][k]
+    vy = p[:, 1] + s * base[b, 0] + c * base[b, 1] - door["hy"][k]
+    r = torch.hypot(vx, vy)
+    length, lo, hi = door["length"][k], door["lo"][k], door["hi"][k]
+    mid = (lo + hi) / 2
+    wrapped = torch.remainder(torch.atan2(vy, vx) - door["closed_yaw"][k] - mid + math.pi, 2 * math.pi) - math.pi
+    phi = mid + torch.where(wrapped == -math.pi, math.pi, wrapped)  # wrap_angle: (−π, π]
+    margin = math.radians(config.door_angle_margin_deg)
+    inside = (phi >= lo - margin) & (phi <= hi + margin)
+    info = torch.where(inside, torch.where(r <= length, r * r, r * length), 0.0) / config.sigma_hit**2
+    flat = i * d + k
+    sums = [torch.zeros(n * d, dtype=torch.float64, device=device).index_add_(0, flat, w) for w in (info, info * phi)]
+    return DoorBeamInformation(*(np.asarray(t.reshape(n, d).cpu().numpy()) for t in sums))
+
+
 def skipped_door_log_likelihood(dist_field: DistanceField, pose: npt.ArrayLike, weight: npt.ArrayLike,
                                 points_base: npt.ArrayLike, doors: DoorSet, door_mean: npt.ArrayLike,
                                 door_var: npt.ArrayLike, config: LocalizeConfig, range_max_m: float,
                                 combination: BeamCombination, unobserved_var: npt.ArrayLike | None = None
-                                ) -> tuple[FloatArray, Int16Array, int]:
-    """log p(z | x) (N,) of a tracked RBPF cloud with its doors, the (N, B) beam association and the number of
-    beams skipped, every step on the field's ``torch_device``: the static distances
+                                ) -> TrackedWeighing:
+    """log p(z | x) (N,) of a tracked RBPF cloud with its doors, what its beams say of the doors and the number
+    of beams skipped, every step on the field's ``torch_device``: the static distances
     (:func:`.torch_field.endpoint_distances`' lookup), :func:`door_scores`, the per-beam likelihoods, then beam
-    skipping and the sum (:func:`.torch_field.skip_and_combine`). The host's path is
-    :func:`.door_likelihood.door_log_likelihood_at_poses`, :func:`.likelihood_field.skip_unexplained`,
-    :func:`.likelihood_field.combine_beams`. The whole cloud is one block (beam skipping normalizes over it)."""
+    skipping and the sum (:func:`.torch_field.skip_and_combine`), and :func:`door_beam_information` of the
+    association. The host's path is :func:`.door_likelihood.door_log_likelihood_at_poses`,
+    :func:`.likelihood_field.skip_unexplained`, :func:`.likelihood_field.combine_beams`,
+    :func:`.rbpf.door_beam_information`. The whole cloud is one block (beam skipping normalizes over it)."""
     torch = import_torch()
     model = beam_model(config, range_max_m)
     field, grid, cells = device_blocks(dist_field, pose, points_base)
     n, b = grid.shape[0], cells.shape[0]
     if b == 0:
-        return np.zeros(n), np.full((n, 0), STATIC, dtype=np.int16), 0
+        return TrackedWeighing(np.zeros(n), DoorBeamInformation(np.zeros((n, len(doors))), np.zeros((n, len(doors)))),
+                               0)
     device = grid.device
     poses = torch.as_tensor(np.ascontiguousarray(pose, dtype=np.float64).reshape(-1, 3), device=device)
     base = torch.as_tensor(np.ascontiguousarray(points_base, dtype=np.float64).reshape(-1, 2), device=device)
@@ -157,4 +196,5 @@ def skipped_door_log_likelihood(dist_field: DistanceField, pose: npt.ArrayLike, 
     pz *= float(np.float32(model.z_hit))
     pz += float(np.float32(model.rand_term))
     loglik, skipped = skip_and_combine(pz, pose, weight, config, range_max_m, combination)
-    return np.asarray(loglik.cpu().numpy()), np.asarray(assoc.cpu().numpy()), skipped
+    return TrackedWeighing(np.asarray(loglik.cpu().numpy()), door_beam_information(assoc, poses, base, doors, config),
+                           skipped)

@@ -15,7 +15,12 @@ from doorbatch.pipeline.localize.door_observation import DoorUpdate, kalman_upda
 from doorbatch.pipeline.localize.likelihood_field import BeamSet, build_distance_field
 from doorbatch.pipeline.localize.mcl import MclState, initial_particles
 from doorbatch.pipeline.localize.particles import ParticleSet
-from doorbatch.pipeline.localize.rbpf import condition_doors_on_beams, door_update_log_factor, rbpf_step
+from doorbatch.pipeline.localize.rbpf import (
+    condition_doors_on_beams,
+    door_beam_information,
+    door_update_log_factor,
+    rbpf_step,
+)
 
 FloatArray = npt.NDArray[np.float64]
 HINGES_X = (3.0, 6.0, 9.0)
@@ -139,10 +144,11 @@ def test_beams_on_a_moved_leaf_restart_the_door_as_the_polygon_update_does() -> 
     beams = BeamSet((leaf - pose[0, :2]).astype(np.float32), np.zeros(2), 20.0, np.arange(6))
     particles = ParticleSet(pose, np.ones(1), np.zeros((1, 1)), np.full((1, 1), math.radians(1.0) ** 2))
     association = np.zeros((1, 6), dtype=np.int16)
-    mean, var = condition_doors_on_beams(particles, beams, None, doors, config, association=association)  # type: ignore[arg-type]
+    mean, var = condition_doors_on_beams(particles, beams, None, doors, config, evidence=association)  # type: ignore[arg-type]
     assert abs(math.degrees(mean[0, 0]) - 40.0) < 2.0, math.degrees(mean[0, 0])
     assert var[0, 0] < config.sigma_hit**2 / float((t**2).sum())  # the beams' own variance, as after a restart
     creeping, _ = condition_doors_on_beams(particles, beams, None, doors,  # type: ignore[arg-type]
                                            config.model_copy(update={"door_moved_gate_chi2": 1e12}),
-                                           association=association)
+                                           evidence=door_beam_information(association, pose, beams.points_base,
+                                                                          doors, config))
     assert math.degrees(creeping[0, 0]) < 10.0

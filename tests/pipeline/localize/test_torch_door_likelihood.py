@@ -21,7 +21,7 @@ from doorbatch.pipeline.localize.likelihood_field import (
     skip_unexplained,
 )
 from doorbatch.pipeline.localize.particles import ParticleSet
-from doorbatch.pipeline.localize.rbpf import tracked_log_likelihood
+from doorbatch.pipeline.localize.rbpf import DoorBeamInformation, door_beam_information, tracked_log_likelihood
 from doorbatch.pipeline.localize.torch_door_likelihood import door_scores, skipped_door_log_likelihood
 
 torch = pytest.importorskip("torch")
@@ -82,16 +82,21 @@ def test_a_tracked_cloud_with_doors_is_weighed_on_the_device_as_on_the_host(devi
     config = LocalizeConfig(tracking_door_prior=True)
     numpy_field = build_distance_field(room_map(), 2.0)
     torch_field = build_distance_field(room_map(), 2.0, torch_device=device)
-    reference, ref_assoc = tracked_log_likelihood(particles, beams, numpy_field, DOORS, config, combination)
-    got, assoc = tracked_log_likelihood(particles, beams, torch_field, DOORS, config, combination)
-    assert ref_assoc is not None and assoc is not None and assoc.shape == (n, len(beams))
-    assert np.mean((ref_assoc == 0).any(axis=1)) > 0.9  # the open leaf explains beams
-    assert np.mean(assoc == ref_assoc) > 0.9999
+    reference, association = tracked_log_likelihood(particles, beams, numpy_field, DOORS, config, combination)
+    got, info = tracked_log_likelihood(particles, beams, torch_field, DOORS, config, combination)
+    assert isinstance(association, np.ndarray) and isinstance(info, DoorBeamInformation)  # each where it lies
+    assert info.info.shape == info.info_angle.shape == (n, 2)
+    ref_info = door_beam_information(association, particles.pose, beams.points_base, DOORS, config)
+    assert np.mean(ref_info.info[:, 0] > 0) > 0.9  # the open leaf explains beams, and says where it stands
+    near = ref_info.info[:, 0] > 0
+    assert abs(np.median(ref_info.info_angle[near, 0] / ref_info.info[near, 0]) - 1.2) < 0.02
+    for a, b in zip(info, ref_info, strict=True):  # the same beams on each door, the same angles
+        np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-9)
     assert np.ptp(reference) > 0.5
     np.testing.assert_allclose(got, reference, rtol=1e-5, atol=1e-5)
-    _, _, skipped = skipped_door_log_likelihood(torch_field, particles.pose, particles.weight, beams.points_base,
-                                                DOORS, particles.door_mean, particles.door_var, config,
-                                                beams.range_max_m, combination, np.full(2, 0.3))
+    *_, skipped = skipped_door_log_likelihood(torch_field, particles.pose, particles.weight, beams.points_base,
+                                              DOORS, particles.door_mean, particles.door_var, config,
+                                              beams.range_max_m, combination, np.full(2, 0.3))
     from doorbatch.pipeline.localize.door_likelihood import door_log_likelihood_at_poses
 
     dl = door_log_likelihood_at_poses(endpoint_distances(numpy_field, particles.pose, beams.points_base),
@@ -107,12 +112,12 @@ def test_no_beams_and_no_doors_in_reach(device: str) -> None:
     field = build_distance_field(room_map(), 2.0, torch_device=device)
     pose = np.array([[4.0, 2.5, 0.0], [4.1, 2.5, 0.1]])
     mean, var = np.zeros((2, 2)), np.full((2, 2), 0.01)
-    loglik, assoc, skipped = skipped_door_log_likelihood(field, pose, np.full(2, 0.5), np.zeros((0, 2)), DOORS,
-                                                         mean, var, CONFIG, RANGE_MAX, BeamCombination.PRODUCT)
-    assert loglik.tolist() == [0.0, 0.0] and assoc.shape == (2, 0) and skipped == 0
+    loglik, info, skipped = skipped_door_log_likelihood(field, pose, np.full(2, 0.5), np.zeros((0, 2)), DOORS,
+                                                        mean, var, CONFIG, RANGE_MAX, BeamCombination.PRODUCT)
+    assert loglik.tolist() == [0.0, 0.0] and not info.info.any() and info.info.shape == (2, 2) and skipped == 0
     far = DoorSet(hinge=np.array([[60.0, 60.0]]), length=np.array([0.9]), closed_yaw=np.zeros(1),
                   angle_min=np.zeros(1), angle_max=np.ones(1))
     pts = np.array([[1.0, 0.0], [0.0, 1.0]])
-    loglik, assoc, _ = skipped_door_log_likelihood(field, pose, np.full(2, 0.5), pts, far, mean[:, :1], var[:, :1],
-                                                   CONFIG, RANGE_MAX, BeamCombination.PRODUCT)
-    assert (assoc == -1).all() and np.isfinite(loglik).all()
+    loglik, info, _ = skipped_door_log_likelihood(field, pose, np.full(2, 0.5), pts, far, mean[:, :1], var[:, :1],
+                                                  CONFIG, RANGE_MAX, BeamCombination.PRODUCT)
+    assert not info.info.any() and np.isfinite(loglik).all()
