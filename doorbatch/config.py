@@ -466,9 +466,11 @@ class LocalizeConfig(Section):
     beam_skip_support: Literal["posterior", "particles"] = "posterior"
     # End points in unknown cells: their real distance to the nearest obstacle (nav2_amcl), or the maximum.
     unknown_as_max_dist: bool = False
-    # Where the likelihood field's particles x beams lookups run: "numpy", or "torch" on torch_device
-    # (pipeline/localize/torch_field.py, the same cells; needs the torch extra). On a CPU NumPy is faster;
-    # a GPU pays from a few thousand particles (docs/benchmarks.md). Door terms and resampling stay in NumPy.
+    # Where the particles x beams work runs: "numpy", or "torch" on torch_device (needs the torch extra): the
+    # likelihood field's lookups (pipeline/localize/torch_field.py, the same cells), beam skipping, and the RBPF's
+    # door terms while tracking (torch_door_likelihood.py). On a CPU NumPy is faster; a GPU pays from a few
+    # thousand particles (docs/benchmarks.md). The door update, the global phase's door terms and resampling stay
+    # in NumPy/numba.
     backend: Literal["numpy", "torch"] = "numpy"
     torch_device: str = "cuda"
     # --map LOG: the log's nav_msgs/OccupancyGrid topic that holds the map (None: /map, else the only one).
