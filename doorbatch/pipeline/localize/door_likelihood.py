@@ -55,6 +55,7 @@ points (:func:`door_log_likelihood_at_poses`, which moves them inside the kernel
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Literal, NamedTuple
 
 import numpy as np
@@ -78,14 +79,22 @@ Backend = Literal["auto", "numba", "numpy"]
 STATIC = -1  # association code of a beam explained by the static map (or skipped)
 
 
-class DoorLikelihood(NamedTuple):
-    """Per-particle log-likelihood Σ_beams log pz (N,) float64, per-beam association (N, B) int16 (−1 static,
-    k ≥ 0 door k), and the per-beam likelihoods pz (N, B) float32 (NaN for skipped beams), for combining the
-    beams another way (e.g. Nav2's log(1 + Σ pz³) with ``likelihood_field.combine_beams``)."""
+@dataclass(frozen=True)
+class DoorLikelihood:
+    """Per-beam association (N, B) int16 (−1 static, k ≥ 0 door k) and per-beam likelihoods pz (N, B) float32
+    (NaN for skipped beams), which the filters combine with beam skipping (``likelihood_field.skip_unexplained``,
+    ``combine_beams``); and, computed when asked for, the product model's per-particle log-likelihood."""
 
-    log_likelihood: FloatArray
     association: Int16Array
     beam_likelihood: npt.NDArray[np.float32]
+
+    @property
+    def log_likelihood(self) -> FloatArray:
+        """Σ_beams log pz (N,) float64, a skipped beam counting 0: float32 per beam (SIMD log), float64 sums (the
+        error is ~1e-7 relative per beam, far below what the weights resolve)."""
+        log_pz = np.log(self.beam_likelihood)
+        log_pz[np.isnan(self.beam_likelihood)] = 0.0
+        return np.asarray(log_pz.sum(axis=1, dtype=np.float64), dtype=np.float64)
 
 
 class BeamModel(NamedTuple):
@@ -215,22 +224,15 @@ def _door_log_likelihood(dist: npt.NDArray[np.float32], pts: FloatArray | None, 
             pts = np.stack([poses[:, 0, None] + c * base[:, 0] - s * base[:, 1],
                             poses[:, 1, None] + s * base[:, 0] + c * base[:, 1]], axis=-1)
         score, assoc = _numpy_scores(dist, pts, doors, mean, var, model, extra, uni, prior)
-    loglik, pz = _likelihoods(score, model)
-    return DoorLikelihood(loglik, assoc, pz)
+    return DoorLikelihood(assoc, beam_likelihoods(score, model))
 
 
-def _likelihoods(score: npt.NDArray[np.float32], model: BeamModel) -> tuple[FloatArray, npt.NDArray[np.float32]]:
-    """pz = z_hit·exp(−score/2) + z_rand/range_max per beam, and Σ_beams log pz per particle (NaN: skipped).
-
-    float32 per beam (SIMD exp and log), float64 sums: the error is ~1e-7 relative per beam, far below what
-    the weights resolve.
-    """
-    pz = np.exp(np.float32(-0.5) * score)
+def beam_likelihoods(score: npt.NDArray[np.float32], model: BeamModel) -> npt.NDArray[np.float32]:
+    """pz = z_hit·exp(−score/2) + z_rand/range_max per beam, float32 (NaN where the score is: a skipped beam)."""
+    pz: npt.NDArray[np.float32] = np.exp(np.float32(-0.5) * score)
     pz *= np.float32(model.z_hit)
     pz += np.float32(model.rand_term)
-    log_pz = np.log(pz)
-    log_pz[np.isnan(score)] = 0.0
-    return np.asarray(log_pz.sum(axis=1, dtype=np.float64), dtype=np.float64), pz
+    return pz
 
 
 def _numpy_scores(dist: npt.NDArray[np.float32], pts: FloatArray, doors: DoorSet, mean: FloatArray, var: FloatArray,

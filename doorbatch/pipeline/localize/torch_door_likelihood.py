@@ -192,7 +192,7 @@ def skipped_door_log_likelihood(dist_field: DistanceField, pose: npt.ArrayLike, 
     mean = torch.as_tensor(np.ascontiguousarray(door_mean, dtype=np.float64).reshape(n, n_doors), device=device)
     var = torch.as_tensor(np.ascontiguousarray(door_var, dtype=np.float64).reshape(n, n_doors), device=device)
     score, assoc = door_scores(block_distances(field, grid, cells), pts, doors, mean, var, model, uni)
-    pz = torch.exp(score * -0.5)  # :func:`.door_likelihood._likelihoods`, in float32
+    pz = torch.exp(score * -0.5)  # :func:`.door_likelihood.beam_likelihoods`, in float32
     pz *= float(np.float32(model.z_hit))
     pz += float(np.float32(model.rand_term))
     loglik, skipped = skip_and_combine(pz, pose, weight, config, range_max_m, combination)
