@@ -200,11 +200,12 @@ def _scan_origin(msg: Any, topic: str) -> tuple[npt.NDArray[np.float64], float, 
 
 def scan_mount(msg: Any, topic: str) -> Transform | None:
     """The static transform from a Foxglove scan's frame to its origin (:func:`origin_frame`; the rotation is folded
-    into the beam angles, :func:`laser_scan`), or None where the origin lies at the frame's origin. Taken from a
-    topic's first readable scan, like a sensor mount.
+    into the beam angles, :func:`laser_scan`), or None where the origin lies at the frame's origin (or where the
+    message has no pose to read: :func:`as_ros_message` tells whether it reads at all). Taken from a topic's first
+    readable scan, like a sensor mount (:meth:`~doorbatch.io.reader.LogReader.scan_origin_mounts`).
 
     Raises:
-        Exception: a message that cannot be read (of any kind: bad bytes, JSON, or a tilted origin).
+        Exception: a payload that does not decode (bad bytes or JSON), or an origin tilted out of the plane.
     """
     msg = _decoded(msg)
     offset, _, _ = _scan_origin(msg, topic)
@@ -223,10 +224,9 @@ def laser_scan(msg: Any, topic: str, mount: Transform | None = None) -> Any:
     folded into the angles: a beam at angle a in the origin points at φ + s·a in the frame, φ the origin's heading
     and s = ±1 the sign of its z axis. An origin offset from the frame's origin is a mount: the scan is put in
     :func:`origin_frame`, which ``mount`` (:func:`scan_mount` of the topic's first readable scan) places in the
-    frame. The
-    schema states no range limits: range_min is 0 (a reading of 0, which drivers write for no echo, is then no hit,
-    as in any log: :func:`~doorbatch.io.recording.usable_range_limits`) and range_max +inf, "not stated" to every
-    stage (the localizers take ``localize.laser_max_range_fallback``).
+    frame. The schema states no range limits: range_min is 0 (a reading of 0, which drivers write for no echo, is
+    then no hit, as in any log: :func:`~doorbatch.io.recording.usable_range_limits`) and range_max +inf, "not
+    stated" to every stage (the localizers take ``localize.laser_max_range_fallback``).
 
     Raises:
         LogContentError: an origin tilted out of the frame's xy-plane, one offset other than ``mount`` (the

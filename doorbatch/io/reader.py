@@ -168,14 +168,18 @@ class LogReader(ABC):
         yield from self.raw_messages()
 
     def _first_mount(self, topic: str) -> Transform | None:
-        """:func:`~doorbatch.io.foxglove.scan_mount` of the first scan of ``topic`` that can be read (None: none
-        can, or the log cannot be read: the topic's own reading reports either)."""
+        """:func:`~doorbatch.io.foxglove.scan_mount` of the first scan of ``topic`` that reads as a LaserScan with it
+        (None: none does, or the log cannot be read: the topic's own reading reports either). A message the
+        conversion refuses (bad JSON or protobuf, JSON that is not an object, no ranges, a tilted origin) is
+        skipped here as the topic's reading skips it."""
         try:
             for raw in self._raw([topic], None, None):
                 try:
-                    return foxglove.scan_mount(raw.msg, topic)
+                    mount = foxglove.scan_mount(raw.msg, topic)
+                    foxglove.as_ros_message("LaserScan", raw.msg, topic, mount)
                 except Exception:  # an unreadable scan: the topic's own reading counts it
                     continue
+                return mount
         except Exception:
             return None
         return None

@@ -551,7 +551,7 @@ def odometry_to_reference(reference: PoseSeries | None, odometry: PoseSeries | N
         return None
     ref, ref_ok = interpolate_poses(reference.stamps_ns, reference.poses, stamps_ns)
     odo, odo_ok = interpolate_poses(odometry.stamps_ns, odometry.poses, stamps_ns)
-    both = ref_ok & odo_ok
+    both = ref_ok & odo_ok & np.isfinite(ref).all(axis=1) & np.isfinite(odo).all(axis=1)  # a NaN pose says nothing
     ref, odo = ref[both], odo[both]
     io = config.io
     if ref.shape[0] < 2 or float(np.hypot(*np.diff(odo[:, :2], axis=0).T).sum()) < io.reference_repeats_min_path_m:
@@ -559,8 +559,8 @@ def odometry_to_reference(reference: PoseSeries | None, odometry: PoseSeries | N
     # printed precision: a CARMEN log writes 6 significant digits, a millimetre at 100 m
     tolerance_m = io.reference_repeats_odometry_m + 1e-5 * float(np.abs(np.concatenate([ref[:, :2], odo[:, :2]])).max())
     off_m, off_rad = rigid_copy_offset(odo, ref)
-    if off_m > tolerance_m or math.degrees(off_rad) > io.reference_repeats_odometry_deg:
-        return None
+    if not (off_m <= tolerance_m and math.degrees(off_rad) <= io.reference_repeats_odometry_deg):
+        return None  # NaN-safe: only offsets within the tolerances are a copy
     return first_pose_correction(odo, ref)
 
 

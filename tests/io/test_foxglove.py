@@ -307,15 +307,16 @@ def test_a_ros1_style_frame_name_keeps_the_scan_origin_mount(write_log: Callable
 
 
 def test_the_mount_comes_from_the_first_scan_that_reads(write_log: Callable[..., Path], tmp_path: Path) -> None:
-    """An unreadable first scan (bad JSON, or an origin tilted out of the plane) is skipped as any unreadable
-    message is, and the mount comes from the next scan: the topic is not refused."""
+    """An unreadable first scan (bad JSON, JSON that is not an object, no ranges, or an origin tilted out of the
+    plane) is skipped as any unreadable message is, and the mount comes from the next scan: the topic is not
+    refused."""
     msgs = sample_messages(8)
     ros = load_recording(write_log("ros.mcap", msgs))
     entries = json_entries(_scans_in_base_link(as_foxglove(msgs), 0.4))
     first = next(i for i, e in enumerate(entries) if e[0] == "/scan")
     tilted = json.loads(entries[first][6])
     tilted["pose"]["orientation"] = {"x": math.sin(0.2), "y": 0.0, "z": 0.0, "w": math.cos(0.2)}
-    for bad in (b"{not json", json.dumps(tilted).encode()):
+    for bad in (b"{not json", json.dumps(tilted).encode(), b"null", b"[]", b'{"ranges": []}'):
         broken = list(entries)
         broken[first] = (*entries[first][:6], bad)
         fox = load_recording(write_mcap(tmp_path / "first_bad.mcap", broken))

@@ -248,6 +248,25 @@ def test_a_copy_printed_to_six_digits_far_from_the_origin_is_still_a_copy() -> N
     assert odometry_to_reference(args[0], drifted, stamps, DoorbatchConfig()) is None
 
 
+def test_a_nan_odometry_pose_neither_makes_a_copy_nor_spoils_the_motion() -> None:
+    """A NaN odometry message (a driver's glitch) says nothing: an independent reference stays independent, and a
+    copy's motion comes from finite poses (a reviewer's case: one NaN made a 5 % drift "a copy")."""
+    from doorbatch.io.recording import PoseSeries, odometry_to_reference
+
+    stamps = (np.arange(200) * 100_000_000).astype(np.int64)
+    s = np.linspace(0.0, 20.0, 200)
+    truth = np.column_stack([s, np.sin(s), np.zeros(200)])
+    drifted = truth * np.array([1.05, 1.0, 1.0])
+    copy = truth + np.array([1.0, -2.0, 0.0])
+    for i in (0, 50):
+        drifted[i] = copy[i] = np.nan
+        got = [odometry_to_reference(PoseSeries(stamps, truth, "map"), PoseSeries(stamps, odo, "odom"), stamps,
+                                     DoorbatchConfig()) for odo in (drifted, copy)]
+        assert got[0] is None
+        assert got[1] is not None
+        np.testing.assert_allclose(got[1], [-1.0, 2.0, 0.0], atol=1e-9)
+
+
 def _turtlebot_without_tf_static(messages: list) -> list:
     """The messages as a TurtleBot's recording that started after /tf_static was latched: its base is
     base_footprint (odom → base_footprint on /tf, Odometry child frames), and no transform names the laser."""
