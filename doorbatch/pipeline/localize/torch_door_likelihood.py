@@ -6,9 +6,11 @@ the device: each beam end point's static score d₀²/σ² against every door in
 at the particle's mean with the propagated variance σ_k² = σ_hit² + J_k²·P_k, or, for a door the particle has
 not observed, its prior over the opening range in closed form; the lowest score wins the beam (the static map
 on ties). Then pz = z_hit·exp(−score/2) + z_rand/range_max in float32, beam skipping and the sum as MCL's
-(:func:`.torch_field.skip_and_combine`). What comes back: N log-likelihoods and the (N, B) int16 association the
-door conditioning reuses. ``erf``, ``atan2`` and the sums are torch's, so scores equal NumPy's to rounding, not
-to the bit (the tests bound both).
+(:func:`.torch_field.skip_and_combine`), and the sums of what the beams each leaf explains say of its angle
+(:func:`door_beam_information`), which the door conditioning needs. What comes back: N log-likelihoods and those
+(N, D) sums; the (N, B) association stays on the device. ``erf``, ``atan2`` and the sums are torch's, so scores
+equal NumPy's to rounding, not to the bit (the tests bound both); on a device the results are the same on every
+run (no atomic adds).
 """
 
 from __future__ import annotations
@@ -137,28 +139,34 @@ class TrackedWeighing(NamedTuple):
 def door_beam_information(assoc: Any, poses: Any, base: Any, doors: DoorSet, config: LocalizeConfig
                           ) -> DoorBeamInformation:
     """:func:`.rbpf.door_beam_information` of an association (N, B) on the device, summed there; the (N, D) sums
-    come back."""
+    come back. Each beam's measurement is computed for its associated door, then summed per door with a mask per
+    door: plain reductions, the same bits on every run (atomic scatter-adds on a GPU add in any order)."""
     torch = import_torch()
     device = assoc.device
     n, d = poses.shape[0], len(doors)
-    i, b = torch.nonzero(assoc >= 0, as_tuple=True)
-    k = assoc[i, b].long()
+    info_sum = torch.zeros((n, d), dtype=torch.float64, device=device)
+    angle_sum = torch.zeros((n, d), dtype=torch.float64, device=device)
+    if n == 0 or d == 0 or assoc.shape[1] == 0:
+        return DoorBeamInformation(info_sum.cpu().numpy(), angle_sum.cpu().numpy())
     door = _door_arrays(doors, np.arange(d), device)
-    p = poses[i]
-    c, s = torch.cos(p[:, 2]), torch.sin(p[:, 2])
-    vx = p[:, 0] + c * base[b, 0] - s * base[b, 1] - door["hx"][k]
-    vy = p[:, 1] + s * base[b, 0] + c * base[b, 1] - door["hy"][k]
+    k = assoc.long().clamp_min(0)  # (N, B); a static beam gets door 0's geometry and no weight
+    c, s = torch.cos(poses[:, 2, None]), torch.sin(poses[:, 2, None])
+    vx = poses[:, 0, None] + c * base[:, 0] - s * base[:, 1] - door["hx"][k]
+    vy = poses[:, 1, None] + s * base[:, 0] + c * base[:, 1] - door["hy"][k]
     r = torch.hypot(vx, vy)
     length, lo, hi = door["length"][k], door["lo"][k], door["hi"][k]
     mid = (lo + hi) / 2
     wrapped = torch.remainder(torch.atan2(vy, vx) - door["closed_yaw"][k] - mid + math.pi, 2 * math.pi) - math.pi
     phi = mid + torch.where(wrapped == -math.pi, math.pi, wrapped)  # wrap_angle: (−π, π]
     margin = math.radians(config.door_angle_margin_deg)
-    inside = (phi >= lo - margin) & (phi <= hi + margin)
-    info = torch.where(inside, torch.where(r <= length, r * r, r * length), 0.0) / config.sigma_hit**2
-    flat = i * d + k
-    sums = [torch.zeros(n * d, dtype=torch.float64, device=device).index_add_(0, flat, w) for w in (info, info * phi)]
-    return DoorBeamInformation(*(np.asarray(t.reshape(n, d).cpu().numpy()) for t in sums))
+    counts = (assoc >= 0) & (phi >= lo - margin) & (phi <= hi + margin)
+    info = torch.where(counts, torch.where(r <= length, r * r, r * length), 0.0) / config.sigma_hit**2
+    info_angle = info * phi
+    for j in range(d):  # a (N, B) mask per door: D reductions of the cloud's beams
+        on = assoc == j
+        info_sum[:, j] = torch.where(on, info, 0.0).sum(dim=1)
+        angle_sum[:, j] = torch.where(on, info_angle, 0.0).sum(dim=1)
+    return DoorBeamInformation(np.asarray(info_sum.cpu().numpy()), np.asarray(angle_sum.cpu().numpy()))
 
 
 def skipped_door_log_likelihood(dist_field: DistanceField, pose: npt.ArrayLike, weight: npt.ArrayLike,
@@ -187,6 +195,8 @@ def skipped_door_log_likelihood(dist_field: DistanceField, pose: npt.ArrayLike, 
     pts = torch.stack([poses[:, 0, None] + c * base[:, 0] - s * base[:, 1],
                        poses[:, 1, None] + s * base[:, 0] + c * base[:, 1]], dim=-1)
     n_doors = len(doors)
+    if n_doors > np.iinfo(np.int16).max:
+        raise ValueError(f"{n_doors} doors do not fit the int16 association")
     uni = (np.full(n_doors, np.inf) if unobserved_var is None
            else np.broadcast_to(np.asarray(unobserved_var, dtype=np.float64), (n_doors,)))
     mean = torch.as_tensor(np.ascontiguousarray(door_mean, dtype=np.float64).reshape(n, n_doors), device=device)

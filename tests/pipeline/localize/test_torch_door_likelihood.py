@@ -94,6 +94,9 @@ def test_a_tracked_cloud_with_doors_is_weighed_on_the_device_as_on_the_host(devi
         np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-9)
     assert np.ptp(reference) > 0.5
     np.testing.assert_allclose(got, reference, rtol=1e-5, atol=1e-5)
+    again, info_again = tracked_log_likelihood(particles, beams, torch_field, DOORS, config, combination)
+    assert isinstance(info_again, DoorBeamInformation)  # the same seed, the same bits: no atomic adds on a GPU
+    assert np.array_equal(again, got) and all(np.array_equal(a, b) for a, b in zip(info_again, info, strict=True))
     *_, skipped = skipped_door_log_likelihood(torch_field, particles.pose, particles.weight, beams.points_base,
                                               DOORS, particles.door_mean, particles.door_var, config,
                                               beams.range_max_m, combination, np.full(2, 0.3))
@@ -121,3 +124,13 @@ def test_no_beams_and_no_doors_in_reach(device: str) -> None:
     loglik, info, _ = skipped_door_log_likelihood(field, pose, np.full(2, 0.5), pts, far, mean[:, :1], var[:, :1],
                                                   CONFIG, RANGE_MAX, BeamCombination.PRODUCT)
     assert not info.info.any() and np.isfinite(loglik).all()
+
+
+def test_more_doors_than_the_association_holds_is_an_error_as_on_the_host() -> None:
+    field = build_distance_field(room_map(), 2.0, torch_device="cpu")
+    n = 40_000
+    many = DoorSet(hinge=np.zeros((n, 2)), length=np.ones(n), closed_yaw=np.zeros(n), angle_min=np.zeros(n),
+                   angle_max=np.ones(n))
+    with pytest.raises(ValueError, match="40000 doors do not fit the int16 association"):
+        skipped_door_log_likelihood(field, np.zeros((1, 3)), np.ones(1), np.ones((3, 2)), many, np.zeros((1, n)),
+                                    np.zeros((1, n)), CONFIG, RANGE_MAX, BeamCombination.PRODUCT)
