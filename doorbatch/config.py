@@ -291,8 +291,8 @@ class GridConfig(Section):
     no_return_clear_m: float = Field(5.0, ge=0.0)
     # ... except dropouts: a no-return beam in a run of at most this many beams without a hit (NaN too) between two
     # hits, in beam order round a 360° laser, clears nothing (the surface they hit lost those echoes; clearing would
-    # cut through it). 0: every no-return beam clears. A count of beams, not an angle: suspected loose on a coarse
-    # laser (2 beams of 1° are 17 cm at 5 m), left so as it kept the sample's map byte-identical.
+    # cut through it). 0: every no-return beam clears. A count of beams, not an angle: on a coarse laser two beams
+    # of 1° span 17 cm at 5 m, a gap that may be real; not changed without a log that shows it matters.
     dropout_max_beams: int = Field(2, ge=0)
     # Hits farther than this are cut here and only clear free space (no occupied end cell).
     max_range_m: float = Field(30.0, gt=0.0)
