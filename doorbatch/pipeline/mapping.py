@@ -130,6 +130,13 @@ def pass_poses(rec: Recording, source: str, config: DoorbatchConfig) -> PassPose
     return PassPoses(rec.path, stamps, odom, valid, source)
 
 
+def odometry_jump_m(prev: Recording, nxt: Recording) -> float:
+    """How far ``nxt``'s odometry starts from where ``prev``'s ended (m); inf where either has none."""
+    if prev.odometry is None or nxt.odometry is None:
+        return float("inf")
+    return float(np.hypot(*(nxt.odometry.poses[0, :2] - prev.odometry.poses[-1, :2])))
+
+
 def check_common_frame(recordings: Sequence[Recording], source: str, config: DoorbatchConfig) -> None:
     """Passes must share one map frame.
 
@@ -147,12 +154,14 @@ def check_common_frame(recordings: Sequence[Recording], source: str, config: Doo
         if prev.odometry is None or nxt.odometry is None:
             raise PipelineError(f"{nxt.path}: passes have disjoint coordinate frames: without a reference, "
                                 "several passes need one continuous odometry frame")
-        jump = float(np.hypot(*(nxt.odometry.poses[0, :2] - prev.odometry.poses[-1, :2])))
+        jump = odometry_jump_m(prev, nxt)
         if jump > config.mapping.odometry_continuity_m:
             raise PipelineError(
                 f"{nxt.path}: passes have disjoint coordinate frames: its odometry starts {jump:.2f} m from where "
                 f"{Path(prev.path).name} ended (mapping.odometry_continuity_m = "
-                f"{config.mapping.odometry_continuity_m}); give a reference pose topic, or map the logs separately")
+                f"{config.mapping.odometry_continuity_m}); give a reference pose topic, map the logs separately, or "
+                "try --set mapping.join_passes=true (each pass placed on the map of the ones before it by global "
+                "localization)")
 
 
 def _chain_scanmatch(recordings: Sequence[Recording], config: DoorbatchConfig) -> tuple[list[PassPoses], list[str]]:
@@ -231,6 +240,17 @@ def integrate_pass(mapper: GridMapper, rec: Recording, poses: PassPoses, stride:
     mapper.end_pass()
 
 
+def static_map_of(recordings: Sequence[Recording], source: str, config: DoorbatchConfig) -> OccupancyMap:
+    """The static grid map of passes in one frame from odometry or scan matching (``source``), without the em
+    stage: what :func:`build_map` makes of them (door detection included), for localizing another pass on it."""
+    passes = (_chain_scanmatch(recordings, config)[0] if source == "scanmatch"
+              else [pass_poses(rec, source, config) for rec in recordings])
+    mapper = GridMapper(config.grid, config.doors)
+    for rec, poses in zip(recordings, passes, strict=True):
+        integrate_pass(mapper, rec, poses, config.mapping.scan_stride, config.grid.dropout_max_beams)
+    return mapper.finish().static_map
+
+
 def build_map(logs: Sequence[Path], config: DoorbatchConfig | None = None,
               progress: Callable[[int], object] | None = None,
               recordings: Sequence[Recording] | None = None) -> DoorMap:
@@ -252,7 +272,14 @@ def build_map(logs: Sequence[Path], config: DoorbatchConfig | None = None,
                  "yes" if rec.odometry is not None else "no", "yes" if rec.reference is not None else "no")
     source, warnings = choose_pose_source(recordings, config.mapping.pose_source, config)
     log.info("pose source: %s", source)
-    check_common_frame(recordings, source, config)
+    if source != "reference" and config.mapping.join_passes and len(recordings) > 1:
+        from doorbatch.pipeline.join_passes import join_passes  # it localizes, and localization reads pass poses
+
+        # one frame for all passes, or an error
+        recordings, joined = join_passes(recordings, lambda passes: static_map_of(passes, source, config), config)
+        warnings += joined
+    else:
+        check_common_frame(recordings, source, config)
     t0 = time.perf_counter()
     if source == "scanmatch":
         passes, matching_notes = _chain_scanmatch(recordings, config)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -267,52 +268,12 @@ def test_a_robot_that_barely_moved_cannot_tell_its_reference_from_its_odometry(w
                           DoorbatchConfig()).reference_is_odometry
 
 
-def _under_a_localizer(path: Path, out: Path) -> Path:
-    """A sample pass as a robot without ground truth records it under AMCL: odometry from zero at the pass's start,
-    the localizer's map → odom on /tf (here exact: truth ∘ odometry⁻¹ at each odometry stamp), no /ground_truth."""
-    from doorbatch.geometry.se2 import compose, interpolate_poses, inverse, relative
-    from doorbatch.io.reader import open_log
-    from tests.conftest import write_messages
-
-    config = DoorbatchConfig()
-    with open_log(path, config) as reader:
-        raws = list(reader.raw_messages())
-
-    def planar(msg: object) -> tuple[int, tuple[float, float, float]]:
-        p = msg.pose.pose  # type: ignore[attr-defined]
-        yaw = 2 * np.arctan2(p.orientation.z, p.orientation.w)
-        return msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec, (p.position.x, p.position.y, yaw)  # type: ignore[attr-defined]
-
-    truth = [planar(r.msg) for r in raws if r.topic == "/ground_truth"]
-    truth_ns = np.array([t for t, _ in truth])
-    truth_poses = np.array([p for _, p in truth])
-    first = next(np.array(planar(r.msg)[1]) for r in raws if r.topic == "/odom")
-    msgs = []
-    for r in raws:
-        if r.topic == "/ground_truth" or (r.topic == "/tf" and r.msg.transforms[0].child_frame_id == "base_link"):
-            continue
-        if r.topic == "/odom":
-            t, pose = planar(r.msg)
-            x, y, yaw = relative(first, np.array(pose))
-            msgs.append(("/odom", r.msgtype, r.log_time_ns, m.odometry(t, "odom", "base_link", x, y, yaw)))
-            msgs.append(("/tf", "tf2_msgs/msg/TFMessage", r.log_time_ns,
-                         m.tf_message([m.planar_transform(t, "odom", "base_link", x, y, yaw)])))
-            at, ok = interpolate_poses(truth_ns, truth_poses, np.array([t]))
-            if ok[0]:
-                cx, cy, cyaw = compose(at[0], inverse(np.array([x, y, yaw])))
-                msgs.append(("/tf", "tf2_msgs/msg/TFMessage", r.log_time_ns,
-                             m.tf_message([m.planar_transform(t, "map", "odom", cx, cy, cyaw)])))
-            continue
-        msgs.append((r.topic, r.msgtype, r.log_time_ns, r.msg))
-    return write_messages(out, msgs)
-
-
 def test_passes_recorded_apart_under_a_localizer_map_in_its_map_frame(tmp_path: Path,
                                                                      capsys: pytest.CaptureFixture[str]) -> None:
     """Two sample passes, each with its odometry from zero and no ground truth, but AMCL's map → odom on /tf:
     auto takes base_link in map as the reference, and the doors come where the ground truth puts them."""
     logs = [SAMPLE_LOGS / f"map_pass{k}.mcap" for k in (1, 2)]
-    apart = [_under_a_localizer(p, tmp_path / p.name) for p in logs]
+    apart = [_recorded_apart(p, tmp_path / p.name, under_a_localizer=True) for p in logs]
     assert main(["map", *map(str, apart), "-o", str(tmp_path / "apart"), "--stages", "grid", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["pose_source"] == "reference"
     assert main(["map", *map(str, logs), "-o", str(tmp_path / "truth"), "--stages", "grid", "--json"]) == 0
@@ -323,6 +284,89 @@ def test_passes_recorded_apart_under_a_localizer_map_in_its_map_frame(tmp_path: 
     np.testing.assert_allclose(sorted(got["hinge_x"]), sorted(want["hinge_x"]), atol=0.02)
     assert main(["map", *(str(p) for p in apart), "-o", str(tmp_path / "odom"), "--pose-source", "odometry"]) == 3
     assert "disjoint coordinate frames" in capsys.readouterr().err  # without the localizer: refused, as before
+
+
+def _recorded_apart(path: Path, out: Path, under_a_localizer: bool = False) -> Path:
+    """A sample pass as its own recording: odometry from zero at the pass's start, no /ground_truth; under a
+    localizer (AMCL), also its map → odom on /tf (here exact: truth ∘ odometry⁻¹ at each odometry stamp)."""
+    from doorbatch.geometry.se2 import compose, interpolate_poses, inverse, relative
+    from doorbatch.io.reader import open_log
+    from tests.conftest import write_messages
+
+    with open_log(path, DoorbatchConfig()) as reader:
+        raws = list(reader.raw_messages())
+    truth = [_planar_odometry(r.msg) for r in raws if r.topic == "/ground_truth"]
+    truth_ns, truth_poses = np.array([t for t, _ in truth]), np.array([p for _, p in truth])
+    first = next(np.array(_planar_odometry(r.msg)[1]) for r in raws if r.topic == "/odom")
+    msgs = []
+    for r in raws:
+        if r.topic == "/ground_truth" or (r.topic == "/tf" and r.msg.transforms[0].child_frame_id == "base_link"):
+            continue
+        if r.topic != "/odom":
+            msgs.append((r.topic, r.msgtype, r.log_time_ns, r.msg))
+            continue
+        t, pose = _planar_odometry(r.msg)
+        x, y, yaw = relative(first, np.array(pose))
+        msgs += [("/odom", r.msgtype, r.log_time_ns, m.odometry(t, "odom", "base_link", x, y, yaw)),
+                 ("/tf", "tf2_msgs/msg/TFMessage", r.log_time_ns,
+                  m.tf_message([m.planar_transform(t, "odom", "base_link", x, y, yaw)]))]
+        at, ok = interpolate_poses(truth_ns, truth_poses, np.array([t])) if under_a_localizer else (None, [False])
+        if ok[0]:
+            assert at is not None
+            cx, cy, cyaw = compose(at[0], inverse(np.array([x, y, yaw])))
+            msgs.append(("/tf", "tf2_msgs/msg/TFMessage", r.log_time_ns,
+                         m.tf_message([m.planar_transform(t, "map", "odom", cx, cy, cyaw)])))
+    return write_messages(out, msgs)
+
+
+def _planar_odometry(msg: Any) -> tuple[int, tuple[float, float, float]]:
+    p = msg.pose.pose
+    return (msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec,
+            (p.position.x, p.position.y, 2 * float(np.arctan2(p.orientation.z, p.orientation.w))))
+
+
+def test_passes_recorded_apart_without_a_localizer_can_be_joined_by_global_localization(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Two sample passes, each its own recording with odometry from zero and nothing else to relate them (the
+    second starts 37 m from where the first ended): the second is placed on the first's map by MCL's global
+    localization, and the doors come where matching the same scans in one continuous odometry frame puts them."""
+    from doorbatch.geometry.se2 import compose, inverse
+    from doorbatch.io.recording import load_recording
+
+    logs = [SAMPLE_LOGS / f"map_pass{k}.mcap" for k in (1, 2)]
+    apart = [_recorded_apart(p, tmp_path / p.name) for p in logs]
+    assert main(["map", *map(str, apart), "-o", str(tmp_path / "refused"), "--stages", "grid"]) == 3
+    assert "--set mapping.join_passes=true" in capsys.readouterr().err  # by default refused (issue #4), with the way
+    assert main(["map", *map(str, apart), "-o", str(tmp_path / "joined"), "--stages", "grid", "--json", "--set",
+                 "mapping.join_passes=true"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["pose_source"] == "scanmatch"
+    assert any("placed on the map of the passes before it by global localization" in w for w in out["warnings"])
+    assert main(["map", *map(str, logs), "-o", str(tmp_path / "one"), "--stages", "grid", "--pose-source",
+                 "scanmatch", "-q"]) == 0
+    rec = load_recording(logs[0], DoorbatchConfig())
+    assert rec.odometry is not None
+    start = inverse(rec.odometry.poses[0])  # the continuous frame seen from the first pass's start
+    got = read_table("doors", tmp_path / "joined" / "doors.parquet").to_pydict()
+    want = read_table("doors", tmp_path / "one" / "doors.parquet").to_pydict()
+    hinges = np.column_stack([want["hinge_x"], want["hinge_y"], np.zeros(len(want["hinge_x"]))])
+    hinges = compose(np.broadcast_to(start, hinges.shape), hinges)[:, :2]
+    assert len(got["door_id"]) == len(want["door_id"]) >= 2
+    for x, y in zip(got["hinge_x"], got["hinge_y"], strict=True):
+        assert np.hypot(hinges[:, 0] - x, hinges[:, 1] - y).min() < 0.05
+
+
+def test_a_pass_that_global_localization_cannot_place_is_refused(write_log: Callable[..., Path], tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """A second pass from somewhere else (a small log whose scans fit nowhere on the first pass's corridor map)
+    with odometry that does not continue the first's: the map is refused with the reason, not laid across."""
+    first = _recorded_apart(SAMPLE_LOGS / "map_pass1.mcap", tmp_path / "pass1.mcap")
+    msgs = [x for x in sample_messages(40) if x[0] != "/ground_truth"]
+    elsewhere = write_log("elsewhere.mcap", msgs)
+    code = main(["map", str(first), str(elsewhere), "-o", str(tmp_path / "out"), "--stages", "grid", "--set",
+                 "mapping.join_passes=true"])
+    err = capsys.readouterr().err
+    assert code == 3 and "disjoint coordinate frames" in err and "global localization" in err
 
 
 def test_scan_matched_poses_go_into_the_frame_of_a_reference_that_repeats_the_odometry(

@@ -1,0 +1,97 @@
+"""Passes recorded apart, each with its own odometry frame and no reference: each pass placed on the map of the
+passes before it by global localization, so that all share the first pass's frame (``mapping.join_passes``, off by
+default: without it such passes are refused as disjoint frames, issue #4).
+
+A robot whose odometry restarts at zero with every recording (a bag per run, no localizer running) leaves one
+odometry frame per pass; where a pass does not start where the one before it ended
+(``mapping.odometry_continuity_m``), the passes cannot be chained. Expert choice: the pass is localized globally
+(MCL, ``--init global``, the localize config) on the static map of the passes before it, and once the filter has
+converged, is not ambiguous and never got lost (:mod:`.localize.convergence`), the rigid motion
+T = x_u ⊕ o_u⁻¹ at the first converged update u (its map pose x_u, its odometry o_u) takes the pass's odometry into
+the first pass's frame; scan matching then refines every pose as in one continuous run. The first converged update
+rather than a later one: T must be right where the pass starts, and the odometry drifts after. A pass that
+localization cannot place is an error: a wrong motion would lay the pass across the map.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+from collections.abc import Callable, Sequence
+from dataclasses import replace
+
+import numpy as np
+import numpy.typing as npt
+
+from doorbatch.config import DoorbatchConfig
+from doorbatch.errors import PipelineError
+from doorbatch.geometry.se2 import compose, inverse
+from doorbatch.io.recording import Recording
+from doorbatch.maps import DoorSet, OccupancyMap
+from doorbatch.pipeline.localize.likelihood_field import free_cells
+from doorbatch.pipeline.localize.run import LocalizationMap, localization_field, localize_recording
+from doorbatch.pipeline.mapping import odometry_jump_m
+
+log = logging.getLogger(__name__)
+
+FloatArray = npt.NDArray[np.float64]
+
+
+def moved_odometry(rec: Recording, motion: npt.ArrayLike) -> Recording:
+    """``rec`` with its odometry moved by the rigid ``motion`` T (x, y, yaw): o ↦ T ⊕ o; a reference that repeats
+    the odometry (r = M ⊕ o) then repeats the moved one by M ⊕ T⁻¹."""
+    assert rec.odometry is not None
+    t = np.asarray(motion, dtype=np.float64).reshape(3)
+    poses = compose(np.broadcast_to(t, rec.odometry.poses.shape), rec.odometry.poses)
+    repeat = None if rec.odometry_to_reference is None else compose(rec.odometry_to_reference, inverse(t))
+    return replace(rec, odometry=replace(rec.odometry, poses=poses), odometry_to_reference=repeat)
+
+
+def join_passes(recordings: Sequence[Recording], static_map_of: Callable[[Sequence[Recording]], OccupancyMap],
+                config: DoorbatchConfig) -> tuple[list[Recording], list[str]]:
+    """The passes with the odometry of each that does not continue the previous one's moved into the first pass's
+    frame (module docstring), in log order, and a note per pass localized. A pass that continues the previous one
+    (``mapping.odometry_continuity_m``) takes its motion. ``static_map_of(passes)``: the static map the mapping
+    stage builds of passes in one frame; each pass is localized on the map of all passes before it, so that the
+    map it is placed on is built as the final one is, in the same order. (Expert choice, measured: placing a pass
+    on the map of whichever passes were placed first, or from another pass's frame, let a pass be placed 5° off
+    on a map that chaining its passes out of log order had bent, and the map came out broken without an error.)
+
+    Raises:
+        PipelineError: a pass without odometry, or one that global localization does not place.
+    """
+    out = [recordings[0]]
+    motion = np.zeros(3)
+    notes = []
+    for prev, nxt in itertools.pairwise(recordings):
+        if nxt.odometry is None or prev.odometry is None:
+            raise PipelineError(f"{nxt.path}: passes have disjoint coordinate frames: without a reference, "
+                                "several passes need one continuous odometry frame")
+        if odometry_jump_m(prev, nxt) > config.mapping.odometry_continuity_m:
+            motion, seconds = _place(nxt, static_map_of(out), config)
+            notes.append(f"{nxt.path}: its odometry does not continue the previous pass's; placed on the map of the "
+                         f"passes before it by global localization (MCL, converged after {seconds:.1f} s): its "
+                         f"odometry moved by ({motion[0]:.3f} m, {motion[1]:.3f} m, {np.degrees(motion[2]):.2f}°)")
+            log.info(notes[-1])
+        out.append(moved_odometry(nxt, motion) if motion.any() else nxt)
+    return out, notes
+
+
+def _place(rec: Recording, occ: OccupancyMap, config: DoorbatchConfig) -> tuple[FloatArray, float]:
+    """(T, seconds to converge): the motion taking ``rec``'s odometry onto the map ``occ``, from MCL's global
+    localization of ``rec`` there.
+
+    Raises:
+        PipelineError: the filter did not converge, ended ambiguous, or got lost.
+    """
+    lmap = LocalizationMap(occ, localization_field(occ, config.localize), free_cells(occ), DoorSet.empty())
+    result = localize_recording(rec, lmap, config, "mcl", "global")
+    why = ("did not converge" if result.converged_ns is None else "ended with several hypotheses" if result.ambiguous
+           else "got lost after converging" if result.lost_ns else None)
+    if why is not None or result.converged_ns is None:
+        raise PipelineError(f"{rec.path}: passes have disjoint coordinate frames (its odometry does not continue the "
+                            f"previous pass's), and global localization on the map of the passes before it {why}: "
+                            "give a reference pose topic, map the logs separately, or put another log first")
+    u = int(np.searchsorted(result.stamps_ns, result.converged_ns))
+    motion = compose(result.pose[u], inverse(result.odom[u]))
+    return motion, (result.converged_ns - int(result.stamps_ns[0])) / 1e9
