@@ -406,6 +406,9 @@ class MappingConfig(Section):
     # Passes after the first must start within this distance of where the previous one's odometry ended
     # when poses come from odometry or scan matching (one odometry frame), else the frames are disjoint.
     odometry_continuity_m: float = Field(1.0, gt=0.0)
+    # ... and turned by at most this much (an odometry that restarts at zero where a round trip ended, at the dock
+    # but facing the other way, starts where the previous pass ended, in another frame).
+    odometry_continuity_deg: float = Field(10.0, gt=0.0)
     # A pass whose odometry does not continue the previous one's (a recording of its own, odometry from zero):
     # true: placed on the map of the passes before it by global localization (pipeline/join_passes.py; look at
     # preview.png: it depends on which log comes first); false: refused as a disjoint frame.

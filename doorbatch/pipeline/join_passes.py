@@ -30,7 +30,7 @@ from doorbatch.io.recording import Recording
 from doorbatch.maps import DoorSet, OccupancyMap
 from doorbatch.pipeline.localize.likelihood_field import free_cells
 from doorbatch.pipeline.localize.run import LocalizationMap, localization_field, localize_recording
-from doorbatch.pipeline.mapping import odometry_jump_m
+from doorbatch.pipeline.mapping import PartialMap, continues
 
 log = logging.getLogger(__name__)
 
@@ -47,13 +47,19 @@ def moved_odometry(rec: Recording, motion: npt.ArrayLike) -> Recording:
     return replace(rec, odometry=replace(rec.odometry, poses=poses), odometry_to_reference=repeat)
 
 
-def join_passes(recordings: Sequence[Recording], static_map_of: Callable[[Sequence[Recording]], OccupancyMap],
+def join_passes(recordings: Sequence[Recording], static_map_of: Callable[[Sequence[Recording]], PartialMap],
                 config: DoorbatchConfig) -> tuple[list[Recording], list[str]]:
     """The passes with the odometry of each that does not continue the previous one's moved into the first pass's
     frame (module docstring), in log order, and a note per pass localized. A pass that continues the previous one
-    (``mapping.odometry_continuity_m``) takes its motion. ``static_map_of(passes)``: the static map the mapping
-    stage builds of passes in one frame; each pass is localized on the map of all passes before it, so that the
-    map it is placed on is built as the final one is, in the same order. (Expert choice, measured: placing a pass
+    (:func:`~.mapping.continues`) takes its motion. ``static_map_of(passes)``: the static map the mapping stage
+    builds of passes in one frame, and where their poses end; each pass is localized on the map of all passes
+    before it, so that the map it is placed on is built as the final one is, in the same order.
+
+    The mapping stage's poses go on from the previous pass's last one by odometry steps (scan matching predicts each
+    scan from the last matched pose), so the odometry is moved by T' = e_o ⊕ e_m⁻¹ ⊕ T, with e_m and e_o the map
+    pose and the odometry pose of the previous pass's last scan: the step from there then predicts T ⊕ o₀, where
+    localization put the pass, whatever drift the matching took out of the previous pass (T' = T for odometry
+    poses, where e_m = e_o). (Expert choice, measured: placing a pass
     on the map of whichever passes were placed first, or from another pass's frame, let a pass be placed 5° off
     on a map that chaining its passes out of log order had bent, and the map came out broken without an error.)
 
@@ -67,11 +73,14 @@ def join_passes(recordings: Sequence[Recording], static_map_of: Callable[[Sequen
         if nxt.odometry is None or prev.odometry is None:
             raise PipelineError(f"{nxt.path}: passes have disjoint coordinate frames: without a reference, "
                                 "several passes need one continuous odometry frame")
-        if odometry_jump_m(prev, nxt) > config.mapping.odometry_continuity_m:
-            motion, seconds = _place(nxt, static_map_of(out), config)
+        if not continues(prev, nxt, config):
+            partial = static_map_of(out)
+            placed, seconds = _place(nxt, partial.occupancy, config)
+            motion = compose(compose(partial.end_odometry, inverse(partial.end_pose)), placed)
+            start = compose(placed, nxt.odometry.poses[0])
             notes.append(f"{nxt.path}: its odometry does not continue the previous pass's; placed on the map of the "
-                         f"passes before it by global localization (MCL, converged after {seconds:.1f} s): its "
-                         f"odometry moved by ({motion[0]:.3f} m, {motion[1]:.3f} m, {np.degrees(motion[2]):.2f}°)")
+                         f"passes before it by global localization (MCL, converged after {seconds:.1f} s): it "
+                         f"starts at ({start[0]:.3f} m, {start[1]:.3f} m, {np.degrees(start[2]):.2f}°) on that map")
             log.info(notes[-1])
         out.append(moved_odometry(nxt, motion) if motion.any() else nxt)
     return out, notes
@@ -86,8 +95,9 @@ def _place(rec: Recording, occ: OccupancyMap, config: DoorbatchConfig) -> tuple[
     """
     lmap = LocalizationMap(occ, localization_field(occ, config.localize), free_cells(occ), DoorSet.empty())
     result = localize_recording(rec, lmap, config, "mcl", "global")
-    why = ("did not converge" if result.converged_ns is None else "ended with several hypotheses" if result.ambiguous
-           else "got lost after converging" if result.lost_ns else None)
+    # lost first: without localize.relocalize_when_lost a lost run's convergence claim is withdrawn
+    why = ("got lost" if result.lost_ns else "did not converge" if result.converged_ns is None
+           else "ended with several hypotheses" if result.ambiguous else None)
     if why is not None or result.converged_ns is None:
         raise PipelineError(f"{rec.path}: passes have disjoint coordinate frames (its odometry does not continue the "
                             f"previous pass's), and global localization on the map of the passes before it {why}: "

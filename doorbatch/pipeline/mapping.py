@@ -27,6 +27,7 @@ import numpy.typing as npt
 from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import PipelineError
 from doorbatch.geometry.laser import dropouts, wraps_around
+from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.geometry.se2 import compose, interpolate_poses, rotation_matrix
 from doorbatch.io.preview import PreviewDoor
 from doorbatch.io.recording import Recording, load_recording
@@ -130,11 +131,19 @@ def pass_poses(rec: Recording, source: str, config: DoorbatchConfig) -> PassPose
     return PassPoses(rec.path, stamps, odom, valid, source)
 
 
-def odometry_jump_m(prev: Recording, nxt: Recording) -> float:
-    """How far ``nxt``'s odometry starts from where ``prev``'s ended (m); inf where either has none."""
+def odometry_jump(prev: Recording, nxt: Recording) -> tuple[float, float]:
+    """How far ``nxt``'s odometry starts from where ``prev``'s ended: (m, degrees); inf where either has none."""
     if prev.odometry is None or nxt.odometry is None:
-        return float("inf")
-    return float(np.hypot(*(nxt.odometry.poses[0, :2] - prev.odometry.poses[-1, :2])))
+        return float("inf"), float("inf")
+    step = nxt.odometry.poses[0] - prev.odometry.poses[-1]
+    return float(np.hypot(step[0], step[1])), abs(math.degrees(float(wrap_angle(step[2]))))
+
+
+def continues(prev: Recording, nxt: Recording, config: DoorbatchConfig) -> bool:
+    """Whether ``nxt``'s odometry continues ``prev``'s (one recording split in pieces): it starts within
+    ``mapping.odometry_continuity_m`` and ``_deg`` of where ``prev``'s ended."""
+    jump_m, jump_deg = odometry_jump(prev, nxt)
+    return jump_m <= config.mapping.odometry_continuity_m and jump_deg <= config.mapping.odometry_continuity_deg
 
 
 def check_common_frame(recordings: Sequence[Recording], source: str, config: DoorbatchConfig) -> None:
@@ -154,12 +163,13 @@ def check_common_frame(recordings: Sequence[Recording], source: str, config: Doo
         if prev.odometry is None or nxt.odometry is None:
             raise PipelineError(f"{nxt.path}: passes have disjoint coordinate frames: without a reference, "
                                 "several passes need one continuous odometry frame")
-        jump = odometry_jump_m(prev, nxt)
-        if jump > config.mapping.odometry_continuity_m:
+        if not continues(prev, nxt, config):
+            jump_m, jump_deg = odometry_jump(prev, nxt)
             raise PipelineError(
-                f"{nxt.path}: passes have disjoint coordinate frames: its odometry starts {jump:.2f} m from where "
-                f"{Path(prev.path).name} ended (mapping.odometry_continuity_m = "
-                f"{config.mapping.odometry_continuity_m}); give a reference pose topic, map the logs separately, or "
+                f"{nxt.path}: passes have disjoint coordinate frames: its odometry starts {jump_m:.2f} m and "
+                f"{jump_deg:.1f}° from where {Path(prev.path).name} ended (mapping.odometry_continuity_m = "
+                f"{config.mapping.odometry_continuity_m}, _deg = {config.mapping.odometry_continuity_deg}); give a "
+                "reference pose topic, map the logs separately, or "
                 "try --set mapping.join_passes=true (each pass placed on the map of the ones before it by global "
                 "localization)")
 
@@ -240,7 +250,17 @@ def integrate_pass(mapper: GridMapper, rec: Recording, poses: PassPoses, stride:
     mapper.end_pass()
 
 
-def static_map_of(recordings: Sequence[Recording], source: str, config: DoorbatchConfig) -> OccupancyMap:
+@dataclass(frozen=True)
+class PartialMap:
+    """What :func:`static_map_of` makes of passes in one frame: the static map, and the map pose and odometry pose
+    of the last scan with a pose (where the next pass's poses continue from)."""
+
+    occupancy: OccupancyMap
+    end_pose: FloatArray
+    end_odometry: FloatArray
+
+
+def static_map_of(recordings: Sequence[Recording], source: str, config: DoorbatchConfig) -> PartialMap:
     """The static grid map of passes in one frame from odometry or scan matching (``source``), without the em
     stage: what :func:`build_map` makes of them (door detection included), for localizing another pass on it."""
     passes = (_chain_scanmatch(recordings, config)[0] if source == "scanmatch"
@@ -248,7 +268,11 @@ def static_map_of(recordings: Sequence[Recording], source: str, config: Doorbatc
     mapper = GridMapper(config.grid, config.doors)
     for rec, poses in zip(recordings, passes, strict=True):
         integrate_pass(mapper, rec, poses, config.mapping.scan_stride, config.grid.dropout_max_beams)
-    return mapper.finish().static_map
+    odometry = pass_poses(recordings[-1], "odometry", config)
+    both = np.flatnonzero(passes[-1].valid & odometry.valid)
+    if both.size == 0:
+        raise PipelineError(f"{recordings[-1].path}: no scan has a {source} pose: nothing to place the next pass on")
+    return PartialMap(mapper.finish().static_map, passes[-1].poses[both[-1]], odometry.poses[both[-1]])
 
 
 def build_map(logs: Sequence[Path], config: DoorbatchConfig | None = None,
