@@ -7,8 +7,9 @@ odometry frame per pass; where a pass does not start where the one before it end
 (``mapping.odometry_continuity_m``), the passes cannot be chained. Expert choice: the pass is localized globally
 (MCL, ``--init global``, the localize config) on the static map of the passes before it, and once the filter has
 converged, is not ambiguous and never got lost (:mod:`.localize.convergence`), the rigid motion
-T = x_u ⊕ o_u⁻¹ at the first converged update u (its map pose x_u, its odometry o_u) takes the pass's odometry into
-the first pass's frame; scan matching then refines every pose as in one continuous run. The first converged update
+T = x_u ⊕ o_u⁻¹ at the first converged update u (its map pose x_u, its odometry o_u) says where the pass's odometry
+lies in the first pass's frame (:func:`join_passes` moves it so that scan matching predicts it there); scan matching
+then refines every pose as in one continuous run. The first converged update
 rather than a later one: T must be right where the pass starts, and the odometry drifts after. A pass that
 localization cannot place is an error: a wrong motion would lay the pass across the map.
 """
@@ -59,9 +60,9 @@ def join_passes(recordings: Sequence[Recording], static_map_of: Callable[[Sequen
     scan from the last matched pose), so the odometry is moved by T' = e_o ⊕ e_m⁻¹ ⊕ T, with e_m and e_o the map
     pose and the odometry pose of the previous pass's last scan: the step from there then predicts T ⊕ o₀, where
     localization put the pass, whatever drift the matching took out of the previous pass (T' = T for odometry
-    poses, where e_m = e_o). (Expert choice, measured: placing a pass
-    on the map of whichever passes were placed first, or from another pass's frame, let a pass be placed 5° off
-    on a map that chaining its passes out of log order had bent, and the map came out broken without an error.)
+    poses, where e_m = e_o). (Expert choice, measured: placing a pass on the map of whichever passes were placed
+    first, or from another pass's frame, let a pass be placed 5° off on a map that chaining its passes out of log
+    order had bent, and the map came out broken without an error.)
 
     Raises:
         PipelineError: a pass without odometry, or one that global localization does not place.
