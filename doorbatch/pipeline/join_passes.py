@@ -29,8 +29,7 @@ from doorbatch.errors import PipelineError
 from doorbatch.geometry.se2 import compose, inverse
 from doorbatch.io.recording import Recording
 from doorbatch.maps import DoorSet, OccupancyMap
-from doorbatch.pipeline.localize.likelihood_field import free_cells
-from doorbatch.pipeline.localize.run import LocalizationMap, localization_field, localize_recording
+from doorbatch.pipeline.localize.run import LocalizationMap, localize_recording
 from doorbatch.pipeline.mapping import PartialMap, continues
 
 log = logging.getLogger(__name__)
@@ -94,8 +93,7 @@ def _place(rec: Recording, occ: OccupancyMap, config: DoorbatchConfig) -> tuple[
     Raises:
         PipelineError: the filter did not converge, ended ambiguous, or got lost.
     """
-    lmap = LocalizationMap(occ, localization_field(occ, config.localize), free_cells(occ), DoorSet.empty())
-    result = localize_recording(rec, lmap, config, "mcl", "global")
+    result = localize_recording(rec, LocalizationMap.of(occ, DoorSet.empty(), config.localize), config, "mcl", "global")
     # lost first: without localize.relocalize_when_lost a lost run's convergence claim is withdrawn
     why = ("got lost" if result.lost_ns else "did not converge" if result.converged_ns is None
            else "ended with several hypotheses" if result.ambiguous else None)

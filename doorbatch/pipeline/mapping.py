@@ -32,7 +32,7 @@ from doorbatch.geometry.se2 import compose, interpolate_poses, rotation_matrix
 from doorbatch.io.preview import PreviewDoor
 from doorbatch.io.recording import Recording, load_recording
 from doorbatch.maps import OccupancyMap
-from doorbatch.pipeline.gridmap.build import GridMapper, MapScan
+from doorbatch.pipeline.gridmap.build import GridMapper, GridMapResult, MapScan
 from doorbatch.pipeline.gridmap.doors import DetectedDoor, remove_leaves
 from doorbatch.pipeline.gridmap.occupancy import LogOddsGrid, to_occupancy_map
 from doorbatch.pipeline.poses import scan_match_trajectory
@@ -250,6 +250,17 @@ def integrate_pass(mapper: GridMapper, rec: Recording, poses: PassPoses, stride:
     mapper.end_pass()
 
 
+def grid_of(recordings: Sequence[Recording], passes: Sequence[PassPoses], config: DoorbatchConfig,
+            progress: Callable[[int], object] | None = None) -> GridMapResult:
+    """The grid stage over passes at their poses, one after the other (``progress``: called once per pass)."""
+    mapper = GridMapper(config.grid, config.doors)
+    for rec, poses in zip(recordings, passes, strict=True):
+        integrate_pass(mapper, rec, poses, config.mapping.scan_stride, config.grid.dropout_max_beams)
+        if progress is not None:
+            progress(1)
+    return mapper.finish()
+
+
 @dataclass(frozen=True)
 class PartialMap:
     """What :func:`static_map_of` makes of passes in one frame: the static map, and the map pose and odometry pose
@@ -265,14 +276,12 @@ def static_map_of(recordings: Sequence[Recording], source: str, config: Doorbatc
     stage: what :func:`build_map` makes of them (door detection included), for localizing another pass on it."""
     passes = (_chain_scanmatch(recordings, config)[0] if source == "scanmatch"
               else [pass_poses(rec, source, config) for rec in recordings])
-    mapper = GridMapper(config.grid, config.doors)
-    for rec, poses in zip(recordings, passes, strict=True):
-        integrate_pass(mapper, rec, poses, config.mapping.scan_stride, config.grid.dropout_max_beams)
+    occupancy = grid_of(recordings, passes, config).static_map
     odometry = pass_poses(recordings[-1], "odometry", config)
     both = np.flatnonzero(passes[-1].valid & odometry.valid)
     if both.size == 0:
         raise PipelineError(f"{recordings[-1].path}: no scan has a {source} pose: nothing to place the next pass on")
-    return PartialMap(mapper.finish().static_map, passes[-1].poses[both[-1]], odometry.poses[both[-1]])
+    return PartialMap(occupancy, passes[-1].poses[both[-1]], odometry.poses[both[-1]])
 
 
 def build_map(logs: Sequence[Path], config: DoorbatchConfig | None = None,
@@ -322,12 +331,7 @@ def build_map(logs: Sequence[Path], config: DoorbatchConfig | None = None,
         if skipped:
             warnings.append(f"{p.log}: {skipped} of {p.valid.shape[0]} scans have no {source} pose and are skipped")
     t0 = time.perf_counter()
-    mapper = GridMapper(config.grid, config.doors)
-    for rec, poses in zip(recordings, passes, strict=True):
-        integrate_pass(mapper, rec, poses, config.mapping.scan_stride, config.grid.dropout_max_beams)
-        if progress is not None:
-            progress(1)
-    result = mapper.finish()
+    result = grid_of(recordings, passes, config, progress)
     seconds["grid"] = time.perf_counter() - t0
     return DoorMap(result.static_map, result.doors, passes, source, result.n_dynamic_points, warnings, seconds,
                    result.grid)

@@ -176,7 +176,7 @@ def tracked_log_likelihood(particles: ParticleSet, beams: BeamSet, field: Distan
 
         weighed = skipped_door_log_likelihood(field, particles.pose, particles.weight, beams.points_base, doors,
                                               particles.door_mean, particles.door_var, config, beams.range_max_m,
-                                              combination, unobserved)
+                                              combination, unobserved, with_information=config.tracking_door_prior)
         return weighed.log_likelihood, weighed.information
     static = endpoint_distances(field, particles.pose, beams.points_base)
     dl = door_log_likelihood_at_poses(static, particles.pose, beams.points_base, doors, particles.door_mean,

@@ -70,6 +70,11 @@ class LocalizationMap:
     free: FreeCells
     doors: DoorSet
 
+    @classmethod
+    def of(cls, occ: OccupancyMap, doors: DoorSet, config: LocalizeConfig) -> LocalizationMap:
+        """The map ``occ`` with ``doors``, its likelihood field as the config asks and its free cells."""
+        return cls(occ, localization_field(occ, config), free_cells(occ), doors)
+
 
 def is_map_log(map_path: Path) -> bool:
     """Whether ``--map`` names a log (its OccupancyGrid topic is the map) rather than a map directory or a
@@ -107,7 +112,7 @@ def load_localization_map(map_path: Path, config: LocalizeConfig) -> Localizatio
         doors_path = map_doors_file(map_path)
         doors = read_door_set(doors_path.parent) if doors_path is not None else DoorSet.empty()
     doors = with_closed_in_range(doors)
-    return LocalizationMap(occ, localization_field(occ, config), free_cells(occ), doors)
+    return LocalizationMap.of(occ, doors, config)
 
 
 def truth_localization_map(truth_path: Path, config: LocalizeConfig) -> LocalizationMap:
@@ -121,7 +126,7 @@ def truth_localization_map(truth_path: Path, config: LocalizeConfig) -> Localiza
     reach = np.array([d.opening_sign * d.max_angle for d in ds])
     doors = DoorSet(np.array([[d.hinge_x, d.hinge_y] for d in ds]).reshape(-1, 2), np.array([d.length for d in ds]),
                     np.array([d.closed_yaw for d in ds]), np.minimum(reach, 0.0), np.maximum(reach, 0.0))
-    return LocalizationMap(occ, localization_field(occ, config), free_cells(occ), doors)
+    return LocalizationMap.of(occ, doors, config)
 
 
 def localization_field(occ: OccupancyMap, config: LocalizeConfig) -> DistanceField:

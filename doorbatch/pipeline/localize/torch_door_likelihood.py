@@ -128,11 +128,11 @@ def door_scores(dist: Any, pts: Any, doors: DoorSet, mean: Any, var: Any, model:
 
 
 class TrackedWeighing(NamedTuple):
-    """The tracked cloud's log-likelihoods (N,), what its beams say of the doors (:func:`.rbpf.door_beam_information`)
-    and the number of beams skipped."""
+    """The tracked cloud's log-likelihoods (N,), what its beams say of the doors (:func:`.rbpf.door_beam_information`;
+    None when not asked for) and the number of beams skipped."""
 
     log_likelihood: FloatArray
-    information: DoorBeamInformation
+    information: DoorBeamInformation | None
     skipped: int
 
 
@@ -172,22 +172,23 @@ def door_beam_information(assoc: Any, poses: Any, base: Any, doors: DoorSet, con
 def skipped_door_log_likelihood(dist_field: DistanceField, pose: npt.ArrayLike, weight: npt.ArrayLike,
                                 points_base: npt.ArrayLike, doors: DoorSet, door_mean: npt.ArrayLike,
                                 door_var: npt.ArrayLike, config: LocalizeConfig, range_max_m: float,
-                                combination: BeamCombination, unobserved_var: npt.ArrayLike | None = None
-                                ) -> TrackedWeighing:
+                                combination: BeamCombination, unobserved_var: npt.ArrayLike | None = None,
+                                with_information: bool = True) -> TrackedWeighing:
     """log p(z | x) (N,) of a tracked RBPF cloud with its doors, what its beams say of the doors and the number
     of beams skipped, every step on the field's ``torch_device``: the static distances
     (:func:`.torch_field.endpoint_distances`' lookup), :func:`door_scores`, the per-beam likelihoods, then beam
     skipping and the sum (:func:`.torch_field.skip_and_combine`), and :func:`door_beam_information` of the
-    association. The host's path is :func:`.door_likelihood.door_log_likelihood_at_poses`,
-    :func:`.likelihood_field.skip_unexplained`, :func:`.likelihood_field.combine_beams`,
-    :func:`.rbpf.door_beam_information`. The whole cloud is one block (beam skipping normalizes over it)."""
+    association where ``with_information`` (the conditioning of the doors on the beams needs it). The host's path
+    is :func:`.door_likelihood.door_log_likelihood_at_poses`, :func:`.likelihood_field.skip_unexplained`,
+    :func:`.likelihood_field.combine_beams`, :func:`.rbpf.door_beam_information`. The whole cloud is one block
+    (beam skipping normalizes over it)."""
     torch = import_torch()
     model = beam_model(config, range_max_m)
     field, grid, cells = device_blocks(dist_field, pose, points_base)
     n, b = grid.shape[0], cells.shape[0]
     if b == 0:
-        return TrackedWeighing(np.zeros(n), DoorBeamInformation(np.zeros((n, len(doors))), np.zeros((n, len(doors)))),
-                               0)
+        none = DoorBeamInformation(np.zeros((n, len(doors))), np.zeros((n, len(doors))))
+        return TrackedWeighing(np.zeros(n), none if with_information else None, 0)
     device = grid.device
     poses = torch.as_tensor(np.ascontiguousarray(pose, dtype=np.float64).reshape(-1, 3), device=device)
     base = torch.as_tensor(np.ascontiguousarray(points_base, dtype=np.float64).reshape(-1, 2), device=device)
@@ -206,5 +207,5 @@ def skipped_door_log_likelihood(dist_field: DistanceField, pose: npt.ArrayLike, 
     pz *= float(np.float32(model.z_hit))
     pz += float(np.float32(model.rand_term))
     loglik, skipped = skip_and_combine(pz, pose, weight, config, range_max_m, combination)
-    return TrackedWeighing(np.asarray(loglik.cpu().numpy()), door_beam_information(assoc, poses, base, doors, config),
-                           skipped)
+    information = door_beam_information(assoc, poses, base, doors, config) if with_information else None
+    return TrackedWeighing(np.asarray(loglik.cpu().numpy()), information, skipped)
