@@ -86,6 +86,13 @@ class IoConfig(Section):
     reference_repeats_odometry_deg: float = Field(0.05, ge=0.0)
     # ... judged only over this much odometry path: wheel odometry drifts 0.1 % of distance at its best, 2 mm here.
     reference_repeats_min_path_m: float = Field(2.0, ge=0.0)
+    # A laser that states no range_max (Foxglove's schema has none; drivers that leave it 0 or NaN) but writes a
+    # no-return code (some simulators and drivers put their maximum range in every beam without an echo): where at
+    # least this many readings of those scans, and this share of their finite readings, sit at exactly the largest
+    # value, that value is the code and their range_max. Expert choice: a real surface at the largest range gives
+    # one or a few beams at noisy, distinct values; a clamp gives the same value in every beam without an echo.
+    no_return_code_min_readings: int = Field(20, ge=1)
+    no_return_code_min_share: float = Field(0.001, ge=0.0, le=1.0)
     # CARMEN: laser field of view when 180/181 or 360/361 readings are given (paper-era SICK scanners).
     carmen_fov_deg: float = Field(180.0, gt=0.0, le=360.0)
     # CARMEN: maximum range used when the log gives none and no reading exceeds it.

@@ -226,7 +226,9 @@ def laser_scan(msg: Any, topic: str, mount: Transform | None = None) -> Any:
     :func:`origin_frame`, which ``mount`` (:func:`scan_mount` of the topic's first readable scan) places in the
     frame. The schema states no range limits: range_min is 0 (a reading of 0, which drivers write for no echo, is
     then no hit, as in any log: :func:`~doorbatch.io.recording.usable_range_limits`) and range_max +inf, "not
-    stated" to every stage (the localizers take ``localize.laser_max_range_fallback``).
+    stated" (the recording takes the readings' no-return code where they show one,
+    :func:`~doorbatch.io.recording.with_no_return_code`, else the localizers take
+    ``localize.laser_max_range_fallback``).
 
     Raises:
         LogContentError: an origin tilted out of the frame's xy-plane, one offset other than ``mount`` (the

@@ -501,8 +501,8 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
                               topic=scan_topic) from err
     range_min, range_max, note = usable_range_limits(np.array([s.range_min for s in scans]),
                                                      np.array([s.range_max for s in scans]))
-    if note:
-        warnings.append(note)
+    range_max, code_note = with_no_return_code([s.ranges for s in scans], range_max, config)
+    warnings += [n for n in (note, code_note) if n]
     scan_set = ScanSet(
         stamps_ns=np.array([s.stamp_ns for s in scans], dtype=np.int64),
         ranges=[s.ranges for s in scans],
@@ -583,6 +583,36 @@ def usable_range_limits(range_min: FloatArray, range_max: FloatArray) -> tuple[F
     note = (f"{int(bad.sum())} of {bad.size} scans state a range_max that is NaN or not above range_min "
             f"(e.g. {float(range_max[bad][0])!r}): read as no stated maximum, every finite reading a hit")
     return low, np.where(bad, np.inf, range_max), note
+
+
+def with_no_return_code(ranges: Sequence[npt.ArrayLike], range_max: FloatArray,
+                        config: DoorbatchConfig) -> tuple[FloatArray, str | None]:
+    """``range_max`` with the scans that state none (+inf: :func:`usable_range_limits`) given their no-return code,
+    where their readings show one, and a warning saying so.
+
+    The code is the largest finite reading v of those scans when at least ``io.no_return_code_min_readings`` of
+    their readings, and ``io.no_return_code_min_share`` of the finite ones, equal v exactly: a laser whose writer
+    puts its maximum range in every beam without an echo (a simulator, a Foxglove log, which states no range
+    limits). Those readings are then no returns (r ≥ range_max), not a ring of walls at the maximum range around
+    every pose, and the sensor model takes v as the laser's reach. Scans with a stated range_max are left alone.
+    """
+    io = config.io
+    unstated = np.flatnonzero(np.isposinf(range_max))
+    if unstated.size == 0:
+        return range_max, None
+    finite = [r[np.isfinite(r)] for r in (np.asarray(ranges[i], dtype=np.float64) for i in unstated.tolist())]
+    n_finite = sum(r.size for r in finite)
+    if n_finite == 0:
+        return range_max, None
+    code = max(float(r.max()) for r in finite if r.size)
+    at_code = sum(int(np.count_nonzero(r == code)) for r in finite)
+    if at_code < max(io.no_return_code_min_readings, io.no_return_code_min_share * n_finite):
+        return range_max, None
+    out = range_max.copy()
+    out[unstated] = code
+    return out, (f"{unstated.size} of {range_max.size} scans state no range_max, and {at_code} of their "
+                 f"{n_finite} finite readings are exactly their largest, {code:g} m: read as the laser's no-return "
+                 "code and range_max (io.no_return_code_min_readings, _share)")
 
 
 def _aligned_colors(colors: BeamColors | None, beams: int) -> npt.NDArray[np.uint8]:

@@ -120,6 +120,45 @@ def test_a_range_max_of_zero_or_nan_is_no_stated_maximum(write_log: Callable[...
     assert all(rec.scans.endpoints_base(i)[1].any() for i in range(4))  # hits in every scan
 
 
+@pytest.mark.parametrize("code", [8.0, 30.0])
+def test_a_no_return_code_of_a_laser_that_states_no_range_max(write_log: Callable[..., Path], code: float) -> None:
+    """A laser that states no range_max (0 here, as some drivers leave it) and writes its maximum range in every
+    beam without an echo: read as every finite reading a hit, those beams were a ring of walls at that range
+    around every pose. The repeated largest value is read as the no-return code and range_max."""
+    messages = sample_messages(n_scans=6, beams=91)
+    scans = [msg for topic, _, _, msg in messages if topic == "/scan"]
+    for scan in scans:
+        scan.range_max = 0.0
+        scan.ranges[np.isinf(scan.ranges) | (scan.ranges > 7.5)] = code  # 21 % of the beams: no echo
+    rec = load_recording(write_log("clamped.mcap", messages), DoorbatchConfig())
+    np.testing.assert_array_equal(rec.scans.range_max, code)
+    for i, scan in enumerate(scans):
+        hit = rec.scans.endpoints_base(i)[1]
+        np.testing.assert_array_equal(hit, np.isfinite(scan.ranges) & (scan.ranges < code))
+    assert any("no-return code" in w and f"{code:g} m" in w for w in rec.warnings)
+
+
+def test_a_largest_reading_that_does_not_repeat_is_no_code(write_log: Callable[..., Path]) -> None:
+    """Without a stated range_max, noisy readings whose largest value occurs once (a far wall) stay hits; so do
+    the readings of a laser that states its range_max, however often they repeat below it."""
+    messages = sample_messages(n_scans=6, beams=91)
+    scans = [msg for topic, _, _, msg in messages if topic == "/scan"]
+    for scan in scans[:3]:
+        scan.range_max = float("nan")
+    for scan in scans[3:]:
+        scan.ranges[::4] = 9.5  # below the stated 30 m
+    rec = load_recording(write_log("noisy.mcap", messages), DoorbatchConfig())
+    np.testing.assert_array_equal(rec.scans.range_max, [np.inf] * 3 + [30.0] * 3)
+    assert not any("no-return code" in w for w in rec.warnings)
+    # the same scans with fewer repeats of their largest value than io.no_return_code_min_readings asks
+    for scan in scans[:3]:
+        scan.ranges[:3] = 12.0
+    rec = load_recording(write_log("few.mcap", messages), DoorbatchConfig())
+    assert np.isposinf(rec.scans.range_max[:3]).all()
+    strict = DoorbatchConfig.model_validate({"io": {"no_return_code_min_readings": 9}})
+    np.testing.assert_array_equal(load_recording(write_log("few9.mcap", messages), strict).scans.range_max[:3], 12.0)
+
+
 def test_a_zero_reading_is_no_hit_even_with_range_min_zero(write_log: Callable[..., Path]) -> None:
     """Some drivers publish 0.0 for "no data" with range_min 0: as a hit, it would mark the laser's own cell
     occupied along the whole path."""
