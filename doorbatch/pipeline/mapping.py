@@ -146,6 +146,26 @@ def continues(prev: Recording, nxt: Recording, config: DoorbatchConfig) -> bool:
     return jump_m <= config.mapping.odometry_continuity_m and jump_deg <= config.mapping.odometry_continuity_deg
 
 
+def time_order(recordings: Sequence[Recording], config: DoorbatchConfig) -> list[int] | None:
+    """The passes' indices in the order of their first scans' stamps, where the passes do not chain as given (a
+    pass's odometry does not continue the one before it: :func:`continues`) but do in that order: one recording's
+    pieces given out of order, as a shell glob gives ``run_10.bag`` before ``run_2.bag``. None otherwise: passes
+    that chain as given keep their order, and so do passes no order of time chains (recorded apart; each in sim
+    time from 0), whose order the user chose.
+    """
+    if len(recordings) < 2 or any(r.odometry is None or len(r.scans) == 0 for r in recordings):
+        return None
+
+    def chains(order: Sequence[int]) -> bool:
+        return all(continues(recordings[a], recordings[b], config) for a, b in itertools.pairwise(order))
+
+    given = list(range(len(recordings)))
+    by_time = sorted(given, key=lambda i: int(recordings[i].scans.stamps_ns[0]))
+    if by_time == given or chains(given) or not chains(by_time):
+        return None
+    return by_time
+
+
 def check_common_frame(recordings: Sequence[Recording], source: str, config: DoorbatchConfig) -> None:
     """Passes must share one map frame.
 
