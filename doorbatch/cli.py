@@ -279,7 +279,7 @@ def localize_cmd(ctx: Context, log_path: Path, map_path: Path, output: Path, met
               callback=_output(folder=True),
               help="Report directory to write.")
 @click.option("--reference", type=click.Path(path_type=Path), default=None,
-              help="Reference trajectory: a TUM file or a log with a reference pose topic.")
+              help="Reference trajectory: a TUM file, a log with a reference pose topic, or LOG:/TOPIC.")
 @click.option("--world", "truth", type=click.Path(path_type=Path, dir_okay=False), default=None,
               help="Simulator truth YAML (door map and door-state scoring).")
 @click.option("--align", type=click.Choice(["none", "se2"]), default=None, help="Default: evaluate.align.")

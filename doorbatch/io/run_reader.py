@@ -55,21 +55,49 @@ def is_map_dir(path: Path) -> bool:
 
 
 def read_reference(path: Path, config: DoorbatchConfig) -> ReferenceTrajectory:
-    """A reference trajectory from a TUM file (``.tum``/``.txt``) or from a log's reference pose topic.
+    """A reference trajectory from a TUM file (``.tum``/``.txt``), from a pose topic of a log (``LOG:/TOPIC``,
+    :func:`split_pose_topic_run`), or from a log's reference pose topic: the robot's pose at the scans
+    (:func:`~doorbatch.io.recording.load_recording`), or, in a log without a laser (a motion-capture or
+    ground-truth recording), the topic's poses as they are.
 
     Raises:
         InputDataError: unreadable, or a log without a reference pose topic.
+        UsageError: ``LOG:/TOPIC`` whose topic the log lacks or that is no pose.
     """
     path = Path(path)
     if path.suffix in TUM_SUFFIXES:
         tum = read_tum(path)
         return ReferenceTrajectory(tum.stamp_ns, np.stack([tum.x, tum.y, tum.yaw], axis=1))
+    topic = split_pose_topic_run(path)
+    if topic is None:
+        topic = _laserless_reference_topic(path, config)
+    if topic is not None:
+        return ReferenceTrajectory(*read_pose_topic(*topic))
     from doorbatch.io.recording import load_recording
 
     rec = load_recording(path, config)
     if rec.reference is None:
         raise InputDataError("--reference: the log has no reference pose topic", path=path)
     return ReferenceTrajectory(rec.reference.stamps_ns, rec.reference.poses, tuple(rec.warnings))
+
+
+def _laserless_reference_topic(path: Path, config: DoorbatchConfig) -> tuple[Path, str] | None:
+    """(log, its reference pose topic) for a log without a laser scan, else None (a log with one is read as a
+    recording).
+
+    Raises:
+        InputDataError: unreadable, or a log with neither a scan nor a reference pose topic.
+    """
+    from doorbatch.io.reader import open_log
+    from doorbatch.records import Role
+
+    with open_log(path, config) as reader:
+        if reader.roles.topic(Role.SCAN) is not None:
+            return None
+        topic = reader.roles.topic(Role.REFERENCE)
+    if topic is None:
+        raise InputDataError("--reference: the log has no reference pose topic (and no laser scan)", path=path)
+    return path, topic
 
 
 def _sibling(log_path: Path, kind: str) -> Path:

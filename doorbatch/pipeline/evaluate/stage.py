@@ -74,7 +74,7 @@ def _classify(path: Path, reference: Path | None) -> _Input:
                              "doors.parquet), a TUM trajectory (.tum, .txt, .csv) nor LOG:/POSE_TOPIC", path=path)
     if item.kind in ("tum", "topic") and reference is None:
         raise UsageError(f"evaluate {path}: another localizer's trajectory has no reference of its own; "
-                         "give --reference LOG|TUM")
+                         "give --reference LOG|TUM|LOG:/TOPIC")
     return item
 
 
@@ -92,8 +92,9 @@ def evaluate_run_dirs(run_dirs: Sequence[Path], out_dir: Path, config: Doorbatch
     unique = list(dict.fromkeys(str(d) if split_pose_topic_run(Path(d)) else str(Path(d).resolve())
                                 for d in run_dirs))
     items = [_classify(Path(d), reference) for d in unique]
-    manifest = Manifest.start(config.as_dict(), [*(i.file for i in items), *(p for p in (reference, truth) if p)],
-                              command="evaluate")
+    reference_file = reference if reference is None else (split_pose_topic_run(reference) or (reference,))[0]
+    manifest = Manifest.start(config.as_dict(), [*(i.file for i in items),
+                                                 *(p for p in (reference_file, truth) if p)], command="evaluate")
     if len(unique) < len(run_dirs):  # the same run twice would count twice in every mean
         manifest.warn(f"{len(run_dirs) - len(unique)} argument(s) named a run already given: each is evaluated once")
     labelled = list(zip(items, _names([i.path for i in items]), strict=True))

@@ -241,16 +241,24 @@ class _Track:
 
 
 def start_scan_index(rec: Recording, start: StartPose) -> int:
-    """The first scan at or after a start pose: by its header stamp, or by its log time where the stamp lies
-    after the last scan (another clock), with a warning.
+    """The first scan at or after a start pose: by its header stamp; by its log time (on the scans' clock,
+    :attr:`~doorbatch.io.recording.Recording.log_clock`) where the stamp is unset (0: ``rostopic pub`` leaves it
+    so, and ROS 1 amcl reads it as "now", when the message comes) or lies after the last scan (another clock),
+    with a warning.
 
     Raises:
         PipelineError: no scan comes after it on either clock.
     """
     last = int(rec.scans.stamps_ns[-1])
-    for t, clock in ((start.stamp_ns, "stamp"), (start.log_time_ns, "log time")):
+    at_log_time = rec.log_clock.stamp_at(start.log_time_ns)
+    if start.stamp_ns == 0:
+        rec.warnings.append(f"--init {start.topic}: its stamp is unset (0); started at its log time, when it came")
+        candidates = [(at_log_time, "log time")]
+    else:
+        candidates = [(start.stamp_ns, "stamp"), (at_log_time, "log time")]
+    for t, clock in candidates:
         if t <= last:
-            if clock != "stamp":
+            if clock != "stamp" and start.stamp_ns != 0:
                 rec.warnings.append(f"--init {start.topic}: its stamp is after the last scan (another clock?); "
                                     "started at its log time")
             return int(np.searchsorted(rec.scans.stamps_ns, t))

@@ -225,6 +225,36 @@ def test_another_localizers_tum_trajectory_is_scored_beside_a_run(tmp_path: Path
     assert "pose topics in the log: /amcl_pose" in capsys.readouterr().err
 
 
+def test_a_log_without_a_laser_or_one_of_its_pose_topics_is_a_reference(tmp_path: Path,
+                                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    """A motion-capture or ground-truth recording has poses but no laser: ``--reference LOG`` takes its reference
+    pose topic (it was refused: "no sensor_msgs/LaserScan topic"), and ``--reference LOG:/TOPIC`` names the topic,
+    as a run may (it was read as a file name that does not exist)."""
+    from doorbatch.io import ros_messages
+    from doorbatch.io.log_writer import LogWriter
+
+    stamps, ref = _straight()
+    log = tmp_path / "loc.mcap"
+    log.write_bytes(b"not read")
+    _write_run(tmp_path / "rbpf", log, stamps, ref + np.array([0.0, 0.05, 0.0]), "rbpf", 0.3)
+    mocap = tmp_path / "mocap.mcap"
+    with LogWriter(mocap) as writer:
+        for t, (x, y, yaw) in zip(stamps, ref, strict=True):
+            writer.write("/ground_truth", "geometry_msgs/msg/PoseStamped", int(t),
+                         ros_messages.pose_stamped(int(t), "map", x, y, yaw))
+            writer.write("/amcl_pose", "geometry_msgs/msg/PoseWithCovarianceStamped", int(t),
+                         ros_messages.pose_with_covariance_stamped(int(t), "map", x, y + 0.02, yaw, np.eye(6)))
+    for reference, want in ((str(mocap), 0.05), (f"{mocap}:/ground_truth", 0.05), (f"{mocap}:/amcl_pose", 0.03)):
+        out = tmp_path / f"report_{want}_{len(reference)}"
+        assert main(["evaluate", str(tmp_path / "rbpf"), "-o", str(out), "--reference", reference, "-q"]) == 0
+        table = read_table("metrics", out / "metrics.parquet").to_pydict()
+        rmse = [v for k, v in zip(table["metric"], table["value"], strict=True) if k == "ape_trans_rmse"]
+        assert rmse == pytest.approx([want]), reference
+    assert main(["evaluate", str(tmp_path / "rbpf"), "-o", str(tmp_path / "bad"), "--reference",
+                 f"{mocap}:/odom"]) == 2
+    assert "pose topics in the log: /amcl_pose, /ground_truth" in capsys.readouterr().err
+
+
 def test_evaluate_cli_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["evaluate", "-o", str(tmp_path / "r")]) == 2
     (tmp_path / "empty").mkdir()

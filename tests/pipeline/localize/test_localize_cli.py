@@ -198,10 +198,11 @@ def test_a_ros1_amcl_launch_file_runs_mcl_as_ros1_amcl_would(sample_map: Path, t
     assert manifest["topics"]["scan"] is None  # the node's scan is /scan: the log's own scan topic
     assert _errors(run, log).mean() < 0.3  # tracks (doorbatch's defaults 0.02 m; lost would be metres)
 
-def _with_initial_pose(tmp_path: Path, after_scans: int, clock_offset_ns: int = 0) -> tuple[Path, int, np.ndarray]:
+def _with_initial_pose(tmp_path: Path, after_scans: int, clock_offset_ns: int | None = 0
+                       ) -> tuple[Path, int, np.ndarray]:
     """loc_open.mcap plus an RViz-style /initialpose (0.5 m, 15 deg std) at the reference pose of a later scan,
-    0.2 m off it, recorded at that scan's time and stamped ``clock_offset_ns`` later; returns the log, the scan's
-    stamp and the reference pose there."""
+    0.2 m off it, recorded at that scan's time and stamped ``clock_offset_ns`` later (None: stamp 0, unset, as
+    ``rostopic pub`` leaves it); returns the log, the scan's stamp and the reference pose there."""
     from doorbatch.io import ros_messages
     from doorbatch.io.log_writer import LogWriter
     from doorbatch.io.reader import open_log
@@ -212,7 +213,8 @@ def _with_initial_pose(tmp_path: Path, after_scans: int, clock_offset_ns: int = 
     stamp = int(rec.scans.stamps_ns[after_scans])
     (truth,), _ = interpolate_poses(rec.reference.stamps_ns, rec.reference.poses, np.array([stamp]))
     cov = np.diag([0.25, 0.25, 0.0, 0.0, 0.0, 0.0685])
-    msg = ros_messages.pose_with_covariance_stamped(stamp + clock_offset_ns, "map", truth[0] + 0.2, truth[1],
+    msg = ros_messages.pose_with_covariance_stamped(0 if clock_offset_ns is None else stamp + clock_offset_ns, "map",
+                                                    truth[0] + 0.2, truth[1],
                                                     truth[2], cov)
     log = tmp_path / "with_initialpose.mcap"
     with open_log(src) as reader, LogWriter(log) as writer:
@@ -224,11 +226,12 @@ def _with_initial_pose(tmp_path: Path, after_scans: int, clock_offset_ns: int = 
     return log, stamp, truth
 
 
-@pytest.mark.parametrize("clock_offset_ns", [0, 100_000 * 10**9])  # another clock: a day later
+@pytest.mark.parametrize("clock_offset_ns", [0, 100_000 * 10**9, None])  # another clock: a day later; unset
 def test_init_from_the_logs_initialpose_starts_there_and_then(sample_map: Path, tmp_path: Path,
-                                                              clock_offset_ns: int) -> None:
+                                                              clock_offset_ns: int | None) -> None:
     """As Nav2 AMCL: the first /initialpose is the start, with its covariance, and scans before it are not used.
-    RViz may stamp it with wall time while the scans carry sim time: then its log time says when."""
+    RViz may stamp it with wall time while the scans carry sim time: then its log time says when. So does an
+    unset stamp (0), which had started the run at the first scan, metres from the pose given for 4 s later."""
     log, stamp, _ = _with_initial_pose(tmp_path, 40, clock_offset_ns)
     run = tmp_path / "run"
     assert main(["localize", str(log), "--map", str(sample_map), "-o", str(run), "--method", "mcl",
@@ -240,7 +243,8 @@ def test_init_from_the_logs_initialpose_starts_there_and_then(sample_map: Path, 
     assert err[len(err) // 2:].mean() < 0.1  # and the scans pull it in
     manifest = json.loads((run / "manifest.json").read_text())
     assert manifest["extra"]["init"] == "/initialpose"
-    assert any("another clock" in w for w in manifest["warnings"]) == (clock_offset_ns > 0)
+    assert any("another clock" in w for w in manifest["warnings"]) == bool(clock_offset_ns)
+    assert any("unset (0)" in w for w in manifest["warnings"]) == (clock_offset_ns is None)
 
 
 def test_init_from_a_topic_the_log_lacks_is_a_usage_error(sample_map: Path, tmp_path: Path,
