@@ -61,6 +61,10 @@ class LogContentError(InputDataError):
     backwards, a missing transform."""
 
 
+class LaserMountError(LogContentError):
+    """No transform takes the laser's frame to the robot's base (no mount in the log)."""
+
+
 class TransformError(InputDataError):
     """A transform between two frames is not available at the requested time."""
 

@@ -94,6 +94,12 @@ class TfBuffer:
         """(parent, child, static) for every edge."""
         return [(e.parent, child, e.static) for child, e in self._edges.items()]
 
+    def static_transforms(self) -> list[Transform]:
+        """Every static edge as a transform (a log's sensor mounts, as /tf_static holds them)."""
+        return [Transform(stamp_ns=0, parent=e.parent, child=child, translation=e.translations[-1],
+                          rotation_xyzw=e.rotations[-1], static=True)
+                for child, e in self._edges.items() if e.static]
+
     def is_static(self, child: str) -> bool:
         """Whether the edge into ``child`` is static (KeyError: ``child`` has no parent)."""
         return self._edges[child].static

@@ -17,7 +17,7 @@ import numpy as np
 import numpy.typing as npt
 
 from doorbatch.config import DoorbatchConfig, FramesConfig
-from doorbatch.errors import LogContentError, TransformError
+from doorbatch.errors import LaserMountError, LogContentError, TransformError
 from doorbatch.geometry.rotations import yaw_of_matrix
 from doorbatch.geometry.se2 import compose, interpolate_poses
 from doorbatch.geometry.tf_buffer import TfBuffer
@@ -104,6 +104,9 @@ class Recording:
     # log recorded on wall-clock time), else the identity: when an output message stamped at a scan's time is
     # logged, so that it sits beside the input's messages (annotated.mcap).
     log_clock: LogClock = field(default_factory=LogClock)
+    # The log's static transforms (its sensor mounts), for another pass of the same robot that lacks them
+    # (:func:`load_passes`).
+    mounts: tuple[Transform, ...] = ()
 
     @property
     def reference_is_odometry(self) -> bool:
@@ -218,8 +221,10 @@ def missing_laser_tf_hint(tf: TfBuffer, base: str, laser: str | None = None) -> 
     another base frame when the tree lacks ``base`` itself (the robot's base is the child of its odometry edge,
     e.g. base_footprint); else say what ``io.assume_identity_laser_tf`` does."""
     if laser is not None and tf.frames and laser not in tf.frames:
-        return (f"no transform in the log names the laser frame {laser!r} (a recording started after /tf_static "
-                "was latched?): io.assume_identity_laser_tf=true takes the laser at the base's origin")
+        return (f"no transform in the log names the laser frame {laser!r}: a recording started after /tf_static was "
+                "latched, or a later piece of one split in pieces? doorbatch map borrows the mount from a piece "
+                "given with it that has it; io.assume_identity_laser_tf=true takes the laser at the base's origin, "
+                "upright, wrong for any other mount")
     if tf.frames and base not in tf.frames:
         dynamic = sorted((parent, child) for parent, child, static in tf.edges() if not static)
         guess = next((c for p, c in dynamic if "odom" in p), None) or next(
@@ -447,14 +452,18 @@ def scan_colors(colors: Sequence[BeamColors], header_stamps_ns: Sequence[int], l
     return out
 
 
-def load_recording(path: Path, config: DoorbatchConfig | None = None, with_colors: bool = False) -> Recording:
+def load_recording(path: Path, config: DoorbatchConfig | None = None, with_colors: bool = False,
+                   borrowed_mounts: Sequence[Transform] = ()) -> Recording:
     """Read the scans, odometry, reference poses (and beam colors) of a log into arrays.
 
     Transforms are read first (a pass over the TF topics only), so that each scan's laser→base_link
-    transform is known at its own stamp even when the TF arrives later in the log.
+    transform is known at its own stamp even when the TF arrives later in the log. ``borrowed_mounts``: static
+    transforms of another log of the same robot, added where the log's own tree does not take the laser to
+    base_link, for the frames it lacks (:func:`load_passes`).
 
     Raises:
-        LogContentError: no scans, or no transform from the laser frame to base_link.
+        LaserMountError: no transform from the laser frame to base_link.
+        LogContentError: no scans.
         LogReadError: the log cannot be read.
     """
     config = config or DoorbatchConfig()
@@ -478,8 +487,11 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
                 ref.append(rec)
             elif item.role is Role.COLORS and isinstance(rec, BeamColors):
                 colors.append(rec)
+        borrowed = (borrow_mounts(tf, borrowed_mounts) if scans and borrowed_mounts
+                    and not tf.can_transform(config.frames.base_link, scans[0].frame_id) else None)
         frames, base_note = resolve_base_frame(tf, config.frames)
         odom, notes = odometry_poses(odom, tf, reader.roles.topic(Role.ODOMETRY) is not None, frames)
+        notes += [f"{path}: {borrowed}"] if borrowed else []
         notes += model_states_note(reader) if not ref else []
         if reader.roles.topic(Role.REFERENCE) is None:
             ref, note = tf_reference(tf, frames)
@@ -497,7 +509,7 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
         affines = np.stack([_planar_affine(tf, base, s.frame_id, s.stamp_ns, config.io.assume_identity_laser_tf)
                             for s in scans])
     except TransformError as err:
-        raise LogContentError(f"{err.reason} ({missing_laser_tf_hint(tf, base, scans[0].frame_id)})", path=path,
+        raise LaserMountError(f"{err.reason} ({missing_laser_tf_hint(tf, base, scans[0].frame_id)})", path=path,
                               topic=scan_topic) from err
     range_min, range_max, note = usable_range_limits(np.array([s.range_min for s in scans]),
                                                      np.array([s.range_max for s in scans]))
@@ -532,7 +544,48 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
                         "no independent reference (a raw CARMEN log's laser poses are its odometry; a corrected log's "
                         "odometry was replaced by its corrected poses)")
     return Recording(str(path), scan_set, odometry, reference, aligned, warnings, valid, repeats,
-                     timed.log_clock)
+                     timed.log_clock, tuple(tf.static_transforms()))
+
+
+def borrow_mounts(tf: TfBuffer, mounts: Sequence[Transform]) -> str | None:
+    """Add to ``tf`` the static ``mounts`` into frames it has no transform into, and say which (None: none).
+
+    One recording split in pieces (rosbag2's ``--max-bag-duration``, ``rosbag record --split``) holds the latched
+    /tf_static in its first piece only: the later pieces name no laser mount."""
+    children = {child for _, child, _ in tf.edges()}
+    added = [m for m in mounts if m.child not in children]
+    for m in added:
+        tf.add(m)
+    if not added:
+        return None
+    return ("its TF tree does not take the laser to the base: the static transforms of another pass of the robot "
+            f"are used for {', '.join(f'{m.parent}→{m.child}' for m in added)} (one recording split in pieces "
+            "keeps /tf_static in its first)")
+
+
+def load_passes(paths: Sequence[Path], config: DoorbatchConfig, with_colors: bool = False) -> list[Recording]:
+    """The logs of one robot, each a pass (``doorbatch map``), as :func:`load_recording` reads them; a pass whose
+    own transforms do not take its laser to base_link borrows the static transforms (sensor mounts) of the
+    passes that have them, for the frames it lacks (:func:`borrow_mounts`), the first pass's first.
+
+    Raises:
+        LaserMountError: a pass whose laser no pass's transforms reach; as :func:`load_recording` otherwise.
+    """
+    loaded: dict[int, Recording] = {}
+    missing: list[int] = []
+    mounts: dict[str, Transform] = {}
+    for i, path in enumerate(paths):
+        try:
+            rec = load_recording(Path(path), config, with_colors, tuple(mounts.values()))
+        except LaserMountError:
+            missing.append(i)  # perhaps a later pass has its mount
+            continue
+        loaded[i] = rec
+        for m in rec.mounts:
+            mounts.setdefault(m.child, m)
+    for i in missing:
+        loaded[i] = load_recording(Path(paths[i]), config, with_colors, tuple(mounts.values()))
+    return [loaded[i] for i in range(len(paths))]
 
 
 def odometry_to_reference(reference: PoseSeries | None, odometry: PoseSeries | None,

@@ -17,7 +17,7 @@ from doorbatch.io.annotated_mcap import write_annotated_mcap
 from doorbatch.io.manifest import Manifest
 from doorbatch.io.mapdir import MappedPass, door_set_of_previews, mapping_annotations, write_map_dir
 from doorbatch.io.object_map import read_classes, write_classes, write_walls
-from doorbatch.io.recording import Recording, load_recording
+from doorbatch.io.recording import Recording, load_passes
 from doorbatch.pipeline.door_rows import DoorRow, em_rows, grid_rows, with_grid_doors
 from doorbatch.pipeline.mapping import DoorMap, build_map, time_order, without_leaves
 from doorbatch.pipeline.objectmap.stage import ObjectMapResult, em_stage
@@ -109,7 +109,7 @@ def run_map(logs: Sequence[Path], out: Path, config: DoorbatchConfig, stages: Se
     if mcap and (out / "annotated.mcap").resolve() in {Path(p).resolve() for p in logs}:
         raise UsageError(f"--mcap would write {out / 'annotated.mcap'}, which is one of the logs: choose another -o")
     classes = read_classes(classes_file) if classes_file is not None else None
-    recordings = [load_recording(Path(p), config, with_colors=stages is None or "em" in stages) for p in logs]
+    recordings = load_passes(logs, config, with_colors=stages is None or "em" in stages)
     stages = default_stages(recordings) if stages is None else list(stages)
     if classes is not None and "em" not in stages:
         raise UsageError("--classes applies to the em stage: add it with --stages grid,em")

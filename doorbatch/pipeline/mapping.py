@@ -30,7 +30,7 @@ from doorbatch.geometry.laser import dropouts, wraps_around
 from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.geometry.se2 import compose, interpolate_poses, rotation_matrix
 from doorbatch.io.preview import PreviewDoor
-from doorbatch.io.recording import Recording, load_recording
+from doorbatch.io.recording import Recording, load_passes
 from doorbatch.maps import OccupancyMap
 from doorbatch.pipeline.gridmap.build import GridMapper, GridMapResult, MapScan
 from doorbatch.pipeline.gridmap.doors import DetectedDoor, remove_leaves
@@ -318,7 +318,7 @@ def build_map(logs: Sequence[Path], config: DoorbatchConfig | None = None,
     seconds: dict[str, float] = {}
     t0 = time.perf_counter()
     if recordings is None:
-        recordings = [load_recording(Path(p), config) for p in logs]
+        recordings = load_passes(logs, config)
     seconds["read"] = time.perf_counter() - t0
     for rec in recordings:
         log.info("%s: %d scans, odometry %s, reference %s", rec.path, len(rec.scans),

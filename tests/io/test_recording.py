@@ -106,6 +106,54 @@ def test_a_tree_without_base_link_takes_the_child_of_odom(write_log: Callable[..
     assert not any("no frame" in w for w in rec.warnings)
 
 
+def _split_recording(write_log: Callable[..., Path], static_in: int) -> list[Path]:
+    """sample_messages with an upside-down laser mount (roll π, 0.2 m ahead) as one recording split in three
+    pieces of 4 scans, /tf_static only in piece ``static_in`` (as a split recording keeps the latched message in
+    its first piece)."""
+    msgs = sample_messages(n_scans=12)
+    static = msgs[0]
+    assert static[0] == "/tf_static"
+    static[3].transforms[0] = m.transform_stamped(T0, "base_link", "laser", (0.2, 0.0, 0.3), (1.0, 0.0, 0.0, 0.0))
+    rest = msgs[1:]
+    cut = [t for topic, _, t, _ in rest if topic == "/scan"][4::4]
+    pieces: list[list[tuple[str, str, int, object]]] = [[], [], []]
+    for msg in rest:
+        pieces[sum(msg[2] >= c for c in cut)].append(msg)
+    pieces[static_in].insert(0, static)
+    return [write_log(f"piece{k}.mcap", piece) for k, piece in enumerate(pieces)]
+
+
+@pytest.mark.parametrize("static_in", [0, 2])
+def test_pieces_of_a_split_recording_borrow_the_mount_of_the_piece_that_has_it(
+        write_log: Callable[..., Path], static_in: int) -> None:
+    """The later pieces name no laser mount: alone, each is the missing-transform error (whose hint had pointed
+    only at io.assume_identity_laser_tf, which mirrors an upside-down laser). As passes of one map, they take the
+    mount of the piece that has it, first piece or last, with a warning."""
+    from doorbatch.errors import LaserMountError
+    from doorbatch.io.recording import load_passes
+
+    paths = _split_recording(write_log, static_in)
+    bare = paths[1]
+    with pytest.raises(LaserMountError, match="split in pieces"):
+        load_recording(bare)
+    recs = load_passes(paths, DoorbatchConfig())
+    for k, rec in enumerate(recs):
+        assert len(rec.scans) == 4
+        np.testing.assert_allclose(rec.scans.laser_to_base, np.broadcast_to([[1, 0, 0.2], [0, -1, 0]], (4, 2, 3)),
+                                   atol=1e-12)
+        assert any("static transforms of another pass" in w and "base_link→laser" in w
+                   for w in rec.warnings) == (k != static_in)
+
+
+def test_pieces_without_any_mount_stay_an_error(write_log: Callable[..., Path]) -> None:
+    from doorbatch.errors import LaserMountError
+    from doorbatch.io.recording import load_passes
+
+    paths = _split_recording(write_log, 1)
+    with pytest.raises(LaserMountError, match="piece0"):
+        load_passes([paths[0], paths[2]], DoorbatchConfig())
+
+
 def test_a_range_max_of_zero_or_nan_is_no_stated_maximum(write_log: Callable[..., Path]) -> None:
     """Drivers that leave range_max 0 (or NaN): read as it was, every reading would be a no-return and the map
     empty. It becomes +inf (every finite reading a hit), with a warning; a good range_max is kept."""
