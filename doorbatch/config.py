@@ -420,6 +420,10 @@ class MappingConfig(Section):
     # true: placed on the map of the passes before it by global localization (pipeline/join_passes.py; look at
     # preview.png: it depends on which log comes first); false: refused as a disjoint frame.
     join_passes: bool = False
+    # Each log cut into passes of this many seconds of scans (0: each log one pass). A robot that patrols for an
+    # hour in one recording, while people open and close doors, then gives passes whose doors stood still within
+    # each (paper 000's setting) and differ between them. A last piece shorter than half of it joins the one before.
+    pass_duration_s: float = Field(0.0, ge=0.0)
     # Integrate every n-th scan (1: all).
     scan_stride: int = Field(1, ge=1)
 

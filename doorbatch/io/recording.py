@@ -43,6 +43,13 @@ class PoseSeries:
     def __len__(self) -> int:
         return int(self.stamps_ns.shape[0])
 
+    def around(self, start_ns: int, stop_ns: int) -> PoseSeries:
+        """The poses stamped in [start_ns, stop_ns], with the one before and the one after, so that any time in
+        that span interpolates as it did in the whole series."""
+        i0 = max(int(np.searchsorted(self.stamps_ns, start_ns, side="left")) - 1, 0)
+        i1 = int(np.searchsorted(self.stamps_ns, stop_ns, side="right")) + 1
+        return replace(self, stamps_ns=self.stamps_ns[i0:i1], poses=self.poses[i0:i1])
+
 
 @dataclass(frozen=True)
 class ScanSet:
@@ -60,6 +67,13 @@ class ScanSet:
 
     def __len__(self) -> int:
         return int(self.stamps_ns.shape[0])
+
+    def take(self, start: int, stop: int) -> ScanSet:
+        """Scans start … stop − 1."""
+        return replace(self, stamps_ns=self.stamps_ns[start:stop], ranges=self.ranges[start:stop],
+                       angle_min=self.angle_min[start:stop], angle_increment=self.angle_increment[start:stop],
+                       range_min=self.range_min[start:stop], range_max=self.range_max[start:stop],
+                       laser_to_base=self.laser_to_base[start:stop])
 
     def scan(self, i: int) -> Scan:
         """Scan i as a :class:`Scan` record."""
@@ -107,6 +121,19 @@ class Recording:
     # The log's static transforms (its sensor mounts), for another pass of the same robot that lacks them
     # (:func:`load_passes`).
     mounts: tuple[Transform, ...] = ()
+
+    def take(self, start: int, stop: int, path: str) -> Recording:
+        """Scans start … stop − 1 as a recording named ``path``, with their colours and the poses around them
+        (:meth:`PoseSeries.around`)."""
+        if stop <= start:
+            raise ValueError(f"an empty piece of {self.path}: scans {start} to {stop}")
+        t0, t1 = int(self.scans.stamps_ns[start]), int(self.scans.stamps_ns[stop - 1])
+        return replace(self, path=path, scans=self.scans.take(start, stop),
+                       odometry=None if self.odometry is None else self.odometry.around(t0, t1),
+                       reference=None if self.reference is None else self.reference.around(t0, t1),
+                       colors=None if self.colors is None else self.colors[start:stop],
+                       color_valid=None if self.color_valid is None else self.color_valid[start:stop],
+                       warnings=list(self.warnings))
 
     @property
     def reference_is_odometry(self) -> bool:

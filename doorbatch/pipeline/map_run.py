@@ -21,6 +21,7 @@ from doorbatch.io.recording import Recording, load_passes
 from doorbatch.pipeline.door_rows import DoorRow, em_rows, grid_rows, with_grid_doors
 from doorbatch.pipeline.mapping import DoorMap, build_map, time_order, without_leaves
 from doorbatch.pipeline.objectmap.stage import ObjectMapResult, em_stage
+from doorbatch.pipeline.time_passes import split_into_passes
 
 STAGES = ("grid", "em")  # em (paper 001) takes the grid stage's poses: grid always runs
 
@@ -116,6 +117,7 @@ def run_map(logs: Sequence[Path], out: Path, config: DoorbatchConfig, stages: Se
     order = time_order(recordings, config)
     if order is not None:
         logs, recordings = [logs[i] for i in order], [recordings[i] for i in order]
+    recordings = split_into_passes(recordings, config.mapping.pass_duration_s)
     manifest = Manifest.start(config.as_dict(), [Path(p) for p in logs], command="map", stages=list(stages))
     door_map = build_map(logs, config, progress, recordings)
     if order is not None:

@@ -307,7 +307,8 @@ def static_map_of(recordings: Sequence[Recording], source: str, config: Doorbatc
 def build_map(logs: Sequence[Path], config: DoorbatchConfig | None = None,
               progress: Callable[[int], object] | None = None,
               recordings: Sequence[Recording] | None = None) -> DoorMap:
-    """Door-augmented occupancy grid from logs, each one pass (doors stationary within a pass);
+    """Door-augmented occupancy grid from logs, each one pass (doors stationary within a pass; or cut into passes
+    of ``mapping.pass_duration_s``: :mod:`~doorbatch.pipeline.time_passes`);
     ``recordings``: the logs already loaded (the em stage loads them with colours).
 
     Raises:
@@ -318,7 +319,9 @@ def build_map(logs: Sequence[Path], config: DoorbatchConfig | None = None,
     seconds: dict[str, float] = {}
     t0 = time.perf_counter()
     if recordings is None:
-        recordings = load_passes(logs, config)
+        from doorbatch.pipeline.time_passes import split_into_passes
+
+        recordings = split_into_passes(load_passes(logs, config), config.mapping.pass_duration_s)
     seconds["read"] = time.perf_counter() - t0
     for rec in recordings:
         log.info("%s: %d scans, odometry %s, reference %s", rec.path, len(rec.scans),
