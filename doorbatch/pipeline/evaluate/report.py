@@ -42,6 +42,7 @@ import numpy.typing as npt
 
 from doorbatch.config import DoorbatchConfig, EvaluateConfig
 from doorbatch.errors import PipelineError
+from doorbatch.geometry.se2 import compose
 from doorbatch.io.sim_truth import SimTruth
 from doorbatch.maps import DoorSet
 from doorbatch.pipeline.evaluate.door_map import score_doors, truth_doors
@@ -283,8 +284,11 @@ def _trajectory_rows(run: RunTables, errs: TrajectoryErrors, cfg: EvaluateConfig
     return rows
 
 
-def _convergence_rows(run: RunTables, reference: ReferenceTrajectory | None,
-                      cfg: EvaluateConfig) -> list[MetricRow]:
+def _convergence_rows(run: RunTables, reference: ReferenceTrajectory | None, cfg: EvaluateConfig,
+                      alignment: FloatArray | None = None) -> list[MetricRow]:
+    """Convergence, loss and (a global start) success rows; ``alignment``: the rigid motion ``--align se2`` put
+    the run's poses through for its APE (:class:`~.trajectory_metrics.TrajectoryErrors`), so that success is
+    judged in the same frame (a map built from scan matching is in its odometry's frame, not the reference's)."""
     t0 = int(run.stamps_ns[0])
     after = math.nan if run.converged_ns is None else (run.converged_ns - t0) / 1e9
     rows = [MetricRow(run.name, run.log, run.method, "converged", float(run.converged_ns is not None), "bool",
@@ -298,7 +302,8 @@ def _convergence_rows(run: RunTables, reference: ReferenceTrajectory | None,
     if run.init == "global" and reference is not None:
         check = ConvergenceCheck(cfg.global_success_window_s, cfg.global_success_xy_m,
                                  math.radians(cfg.global_success_yaw_deg), cfg.global_success_max_reference_gap_s)
-        ok = global_success(run.stamps_ns, run.pose, run.converged_ns, reference.stamps_ns, reference.pose, check)
+        pose = run.pose if alignment is None else compose(np.broadcast_to(alignment, run.pose.shape), run.pose)
+        ok = global_success(run.stamps_ns, pose, run.converged_ns, reference.stamps_ns, reference.pose, check)
         rows.append(MetricRow(run.name, run.log, run.method, "global_success", float(ok), "bool", run.params))
     return rows
 
@@ -413,6 +418,7 @@ def evaluate_runs(runs: Sequence[RunTables], config: DoorbatchConfig, *,
         if len(run.stamps_ns) == 0:
             raise PipelineError(f"run {run.name}: empty trajectory")
         ref = reference if reference is not None else run.reference
+        alignment = None
         if ref is not None:
             try:
                 errs = trajectory_errors(run.stamps_ns, run.pose, ref.stamps_ns, ref.pose,
@@ -422,10 +428,11 @@ def evaluate_runs(runs: Sequence[RunTables], config: DoorbatchConfig, *,
             except PipelineError as err:
                 raise PipelineError(f"run {run.name}: {err}") from err
             rows += _trajectory_rows(run, errs, cfg)
+            alignment = errs.alignment if Alignment(cfg.align) is Alignment.SE2 else None
             series.append(ErrorSeries(run.name, run.log, run.method, run.params,
                                       (errs.stamps_ns - int(run.stamps_ns[0])) / 1e9, errs.reference[:, 0],
                                       errs.ape_m, errs.ape_rad))
-        rows += _convergence_rows(run, ref, cfg)
+        rows += _convergence_rows(run, ref, cfg, alignment)
         state_rows, state_series = _door_state_part(run, truth if truth is not None else run.truth, cfg)
         rows += state_rows
         door_series += state_series

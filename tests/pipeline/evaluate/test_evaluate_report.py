@@ -89,6 +89,24 @@ def test_global_success_needs_convergence_at_the_right_pose() -> None:
     assert math.isnan(ev.value("late", "time_to_converge_s")) and ev.value("late", "converged") == 0.0
 
 
+def test_global_success_is_judged_after_the_alignment_asked_for() -> None:
+    """A run localized on a map in another frame (built from scan matching, in the odometry's frame): with
+    --align se2 its APE is taken after the alignment, and so must its global success be (it was 0 % for runs that
+    tracked within 2 cm once aligned)."""
+    from doorbatch.geometry.se2 import compose
+
+    stamps, ref = _straight()
+    ref = ref + np.stack([np.zeros(len(ref)), np.sin(ref[:, 0]), np.zeros(len(ref))], axis=1)  # not a line
+    frame = np.array([3.0, -2.0, 0.7])  # the map's frame in the reference's
+    estimate = compose(np.broadcast_to(-frame, ref.shape), ref)  # not the inverse: any rigid motion will do
+    run = RunTables("other_frame", "l", "mcl", stamps, estimate, init="global", converged_ns=int(stamps[20]))
+    reference = ReferenceTrajectory(stamps, ref)
+    assert evaluate_runs([run], DoorbatchConfig(), reference=reference).value("other_frame", "global_success") == 0.0
+    aligned = evaluate_runs([run], load_config(overrides=["evaluate.align=se2"]), reference=reference)
+    assert aligned.value("other_frame", "ape_trans_max") < 1e-9
+    assert aligned.value("other_frame", "global_success") == 1.0
+
+
 def test_global_success_interpolates_a_reference_at_its_own_rate() -> None:
     """A ground truth at 25 Hz has no pose at a 10 Hz scan's stamp half of the time (20 ms off): the check
     interpolates it instead of failing the run; a reference that stops early still fails it."""
