@@ -423,7 +423,7 @@ class MappingConfig(Section):
     # Each log cut into passes of this many seconds of scans (0: each log one pass). A robot that patrols for an
     # hour in one recording, while people open and close doors, then gives passes whose doors stood still within
     # each (paper 000's setting) and differ between them. A last piece shorter than half of it joins the one before.
-    pass_duration_s: float = Field(0.0, ge=0.0)
+    pass_duration_s: float = Field(0.0, ge=0.0, le=1e7, allow_inf_nan=False)
     # Integrate every n-th scan (1: all).
     scan_stride: int = Field(1, ge=1)
 

@@ -121,14 +121,27 @@ class Recording:
     # The log's static transforms (its sensor mounts), for another pass of the same robot that lacks them
     # (:func:`load_passes`).
     mounts: tuple[Transform, ...] = ()
+    # A piece of a log cut by time (:meth:`take`): the log's path and the piece's number (0: the first, or a whole
+    # log). A later piece continues the one before it: one recording, one odometry frame.
+    source_path: str = ""
+    piece: int = 0
 
-    def take(self, start: int, stop: int, path: str) -> Recording:
-        """Scans start … stop − 1 as a recording named ``path``, with their colours and the poses around them
-        (:meth:`PoseSeries.around`)."""
+    @property
+    def log_path(self) -> str:
+        """The log this recording was read from (its own path, unless it is a piece of one)."""
+        return self.source_path or self.path
+
+    def continues_piece(self, prev: Recording) -> bool:
+        """Whether this is the piece of a log that comes right after ``prev`` (:meth:`take`)."""
+        return self.piece > 0 and self.piece == prev.piece + 1 and self.log_path == prev.log_path
+
+    def take(self, start: int, stop: int, path: str, piece: int) -> Recording:
+        """Scans start … stop − 1 as piece number ``piece`` of this log, a recording named ``path``, with their
+        colours and the poses around them (:meth:`PoseSeries.around`)."""
         if stop <= start:
             raise ValueError(f"an empty piece of {self.path}: scans {start} to {stop}")
         t0, t1 = int(self.scans.stamps_ns[start]), int(self.scans.stamps_ns[stop - 1])
-        return replace(self, path=path, scans=self.scans.take(start, stop),
+        return replace(self, path=path, source_path=self.log_path, piece=piece, scans=self.scans.take(start, stop),
                        odometry=None if self.odometry is None else self.odometry.around(t0, t1),
                        reference=None if self.reference is None else self.reference.around(t0, t1),
                        colors=None if self.colors is None else self.colors[start:stop],
@@ -480,13 +493,14 @@ def scan_colors(colors: Sequence[BeamColors], header_stamps_ns: Sequence[int], l
 
 
 def load_recording(path: Path, config: DoorbatchConfig | None = None, with_colors: bool = False,
-                   borrowed_mounts: Sequence[Transform] = ()) -> Recording:
+                   borrowed_mounts: Sequence[Transform] = (), no_return_code: bool = True) -> Recording:
     """Read the scans, odometry, reference poses (and beam colors) of a log into arrays.
 
     Transforms are read first (a pass over the TF topics only), so that each scan's laser→base_link
     transform is known at its own stamp even when the TF arrives later in the log. ``borrowed_mounts``: static
     transforms of another log of the same robot, added where the log's own tree does not take the laser to
-    base_link, for the frames it lacks (:func:`load_passes`).
+    base_link, for the frames it lacks (:func:`load_passes`). ``no_return_code``: look for the no-return code of
+    scans that state no range_max (:func:`with_no_return_code`; :func:`load_passes` looks over all passes at once).
 
     Raises:
         LaserMountError: no transform from the laser frame to base_link.
@@ -540,7 +554,9 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
                               topic=scan_topic) from err
     range_min, range_max, note = usable_range_limits(np.array([s.range_min for s in scans]),
                                                      np.array([s.range_max for s in scans]))
-    range_max, code_note = with_no_return_code([s.ranges for s in scans], range_max, config)
+    code_note = None
+    if no_return_code:
+        range_max, code_note = with_no_return_code([s.ranges for s in scans], range_max, config)
     warnings += [n for n in (note, code_note) if n]
     scan_set = ScanSet(
         stamps_ns=np.array([s.stamp_ns for s in scans], dtype=np.int64),
@@ -598,12 +614,14 @@ def load_passes(paths: Sequence[Path], config: DoorbatchConfig, with_colors: boo
     Raises:
         LaserMountError: a pass whose laser no pass's transforms reach; as :func:`load_recording` otherwise.
     """
+    # the identity mount (io.assume_identity_laser_tf) only for a pass that no other pass lends one
+    strict = config.model_copy(update={"io": config.io.model_copy(update={"assume_identity_laser_tf": False})})
     loaded: dict[int, Recording] = {}
     missing: list[int] = []
     mounts: dict[str, Transform] = {}
     for i, path in enumerate(paths):
         try:
-            rec = load_recording(Path(path), config, with_colors, tuple(mounts.values()))
+            rec = load_recording(Path(path), strict, with_colors, tuple(mounts.values()), no_return_code=False)
         except LaserMountError:
             missing.append(i)  # perhaps a later pass has its mount
             continue
@@ -611,8 +629,24 @@ def load_passes(paths: Sequence[Path], config: DoorbatchConfig, with_colors: boo
         for m in rec.mounts:
             mounts.setdefault(m.child, m)
     for i in missing:
-        loaded[i] = load_recording(Path(paths[i]), config, with_colors, tuple(mounts.values()))
-    return [loaded[i] for i in range(len(paths))]
+        loaded[i] = load_recording(Path(paths[i]), config, with_colors, tuple(mounts.values()), no_return_code=False)
+    return with_shared_no_return_code([loaded[i] for i in range(len(paths))], config)
+
+
+def with_shared_no_return_code(recordings: Sequence[Recording], config: DoorbatchConfig) -> list[Recording]:
+    """The passes with the no-return code their scans that state no range_max show together
+    (:func:`with_no_return_code` over all of them: one laser), and its warning in each pass it changes."""
+    range_max = np.concatenate([r.scans.range_max for r in recordings]) if recordings else np.zeros(0)
+    coded, note = with_no_return_code([x for r in recordings for x in r.scans.ranges], range_max, config)
+    out, start = [], 0
+    for rec in recordings:
+        stop = start + len(rec.scans)
+        if note and np.isposinf(rec.scans.range_max).any():  # a pass with scans that state none
+            rec = replace(rec, scans=replace(rec.scans, range_max=coded[start:stop]),
+                          warnings=[*rec.warnings, f"{rec.path}: {note}"])
+        out.append(rec)
+        start = stop
+    return out
 
 
 def odometry_to_reference(reference: PoseSeries | None, odometry: PoseSeries | None,
@@ -661,7 +695,7 @@ def usable_range_limits(range_min: FloatArray, range_max: FloatArray) -> tuple[F
     if not bad.any():
         return low, range_max, None
     note = (f"{int(bad.sum())} of {bad.size} scans state a range_max that is NaN or not above range_min "
-            f"(e.g. {float(range_max[bad][0])!r}): read as no stated maximum, every finite reading a hit")
+            f"(e.g. {float(range_max[bad][0])!r}): read as no stated maximum")
     return low, np.where(bad, np.inf, range_max), note
 
 
@@ -683,11 +717,13 @@ def with_no_return_code(ranges: Sequence[npt.ArrayLike], range_max: FloatArray,
     finite = [r[np.isfinite(r)] for r in (np.asarray(ranges[i], dtype=np.float64) for i in unstated.tolist())]
     n_finite = sum(r.size for r in finite)
     if n_finite == 0:
-        return range_max, None
+        return range_max, f"{unstated.size} of {range_max.size} scans state no range_max and have no finite reading"
     code = max(float(r.max()) for r in finite if r.size)
     at_code = sum(int(np.count_nonzero(r == code)) for r in finite)
     if at_code < max(io.no_return_code_min_readings, io.no_return_code_min_share * n_finite):
-        return range_max, None
+        return range_max, (f"{unstated.size} of {range_max.size} scans state no range_max and their readings show no "
+                           "no-return code: every finite reading is a hit (the localizers take "
+                           "localize.laser_max_range_fallback)")
     out = range_max.copy()
     out[unstated] = code
     return out, (f"{unstated.size} of {range_max.size} scans state no range_max, and {at_code} of their "

@@ -26,7 +26,7 @@ from doorbatch.errors import InputDataError
 from doorbatch.io.manifest import Manifest
 from doorbatch.io.mapdir import door_set_of, read_door_set
 from doorbatch.io.parquet import read_table
-from doorbatch.io.pose_topic import read_pose_topic
+from doorbatch.io.pose_topic import POSE_TYPES, read_pose_topic
 from doorbatch.io.sim_truth import SimTruth, output_paths, read_truth
 from doorbatch.io.tum import read_tum
 from doorbatch.pipeline.evaluate.report import DoorStateTable, MapTables, ReferenceTrajectory, RunTables
@@ -95,9 +95,13 @@ def _laserless_reference_topic(path: Path, config: DoorbatchConfig) -> tuple[Pat
         if reader.roles.topic(Role.SCAN) is not None:
             return None
         topic = reader.roles.topic(Role.REFERENCE)
-    if topic is None:
-        raise InputDataError("--reference: the log has no reference pose topic (and no laser scan)", path=path)
-    return path, topic
+        poses = sorted(t for t, info in reader.topics.items() if info.msgtype in POSE_TYPES)
+        if topic is not None and reader.topics[topic].msgtype in POSE_TYPES:
+            return path, topic
+    found = (f"its reference is {topic}, which without a laser's clock doorbatch does not read as poses"
+             if topic is not None else "no reference pose topic")
+    raise InputDataError(f"--reference: a log without a laser scan and {found}; name a pose topic as LOG:/TOPIC "
+                         f"(pose topics in the log: {', '.join(poses) or 'none'})", path=path)
 
 
 def _sibling(log_path: Path, kind: str) -> Path:

@@ -70,6 +70,9 @@ def join_passes(recordings: Sequence[Recording], static_map_of: Callable[[Sequen
     motion = np.zeros(3)
     notes = []
     for prev, nxt in itertools.pairwise(recordings):
+        if nxt.continues_piece(prev):  # the next piece of one log: it goes where the one before it went
+            out.append(moved_odometry(nxt, motion) if motion.any() and nxt.odometry is not None else nxt)
+            continue
         if nxt.odometry is None or prev.odometry is None:
             raise PipelineError(f"{nxt.path}: passes have disjoint coordinate frames: without a reference, "
                                 "several passes need one continuous odometry frame")

@@ -100,12 +100,17 @@ def choose_pose_source(recordings: Sequence[Recording], wanted: str, config: Doo
     if wanted == "auto":
         if any(r.reference is None for r in recordings):
             return "scanmatch", []
-        coverage = [(r, reference_coverage(r, mc.max_pose_gap_s)) for r in recordings]
-        why = [f"{r.path}: the reference poses cover {c:.0%} of the scans (< mapping.min_reference_coverage "
+        covered: dict[str, list[float]] = {}  # per log (the pieces of one cut by time together): scans, covered
+        for r in recordings:
+            n = len(r.scans)
+            c = covered.setdefault(r.log_path, [0.0, 0.0])
+            c[0], c[1] = c[0] + n, c[1] + n * reference_coverage(r, mc.max_pose_gap_s)
+        why = [f"{path}: the reference poses cover {c / n:.0%} of the scans (< mapping.min_reference_coverage "
                f"{mc.min_reference_coverage:.0%}); poses from scan matching instead"
-               for r, c in coverage if c < mc.min_reference_coverage]
-        why += [f"{r.path}: poses from scan matching, as the reference is the odometry again (--pose-source "
-                "reference takes it, for a corrected CARMEN log)" for r in recordings if r.reference_is_odometry]
+               for path, (n, c) in covered.items() if n and c / n < mc.min_reference_coverage]
+        why += [f"{path}: poses from scan matching, as the reference is the odometry again (--pose-source "
+                "reference takes it, for a corrected CARMEN log)"
+                for path in dict.fromkeys(r.log_path for r in recordings if r.reference_is_odometry)]
         return ("scanmatch", why) if why else ("reference", [])
     need = {"reference": "reference", "odometry": "odometry"}.get(wanted)
     for rec in recordings:
@@ -140,8 +145,11 @@ def odometry_jump(prev: Recording, nxt: Recording) -> tuple[float, float]:
 
 
 def continues(prev: Recording, nxt: Recording, config: DoorbatchConfig) -> bool:
-    """Whether ``nxt``'s odometry continues ``prev``'s (one recording split in pieces): it starts within
-    ``mapping.odometry_continuity_m`` and ``_deg`` of where ``prev``'s ended."""
+    """Whether ``nxt`` continues ``prev`` (one recording split in pieces): the next piece of the same log
+    (``mapping.pass_duration_s``), or odometry that starts within ``mapping.odometry_continuity_m`` and ``_deg``
+    of where ``prev``'s ended."""
+    if nxt.continues_piece(prev):
+        return True
     jump_m, jump_deg = odometry_jump(prev, nxt)
     return jump_m <= config.mapping.odometry_continuity_m and jump_deg <= config.mapping.odometry_continuity_deg
 
@@ -180,6 +188,8 @@ def check_common_frame(recordings: Sequence[Recording], source: str, config: Doo
             raise PipelineError(f"passes have disjoint coordinate frames: reference poses in {sorted(frames)}")
         return
     for prev, nxt in itertools.pairwise(recordings):
+        if nxt.continues_piece(prev):
+            continue
         if prev.odometry is None or nxt.odometry is None:
             raise PipelineError(f"{nxt.path}: passes have disjoint coordinate frames: without a reference, "
                                 "several passes need one continuous odometry frame")

@@ -26,7 +26,7 @@ def pass_bounds(stamps_ns: npt.NDArray[np.int64], pass_s: float) -> list[tuple[i
     n = int(stamps_ns.shape[0])
     if pass_s <= 0.0 or n == 0:
         return [(0, n)]
-    step_ns = round(pass_s * 1e9)
+    step_ns = max(round(pass_s * 1e9), 1)
     window = ((stamps_ns - stamps_ns[0]) // step_ns).astype(np.int64)
     starts = [0, *(np.flatnonzero(np.diff(window)) + 1).tolist()]
     bounds = list(zip(starts, [*starts[1:], n], strict=True))
@@ -49,6 +49,6 @@ def split_into_passes(recordings: Sequence[Recording], pass_s: float) -> list[Re
             continue
         t = (rec.scans.stamps_ns - rec.scans.stamps_ns[0]) / 1e9
         for k, (start, stop) in enumerate(bounds):
-            piece = rec.take(start, stop, f"{rec.path} [{t[start]:.1f}–{t[stop - 1]:.1f} s]")
+            piece = rec.take(start, stop, f"{rec.path} [{t[start]:.1f}–{t[stop - 1]:.1f} s]", k)
             out.append(piece if k == 0 else replace(piece, warnings=[]))
     return out

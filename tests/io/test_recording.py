@@ -145,6 +145,44 @@ def test_pieces_of_a_split_recording_borrow_the_mount_of_the_piece_that_has_it(
                    for w in rec.warnings) == (k != static_in)
 
 
+def test_a_lent_mount_wins_over_the_identity_whatever_the_order(write_log: Callable[..., Path]) -> None:
+    """With io.assume_identity_laser_tf a pass without a mount read the identity (its upside-down scans mirrored)
+    whenever the pass with the mount came after it; the identity is only for a pass no pass lends a mount."""
+    from doorbatch.io.recording import load_passes
+
+    identity = DoorbatchConfig(io=IoConfig(assume_identity_laser_tf=True))
+    for rec in load_passes(_split_recording(write_log, 2), identity):
+        np.testing.assert_allclose(rec.scans.laser_to_base[0], [[1, 0, 0.2], [0, -1, 0]], atol=1e-12)
+    alone = load_passes(_split_recording(write_log, 2)[:2], identity)  # no pass has it: the identity, as asked
+    np.testing.assert_allclose(alone[0].scans.laser_to_base[0], [[1, 0, 0], [0, 1, 0]], atol=1e-12)
+
+
+def test_passes_share_the_no_return_code_of_their_laser(write_log: Callable[..., Path]) -> None:
+    """One laser, two passes that state no range_max: the first writes its 8 m code in a fifth of its beams, the
+    second in 10 beams only, too few to tell in that pass alone (its 10 beams would be hits at 8 m). Read together,
+    both take the code; and the warnings no longer say "every finite reading a hit" beside the code."""
+    from doorbatch.io.recording import load_passes
+
+    messages = sample_messages(n_scans=12, beams=91)
+    scans = [msg for topic, _, _, msg in messages if topic == "/scan"]
+    for k, scan in enumerate(scans):
+        scan.range_max = 0.0
+        scan.ranges = np.minimum(scan.ranges, 7.9).astype(np.float32)
+        if k < 6:
+            scan.ranges[np.isinf(scans[k].ranges) | (np.arange(91) % 5 == 0)] = 8.0
+    scans[8].ranges[:10] = 8.0
+    cut = next(t for topic, _, t, msg in messages if msg is scans[6])
+    paths = [write_log("a.mcap", [x for x in messages if x[2] < cut]),
+             write_log("b.mcap", [messages[0], *(x for x in messages if x[2] >= cut)])]
+    assert np.isposinf(load_recording(paths[1]).scans.range_max).all()  # alone: no code
+    recs = load_passes(paths, DoorbatchConfig())
+    for rec in recs:
+        np.testing.assert_array_equal(rec.scans.range_max, 8.0)
+        assert any("read as the laser's no-return code" in w for w in rec.warnings)
+        assert not any("every finite reading" in w for w in rec.warnings)
+    assert not recs[1].scans.endpoints_base(2)[1][:10].any()  # scan 8's code beams: no hits
+
+
 def test_pieces_without_any_mount_stay_an_error(write_log: Callable[..., Path]) -> None:
     from doorbatch.errors import LaserMountError
     from doorbatch.io.recording import load_passes
@@ -197,7 +235,8 @@ def test_a_largest_reading_that_does_not_repeat_is_no_code(write_log: Callable[.
         scan.ranges[::4] = 9.5  # below the stated 30 m
     rec = load_recording(write_log("noisy.mcap", messages), DoorbatchConfig())
     np.testing.assert_array_equal(rec.scans.range_max, [np.inf] * 3 + [30.0] * 3)
-    assert not any("no-return code" in w for w in rec.warnings)
+    assert not any("read as the laser's no-return code" in w for w in rec.warnings)
+    assert any("show no no-return code: every finite reading is a hit" in w for w in rec.warnings)
     # the same scans with fewer repeats of their largest value than io.no_return_code_min_readings asks
     for scan in scans[:3]:
         scan.ranges[:3] = 12.0

@@ -85,3 +85,39 @@ def test_one_log_of_three_passes_cut_by_time_finds_the_doors_that_moved(tmp_path
     assert found[0.0].recall == 0.0
     assert found[47.0].recall == 1.0 and found[47.0].precision == 1.0
     assert found[47.0].hinge_error_m.max() <= 0.10 and np.abs(found[47.0].length_error_m).max() <= 0.10
+
+
+def test_pieces_of_one_log_chain_without_odometry_and_share_its_reference_coverage(tmp_path: Path) -> None:
+    """Pieces of one log are one recording: without odometry (a handheld lidar matched at constant velocity)
+    they were refused as disjoint frames; and a reference that covers two thirds of the log but none of its last
+    piece made auto match scans for the whole map (coverage was judged per piece, not per log)."""
+    from doorbatch.errors import PipelineError
+    from doorbatch.pipeline.mapping import check_common_frame, choose_pose_source
+    from tests.conftest import sample_messages, write_messages
+
+    config = DoorbatchConfig()
+    bare = [x for x in sample_messages(12) if x[0] not in ("/odom", "/tf", "/ground_truth")]
+    rec = load_recording(write_messages(tmp_path / "bare.mcap", bare), config)
+    pieces = split_into_passes([rec], 0.4)
+    assert len(pieces) == 3 and pieces[1].odometry is None
+    check_common_frame(pieces, "scanmatch", config)  # no error: one recording
+    other = load_recording(write_messages(tmp_path / "other.mcap", bare), config)
+    try:
+        check_common_frame([rec, other], "scanmatch", config)
+        raise AssertionError("two logs without odometry share no frame")
+    except PipelineError:
+        pass
+    msgs = sample_messages(12)
+    last_truth = sorted(t for topic, _, t, _ in msgs if topic == "/ground_truth")[8]
+    partial = [x for x in msgs if x[0] != "/ground_truth" or x[2] < last_truth]  # truth for 8 of 12 scans
+    rec = load_recording(write_messages(tmp_path / "partial.mcap", partial), config)
+    assert choose_pose_source([rec], "auto", config)[0] == "reference"
+    assert choose_pose_source(split_into_passes([rec], 0.4), "auto", config)[0] == "reference"
+
+
+def test_a_pass_duration_that_is_not_a_finite_number_of_seconds_is_a_config_error(tmp_path: Path) -> None:
+    for value in ("inf", "nan", "-1", "1e12"):
+        assert main(["map", str(SAMPLE_LOGS / "map_pass1.mcap"), "-o", str(tmp_path / "m"), "--set",
+                     f"mapping.pass_duration_s={value}"]) == 2, value
+    # a window of 1 ns, not of 0 (a division by zero); the last scan is 0 ns into its window: it joins
+    assert pass_bounds(np.arange(5, dtype=np.int64), 1e-12) == [(0, 1), (1, 2), (2, 3), (3, 5)]

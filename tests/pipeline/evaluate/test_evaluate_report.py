@@ -271,6 +271,18 @@ def test_a_log_without_a_laser_or_one_of_its_pose_topics_is_a_reference(tmp_path
     assert main(["evaluate", str(tmp_path / "rbpf"), "-o", str(tmp_path / "bad"), "--reference",
                  f"{mocap}:/odom"]) == 2
     assert "pose topics in the log: /amcl_pose, /ground_truth" in capsys.readouterr().err
+    # a laserless log whose only pose is an Odometry named as wheel odometry is: no reference role; the error
+    # names LOG:/TOPIC and the log's pose topics
+    vicon = tmp_path / "vicon.mcap"
+    with LogWriter(vicon) as writer:
+        for t, (x, y, yaw) in zip(stamps, ref, strict=True):
+            writer.write("/vicon/robot/odom", "nav_msgs/msg/Odometry", int(t),
+                         ros_messages.odometry(int(t), "map", "base_link", x, y, yaw))
+    code = main(["evaluate", str(tmp_path / "rbpf"), "-o", str(tmp_path / "bad"), "--reference", str(vicon)])
+    err = capsys.readouterr().err
+    assert code == 3 and "LOG:/TOPIC" in err and "/vicon/robot/odom" in err, err
+    assert main(["evaluate", str(tmp_path / "rbpf"), "-o", str(tmp_path / "vicon"), "--reference",
+                 f"{vicon}:/vicon/robot/odom", "-q"]) == 0
 
 
 def test_evaluate_cli_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
