@@ -17,11 +17,10 @@ from doorbatch.io.annotated_mcap import write_annotated_mcap
 from doorbatch.io.manifest import Manifest
 from doorbatch.io.mapdir import MappedPass, door_set_of_previews, mapping_annotations, write_map_dir
 from doorbatch.io.object_map import read_classes, write_classes, write_walls
-from doorbatch.io.recording import Recording, load_passes
+from doorbatch.io.recording import Recording
 from doorbatch.pipeline.door_rows import DoorRow, em_rows, grid_rows, with_grid_doors
-from doorbatch.pipeline.mapping import DoorMap, build_map, time_order, without_leaves
+from doorbatch.pipeline.mapping import DoorMap, build_map, mapping_passes, without_leaves
 from doorbatch.pipeline.objectmap.stage import ObjectMapResult, em_stage
-from doorbatch.pipeline.time_passes import split_into_passes
 
 STAGES = ("grid", "em")  # em (paper 001) takes the grid stage's poses: grid always runs
 
@@ -110,20 +109,14 @@ def run_map(logs: Sequence[Path], out: Path, config: DoorbatchConfig, stages: Se
     if mcap and (out / "annotated.mcap").resolve() in {Path(p).resolve() for p in logs}:
         raise UsageError(f"--mcap would write {out / 'annotated.mcap'}, which is one of the logs: choose another -o")
     classes = read_classes(classes_file) if classes_file is not None else None
-    recordings = load_passes(logs, config, with_colors=stages is None or "em" in stages)
+    logs, recordings, ordered = mapping_passes(logs, config, with_colors=stages is None or "em" in stages)
     stages = default_stages(recordings) if stages is None else list(stages)
     if classes is not None and "em" not in stages:
         raise UsageError("--classes applies to the em stage: add it with --stages grid,em")
-    order = time_order(recordings, config)
-    if order is not None:
-        logs, recordings = [logs[i] for i in order], [recordings[i] for i in order]
-    recordings = split_into_passes(recordings, config.mapping.pass_duration_s)
-    manifest = Manifest.start(config.as_dict(), [Path(p) for p in logs], command="map", stages=list(stages))
+    manifest = Manifest.start(config.as_dict(), logs, command="map", stages=list(stages))
     door_map = build_map(logs, config, progress, recordings)
-    if order is not None:
-        door_map = replace(door_map, warnings=[
-            "the passes' odometry does not chain in the order given, and does in the order of their first scans' "
-            f"stamps: mapped in that order ({', '.join(Path(p).name for p in logs)})", *door_map.warnings])
+    if ordered:
+        door_map = replace(door_map, warnings=[ordered, *door_map.warnings])
     rows = grid_rows(door_map.doors, len(door_map.passes))
     em: ObjectMapResult | None = None
     if "em" in stages and recordings is not None:

@@ -36,6 +36,7 @@ from doorbatch.pipeline.gridmap.build import GridMapper, GridMapResult, MapScan
 from doorbatch.pipeline.gridmap.doors import DetectedDoor, remove_leaves
 from doorbatch.pipeline.gridmap.occupancy import LogOddsGrid, to_occupancy_map
 from doorbatch.pipeline.poses import scan_match_trajectory
+from doorbatch.pipeline.time_passes import split_into_passes
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -172,6 +173,23 @@ def time_order(recordings: Sequence[Recording], config: DoorbatchConfig) -> list
     if by_time == given or chains(given) or not chains(by_time):
         return None
     return by_time
+
+
+def mapping_passes(logs: Sequence[Path], config: DoorbatchConfig, with_colors: bool = False
+                   ) -> tuple[list[Path], list[Recording], str | None]:
+    """The logs as the passes ``doorbatch map`` builds from: read as passes of one robot (:func:`load_passes`),
+    put in the order of their first stamps where only that order chains (:func:`time_order`; the logs in that
+    order and a note saying so), and cut by ``mapping.pass_duration_s``
+    (:func:`~doorbatch.pipeline.time_passes.split_into_passes`)."""
+    paths = [Path(p) for p in logs]
+    recordings = load_passes(paths, config, with_colors)
+    order = time_order(recordings, config)
+    note = None
+    if order is not None:
+        paths, recordings = [paths[i] for i in order], [recordings[i] for i in order]
+        note = ("the passes' odometry does not chain in the order given, and does in the order of their first scans' "
+                f"stamps: mapped in that order ({', '.join(p.name for p in paths)})")
+    return paths, split_into_passes(recordings, config.mapping.pass_duration_s), note
 
 
 def check_common_frame(recordings: Sequence[Recording], source: str, config: DoorbatchConfig) -> None:
@@ -328,15 +346,15 @@ def build_map(logs: Sequence[Path], config: DoorbatchConfig | None = None,
     config = config or DoorbatchConfig()
     seconds: dict[str, float] = {}
     t0 = time.perf_counter()
+    ordered = None
     if recordings is None:
-        from doorbatch.pipeline.time_passes import split_into_passes
-
-        recordings = split_into_passes(load_passes(logs, config), config.mapping.pass_duration_s)
+        _, recordings, ordered = mapping_passes(logs, config)
     seconds["read"] = time.perf_counter() - t0
     for rec in recordings:
         log.info("%s: %d scans, odometry %s, reference %s", rec.path, len(rec.scans),
                  "yes" if rec.odometry is not None else "no", "yes" if rec.reference is not None else "no")
     source, warnings = choose_pose_source(recordings, config.mapping.pose_source, config)
+    warnings = [ordered, *warnings] if ordered else warnings
     log.info("pose source: %s", source)
     if source != "reference" and config.mapping.join_passes and len(recordings) > 1:
         from doorbatch.pipeline.join_passes import join_passes  # it localizes, and localization reads pass poses
