@@ -797,6 +797,9 @@ class DoorPoseConfig(Section):
     # A detection message whose stamp is no image's takes the latest image stamp of its frame up to this much
     # before it (detectors that stamp on publishing); 0 disables.
     max_detection_latency_s: float = Field(0.5, ge=0.0)
+    # ... and a box stamped this little before an image is that image's (two clocks that jitter; a box stamped
+    # 5 ms early had taken the image before it, 150 ms older). Expert choice: well under any camera's period.
+    max_detection_lead_s: float = Field(0.01, ge=0.0)
     # The fusion intersects horizontal rays (paper 003 assumes a level camera): an optical axis tilted more than
     # this from horizontal (or a CameraInfo frame that is not the optical one, z forward) gets a warning.
     max_camera_tilt_deg: float = Field(5.0, gt=0.0, le=90.0)

@@ -196,9 +196,11 @@ def _colour_image_topic(reader: LogReader, config: DoorbatchConfig) -> str | Non
 def _on_image_stamps(boxes: list[Detections], reader: LogReader, config: DoorbatchConfig
                      ) -> tuple[list[Detections], str | None]:
     """Detections stamped when they were published rather than with their image's stamp (a node stamping with
-    ``now()``): where the log has images of the boxes' frame (any image topic) and hardly any box message
+    ``now()``): where the log has images of the boxes' frame (any image topic; the images of the log's one
+    camera frame where the boxes name another, e.g. camera_link for camera_optical) and hardly any box message
     carries an image's stamp (under a tenth: a log with dropped images keeps its stamps), each takes the stamp
-    of the latest image of its frame before it (within ``doorpose.max_detection_latency_s``), with a note."""
+    of the latest image of its frame before it (within ``doorpose.max_detection_latency_s``; up to
+    ``doorpose.max_detection_lead_s`` after it, for clocks that jitter), with a note."""
     names = [t.name for t in reader.topics.values() if t.msgtype in (IMAGE, COMPRESSED_IMAGE)]
     stamps: dict[str, set[int]] = {}
     for raw in reader.raw_messages(names):
@@ -208,11 +210,13 @@ def _on_image_stamps(boxes: list[Detections], reader: LogReader, config: Doorbat
     if not stamps or not boxes or 10 * own >= len(boxes):
         return boxes, None
     latency = int(config.doorpose.max_detection_latency_s * 1e9)
+    lead = int(config.doorpose.max_detection_lead_s * 1e9)
     ordered = {frame: np.array(sorted(v), dtype=np.int64) for frame, v in stamps.items()}
+    only = next(iter(ordered.values())) if len(ordered) == 1 else None  # one camera: its images, whatever frame
     out, moved = [], 0
     for b in boxes:
-        images = ordered.get(b.frame_id)
-        k = -1 if images is None else int(np.searchsorted(images, b.stamp_ns, side="right")) - 1
+        images = ordered.get(b.frame_id, only)
+        k = -1 if images is None else int(np.searchsorted(images, b.stamp_ns + lead, side="right")) - 1
         if images is not None and k >= 0 and images[k] != b.stamp_ns and b.stamp_ns - int(images[k]) <= latency:
             out.append(replace(b, stamp_ns=int(images[k])))
             moved += 1

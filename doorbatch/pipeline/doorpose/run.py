@@ -130,9 +130,11 @@ def estimate_door_poses(inputs: DoorPoseInputs, config: DoorbatchConfig, doors: 
         classes.update(name for name, _ in named)
         door_scores += [score for name, score in named if name == door_class]
         i = nearest_scan(scan_stamps, boxes.stamp_ns, tol)
-        if i is None or not boxes.detections:
+        if i is None:
             continue
         paired += 1
+        if not boxes.detections:
+            continue
         scan = inputs.scans[i]
         try:
             points, _ = scan_in_camera(scan, inputs.tf, camera.frame_id)
@@ -168,6 +170,12 @@ def estimate_door_poses(inputs: DoorPoseInputs, config: DoorbatchConfig, doors: 
     if classes and door_class not in classes:
         warnings.append(f"no box of class {door_class!r} in {len(inputs.detections)} detection messages; classes "
                         f"seen: {', '.join(sorted(classes))} (doorpose.door_class, doorpose.class_names)")
+    if inputs.detections and not any(boxes.detections for boxes in inputs.detections):
+        warnings.append(f"none of {len(inputs.detections)} detection messages holds a box")
+    if doors and (series is None or series is not inputs.reference):
+        warnings.append(f"door poses in {frame!r}, not in a reference's frame: they are matched to --map's doors as "
+                        "if the map were built in it (map and log from one odometry frame); else the matches and "
+                        "angles are wrong")
     if inputs.detections and paired == 0:
         warnings.append(f"none of {len(inputs.detections)} detection messages has a scan within "
                         f"{config.io.stamp_tolerance_s} s of its stamp (io.stamp_tolerance_s; unset stamps?)")

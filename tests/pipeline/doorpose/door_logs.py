@@ -18,14 +18,15 @@ def door_log(path: Path, scene: DoorScene, poses: np.ndarray, rng: np.random.Gen
              other_cameras: tuple[tuple[str, str, float], ...] = (), info_topic: str = "/camera/camera_info",
              camera_xyzw: tuple[float, float, float, float] | None = None, unset_box_stamps: bool = False,
              image_topic: str = "/camera/image_raw", depth_topic: str | None = None, box_delay_ns: int = 0,
-             image_every: int = 1) -> Path:
+             image_every: int = 1, box_frame: str = CAMERA_FRAME) -> Path:
     """A log of the robot at ``poses`` in a door scene: static TF, camera_info, and per pose ground truth, a
     scan, the detector's boxes (5 ms later) and, with ``images``, the rendered image. ``other_cameras``: more
     CameraInfo topics (topic, frame, focal length in px), as a RealSense publishes for depth and infrared;
     ``camera_xyzw``: another camera mount rotation; ``unset_box_stamps``: detections with header stamp 0;
     ``depth_topic``: also a 16UC1 depth image per pose there; ``box_delay_ns``: boxes stamped (and logged) this
-    much after their image, as a detector that stamps on publishing; ``image_every``: the recording kept only
-    every n-th image."""
+    much after their image, as a detector that stamps on publishing (negative: before it, a jittering clock);
+    ``image_every``: the recording kept only every n-th image; ``box_frame``: the boxes' header frame (a detector
+    that names the camera's body frame, not its optical frame)."""
     cam = scene.camera_model
     lm = scene.laser
     msgs: list[tuple[str, str, int, object]] = [
@@ -50,7 +51,7 @@ def door_log(path: Path, scene: DoorScene, poses: np.ndarray, rng: np.random.Gen
              m.laser_scan(t, LASER_FRAME, lm.angle_min_rad, lm.angle_increment_rad, lm.range_min_m, lm.range_max_m,
                           ranges)),
             ("/detections", "vision_msgs/msg/Detection2DArray", t + 5_000_000 + box_delay_ns,
-             m.detection_array(0 if unset_box_stamps else t + 5_000_000 + box_delay_ns, CAMERA_FRAME, boxes)),
+             m.detection_array(0 if unset_box_stamps else t + 5_000_000 + box_delay_ns, box_frame, boxes)),
         ]
         if images and i % image_every == 0:
             msgs.append((image_topic, "sensor_msgs/msg/Image", t + 5_000_000,

@@ -74,6 +74,32 @@ def test_doorpose_writes_door_poses_matched_to_the_map(tmp_path: Path, capsys: p
     assert main(["doorpose", str(log), "-o", str(other), "--set", "doorpose.door_class=window", "-q"]) == 0
     warnings = json.loads((other / "manifest.json").read_text())["warnings"]
     assert any("no box of class 'window'" in w and "classes seen: door" in w for w in warnings)
+    assert not any("--map" in w for w in json.loads((out / "manifest.json").read_text())["warnings"])
+
+
+def test_doorpose_says_what_it_cannot_do(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Door poses of a log without a reference are not in the map's frame: matching them to --map's doors is
+    said to assume one frame (62 of 135 had matched the wrong doors, silently). A log whose detection messages
+    are all empty says so (it had said no message had a scan near it, and 0 images paired)."""
+    rng = np.random.default_rng(11)
+    scene = make_door_scene(rng, DoorSceneSpec(obstacles_per_scene=(1, 1)))
+    poses = np.array([[0.1 * k - 0.3, -2.6 + 0.15 * k, math.pi / 2 + 0.03 * k] for k in range(4)])
+    log = door_log(tmp_path / "door.mcap", scene, poses, rng)
+    bare = tmp_path / "bare.mcap"
+    with open_log(log) as reader, LogWriter(bare, LogFormat.MCAP) as writer:
+        for raw in reader.raw_messages():
+            if raw.topic == "/detections":
+                raw.msg.detections = []
+            if raw.topic != "/ground_truth":
+                writer.write_raw(raw)
+    assert main(["doorpose", str(bare), "-o", str(tmp_path / "run"), "--map", str(_map_dir(tmp_path / "map", scene)),
+                 "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["paired"] == 4 and summary["frame"] == "base_link"
+    warnings = json.loads((tmp_path / "run" / "manifest.json").read_text())["warnings"]
+    assert any("none of 4 detection messages holds a box" in w for w in warnings)
+    assert any("not in a reference's frame" in w and "--map" in w for w in warnings)
+    assert not any("has a scan within" in w for w in warnings)
 
 
 def test_in_a_log_with_several_cameras_the_boxes_camera_intrinsics_are_used(tmp_path: Path) -> None:
@@ -127,6 +153,16 @@ def test_boxes_stamped_on_publishing_take_their_images_stamp(tmp_path: Path) -> 
     inputs = read_doorpose_inputs(log, DoorbatchConfig())
     assert [b.stamp_ns for b in inputs.detections] == [T0 + 200_000_000 * (k + 1) + 5_000_000 for k in range(4)]
     assert any("4 of 4 detection messages carry no image's stamp" in w for w in inputs.warnings)
+    images = [T0 + 200_000_000 * (k + 1) + 5_000_000 for k in range(4)]
+    # 5 ms before their images (two jittering clocks): those images, not the ones 195 ms before (they were)
+    early = read_doorpose_inputs(door_log(tmp_path / "early.mcap", scene, poses, rng, images=True,
+                                          box_delay_ns=-5_000_000), DoorbatchConfig())
+    assert [b.stamp_ns for b in early.detections] == images
+    # late boxes that name the camera's body frame, not the images' optical frame: the one camera's images
+    # (their publishing stamps were kept, without a word)
+    body = read_doorpose_inputs(door_log(tmp_path / "body.mcap", scene, poses, rng, images=True,
+                                         box_delay_ns=80_000_000, box_frame="camera_link"), DoorbatchConfig())
+    assert [b.stamp_ns for b in body.detections] == images
     # on-time boxes in a recording that dropped every second image keep their own stamps
     sparse = read_doorpose_inputs(door_log(tmp_path / "sparse.mcap", scene, poses, rng, images=True, image_every=2),
                                   DoorbatchConfig())
