@@ -3,7 +3,8 @@
 The stage in outline::
 
     inputs   = TF, camera_info, scans, robot poses, and door boxes (topic, or the user's model per image)
-    for each image's boxes:  the scan nearest in time (within io.stamp_tolerance_s)
+    for each image's boxes:  the scan nearest in time (within io.stamp_tolerance_s), its points moved to where
+                             the robot was at the image's stamp (odometry, else the reference: scan_at_image)
                              → door in the camera plane (fusion) → base_link → output frame (robot pose)
                              → the mapped door it belongs to (with --map) and that door's current angle
     outputs  = door_poses.parquet, annotated.mcap, manifest.json
@@ -23,7 +24,7 @@ import numpy.typing as npt
 from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import TransformError
 from doorbatch.geometry.camera import camera_from_info, scan_in_camera
-from doorbatch.geometry.se2 import interpolate_poses
+from doorbatch.geometry.se2 import interpolate_poses, relative
 from doorbatch.io.doorpose_inputs import DoorPoseInputs
 from doorbatch.io.recording import PoseSeries
 from doorbatch.maps import DoorSet
@@ -95,6 +96,25 @@ def nearest_scan(scan_stamps_ns: npt.NDArray[np.int64], stamp_ns: int, tolerance
     return best if abs(int(scan_stamps_ns[best]) - stamp_ns) <= tolerance_ns else None
 
 
+def scan_at_image(points_cam: FloatArray, cam_to_base: FloatArray, motion: PoseSeries | None, scan_ns: int,
+                  image_ns: int) -> tuple[FloatArray, int]:
+    """The scan's points (N, 3) in the camera frame, moved from the robot's pose at the scan's stamp to its pose at
+    the image's (the planar motion Δ = o(image)⁻¹ ⊕ o(scan) of ``motion``, in base_link: p ↦ C⁻¹ Δ C p with C
+    camera → base_link), and the stamp they now hold. Unmoved, at the scan's stamp, where ``motion`` does not
+    cover both stamps. A camera and a laser are never triggered together: a scan 25 ms off the image during a
+    0.8 rad/s turn puts the door 0.1 m off (measured by a user's simulator)."""
+    if motion is None or scan_ns == image_ns:
+        return points_cam, scan_ns
+    at, ok = interpolate_poses(motion.stamps_ns, motion.poses, [image_ns, scan_ns])
+    if not ok.all():
+        return points_cam, scan_ns
+    dx, dy, dyaw = relative(at[0], at[1])
+    c, s = math.cos(dyaw), math.sin(dyaw)
+    delta = np.array([[c, -s, 0.0, dx], [s, c, 0.0, dy], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
+    mat = np.linalg.inv(cam_to_base) @ delta @ cam_to_base
+    return points_cam @ mat[:3, :3].T + mat[:3, 3], image_ns
+
+
 def camera_tilt_deg(inputs: DoorPoseInputs, base_link: str, camera_frame: str) -> float | None:
     """Elevation of the camera's optical axis (its frame's z) above base_link's horizontal plane, at the first
     detection; None without boxes or a transform."""
@@ -142,12 +162,14 @@ def estimate_door_poses(inputs: DoorPoseInputs, config: DoorbatchConfig, doors: 
         except TransformError as err:
             warnings.append(f"image at {boxes.stamp_ns / 1e9:.3f} s skipped: {err.reason}")
             continue
+        points, seen_ns = scan_at_image(points, cam_to_base, inputs.odometry or inputs.reference, scan.stamp_ns,
+                                        boxes.stamp_ns)
         door = estimate_door(camera, boxes.detections, points, dc, rng, method)
         if door is None:
             continue
         pose = None
         if series is not None:
-            poses, valid = interpolate_poses(series.stamps_ns, series.poses, [scan.stamp_ns])
+            poses, valid = interpolate_poses(series.stamps_ns, series.poses, [seen_ns])
             if not valid[0]:
                 continue
             pose = poses[0]

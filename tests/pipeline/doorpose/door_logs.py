@@ -18,7 +18,7 @@ def door_log(path: Path, scene: DoorScene, poses: np.ndarray, rng: np.random.Gen
              other_cameras: tuple[tuple[str, str, float], ...] = (), info_topic: str = "/camera/camera_info",
              camera_xyzw: tuple[float, float, float, float] | None = None, unset_box_stamps: bool = False,
              image_topic: str = "/camera/image_raw", depth_topic: str | None = None, box_delay_ns: int = 0,
-             image_every: int = 1, box_frame: str = CAMERA_FRAME) -> Path:
+             image_every: int = 1, box_frame: str = CAMERA_FRAME, boxes_seen_late: bool = False) -> Path:
     """A log of the robot at ``poses`` in a door scene: static TF, camera_info, and per pose ground truth, a
     scan, the detector's boxes (5 ms later) and, with ``images``, the rendered image. ``other_cameras``: more
     CameraInfo topics (topic, frame, focal length in px), as a RealSense publishes for depth and infrared;
@@ -26,7 +26,8 @@ def door_log(path: Path, scene: DoorScene, poses: np.ndarray, rng: np.random.Gen
     ``depth_topic``: also a 16UC1 depth image per pose there; ``box_delay_ns``: boxes stamped (and logged) this
     much after their image, as a detector that stamps on publishing (negative: before it, a jittering clock);
     ``image_every``: the recording kept only every n-th image; ``box_frame``: the boxes' header frame (a detector
-    that names the camera's body frame, not its optical frame)."""
+    that names the camera's body frame, not its optical frame); ``boxes_seen_late``: the boxes (and image) seen
+    from where the robot is at their stamp (the poses interpolated), not from the scan's pose."""
     cam = scene.camera_model
     lm = scene.laser
     msgs: list[tuple[str, str, int, object]] = [
@@ -44,6 +45,9 @@ def door_log(path: Path, scene: DoorScene, poses: np.ndarray, rng: np.random.Gen
         x, y, yaw = (float(v) for v in pose)
         obs = observe(scene, pose, rng)
         ranges = obs.ranges
+        if boxes_seen_late:
+            step = poses[i + 1] - pose if i + 1 < len(poses) else pose - poses[i - 1]
+            obs = observe(scene, pose + step * (5_000_000 + box_delay_ns) / STEP_NS, rng)
         boxes = [(d.class_id, d.score, d.center_x, d.center_y, d.size_x, d.size_y) for d in obs.detections]
         msgs += [
             ("/ground_truth", "nav_msgs/msg/Odometry", t, m.odometry(t, "map", "base_link", x, y, yaw)),

@@ -77,6 +77,22 @@ def test_doorpose_writes_door_poses_matched_to_the_map(tmp_path: Path, capsys: p
     assert not any("--map" in w for w in json.loads((out / "manifest.json").read_text())["warnings"])
 
 
+def test_the_scan_is_moved_to_where_the_robot_was_when_the_image_was_taken(tmp_path: Path) -> None:
+    """A robot turning at 1 rad/s in front of the door, its camera 40 ms after its laser: the scan's points go
+    where the robot was at the image's stamp (the reference's motion between the two), and the door comes out
+    where it is; taken at the scan's pose, it was turned by 0.04 rad about the robot, centimetres off."""
+    rng = np.random.default_rng(11)
+    scene = make_door_scene(rng, DoorSceneSpec(obstacles_per_scene=(0, 0)))
+    poses = np.array([[0.0, -2.4, math.pi / 2 - 0.3 + 0.2 * k] for k in range(4)])
+    log = door_log(tmp_path / "turn.mcap", scene, poses, rng, box_delay_ns=35_000_000, boxes_seen_late=True)
+    config = DoorbatchConfig.model_validate({"doorpose": {"fit": "lsq"}})
+    found = estimate_door_poses(read_doorpose_inputs(log, config), config)
+    assert len(found) >= 3
+    centres = np.array([e.center for e in found.estimates])
+    np.testing.assert_allclose(centres, 0.0, atol=0.02)
+    np.testing.assert_allclose([e.width_m for e in found.estimates], scene.door_width_m, atol=0.03)
+
+
 def test_doorpose_says_what_it_cannot_do(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """Door poses of a log without a reference are not in the map's frame: matching them to --map's doors is
     said to assume one frame (62 of 135 had matched the wrong doors, silently). A log whose detection messages
