@@ -8,11 +8,13 @@ removes the staged folders they left.
 
 from __future__ import annotations
 
+import ctypes
 import importlib
 import logging
 import multiprocessing
 import os
 import signal
+import sys
 from collections.abc import Callable, Iterator
 from concurrent.futures import Executor, Future, ProcessPoolExecutor
 from contextlib import contextmanager
@@ -41,9 +43,24 @@ class InlineExecutor(Executor):
         return future
 
 
-def _ignore_sigint() -> None:
+def _worker_init(parent_pid: int) -> None:
+    """A pool worker: Ctrl-C goes to the main process alone; and the worker dies with the main process (Linux's
+    PR_SET_PDEATHSIG), which a SIGKILL (the OOM killer, ``kill -9`` of the cron job) would otherwise leave
+    orphaned, writing into OUT without the lock's holder and then idle for good."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    # only a worker the main process forked itself (a forkserver's children have the server as parent)
+    if not sys.platform.startswith("linux") or os.getppid() != parent_pid:
+        return
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+    except (OSError, AttributeError):  # no prctl to call: the worker outlives a killed parent, as before
+        return
+    if os.getppid() != parent_pid:  # the parent died between the two looks
+        os._exit(1)
+
+
+_PR_SET_PDEATHSIG = 1  # linux/prctl.h
 
 
 def resolve_workers(workers: int) -> int:
@@ -53,7 +70,7 @@ def resolve_workers(workers: int) -> int:
 
 @contextmanager
 def _process_pool(workers: int) -> Iterator[Executor]:
-    pool = ProcessPoolExecutor(workers, initializer=_ignore_sigint)
+    pool = ProcessPoolExecutor(workers, initializer=_worker_init, initargs=(os.getpid(),))
     try:
         yield pool
     except BaseException:

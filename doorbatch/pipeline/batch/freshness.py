@@ -27,15 +27,22 @@ STEP_RECORD = "step"  # the key of the step record in manifest.extra
 _READING = ("seed", "topics", "frames", "io", "laser")
 STEP_SECTIONS: dict[StepKind, tuple[str, ...]] = {
     StepKind.MAP: (*_READING, "scanmatch", "mapping", "grid", "doors"),
-    StepKind.LOCALIZE: (*_READING, "mapping", "localize"),  # mapping.max_pose_gap_s bounds odometry gaps
+    StepKind.LOCALIZE: (*_READING, "mapping.max_pose_gap_s", "localize"),  # it bounds odometry gaps
     StepKind.EVALUATE: (*_READING, "doors", "evaluate"),
     StepKind.REPORT: ("evaluate",),
 }
 
 
 def sections_hash(config: Mapping[str, Any], sections: Sequence[str]) -> str:
-    """SHA-256 of the named sections of a resolved config tree (canonical JSON)."""
-    return tree_hash({name: config[name] for name in sections if name in config})
+    """SHA-256 of the named sections of a resolved config tree (canonical JSON); ``section.key`` names one key
+    of a section (localization reads one key of ``mapping``: a mapping change that leaves the map as it was
+    does not redo it)."""
+    picked: dict[str, Any] = {}
+    for name in sections:
+        section, _, key = name.partition(".")
+        if section in config and (not key or key in config[section]):
+            picked[name] = config[section][key] if key else config[section]
+    return tree_hash(picked)
 
 
 @dataclass(frozen=True)
@@ -105,5 +112,31 @@ def stamp_manifest(out_dir: Path, key: StepKey, config: Mapping[str, Any], start
         for w in warnings:
             manifest.warn(w)
         manifest.finish()
-    manifest.extra[STEP_RECORD] = key.record()
+    manifest.extra[STEP_RECORD] = {**key.record(), OUTPUTS: _files_of(out_dir)}
     manifest.write(path)
+
+
+OUTPUTS = "outputs"  # in the step record: the files the step wrote into its folder, by relative path and size
+
+
+def _files_of(folder: Path) -> dict[str, int]:
+    """{relative path: size} of the files in ``folder``, its manifest left out."""
+    return {p.relative_to(folder).as_posix(): p.stat().st_size for p in sorted(folder.rglob("*"))
+            if p.is_file() and p.name != MANIFEST}
+
+
+def is_up_to_date(out_dir: Path, digest: str) -> bool:
+    """Whether ``out_dir`` holds the outputs of the step whose key is ``digest``: its manifest records that key, and
+    every file the step wrote there is still there at its size (a deleted trajectory.parquet or report.html is
+    made again, not taken as done; a record from before outputs were recorded is trusted)."""
+    record = recorded_step(out_dir)
+    if record is None or record["key"] != digest:
+        return False
+    outputs = record.get(OUTPUTS)
+    if not isinstance(outputs, dict):
+        return True
+    for name, size in outputs.items():
+        path = out_dir / name
+        if not path.is_file() or path.stat().st_size != size:
+            return False
+    return True

@@ -7,7 +7,7 @@ succeeded, or blocked without running when a step it ``needs`` did not succeed.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from concurrent.futures import FIRST_COMPLETED, Executor, Future, wait
+from concurrent.futures import FIRST_COMPLETED, BrokenExecutor, Executor, Future, wait
 
 from doorbatch.pipeline.batch.plan import Step
 from doorbatch.pipeline.batch.steps import BatchJob, StepOutcome, StepStatus, execute_step
@@ -52,7 +52,10 @@ def run_steps(steps: Sequence[Step], job: BatchJob, executor: Executor,
                 continue
             usable = [by_id[u] for u in step.uses if outcomes[u].ok]
             on_start(step)
-            running[executor.submit(execute_step, step, job, usable)] = step
+            try:
+                running[executor.submit(execute_step, step, job, usable)] = step
+            except BrokenExecutor as err:  # a worker died (killed for memory): the steps left fail, the batch ends
+                finish(step, _failed(step, err))
         if not running:
             continue
         done, _ = wait(running, return_when=FIRST_COMPLETED)

@@ -23,8 +23,8 @@ from doorbatch.io.fingerprint_cache import FingerprintCache
 from doorbatch.io.manifest import utc_now_iso
 from doorbatch.io.sim_truth import output_paths
 from doorbatch.io.staged_dir import staged_dir
-from doorbatch.pipeline.batch.freshness import StepKey, recorded_key, stamp_manifest, step_key
-from doorbatch.pipeline.batch.plan import Step, StepKind, map_dir
+from doorbatch.pipeline.batch.freshness import StepKey, is_up_to_date, recorded_key, stamp_manifest, step_key
+from doorbatch.pipeline.batch.plan import METRICS_DIR, TRAJECTORIES_DIR, Step, StepKind, map_dir
 
 MAP_FILES = ("map.yaml", "map.pgm", "doors.parquet")
 RUN_FILES = ("trajectory.parquet", "door_states.parquet", "trajectory.tum")
@@ -159,7 +159,10 @@ def execute_step(step: Step, job: BatchJob, usable: Sequence[Step] = ()) -> Step
     cache = FingerprintCache(job.fingerprints)
     try:
         key = step_key(step.kind, job.config.as_dict(), *_inputs(step, job, usable), fingerprint=cache.fingerprint)
-        if not job.force and recorded_key(job.out / step.out_dir) == key.digest:
+        # the dataset report's tables lie beside its folder (OUT/metrics, OUT/trajectories)
+        beside = (METRICS_DIR, TRAJECTORIES_DIR) if step.kind is StepKind.REPORT else ()
+        if not job.force and is_up_to_date(job.out / step.out_dir, key.digest) and all(
+                (job.out / d).is_dir() for d in beside):
             return StepOutcome(step.id, StepStatus.UP_TO_DATE, time.perf_counter() - start, fingerprints=cache.new)
         warnings = _execute(step, job, usable, key)
     except DoorbatchError as err:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -94,6 +95,21 @@ def test_rerun_skips_everything_and_a_changed_log_redoes_only_its_steps(
     assert code == 0 and by_status(summary, "up_to_date") == {f"map:{SITE}"}
     code, summary = run_json(tiny, out, capsys, "--set", "localize.sigma_hit=0.12", "--force")
     assert code == 0 and by_status(summary, "done") == ALL_STEPS
+
+    # a mapping setting that leaves the map as it was redoes the map only (every localization redid before)
+    sets = ["--set", "localize.sigma_hit=0.12", "--set", "mapping.odometry_continuity_m=2.0"]
+    code, summary = run_json(tiny, out, capsys, *sets)
+    assert code == 0 and by_status(summary, "done") == {f"map:{SITE}"}
+
+    # outputs deleted since are made again, not taken as done (the site's evaluation had failed every night)
+    (out / SITE / "runs" / "loc_open" / "mcl" / "trajectory.parquet").unlink()
+    (out / "report" / "report.html").unlink()
+    code, summary = run_json(tiny, out, capsys, *sets)
+    assert code == 0 and by_status(summary, "done") == {f"localize:{SITE}/loc_open/mcl", "report"}
+    assert (out / "report" / "report.html").is_file()
+    shutil.rmtree(out / "metrics")
+    code, summary = run_json(tiny, out, capsys, *sets)
+    assert code == 0 and by_status(summary, "done") == {"report"} and (out / "metrics").is_dir()
 
 
 def test_corrupt_log_fails_its_steps_and_the_rest_completes(
