@@ -66,7 +66,7 @@ def _hash_into(digest: Any, path: Path) -> None:
             digest.update(block)
 
 
-def _folder_files(folder: Path) -> list[tuple[str, Path]]:
+def folder_files(folder: Path) -> list[tuple[str, Path]]:
     """(relative posix path, path) of every file under ``folder``, sorted by the relative path."""
     files = [(p.relative_to(folder).as_posix(), p) for p in folder.rglob("*") if p.is_file()]
     return sorted(files)
@@ -84,7 +84,7 @@ def file_fingerprint(path: Path) -> dict[str, Any]:
     try:
         if path.is_dir():
             size = 0
-            for relative, file in _folder_files(path):
+            for relative, file in folder_files(path):
                 file_size = file.stat().st_size
                 digest.update(f"{relative}\0{file_size}\0".encode())
                 _hash_into(digest, file)

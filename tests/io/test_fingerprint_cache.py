@@ -41,12 +41,26 @@ def test_a_restored_mtime_does_not_hide_a_change(tmp_path: Path) -> None:
     assert cache.fingerprint(log) == file_fingerprint(log)
 
 
-def test_folders_are_always_hashed(tmp_path: Path) -> None:
+def test_a_folder_keeps_its_cached_hash_while_every_file_in_it_does(tmp_path: Path) -> None:
+    """A ROS 2 bag folder was hashed again by every step that read it, on every no-op rerun (a 575 MB bag 4
+    times, 2.3 s): its own times do not follow the files inside, but its files' identities do."""
     bag = tmp_path / "bag"
     bag.mkdir()
-    (bag / "x.db3").write_bytes(b"1")
-    cache = FingerprintCache()
-    assert cache.fingerprint(bag) == file_fingerprint(bag) and cache.new == {} and file_identity(bag) is None
+    (bag / "metadata.yaml").write_text("rosbag2_bagfile_information: {}")
+    (bag / "x_0.db3").write_bytes(b"1")
+    first = FingerprintCache()
+    assert first.fingerprint(bag) == file_fingerprint(bag) and file_identity(bag) is None
+    assert list(first.new) == [str(bag.resolve())]
+    planted = {k: {**v, "sha256": "cached"} for k, v in first.new.items()}
+    assert FingerprintCache(planted).fingerprint(bag)["sha256"] == "cached"
+    (bag / "x_0.db3").write_bytes(b"2")  # a file rewritten
+    assert FingerprintCache(planted).fingerprint(bag) == file_fingerprint(bag)
+    (bag / "x_0.db3").write_bytes(b"1")
+    refreshed = FingerprintCache()
+    refreshed.fingerprint(bag)
+    planted = {k: {**v, "sha256": "cached"} for k, v in refreshed.new.items()}
+    (bag / "x_1.db3").write_bytes(b"3")  # a file added
+    assert FingerprintCache(planted).fingerprint(bag) == file_fingerprint(bag)
 
 
 def test_cache_file_round_trip_drops_vanished_files(tmp_path: Path) -> None:
