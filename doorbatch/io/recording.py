@@ -137,7 +137,8 @@ class Recording:
 
     def take(self, start: int, stop: int, path: str, piece: int) -> Recording:
         """Scans start … stop − 1 as piece number ``piece`` of this log, a recording named ``path``, with their
-        colours and the poses around them (:meth:`PoseSeries.around`)."""
+        colours and the poses around them (:meth:`PoseSeries.around`); the log's warnings go with its first piece
+        only (once in a map of its pieces)."""
         if stop <= start:
             raise ValueError(f"an empty piece of {self.path}: scans {start} to {stop}")
         t0, t1 = int(self.scans.stamps_ns[start]), int(self.scans.stamps_ns[stop - 1])
@@ -146,7 +147,7 @@ class Recording:
                        reference=None if self.reference is None else self.reference.around(t0, t1),
                        colors=None if self.colors is None else self.colors[start:stop],
                        color_valid=None if self.color_valid is None else self.color_valid[start:stop],
-                       warnings=list(self.warnings))
+                       warnings=list(self.warnings) if piece == 0 else [])
 
     @property
     def reference_is_odometry(self) -> bool:
@@ -714,12 +715,16 @@ def with_no_return_code(ranges: Sequence[npt.ArrayLike], range_max: FloatArray,
     unstated = np.flatnonzero(np.isposinf(range_max))
     if unstated.size == 0:
         return range_max, None
-    finite = [r[np.isfinite(r)] for r in (np.asarray(ranges[i], dtype=np.float64) for i in unstated.tolist())]
-    n_finite = sum(r.size for r in finite)
+    # two passes over the scans as stored (float32), not a float64 copy of every reading of a long log
+    scans = [np.asarray(ranges[i]) for i in unstated.tolist()]
+    n_finite, code = 0, -math.inf
+    for r in scans:
+        finite = r[np.isfinite(r)]
+        n_finite += finite.size
+        code = max(code, float(finite.max())) if finite.size else code
     if n_finite == 0:
         return range_max, f"{unstated.size} of {range_max.size} scans state no range_max and have no finite reading"
-    code = max(float(r.max()) for r in finite if r.size)
-    at_code = sum(int(np.count_nonzero(r == code)) for r in finite)
+    at_code = sum(int(np.count_nonzero(r == code)) for r in scans)
     if at_code < max(io.no_return_code_min_readings, io.no_return_code_min_share * n_finite):
         return range_max, (f"{unstated.size} of {range_max.size} scans state no range_max and their readings show no "
                            "no-return code: every finite reading is a hit (the localizers take "

@@ -39,8 +39,10 @@ FloatArray = npt.NDArray[np.float64]
 
 def moved_odometry(rec: Recording, motion: npt.ArrayLike) -> Recording:
     """``rec`` with its odometry moved by the rigid ``motion`` T (x, y, yaw): o ↦ T ⊕ o; a reference that repeats
-    the odometry (r = M ⊕ o) then repeats the moved one by M ⊕ T⁻¹."""
-    assert rec.odometry is not None
+    the odometry (r = M ⊕ o) then repeats the moved one by M ⊕ T⁻¹. A pass without odometry (a piece of a log
+    matched at constant velocity) has nothing to move."""
+    if rec.odometry is None:
+        return rec
     t = np.asarray(motion, dtype=np.float64).reshape(3)
     poses = compose(np.broadcast_to(t, rec.odometry.poses.shape), rec.odometry.poses)
     repeat = None if rec.odometry_to_reference is None else compose(rec.odometry_to_reference, inverse(t))
@@ -70,13 +72,10 @@ def join_passes(recordings: Sequence[Recording], static_map_of: Callable[[Sequen
     motion = np.zeros(3)
     notes = []
     for prev, nxt in itertools.pairwise(recordings):
-        if nxt.continues_piece(prev):  # the next piece of one log: it goes where the one before it went
-            out.append(moved_odometry(nxt, motion) if motion.any() and nxt.odometry is not None else nxt)
-            continue
-        if nxt.odometry is None or prev.odometry is None:
-            raise PipelineError(f"{nxt.path}: passes have disjoint coordinate frames: without a reference, "
-                                "several passes need one continuous odometry frame")
-        if not continues(prev, nxt, config):
+        if not continues(prev, nxt, config):  # the next piece of one log continues it, odometry or not
+            if nxt.odometry is None or prev.odometry is None:
+                raise PipelineError(f"{nxt.path}: passes have disjoint coordinate frames: without a reference, "
+                                    "several passes need one continuous odometry frame")
             partial = static_map_of(out)
             placed, seconds = _place(nxt, partial.occupancy, config)
             motion = compose(compose(partial.end_odometry, inverse(partial.end_pose)), placed)

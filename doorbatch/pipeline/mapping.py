@@ -206,20 +206,19 @@ def check_common_frame(recordings: Sequence[Recording], source: str, config: Doo
             raise PipelineError(f"passes have disjoint coordinate frames: reference poses in {sorted(frames)}")
         return
     for prev, nxt in itertools.pairwise(recordings):
-        if nxt.continues_piece(prev):
+        if continues(prev, nxt, config):
             continue
         if prev.odometry is None or nxt.odometry is None:
             raise PipelineError(f"{nxt.path}: passes have disjoint coordinate frames: without a reference, "
                                 "several passes need one continuous odometry frame")
-        if not continues(prev, nxt, config):
-            jump_m, jump_deg = odometry_jump(prev, nxt)
-            raise PipelineError(
-                f"{nxt.path}: passes have disjoint coordinate frames: its odometry starts {jump_m:.2f} m and "
-                f"{jump_deg:.1f}° from where {Path(prev.path).name} ended (mapping.odometry_continuity_m = "
-                f"{config.mapping.odometry_continuity_m}, _deg = {config.mapping.odometry_continuity_deg}); give a "
-                "reference pose topic, map the logs separately, or "
-                "try --set mapping.join_passes=true (each pass placed on the map of the ones before it by global "
-                "localization)")
+        jump_m, jump_deg = odometry_jump(prev, nxt)
+        raise PipelineError(
+            f"{nxt.path}: passes have disjoint coordinate frames: its odometry starts {jump_m:.2f} m and "
+            f"{jump_deg:.1f}° from where {Path(prev.path).name} ended (mapping.odometry_continuity_m = "
+            f"{config.mapping.odometry_continuity_m}, _deg = {config.mapping.odometry_continuity_deg}); give a "
+            "reference pose topic, map the logs separately, or "
+            "try --set mapping.join_passes=true (each pass placed on the map of the ones before it by global "
+            "localization)")
 
 
 def _chain_scanmatch(recordings: Sequence[Recording], config: DoorbatchConfig) -> tuple[list[PassPoses], list[str]]:

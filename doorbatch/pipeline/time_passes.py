@@ -10,7 +10,6 @@ a fixed duration, each piece is such a pass, and the pieces chain as one odometr
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import replace
 
 import numpy as np
 import numpy.typing as npt
@@ -39,8 +38,8 @@ def pass_bounds(stamps_ns: npt.NDArray[np.int64], pass_s: float) -> list[tuple[i
 
 def split_into_passes(recordings: Sequence[Recording], pass_s: float) -> list[Recording]:
     """Each recording cut into its passes (:func:`pass_bounds`), in order; a piece is named after its log and its
-    span from the log's first scan (``run.mcap [0.0–60.0 s]``), and only the first piece of a log carries the
-    log's warnings (once in the map's). A recording that is one pass stays as it is."""
+    span from the log's first scan (``run.mcap [0.0–60.0 s]``; :meth:`~doorbatch.io.recording.Recording.take`).
+    A recording that is one pass stays as it is."""
     out: list[Recording] = []
     for rec in recordings:
         bounds = pass_bounds(rec.scans.stamps_ns, pass_s)
@@ -48,7 +47,6 @@ def split_into_passes(recordings: Sequence[Recording], pass_s: float) -> list[Re
             out.append(rec)
             continue
         t = (rec.scans.stamps_ns - rec.scans.stamps_ns[0]) / 1e9
-        for k, (start, stop) in enumerate(bounds):
-            piece = rec.take(start, stop, f"{rec.path} [{t[start]:.1f}–{t[stop - 1]:.1f} s]", k)
-            out.append(piece if k == 0 else replace(piece, warnings=[]))
+        out += [rec.take(start, stop, f"{rec.path} [{t[start]:.1f}–{t[stop - 1]:.1f} s]", k)
+                for k, (start, stop) in enumerate(bounds)]
     return out

@@ -22,6 +22,7 @@ from doorbatch.pipeline.batch.plan import StepKind
 
 MANIFEST = "manifest.json"
 STEP_RECORD = "step"  # the key of the step record in manifest.extra
+OUTPUTS = "outputs"  # in the step record: the files the step wrote into its folder, by relative path and size
 
 # Config sections each kind of step reads (absent ones are left out: evaluation's section lands separately).
 _READING = ("seed", "topics", "frames", "io", "laser")
@@ -114,9 +115,6 @@ def stamp_manifest(out_dir: Path, key: StepKey, config: Mapping[str, Any], start
         manifest.finish()
     manifest.extra[STEP_RECORD] = {**key.record(), OUTPUTS: _files_of(out_dir)}
     manifest.write(path)
-
-
-OUTPUTS = "outputs"  # in the step record: the files the step wrote into its folder, by relative path and size
 
 
 def _files_of(folder: Path) -> dict[str, int]:

@@ -24,7 +24,8 @@ import numpy.typing as npt
 from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import TransformError
 from doorbatch.geometry.camera import camera_from_info, scan_in_camera
-from doorbatch.geometry.se2 import interpolate_poses, relative
+from doorbatch.geometry.rotations import invert_transform
+from doorbatch.geometry.se2 import interpolate_poses, relative, rotation_matrix
 from doorbatch.io.doorpose_inputs import DoorPoseInputs
 from doorbatch.io.recording import PoseSeries
 from doorbatch.maps import DoorSet
@@ -109,9 +110,9 @@ def scan_at_image(points_cam: FloatArray, cam_to_base: FloatArray, motion: PoseS
     if not ok.all():
         return points_cam, scan_ns
     dx, dy, dyaw = relative(at[0], at[1])
-    c, s = math.cos(dyaw), math.sin(dyaw)
-    delta = np.array([[c, -s, 0.0, dx], [s, c, 0.0, dy], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
-    mat = np.linalg.inv(cam_to_base) @ delta @ cam_to_base
+    delta = np.eye(4)
+    delta[:2, :2], delta[:2, 3] = rotation_matrix(dyaw), (dx, dy)
+    mat = invert_transform(cam_to_base) @ delta @ cam_to_base
     return points_cam @ mat[:3, :3].T + mat[:3, 3], image_ns
 
 
