@@ -665,11 +665,14 @@ class ObjectMapConfig(Section):
     # default): chosen from the logs so that at least kept_beams_per_s beams a second of log are kept, and at
     # least 1/max_thinning of them (every 2nd scan and beam of a 360-beam 10 Hz or a 720-beam 15 Hz laser, all
     # of a 181-beam 5 Hz one's: the paper's ρ are set for full data, so a sparse laser must not be thinned;
-    # stage.strides_for_rate).
+    # stage.strides_for_rate), or dense_kept_beams_per_s where that thins more (a laser denser than the
+    # 720-beam 15 Hz one, whose 2,700 kept a second are the most the search was checked with: a 1081-beam
+    # 40 Hz laser kept at 1/4 made the priors 4 times weaker against its evidence; docs/results.md, "A dense laser").
     scan_stride: int = Field(0, ge=0)
     beam_stride: int = Field(0, ge=0)
     kept_beams_per_s: float = Field(800.0, gt=0.0)
     max_thinning: int = Field(4, ge=1)
+    dense_kept_beams_per_s: float = Field(2700.0, gt=0.0)
     # A robot standing still: a scan within still_travel_m and still_turn_deg of the last one kept is kept only
     # once still_interval_s have passed since it (stage.pass_scans; Cartographer's motion filter, at a scale that
     # leaves a moving robot's scans alone: 1 cm is 1/7 of a 1 m/s, 15 Hz laser's spacing).
@@ -677,12 +680,14 @@ class ObjectMapConfig(Section):
     still_turn_deg: float = Field(0.5, ge=0.0)
     still_interval_s: float = Field(1.0, ge=0.0)
     # Once the structure has converged: walls proposed and re-cut by eq. (9) over every final_scan_stride-th
-    # scan and final_beam_stride-th beam (default all, less a standing robot's repeats: the paper's ρ are set for
-    # full data; ~81 bytes a beam)
-    # in at most this many sweeps over the walls; 0: off.
+    # scan and final_beam_stride-th beam (less a standing robot's repeats: the paper's ρ are set for full data;
+    # ~81 bytes a beam) in at most this many sweeps over the walls; 0: off. Strides 0 (the default): every beam
+    # of a laser up to final_kept_beams_per_s (the 720-beam 15 Hz laser, the densest checked at full data), a
+    # denser one thinned to it (stage.final_strides_for_rate).
     final_recut_sweeps: int = Field(3, ge=0)
-    final_scan_stride: int = Field(1, ge=1)
-    final_beam_stride: int = Field(1, ge=1)
+    final_scan_stride: int = Field(0, ge=0)
+    final_beam_stride: int = Field(0, ge=0)
+    final_kept_beams_per_s: float = Field(10800.0, gt=0.0)
     # At most this many beams in the final step (0: no limit): a longer log keeps every k-th of its scans there,
     # k the smallest that fits. Its peak memory grows ~330 bytes a beam (8.1 M beams: 2.7 GB, docs/benchmarks.md);
     # a log this long holds many passes' evidence per wall, far more than the few passes the ρ were set for.

@@ -53,7 +53,8 @@ def main() -> None:
     args = ap.parse_args()
     config = DoorbatchConfig()
     em = config.em.model_copy(update={"use_color": False, "scan_stride": args.scan_stride,
-                                      "beam_stride": args.beam_stride})
+                                      "beam_stride": args.beam_stride, "final_scan_stride": 1,
+                                      "final_beam_stride": 1})
     rows = []
     for path in sorted(CARMEN.glob("*.log*")):
         rec = load_recording(path, config)

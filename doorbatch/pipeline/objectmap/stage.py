@@ -70,18 +70,9 @@ def pass_scans(rec: Recording, poses: PassPoses, scan_stride: int, config: Objec
     return out
 
 
-def strides_for_rate(beams_per_s: float, config: ObjectMapConfig) -> tuple[int, int]:
-    """The search's (scan stride, beam stride) for a log of ``beams_per_s``: ``config.scan_stride`` and
-    ``beam_stride`` where set (> 0), the others derived so that at least ``kept_beams_per_s`` are kept,
-
-        k = min(max_thinning, max(1, ⌊beams_per_s / kept_beams_per_s⌋)),
-        beam stride = ⌊√k⌋,  scan stride = ⌊k / beam stride⌋
-
-    (one of them set: the other ⌊k / it⌋): a sparse laser is not thinned at all, a dense one by at most
-    max_thinning."""
-    k = max(1, int(beams_per_s // config.kept_beams_per_s)) if np.isfinite(beams_per_s) else 1
-    k = min(k, config.max_thinning)
-    scan_stride, beam_stride = config.scan_stride, config.beam_stride
+def _split(k: int, scan_stride: int, beam_stride: int) -> tuple[int, int]:
+    """(scan stride, beam stride) that keep 1 beam in about k: the configured ones where set (> 0), the
+    others derived, beam stride = ⌊√k⌋ and scan stride = ⌊k / beam stride⌋ (one set: the other ⌊k / it⌋)."""
     if not beam_stride:
         beam_stride = max(1, k // scan_stride) if scan_stride else max(1, math.isqrt(k))
     if not scan_stride:
@@ -89,23 +80,56 @@ def strides_for_rate(beams_per_s: float, config: ObjectMapConfig) -> tuple[int, 
     return int(scan_stride), int(beam_stride)
 
 
-def em_strides(recordings: Sequence[Recording], config: ObjectMapConfig) -> tuple[int, int]:
-    """:func:`strides_for_rate` at the logs' data rate: the median beams per scan over the median interval
-    between scans (1, 1 where the logs give no rate); the configured strides where both are set."""
-    if config.scan_stride and config.beam_stride:
-        return config.scan_stride, config.beam_stride
+def strides_for_rate(beams_per_s: float, config: ObjectMapConfig) -> tuple[int, int]:
+    """The search's (scan stride, beam stride) for a log of ``beams_per_s``: ``config.scan_stride`` and
+    ``beam_stride`` where set (> 0), the others derived so that at least ``kept_beams_per_s`` are kept,
+
+        k = min(⌊beams_per_s / kept_beams_per_s⌋, max(max_thinning, ⌊beams_per_s / dense_kept_beams_per_s⌋)),
+
+    at least 1, split by :func:`_split`: a sparse laser is not thinned at all, an ordinary one by at most
+    max_thinning, a denser one down to dense_kept_beams_per_s."""
+    if not np.isfinite(beams_per_s):
+        return _split(1, config.scan_stride, config.beam_stride)
+    cap = max(config.max_thinning, int(beams_per_s // config.dense_kept_beams_per_s))
+    k = max(1, min(int(beams_per_s // config.kept_beams_per_s), cap))
+    return _split(k, config.scan_stride, config.beam_stride)
+
+
+def final_strides_for_rate(beams_per_s: float, config: ObjectMapConfig) -> tuple[int, int]:
+    """The final wall step's (scan stride, beam stride): ``final_scan_stride`` and ``final_beam_stride`` where
+    set (> 0), the others derived from k = max(1, ⌊beams_per_s / final_kept_beams_per_s⌋) by :func:`_split`:
+    every beam of every laser up to that rate, a denser one thinned to it."""
+    k = max(1, int(beams_per_s // config.final_kept_beams_per_s)) if np.isfinite(beams_per_s) else 1
+    return _split(k, config.final_scan_stride, config.final_beam_stride)
+
+
+def beams_per_second(recordings: Sequence[Recording]) -> float:
+    """The logs' data rate: the median beams per scan over the median interval between scans (0 where the logs
+    give no rate)."""
     intervals = [np.diff(r.scans.stamps_ns) * 1e-9 for r in recordings if len(r.scans) > 1]
     dt = np.concatenate(intervals) if intervals else np.zeros(0)
     dt = dt[dt > 0.0]
     counts = [len(x) for r in recordings for x in r.scans.ranges]
-    rate = float(np.median(counts)) / float(np.median(dt)) if dt.size and counts else 0.0
-    return strides_for_rate(rate, config)
+    return float(np.median(counts)) / float(np.median(dt)) if dt.size and counts else 0.0
+
+
+def em_strides(recordings: Sequence[Recording], config: ObjectMapConfig) -> tuple[int, int]:
+    """:func:`strides_for_rate` at the logs' data rate (:func:`beams_per_second`; 1, 1 where the logs give no
+    rate); the configured strides where both are set."""
+    if config.scan_stride and config.beam_stride:
+        return config.scan_stride, config.beam_stride
+    return strides_for_rate(beams_per_second(recordings), config)
 
 
 def with_strides(recordings: Sequence[Recording], config: ObjectMapConfig) -> ObjectMapConfig:
-    """``config`` with the search's strides resolved for these logs (:func:`em_strides`)."""
+    """``config`` with the search's and the final wall step's strides resolved for these logs
+    (:func:`em_strides`, :func:`final_strides_for_rate`)."""
     scan_stride, beam_stride = em_strides(recordings, config)
-    return config.model_copy(update={"scan_stride": scan_stride, "beam_stride": beam_stride})
+    final_scan, final_beam = config.final_scan_stride, config.final_beam_stride
+    if not (final_scan and final_beam):
+        final_scan, final_beam = final_strides_for_rate(beams_per_second(recordings), config)
+    return config.model_copy(update={"scan_stride": scan_stride, "beam_stride": beam_stride,
+                                     "final_scan_stride": final_scan, "final_beam_stride": final_beam})
 
 
 def collect_beams(recordings: Sequence[Recording], passes: Sequence[PassPoses], config: ObjectMapConfig,
@@ -135,6 +159,7 @@ def final_step_beams(recordings: Sequence[Recording], passes: Sequence[PassPoses
     step is off."""
     if not config.final_recut_sweeps:
         return None
+    config = with_strides(recordings, config)
     scans = [pass_scans(r, p, config.final_scan_stride, config) for r, p in zip(recordings, passes, strict=True)]
 
     def count(thin: int) -> int:

@@ -349,7 +349,7 @@ def test_a_pass_that_shows_only_the_hinge_does_not_count_as_seeing_the_leaf() ->
 def test_the_search_keeps_at_least_the_target_beam_rate_and_below_twice_it(rate: float, target: float) -> None:
     """Strides from the data rate (stage.strides_for_rate): a log with fewer beams a second than the target
     is kept whole; a denser one is thinned to between the target and twice it (uncapped), scans no less than
-    beams; capped, by at most max_thinning."""
+    beams; capped, by at most max_thinning, or down to dense_kept_beams_per_s where that thins more."""
     from doorbatch.pipeline.objectmap.stage import strides_for_rate
 
     config = DoorbatchConfig().em.model_copy(update={"kept_beams_per_s": target, "max_thinning": 10**9})
@@ -359,8 +359,11 @@ def test_the_search_keeps_at_least_the_target_beam_rate_and_below_twice_it(rate:
         assert (scan_stride, beam_stride) == (1, 1)
     else:
         assert target <= rate / (scan_stride * beam_stride) < 2.0 * target
-    capped = strides_for_rate(rate, config.model_copy(update={"max_thinning": 4}))
-    assert capped[0] * capped[1] <= 4 and rate / (capped[0] * capped[1]) >= min(rate, target)
+    dense = 2.5 * target
+    capped = strides_for_rate(rate, config.model_copy(update={"max_thinning": 4, "dense_kept_beams_per_s": dense}))
+    thinning = capped[0] * capped[1]
+    assert thinning <= max(4, rate // dense) and rate / thinning >= min(rate, target)
+    assert thinning <= 4 or rate / thinning >= dense
 
 
 def test_strides_for_the_sample_laser_and_a_sparse_one_and_explicit_ones_win() -> None:
@@ -378,6 +381,21 @@ def test_strides_for_the_sample_laser_and_a_sparse_one_and_explicit_ones_win() -
     assert strides_for_rate(1081 * 40.0, uncapped) == (7, 7)  # k = 54
     assert strides_for_rate(1081 * 40.0, uncapped.model_copy(update={"beam_stride": 1})) == (54, 1)
     assert strides_for_rate(360 * 10.0, config.model_copy(update={"scan_stride": 3, "beam_stride": 1})) == (3, 1)
+
+
+def test_a_laser_denser_than_the_checked_ones_is_thinned_to_their_rate() -> None:
+    """A 1081-beam 40 Hz laser (43,240 beams a second) is searched at 1 beam in 16 (2,700 a second, the 720-beam
+    15 Hz laser's kept rate) rather than 1 in 4, and its final wall step keeps 1 in 4 (that laser's full rate,
+    10,800 a second); the lasers checked at full data keep every beam there."""
+    from doorbatch.pipeline.objectmap.stage import final_strides_for_rate, strides_for_rate
+
+    config = DoorbatchConfig().em
+    assert strides_for_rate(1081 * 40.0, config) == (4, 4)
+    assert strides_for_rate(1081 * 25.0, config) == (3, 3)  # k = min(33, max(4, 10))
+    assert final_strides_for_rate(1081 * 40.0, config) == (2, 2)
+    for rate in (360 * 10.0, 720 * 15.0, 181 * 5.0, float("nan")):
+        assert final_strides_for_rate(rate, config) == (1, 1)
+    assert final_strides_for_rate(1081 * 40.0, config.model_copy(update={"final_beam_stride": 1})) == (4, 1)
 
 
 def test_a_leaf_fitted_along_the_wall_behind_its_hinge_is_not_seen_there() -> None:
