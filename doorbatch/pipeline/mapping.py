@@ -156,30 +156,38 @@ def continues(prev: Recording, nxt: Recording, config: DoorbatchConfig) -> bool:
 
 
 def time_order(recordings: Sequence[Recording], config: DoorbatchConfig) -> list[int] | None:
-    """The passes' indices in the order of their first scans' stamps, where the passes do not chain as given (a
-    pass's odometry does not continue the one before it: :func:`continues`) but do in that order: one recording's
-    pieces given out of order, as a shell glob gives ``run_10.bag`` before ``run_2.bag``. None otherwise: passes
-    that chain as given keep their order, and so do passes no order of time chains (recorded apart; each in sim
-    time from 0), whose order the user chose.
+    """The passes' indices in the order of their first scans' stamps, where they were given in another order and
+    either happened one after another on one clock (each pass's scans start after the one before it ends: passes
+    recorded apart, or one recording's pieces that a shell glob lists as ``run_10.bag`` before ``run_2.bag``) or
+    chain only in that order (a pass's odometry continues the one before it: :func:`continues`). The grid stage
+    classifies each pass against the map of the passes before it (paper 000, Sec. III, an online mapper), so the
+    order changes the doors: time order makes the map the same whatever order the logs are listed in. None
+    otherwise: passes in time order already, or on clocks that overlap (each in sim time from 0), whose order the
+    user chose.
     """
-    if len(recordings) < 2 or any(r.odometry is None or len(r.scans) == 0 for r in recordings):
+    if len(recordings) < 2 or any(len(r.scans) == 0 for r in recordings):
+        return None
+    given = list(range(len(recordings)))
+    by_time = sorted(given, key=lambda i: int(recordings[i].scans.stamps_ns[0]))
+    if by_time == given:
+        return None
+    if all(int(recordings[b].scans.stamps_ns[0]) > int(recordings[a].scans.stamps_ns[-1])
+           for a, b in itertools.pairwise(by_time)):
+        return by_time
+    if any(r.odometry is None for r in recordings):
         return None
 
     def chains(order: Sequence[int]) -> bool:
         return all(continues(recordings[a], recordings[b], config) for a, b in itertools.pairwise(order))
 
-    given = list(range(len(recordings)))
-    by_time = sorted(given, key=lambda i: int(recordings[i].scans.stamps_ns[0]))
-    if by_time == given or chains(given) or not chains(by_time):
-        return None
-    return by_time
+    return by_time if chains(by_time) and not chains(given) else None
 
 
 def mapping_passes(logs: Sequence[Path], config: DoorbatchConfig, with_colors: bool = False
                    ) -> tuple[list[Path], list[Recording], str | None]:
     """The logs as the passes ``doorbatch map`` builds from: read as passes of one robot (:func:`load_passes`),
-    put in the order of their first stamps where only that order chains (:func:`time_order`; the logs in that
-    order and a note saying so), and cut by ``mapping.pass_duration_s``
+    put in the order of their first stamps where they happened one after another or only that order chains
+    (:func:`time_order`; the logs in that order and a note saying so), and cut by ``mapping.pass_duration_s``
     (:func:`~doorbatch.pipeline.time_passes.split_into_passes`)."""
     paths = [Path(p) for p in logs]
     recordings = load_passes(paths, config, with_colors)
@@ -187,8 +195,9 @@ def mapping_passes(logs: Sequence[Path], config: DoorbatchConfig, with_colors: b
     note = None
     if order is not None:
         paths, recordings = [paths[i] for i in order], [recordings[i] for i in order]
-        note = ("the passes' odometry does not chain in the order given, and does in the order of their first scans' "
-                f"stamps: mapped in that order ({', '.join(p.name for p in paths)})")
+        note = ("the passes were not given in the order of their first scans' stamps: mapped in that order "
+                f"({', '.join(p.name for p in paths)}), the order they happened in (the grid stage classifies each "
+                "pass against the passes before it)")
     return paths, split_into_passes(recordings, config.mapping.pass_duration_s), note
 
 

@@ -78,6 +78,25 @@ def test_pieces_of_one_recording_given_out_of_order_are_mapped_in_time_order(
     assert [Path(i["path"]).name for i in manifest["inputs"]] == [Path(p).name for p in logs]
 
 
+def test_passes_recorded_apart_and_listed_out_of_order_are_mapped_in_the_order_they_happened(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """Passes whose odometry chains in no order (as if recorded apart), listed 3, 1, 2 with a reference: the grid
+    stage classifies each pass against those before it, so the listed order gave other doors; they are mapped in
+    time order, the map of 1, 2, 3, with a warning."""
+    import doorbatch.pipeline.mapping as mapping
+
+    monkeypatch.setattr(mapping, "continues", lambda *_: False)
+    logs = [str(SAMPLE_LOGS / f"map_pass{k}.mcap") for k in (1, 2, 3)]
+    args = ["--stages", "grid", "--pose-source", "reference", "--json"]
+    assert main(["map", *logs, "-o", str(tmp_path / "given"), *args]) == 0
+    capsys.readouterr()
+    assert main(["map", logs[2], logs[0], logs[1], "-o", str(tmp_path / "shuffled"), *args]) == 0
+    warnings = json.loads(capsys.readouterr().out)["warnings"]
+    assert any("order of their first scans' stamps" in w for w in warnings)
+    for name in ("map.pgm", "doors.parquet"):
+        assert (tmp_path / "shuffled" / name).read_bytes() == (tmp_path / "given" / name).read_bytes()
+
+
 def test_a_log_without_any_pose_source_is_an_error(write_log: Callable[..., Path], tmp_path: Path,
                                                    capsys: pytest.CaptureFixture[str]) -> None:
     bare = [x for x in sample_messages(5) if x[0] not in ("/odom", "/ground_truth", "/tf")]
