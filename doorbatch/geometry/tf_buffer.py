@@ -20,6 +20,9 @@ from doorbatch.errors import TransformError
 from doorbatch.geometry.rotations import FloatArray, invert_transform, slerp, transform_matrix
 from doorbatch.records import Transform
 
+_STILL_M = 1e-6  # a dynamic edge whose translation spans less than this (m) ...
+_STILL_TURN = 1e-12  # ... and whose rotation 1 − |q·q₀| stays below this (~3 µrad) does not move
+
 
 @dataclass
 class _Edge:
@@ -103,6 +106,16 @@ class TfBuffer:
     def is_static(self, child: str) -> bool:
         """Whether the edge into ``child`` is static (KeyError: ``child`` has no parent)."""
         return self._edges[child].static
+
+    def moves(self, child: str) -> bool:
+        """Whether the edge into ``child`` is dynamic and its transform changes over the log (a fixed mount
+        republished on /tf, as a ROS 1 robot_state_publisher does, is dynamic but does not move)."""
+        edge = self._edges[child]
+        if edge.static or len(edge.stamps) < 2:
+            return False
+        trans, rot = np.asarray(edge.translations), np.asarray(edge.rotations)
+        turned = 1.0 - np.abs(rot @ rot[0]) / (np.linalg.norm(rot, axis=1) * np.linalg.norm(rot[0]))  # q ≡ −q
+        return bool(np.ptp(trans, axis=0).max() > _STILL_M or turned.max() > _STILL_TURN)
 
     def stamps(self, child: str) -> list[int]:
         """The stamps (ns, sorted) of the edge into ``child`` (KeyError: ``child`` has no parent)."""

@@ -166,13 +166,17 @@ def pose_series(poses: list[Pose2D]) -> PoseSeries | None:
 
 def odometry_frame(tf: TfBuffer, odom: str, base: str) -> str | None:
     """The frame TF odometry is read in: ``odom`` when ``base``'s chain reaches it; else the parent of the first
-    dynamic edge above ``base`` (a tree that calls it odom_combined, say); None when no dynamic edge is above."""
+    edge above ``base`` that moves (a tree that calls it odom_combined, say, above a base_footprint→base_link
+    republished on /tf: :meth:`TfBuffer.moves`), or of the first dynamic one where none moves (a robot that
+    stood still); None when no dynamic edge is above."""
     if base not in tf.frames:
         return None
     chain = tf.chain(base)
     if odom in chain[1:]:
         return odom
-    return next((chain[i + 1] for i, child in enumerate(chain[:-1]) if not tf.is_static(child)), None)
+    dynamic = [i for i, child in enumerate(chain[:-1]) if not tf.is_static(child)]
+    moving = [i for i in dynamic if tf.moves(chain[i])]
+    return chain[(moving or dynamic)[0] + 1] if dynamic else None
 
 
 def _planar(mat: FloatArray) -> FloatArray:

@@ -88,6 +88,25 @@ def test_tf_odometry_in_an_odometry_frame_of_another_name(write_log: Callable[..
     assert any("odom_combined" in w and "frames.odom" in w for w in rec.warnings)
 
 
+def test_a_fixed_mount_republished_on_tf_is_not_taken_for_the_odometry(write_log: Callable[..., Path]) -> None:
+    """The Stata Center's PR2 tree: odom_combined → base_footprint moving, base_footprint → base_link fixed but
+    republished on /tf (robot_state_publisher), no odom frame, no /odom topic. Before, the fixed edge was the
+    first dynamic one above base_link and its parent, base_footprint, the odometry frame: a robot that never
+    moved. The odometry is read in odom_combined, the parent of the first edge that moves."""
+    msgs = []
+    for topic, msgtype, t, msg in sample_messages(n_scans=6):
+        if topic in ("/odom", "/ground_truth"):
+            continue
+        if topic == "/tf":
+            msg.transforms[0].header.frame_id = "odom_combined"
+            msg.transforms[0].child_frame_id = "base_footprint"
+            msg.transforms.append(m.planar_transform(t, "base_footprint", "base_link", 0.0, 0.0, 0.0))
+        msgs.append((topic, msgtype, t, msg))
+    rec = load_recording(write_log("pr2_mount.mcap", msgs))
+    assert rec.odometry is not None and rec.odometry.frame_id == "odom_combined"
+    np.testing.assert_allclose(rec.odometry.poses[:, 0], 0.1 * np.arange(6), atol=1e-12)
+
+
 def test_a_tree_without_base_link_takes_the_child_of_odom(write_log: Callable[..., Path]) -> None:
     msgs = []
     for topic, msgtype, t, msg in sample_messages(n_scans=4):
