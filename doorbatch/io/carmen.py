@@ -87,6 +87,7 @@ _MAX_NUDGED_FRACTION = 0.25
 # Stamp repair: at or above this fraction of consecutive scans sharing one stamp, stamps are coarse.
 _COARSE_FRACTION = 0.5
 _MAX_PARAMS = ("robot_front_laser_max",)
+_FULL_TURN = 2.0 * math.pi + 1e-6  # ROBOTLASER1 and RAWLASER1 angles are radians: no laser spans more
 
 
 class _MalformedError(ValueError):
@@ -451,6 +452,9 @@ def _parse_laser_with_header(parts: list[str], n_pose_fields: int) -> _Laser:
         if n < 2 or fov == 0.0:
             raise _MalformedError(f"{keyword} has zero angular resolution and no field of view")
         res = fov / (n - 1)
+    if abs(fov) > _FULL_TURN or abs(res) * max(n - 1, 0) > _FULL_TURN:
+        raise _MalformedError(f"{keyword} field of view {fov:g} and resolution {res:g} span more than a full turn: "
+                              "its angles must be in radians (they look like degrees)")
     laser_pose = robot_pose = None
     tv = rv = 0.0
     if n_pose_fields:
@@ -575,6 +579,7 @@ class CarmenReader(LogReader):
         counts: Counter[str] = Counter()
         ignored: Counter[str] = Counter()
         keywords: list[str] = []
+        flaser_readings: Counter[int] = Counter()  # FLASER lines by their reading count
         mounts: list[tuple[float, float, float]] = []  # ROBOTLASER1: laser pose in robot pose
         robot_yaws: list[float] = []
         raw_error: LogReadError | None = None  # a malformed RAWLASER1 line matters only if those are the scans
@@ -604,6 +609,7 @@ class CarmenReader(LogReader):
             is_scan.append(isinstance(record, _Laser))
             if keyword == _FLASER and isinstance(record, _Laser):
                 largest, band = _update_band(largest, band, record.ranges)
+                flaser_readings[record.ranges.shape[0]] += 1
             elif isinstance(record, _Laser) and record.laser_pose is not None and record.robot_pose is not None:
                 mx, my, myaw = relative(record.robot_pose, record.laser_pose).tolist()
                 mounts.append((mx, my, myaw))
@@ -627,6 +633,7 @@ class CarmenReader(LogReader):
         is_scan = [v for v, k in zip(is_scan, keep, strict=True) if k]
         self.ignored_lines = dict(sorted(ignored.items()))
         self._read_params(counts[_FLASER], largest, band, mounts, robot_yaws)
+        self._check_flaser_fov(flaser_readings)
         repair = repair_stamps(np.array(stamps, dtype=np.int64), np.array(is_scan, dtype=bool),
                                self.io_config.carmen_scan_period_s)
         self._stamps = repair.stamps_ns
@@ -721,6 +728,21 @@ class CarmenReader(LogReader):
                 log.info("%s: no max-range PARAM; %s is the no-return value", self.path, self.range_max_source)
         resolution = self._param_float("laser_front_laser_resolution")
         self._resolution_deg = resolution if resolution is not None and resolution > 0 else None
+        fov = self._param_float("laser_front_laser_fov")  # degrees, as carmen.ini gives it
+        if fov is not None and 0.0 < fov <= 360.0:
+            self._fov_deg = fov
+
+    def _check_flaser_fov(self, readings: Counter[int]) -> None:
+        """A warning when FLASER lines have a reading count that no paper-era SICK scanner gives (180, 181, 360,
+        361) and no PARAM states the field of view or resolution: their angles are then only the configured
+        ``io.carmen_fov_deg``'s guess (a 541-beam 270° laser squeezed into 180° maps nothing)."""
+        if self._resolution_deg is not None or "laser_front_laser_fov" in self.params or not readings:
+            return
+        n = readings.most_common(1)[0][0]
+        if n not in (180, 181, 360, 361):
+            self._warn(f"FLASER lines have {n} readings and no laser_front_laser_fov or laser_front_laser_resolution "
+                       f"PARAM: taken to span {self._fov_deg:g}° (io.carmen_fov_deg); set it if the laser spans "
+                       "another field of view")
 
     def _flaser_geometry(self, n: int) -> tuple[float, float]:
         fov = self._fov_deg

@@ -146,6 +146,24 @@ def test_resolution_param_sets_the_flaser_increment(tmp_path: Path) -> None:
     assert scan.angles[0] == pytest.approx(math.radians(-45.0))
 
 
+def test_fov_param_sets_the_flaser_angles_and_a_count_without_one_is_warned(tmp_path: Path) -> None:
+    """A 541-beam 270° laser written as FLASER with ``PARAM laser_front_laser_fov 270`` (carmen.ini, degrees):
+    before, the PARAM was ignored and the beams squeezed into 180° without a word. Without any field-of-view
+    PARAM such a count is warned about."""
+    path = write_log(tmp_path / "fov.log", simple_log(n_scans=2, n_readings=541,
+                                                      params=("PARAM laser_front_laser_fov 270",)))
+    scan = scans_of(path)[0]
+    assert scan.angle_increment == pytest.approx(math.radians(0.5))
+    assert scan.angles[0] == pytest.approx(math.radians(-135.0))
+    with CarmenReader(path) as reader:
+        assert not any("laser_front_laser_fov" in w for w in reader.warnings)
+    bare = write_log(tmp_path / "bare.log", simple_log(n_scans=2, n_readings=541))
+    with CarmenReader(bare) as reader:
+        assert any("541 readings" in w and "io.carmen_fov_deg" in w for w in reader.warnings)
+    with CarmenReader(write_log(tmp_path / "sick.log", simple_log(n_scans=2, n_readings=181))) as reader:
+        assert not any("readings and no" in w for w in reader.warnings)
+
+
 # ---- max range
 
 
@@ -263,6 +281,15 @@ def robotlaser1(laser: tuple[float, float, float], robot: tuple[float, float, fl
     readings = " ".join(["1.0"] * n)
     poses = " ".join(f"{v:.9f}" for v in (*laser, *robot))
     return f"ROBOTLASER1 0 -1.0 2.0 0.5 20.0 0.01 0 {n} {readings} 0 {poses} 0.3 0.05 0 0 0 {t} host {t}"
+
+
+def test_robotlaser1_angles_in_degrees_are_refused(tmp_path: Path) -> None:
+    """A ROBOTLASER1 written with start −135, fov 270, resolution 0.5 (degrees, not CARMEN's radians) was read as a
+    270-rad fan: 15 false doors, walls 9 m off. Such a line is malformed, named by its line."""
+    lines = [robotlaser1((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 3.0 + 0.1 * k, n=541).replace(
+        "ROBOTLASER1 0 -1.0 2.0 0.5", "ROBOTLASER1 0 -135 270 0.5") for k in range(3)]
+    with pytest.raises(LogReadError, match=r"line 1: .*radians"):
+        read_all(write_log(tmp_path / "deg.clf", lines))
 
 
 def _mounted(robot: tuple[float, float, float], mount: tuple[float, float, float]) -> tuple[float, float, float]:
