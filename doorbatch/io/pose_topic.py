@@ -75,19 +75,32 @@ def _check_pose_topic(topics: Mapping[str, TopicInfo], topic: str, path: Path, a
         raise UsageError(f"{asked} {topic}: a {topics[topic].msgtype}, not a pose ({listed})")
 
 
-def read_start_pose(path: Path, topic: str) -> StartPose:
-    """The first message of ``topic`` in the log at ``path``.
+def read_start_poses(path: Path, topic: str) -> list[StartPose]:
+    """Every message of ``topic`` in the log at ``path``, in log order: the first is the start; AMCL re-initializes
+    its filter on each later one (an operator setting the pose again in RViz after the robot got lost).
 
     Raises:
         UsageError: the log has no such topic, it is not a pose type, or it has no message.
     """
     with open_log(path) as reader:
         _check_pose_topic(reader.topics, topic, path, "--init")
+        starts = []
         for raw in reader.raw_messages([topic]):
             p = decode_pose(raw.msg, raw.msgtype, raw.log_time_ns)
-            return StartPose(topic, p.stamp_ns, raw.log_time_ns, np.array([p.x, p.y, p.yaw]), p.frame_id,
-                             _sigma(raw.msg, raw.msgtype))
-    raise UsageError(f"--init {topic}: the topic has no message in {path.name}")
+            starts.append(StartPose(topic, p.stamp_ns, raw.log_time_ns, np.array([p.x, p.y, p.yaw]), p.frame_id,
+                                    _sigma(raw.msg, raw.msgtype)))
+    if not starts:
+        raise UsageError(f"--init {topic}: the topic has no message in {path.name}")
+    return starts
+
+
+def read_start_pose(path: Path, topic: str) -> StartPose:
+    """The first message of ``topic`` in the log at ``path`` (:func:`read_start_poses`).
+
+    Raises:
+        UsageError: the log has no such topic, it is not a pose type, or it has no message.
+    """
+    return read_start_poses(path, topic)[0]
 
 
 def read_pose_topic(path: Path, topic: str) -> tuple[npt.NDArray[np.int64], FloatArray]:

@@ -83,6 +83,12 @@ def _looks_like_command(name: str) -> bool:
     return any(w in _COMMAND_WORDS for w in _words(name))
 
 
+def is_initial_pose_topic(name: str) -> bool:
+    """Whether a pose topic is an operator's initial pose (RViz's /initialpose, ``initial_pose``), which a
+    localizer takes anew on every message, rather than an estimate (/amcl_pose) whose first message is a start."""
+    return any(w in ("initialpose", "initial") for w in _words(name))
+
+
 def _pick(role: Role, candidates: list[TopicInfo]) -> tuple[TopicInfo, str] | None:
     """The preferred topic among candidates of the right type: a name tried first, else the busiest."""
     if not candidates:

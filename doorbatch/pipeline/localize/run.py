@@ -14,7 +14,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -28,8 +28,9 @@ from doorbatch.io.log_clock import LogClock
 from doorbatch.io.map_server import read_map
 from doorbatch.io.map_topic import read_map_topic
 from doorbatch.io.mapdir import read_door_set
-from doorbatch.io.pose_topic import StartPose, read_start_pose
+from doorbatch.io.pose_topic import StartPose, read_start_poses
 from doorbatch.io.recording import PoseSeries, Recording, load_recording
+from doorbatch.io.roles import is_initial_pose_topic
 from doorbatch.maps import DoorSet, OccupancyMap
 from doorbatch.pipeline.localize.convergence import ConvergenceMonitor, multimodal, scan_fit
 from doorbatch.pipeline.localize.door_geometry import subset_doors, with_closed_in_range
@@ -265,6 +266,21 @@ def start_scan_index(rec: Recording, start: StartPose) -> int:
     raise PipelineError(f"{rec.path}: no scan after the start pose of {start.topic}")
 
 
+def _reset_indices(rec: Recording, resets: Sequence[StartPose], first_i: int) -> dict[int, StartPose]:
+    """The scan index at which each later initial pose takes effect (:func:`start_scan_index`; the last of several
+    before one scan wins); those at or before the start, or after the last scan, are dropped."""
+    at: dict[int, StartPose] = {}
+    for r in resets:
+        try:
+            i = start_scan_index(rec, r)
+        except PipelineError:
+            rec.warnings.append(f"--init {r.topic}: a message after the last scan is not used")
+            continue
+        if i > first_i:
+            at[i] = r
+    return at
+
+
 def localize(log_path: Path, lmap: LocalizationMap, config: DoorbatchConfig, method: str = "rbpf",
              init: str | tuple[float, float, float] = "reference",
              progress: Callable[[int], object] | None = None) -> LocalizationResult:
@@ -284,8 +300,10 @@ def localize(log_path: Path, lmap: LocalizationMap, config: DoorbatchConfig, met
                          f"(cells from ({corners[0][0]:.2f}, {corners[0][1]:.2f}) to ({corners[1][0]:.2f}, "
                          f"{corners[1][1]:.2f}) m)")
     start: Init = init
+    resets: list[StartPose] = []
     if isinstance(init, str) and init.startswith("/"):
-        start = read_start_pose(log_path, init)
+        start, *later = read_start_poses(log_path, init)
+        resets = later if is_initial_pose_topic(init) else []
     rec = load_recording(log_path, config)
     if isinstance(init, tuple) and (note := init_cell_note(lmap.occupancy, init)):
         rec.warnings.append(note)
@@ -300,7 +318,7 @@ def localize(log_path: Path, lmap: LocalizationMap, config: DoorbatchConfig, met
                             "map frame at all (a raw CARMEN log's): the start is its first pose, right where the map "
                             "lies in the reference's frame (doorbatch map puts it there from such logs); else give "
                             "--init X,Y,YAW or --init global")
-    return localize_recording(rec, lmap, config, method, start, progress)
+    return localize_recording(rec, lmap, config, method, start, progress, resets)
 
 
 def init_cell_note(occ: OccupancyMap, init: tuple[float, float, float]) -> str | None:
@@ -333,11 +351,12 @@ def with_laser_odometry(rec: Recording, config: DoorbatchConfig) -> Recording:
 
 
 def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchConfig, method: str = "rbpf",
-                       init: Init = "reference", progress: Callable[[int], object] | None = None
-                       ) -> LocalizationResult:
+                       init: Init = "reference", progress: Callable[[int], object] | None = None,
+                       resets: Sequence[StartPose] = ()) -> LocalizationResult:
     """Run MCL or the RBPF over a recording (e.g. one whose odometry a script has replaced). A
     :class:`StartPose` start localizes only the scans from its stamp on (AMCL does nothing before its initial
-    pose).
+    pose); each of ``resets`` (an /initialpose topic's later messages) starts the filter anew from the first scan
+    at or after it, as AMCL's handleInitialPose does, with a warning.
 
     A recording without odometry moves by its scans matched at constant velocity (:func:`with_laser_odometry`).
 
@@ -362,6 +381,7 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
     combination = BeamCombination(lc.beam_combination)
     track = _Track()
     first_i = start_scan_index(rec, init) if isinstance(init, StartPose) else 0
+    reset_at = _reset_indices(rec, resets, first_i)
     converged_ns = None if init == "global" else int(rec.scans.stamps_ns[first_i])
     monitor = ConvergenceMonitor()  # convergence claims of a global run; lost detection of every run
     warnings = list(rec.warnings)  # the run's own, not added to the caller's recording
@@ -372,6 +392,12 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
     for i in range(len(rec.scans)):
         if progress is not None:
             progress(1)
+        if i in reset_at:  # an operator's pose again: a fresh cloud there, updated on this scan (pf_init_ false)
+            state = MclState(_initial_particles(rec, lmap, reset_at[i], method, lc, rng))
+            monitor, lost, barred = ConvergenceMonitor(), False, False
+            warnings.append(f"--init {reset_at[i].topic}: started anew at "
+                            f"{(rec.scans.stamps_ns[i] - rec.scans.stamps_ns[first_i]) / 1e9:.1f} s from its "
+                            "message then (AMCL re-initializes on every initial pose)")
         if i < first_i or not odom_ok[i]:
             continue
         scan = rec.scans.scan(i)

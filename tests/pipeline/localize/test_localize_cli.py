@@ -203,6 +203,14 @@ def _with_initial_pose(tmp_path: Path, after_scans: int, clock_offset_ns: int | 
     """loc_open.mcap plus an RViz-style /initialpose (0.5 m, 15 deg std) at the reference pose of a later scan,
     0.2 m off it, recorded at that scan's time and stamped ``clock_offset_ns`` later (None: stamp 0, unset, as
     ``rostopic pub`` leaves it); returns the log, the scan's stamp and the reference pose there."""
+    log, ((stamp, truth),) = _with_initial_poses(tmp_path, [(after_scans, 0.2)], clock_offset_ns)
+    return log, stamp, truth
+
+
+def _with_initial_poses(tmp_path: Path, poses: list[tuple[int, float]], clock_offset_ns: int | None = 0
+                        ) -> tuple[Path, list[tuple[int, np.ndarray]]]:
+    """loc_open.mcap plus one /initialpose per (scan index, metres off the reference along x) of ``poses``, in
+    order (see :func:`_with_initial_pose`); returns the log and each scan's stamp and reference pose."""
     from doorbatch.io import ros_messages
     from doorbatch.io.log_writer import LogWriter
     from doorbatch.io.reader import open_log
@@ -210,20 +218,39 @@ def _with_initial_pose(tmp_path: Path, after_scans: int, clock_offset_ns: int | 
     src = SAMPLE_LOGS / "loc_open.mcap"
     rec = load_recording(src, DoorbatchConfig())
     assert rec.reference is not None
-    stamp = int(rec.scans.stamps_ns[after_scans])
-    (truth,), _ = interpolate_poses(rec.reference.stamps_ns, rec.reference.poses, np.array([stamp]))
     cov = np.diag([0.25, 0.25, 0.0, 0.0, 0.0, 0.0685])
-    msg = ros_messages.pose_with_covariance_stamped(0 if clock_offset_ns is None else stamp + clock_offset_ns, "map",
-                                                    truth[0] + 0.2, truth[1],
-                                                    truth[2], cov)
+    pending, given = [], []
+    for after_scans, off_m in poses:
+        stamp = int(rec.scans.stamps_ns[after_scans])
+        (truth,), _ = interpolate_poses(rec.reference.stamps_ns, rec.reference.poses, np.array([stamp]))
+        msg = ros_messages.pose_with_covariance_stamped(0 if clock_offset_ns is None else stamp + clock_offset_ns,
+                                                        "map", truth[0] + off_m, truth[1], truth[2], cov)
+        pending.append((stamp, msg))
+        given.append((stamp, truth))
     log = tmp_path / "with_initialpose.mcap"
     with open_log(src) as reader, LogWriter(log) as writer:
         for raw in reader.raw_messages():
-            if raw.log_time_ns > stamp and msg is not None:
-                writer.write("/initialpose", "geometry_msgs/msg/PoseWithCovarianceStamped", stamp, msg)
-                msg = None
+            while pending and raw.log_time_ns > pending[0][0]:
+                writer.write("/initialpose", "geometry_msgs/msg/PoseWithCovarianceStamped", *pending.pop(0))
             writer.write(raw.topic, raw.msgtype, raw.log_time_ns, raw.msg, raw.store)
-    return log, stamp, truth
+    return log, given
+
+
+def test_every_later_initialpose_starts_the_filter_anew(sample_map: Path, tmp_path: Path) -> None:
+    """An operator who set the pose 3 m off and set it again 11 s later (as after a kidnapping): AMCL re-initializes
+    on every /initialpose. Before, only the first was used and the run stayed metres off to the end, silently."""
+    log, ((first, _), (second, _)) = _with_initial_poses(tmp_path, [(40, 3.0), (200, 0.2)])
+    run = tmp_path / "run"
+    assert main(["localize", str(log), "--map", str(sample_map), "-o", str(run), "--method", "mcl",
+                 "--init", "/initialpose", "-q"]) == 0
+    stamps = np.asarray(read_table("trajectory", run / "trajectory.parquet").to_pydict()["stamp_ns"])
+    err = _errors(run, log)
+    assert stamps[0] == first and second in stamps
+    before, after = err[stamps < second], err[stamps >= second]
+    assert before.mean() > 1.0  # the wrong start holds along the corridor
+    assert after[len(after) // 2:].mean() < 0.1
+    warnings = json.loads((run / "manifest.json").read_text())["warnings"]
+    assert sum("started anew" in w for w in warnings) == 1
 
 
 @pytest.mark.parametrize("clock_offset_ns", [0, 100_000 * 10**9, None])  # another clock: a day later; unset
