@@ -45,6 +45,7 @@ class LocalizationResult:
     warnings: list[str] = field(default_factory=list)
     log_clock: LogClock | None = None  # the log's recorder clock against its scan stamps (Recording.log_clock)
     lost_ns: list[int] = field(default_factory=list)  # stamps at which an episode of being lost began
+    odom_frame_id: str = ""  # the frame of the odometry the run moved by ("": not known)
 
     def manifest_extra(self) -> dict[str, object]:
         """What a run directory's manifest keeps of the run beyond its tables: seconds from the first update to

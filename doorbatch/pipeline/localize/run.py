@@ -228,8 +228,8 @@ class _Track:
         self.particles.append(particles)
 
     def result(self, log_name: str, method: str, n_doors: int, converged_ns: int | None, is_ambiguous: bool,
-               warnings: list[str], log_clock: LogClock | None = None, lost_ns: list[int] | None = None
-               ) -> LocalizationResult:
+               warnings: list[str], log_clock: LogClock | None = None, lost_ns: list[int] | None = None,
+               odom_frame_id: str = "") -> LocalizationResult:
         u = len(self.stamps)
         return LocalizationResult(
             log=log_name, method=method, stamps_ns=np.asarray(self.stamps, dtype=np.int64),
@@ -238,7 +238,7 @@ class _Track:
             door_mean=np.asarray(self.dmean).reshape(u, n_doors), door_std=np.asarray(self.dstd).reshape(u, n_doors),
             door_observed=np.asarray(self.observed, dtype=bool).reshape(u, n_doors),
             particles=np.asarray(self.particles), converged_ns=converged_ns, ambiguous=is_ambiguous,
-            warnings=warnings, log_clock=log_clock, lost_ns=list(lost_ns or []))
+            warnings=warnings, log_clock=log_clock, lost_ns=list(lost_ns or []), odom_frame_id=odom_frame_id)
 
 
 def start_scan_index(rec: Recording, start: StartPose) -> int:
@@ -439,7 +439,7 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
     if not track.stamps:
         raise PipelineError(f"{log_path}: no scan had an odometry pose; nothing was localized")
     return track.result(Path(log_path).name, method, state.particles.n_doors, converged_ns,
-                        multimodal(state.particles, lc), warnings, rec.log_clock, lost_ns)
+                        multimodal(state.particles, lc), warnings, rec.log_clock, lost_ns, rec.odometry.frame_id)
 
 
 @dataclass(frozen=True)
@@ -475,9 +475,14 @@ def run_localize(log_path: Path, map_path: Path, out: Path, config: DoorbatchCon
     with timer("write"):
         files = write_run_tables(out, result)
         doors = lmap.doors if method == "rbpf" else DoorSet.empty()
+        odom_frame = result.odom_frame_id or config.frames.odom
+        if odom_frame != config.frames.odom:
+            result.warnings.append(f"frames.odom is {config.frames.odom!r} but the log's odometry is in "
+                                   f"{odom_frame!r}: annotated.mcap's map→odom transform names {odom_frame!r}, the "
+                                   "frame the robot hangs from in the log's own TF tree")
         write_annotated_mcap(log_path, out / "annotated.mcap",
                              on_log_clock(run_annotations(result, lmap.occupancy, doors, config.frames.map,
-                                                          config.frames.odom), result.log_clock),
+                                                          odom_frame), result.log_clock),
                              config)
     for w in result.warnings:
         manifest.warn(w)

@@ -484,3 +484,22 @@ def test_a_start_yaw_beyond_a_turn_is_asked_about(sample_map: Path) -> None:
     assert init_cell_note(occ, (x, y, 1.5)) is None  # free, and a yaw in radians
     note = init_cell_note(occ, (x, y, 90.0))
     assert note is not None and "radians" in note and "1.571" in note
+
+
+def test_annotated_map_to_odom_hangs_from_the_logs_odometry_frame(sample_map: Path, tmp_path: Path) -> None:
+    """A Nav2 file's ``odom_frame_id: wheel_odom`` (frames.odom) on a log whose odometry is in ``odom``: the run
+    read the log's odometry, but annotated.mcap's map→odom named wheel_odom, a tree the robot was not in, without
+    a word. It names the log's odometry frame, with a warning."""
+    from rosbags.highlevel import AnyReader
+
+    run = tmp_path / "run"
+    assert main(["localize", str(SAMPLE_LOGS / "loc_open.mcap"), "--map", str(sample_map), "-o", str(run),
+                 "--method", "mcl", "--set", "frames.odom=wheel_odom", "-q"]) == 0
+    parents = set()
+    with AnyReader([run / "annotated.mcap"]) as reader:
+        for conn, _, raw in reader.messages([c for c in reader.connections if c.topic == "/tf"]):
+            msg = reader.deserialize(raw, conn.msgtype)
+            parents |= {(t.header.frame_id, t.child_frame_id) for t in msg.transforms}
+    assert ("map", "odom") in parents and ("map", "wheel_odom") not in parents
+    warnings = json.loads((run / "manifest.json").read_text())["warnings"]
+    assert any("wheel_odom" in w and "map→odom" in w for w in warnings)
