@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -145,10 +146,17 @@ def m_step_colors(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> O
 
 @dataclass
 class EmTrace:
-    """Log posterior and seconds per EM iteration (for benchmarks and reports)."""
+    """Log posterior and seconds per EM iteration (for benchmarks and reports); ``on_step``, where set, is called
+    with 1 after every EM iteration and every sweep of the final wall step (a progress bar's update)."""
 
     log_posterior: list[float] = field(default_factory=list)
     seconds: list[float] = field(default_factory=list)
+    on_step: Callable[[int], object] | None = None
+
+    def step(self) -> None:
+        """One more unit of the stage's work done."""
+        if self.on_step is not None:
+            self.on_step(1)
 
 
 def run_em(beams: BeamSet, obj_map: ObjectMap, config: ObjectMapConfig, learn_classes: bool = True,
@@ -170,6 +178,7 @@ def run_em(beams: BeamSet, obj_map: ObjectMap, config: ObjectMapConfig, learn_cl
         if trace is not None:
             trace.seconds.append(time.perf_counter() - t0)
             trace.log_posterior.append(max(new_state.log_posterior, state.log_posterior))
+            trace.step()
         gain = new_state.log_posterior - state.log_posterior
         if gain > 0.0:
             state = new_state

@@ -541,10 +541,13 @@ def recut_all_walls(beams: BeamSet, state: MapState, config: ObjectMapConfig) ->
     return evaluate(beams, replace(obj_map, walls=walls), config)
 
 
-def _recut_sweeps(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> MapState:
+def _recut_sweeps(beams: BeamSet, state: MapState, config: ObjectMapConfig, trace: EmTrace | None = None
+                  ) -> MapState:
     """Sweeps of eq. (9) over all walls while the log posterior rises (at most ``final_recut_sweeps``)."""
     for _ in range(config.final_recut_sweeps):
         new = recut_all_walls(beams, state, config)
+        if trace is not None:
+            trace.step()
         if new.log_posterior <= state.log_posterior:
             break
         state = new
@@ -575,7 +578,8 @@ def reacquire_occluded(beams: BeamSet, state: MapState, config: ObjectMapConfig)
     return replace(obj_map, walls=same + grown)
 
 
-def final_walls(beams: BeamSet, obj_map: ObjectMap, config: ObjectMapConfig) -> ObjectMap:
+def final_walls(beams: BeamSet, obj_map: ObjectMap, config: ObjectMapConfig, trace: EmTrace | None = None
+                ) -> ObjectMap:
     """Walls once more over the final step's beams (by default every scan and beam of the log), once the
     structure has converged: Hough proposals that now pay for themselves (propose_walls), then sweeps of
     eq. (9) over all walls while the log posterior rises (at most ``final_recut_sweeps``); then the
@@ -586,12 +590,12 @@ def final_walls(beams: BeamSet, obj_map: ObjectMap, config: ObjectMapConfig) -> 
     is ~stride² smaller than the log's against the paper's ρL, ρS (set for the paper's full data): sparse
     tails and short walls (e.g. a room's side wall seen through a doorway) were cut.
     """
-    state = _recut_sweeps(beams, evaluate(beams, propose_walls(beams, obj_map, config), config), config)
+    state = _recut_sweeps(beams, evaluate(beams, propose_walls(beams, obj_map, config), config), config, trace)
     best, best_log_posterior = state.obj_map, state.log_posterior
     if config.final_recut_sweeps:
         grown = reacquire_occluded(beams, state, config)
         del state  # its per-beam arrays are not needed while the trial runs (long logs: hundreds of MB)
-        trial = _recut_sweeps(beams, evaluate(beams, grown, config), config)
+        trial = _recut_sweeps(beams, evaluate(beams, grown, config), config, trace)
         if trial.log_posterior > best_log_posterior:
             best = trial.obj_map
     return replace(best, walls=[w for w in best.walls if w.segments.shape[0]])

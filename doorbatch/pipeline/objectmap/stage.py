@@ -7,9 +7,10 @@
 
 from __future__ import annotations
 
+import logging
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -32,6 +33,9 @@ from doorbatch.pipeline.objectmap.search import (
     final_walls,
     search_structure,
 )
+from doorbatch.progress import progress_bar
+
+log = logging.getLogger(__name__)
 
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
@@ -381,19 +385,21 @@ def stride_weighted(config: ObjectMapConfig) -> ObjectMapConfig:
 
 
 def build_object_map(beams: BeamSet, config: ObjectMapConfig, classes: ClassParams | None = None,
-                     final: FinalStepBeams | None = None, seeds: Sequence[DoorCandidate] = ()) -> ObjectMapResult:
+                     final: FinalStepBeams | None = None, seeds: Sequence[DoorCandidate] = (),
+                     progress: Callable[[int], object] | None = None) -> ObjectMapResult:
     """The em stage on beams (see :func:`collect_beams`); ``classes`` given: applied without relearning.
     ``final`` (:func:`final_step_beams`) given and ``config.final_recut_sweeps`` > 0: the converged
     walls are proposed and re-cut once more over them (:func:`final_walls`). ``seeds``: doors found by motion
-    (:func:`~doorbatch.pipeline.objectmap.search.search_structure`)."""
+    (:func:`~doorbatch.pipeline.objectmap.search.search_structure`). ``progress``: called with 1 after every EM
+    iteration and final sweep."""
     t0 = time.perf_counter()
-    trace = EmTrace()
+    trace = EmTrace(on_step=progress)
     if config.stride_weighted_prior:
         config = stride_weighted(config)
     state = search_structure(beams, config, classes, trace, seeds)
     final = final if config.final_recut_sweeps > 0 else None
     if final is not None:
-        state = evaluate(beams, final_walls(final.beams, state.obj_map, config), config)
+        state = evaluate(beams, final_walls(final.beams, state.obj_map, config, trace), config)
     state, doors = without_plain_still_doors(beams, state, describe_doors(beams, state, config), config)
     return ObjectMapResult(state.obj_map, doors, state.log_posterior, len(beams), trace, time.perf_counter() - t0,
                            (config.scan_stride, config.beam_stride), 0 if final is None else len(final.beams),
@@ -407,5 +413,9 @@ def em_stage(recordings: Sequence[Recording], passes: Sequence[PassPoses], confi
     em = with_strides(recordings, config.em)
     seeds = [DoorCandidate(np.array([d.hinge_x, d.hinge_y]), d.closed_yaw, "grid", d.n_observations)
              for d in grid_doors] if config.em.seed_grid_doors else []
-    return build_object_map(collect_beams(recordings, passes, em), em, classes,
-                            final_step_beams(recordings, passes, em), seeds)
+    beams = collect_beams(recordings, passes, em)
+    final = final_step_beams(recordings, passes, em)
+    log.info("em stage: %d beams (every %d. scan, %d. beam), %d in the final wall step", len(beams), em.scan_stride,
+             em.beam_stride, 0 if final is None else len(final.beams))
+    with progress_bar(None, "map: em stage (--stages grid skips it)", unit="step") as bar:
+        return build_object_map(beams, em, classes, final, seeds, progress=bar.update)

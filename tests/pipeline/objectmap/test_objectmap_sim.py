@@ -4,6 +4,7 @@ between passes and one that never moves (painted like the moving one), three pas
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +18,13 @@ from doorbatch.io.recording import load_recording
 from doorbatch.pipeline.mapping import pass_poses
 from doorbatch.pipeline.objectmap.beams import beams_from_scans
 from doorbatch.pipeline.objectmap.model import ClassParams
-from doorbatch.pipeline.objectmap.stage import ObjectMapResult, build_object_map, collect_beams, pass_scans
+from doorbatch.pipeline.objectmap.stage import (
+    ObjectMapResult,
+    build_object_map,
+    collect_beams,
+    final_step_beams,
+    pass_scans,
+)
 from doorbatch.sim.simulate import run_simulation
 
 WORLD = """
@@ -79,11 +86,22 @@ def short_range_site(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
     return sorted(folder.glob("map_pass*.mcap"))
 
 
-def _em(logs: list[Path], classes: ClassParams | None = None, **em: object) -> ObjectMapResult:
+def _em(logs: list[Path], classes: ClassParams | None = None, progress: Callable[[int], object] | None = None,
+        **em: object) -> ObjectMapResult:
     config = DoorbatchConfig.model_validate({"em": {"scan_stride": 1, "beam_stride": 1, **em}})
     recs = [load_recording(p, config, with_colors=True) for p in logs]
-    beams = collect_beams(recs, [pass_poses(r, "reference", config) for r in recs], config.em)
-    return build_object_map(beams, config.em, classes)
+    passes = [pass_poses(r, "reference", config) for r in recs]
+    beams = collect_beams(recs, passes, config.em)
+    final = final_step_beams(recs, passes, config.em) if progress is not None else None
+    return build_object_map(beams, config.em, classes, final, progress=progress)
+
+
+def test_the_em_stage_reports_each_iteration_and_final_sweep(tiny_site: list[Path]) -> None:
+    """A long em stage showed nothing for minutes: a progress bar now advances by every EM iteration and every
+    sweep of the final wall step."""
+    steps: list[int] = []
+    result = _em(tiny_site, progress=steps.append, use_color=False)
+    assert len(steps) > len(result.trace.seconds) >= 2 and set(steps) == {1}
 
 
 @pytest.fixture(scope="module")
