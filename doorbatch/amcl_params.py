@@ -13,7 +13,8 @@ becomes the ``localize`` key of the same name, and the ones the file leaves out 
 - AMCL resamples on every ``resample_interval``-th update without an effective-sample-size test, so
   ``resample_neff_ratio`` becomes 1.0; it skips a beam by the share of the particles that explain it
   (``beam_skip_support: particles``); its recovery averages the weights per particle weighed
-  (``recovery_average_per_particle``: ``pf_update_sensor``'s ``w_avg /= set->sample_count``).
+  (``recovery_average_per_particle``: ``pf_update_sensor``'s ``w_avg /= set->sample_count``); and it publishes
+  the mean of its heaviest cluster of particles (``pose_estimate: heaviest_cluster``).
 - ``base_frame_id``, ``odom_frame_id``, ``global_frame_id`` and ``scan_topic`` set ``frames`` and ``topics``
   only where the file gives them (nav2's default base frame, base_footprint, is often not in a log's tree).
 - An initial pose (``set_initial_pose``) is not a config value here: the warning names the ``--init`` to pass.
@@ -307,6 +308,7 @@ def translate_amcl_parameters(params: Mapping[str, Any], source: str = "config")
     localize["resample_neff_ratio"] = 1.0  # nav2_amcl resamples every resample_interval updates, no Neff test
     localize["beam_skip_support"] = "particles"  # and counts the particles that explain a beam
     localize["recovery_average_per_particle"] = True  # pf_update_sensor: w_avg /= set->sample_count
+    localize["pose_estimate"] = "heaviest_cluster"  # amcl publishes its heaviest cluster's mean
     warnings: list[str] = []
 
     model = str(merged["robot_model_type"])

@@ -500,6 +500,10 @@ class LocalizeConfig(Section):
     pf_z: float = Field(0.99, gt=0.0)  # used as the normal quantile itself, as nav2_amcl does (pop_z = pf_z)
     kld_bin_xy_m: float = Field(0.5, gt=0.0)
     kld_bin_yaw_deg: float = Field(10.0, gt=0.0)
+    # The pose each update reports: "mean", the weighted mean of all particles (paper 000); "heaviest_cluster",
+    # AMCL's: the weighted mean of the cluster of touching KLD bins with the most weight (localize/clusters.py),
+    # which a Nav2 or ROS 1 amcl parameter file selects. Both report the whole set's covariance.
+    pose_estimate: Literal["mean", "heaviest_cluster"] = "mean"
     # Resample with low-variance sampling when Neff < resample_neff_ratio * N (1.0: every update).
     resample_neff_ratio: float = Field(0.5, gt=0.0, le=1.0)
     # ... and only on every resample_interval-th update (Nav2 resample_interval; Nav2 has no Neff test, i.e. ratio

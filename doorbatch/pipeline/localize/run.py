@@ -32,6 +32,7 @@ from doorbatch.io.pose_topic import StartPose, read_start_poses
 from doorbatch.io.recording import PoseSeries, Recording, load_recording
 from doorbatch.io.roles import is_initial_pose_topic
 from doorbatch.maps import DoorSet, OccupancyMap
+from doorbatch.pipeline.localize.clusters import heaviest_cluster_mean
 from doorbatch.pipeline.localize.convergence import ConvergenceMonitor, multimodal, scan_fit
 from doorbatch.pipeline.localize.door_geometry import subset_doors, with_closed_in_range
 from doorbatch.pipeline.localize.likelihood_field import (
@@ -416,6 +417,8 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
         last_s = stamp_s
         p = state.particles
         mean, cov = p.mean_and_covariance()
+        if lc.pose_estimate == "heaviest_cluster":
+            mean = heaviest_cluster_mean(p, lc.kld_bin_xy_m, math.radians(lc.kld_bin_yaw_deg))
         dmean, dstd = p.door_estimate()
         fit = scan_fit(lmap.field, mean, rec.scans.hits_base(i), lc.lost_fit_distance_m)
         monitor = monitor.update(int(scan.stamp_ns), odom[i], p, lc, fit)
