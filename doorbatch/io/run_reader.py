@@ -197,7 +197,8 @@ def read_run_dir(run_dir: Path, config: DoorbatchConfig, name: str | None = None
         lost_ns=None if "lost_after_s" not in extra else tuple(  # None: a run from before the lost test
             int(stamps[0]) + round(float(t) * 1e9) for t in extra["lost_after_s"] or ()),
         map_doors=read_door_set(maps[0]) if maps and maps[0].is_dir() else None, reference=reference, truth=truth,
-        params=dict(params) if isinstance(params, dict) else {}, map_path=str(inputs[1]) if len(inputs) > 1 else None)
+        params=dict(params) if isinstance(params, dict) else {}, map_path=str(inputs[1]) if len(inputs) > 1 else None,
+        config=dict(manifest.config) if manifest else None)
 
 
 def read_trajectory_file(path: Path, name: str | None = None) -> RunTables:

@@ -29,6 +29,7 @@ Per door map with a truth: ``door_precision``, ``door_recall``, ``door_hinge_err
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 from collections import defaultdict
@@ -110,17 +111,26 @@ class RunTables:
     params: dict[str, Any] = field(default_factory=dict)
     map_path: str | None = None
     lost_ns: tuple[int, ...] | None = None  # stamps at which the run found itself lost; None: not known
+    # The resolved config the run was made with (its manifest's ``config``); None: not known (a run in memory,
+    # another localizer's trajectory).
+    config: dict[str, Any] | None = None
 
 
-def with_setups_told_apart(runs: Sequence[RunTables]) -> list[RunTables]:
-    """Runs outside an experiment (no params) of one log and method that differ in ``--init`` or in their map
-    get those as params, so that the summary does not average them as if they were seeds of one setup."""
-    setups: dict[tuple[str, str], set[tuple[str, str | None]]] = defaultdict(set)
+def with_setups_told_apart(runs: Sequence[RunTables], max_config_keys: int) -> list[RunTables]:
+    """Runs outside an experiment (no params) of one log and method that differ in ``--init``, in their map or in
+    their resolved config (seeds aside) get those as params, so that the summary does not average them as if they
+    were seeds of one setup. A config difference is told by :func:`config_params`: the keys, among those that differ
+    between the runs, where the run leaves doorbatch's defaults (at most ``max_config_keys`` of them)."""
+    setups: dict[tuple[str, str], set[tuple[str, str | None, str | None]]] = defaultdict(set)
+    flat = {id(run): None if run.config is None else _flat_config(run.config) for run in runs}
     for run in runs:
         if not run.params:
-            setups[(run.log, run.method)].add((run.init, run.map_path))
+            setups[(run.log, run.method)].add((run.init, run.map_path, _config_key(flat[id(run)])))
+    differing = {key: _differing_keys([flat[id(r)] for r in runs if not r.params and (r.log, r.method) == key])
+                 for key, seen in setups.items() if len({c for *_, c in seen}) > 1}
     maps = {r.map_path for r in runs if r.map_path is not None}
     label = _short_labels(maps)
+    defaults = _flat_config(DoorbatchConfig().as_dict())
     out = []
     for run in runs:
         seen = setups.get((run.log, run.method), set())
@@ -128,12 +138,64 @@ def with_setups_told_apart(runs: Sequence[RunTables]) -> list[RunTables]:
             out.append(run)
             continue
         params: dict[str, Any] = {}
-        if len({init for init, _ in seen}) > 1:
+        if len({init for init, _, _ in seen}) > 1:
             params["init"] = run.init
-        if len({m for _, m in seen}) > 1:
+        if len({m for _, m, _ in seen}) > 1:
             params["map"] = label.get(run.map_path) if run.map_path is not None else None
+        if (run.log, run.method) in differing:
+            params.update(config_params(flat[id(run)], differing[(run.log, run.method)], defaults, max_config_keys))
         out.append(replace(run, params=params))
     return out
+
+
+# Config keys that do not tell setups apart: the seed (runs that differ only in it are averaged) and the method
+# (a row of its own already; ``--method`` does not change ``localize.method``).
+_NOT_A_SETUP = ("seed", "localize.method")
+
+
+def _flat_config(tree: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    """A config tree as dotted keys (``localize.sigma_hit_m``) → values, without the keys of :data:`_NOT_A_SETUP`
+    (a ``seed`` at any level)."""
+    flat: dict[str, Any] = {}
+    for key, value in tree.items():
+        path = f"{prefix}{key}"
+        if isinstance(value, dict):
+            flat.update(_flat_config(value, f"{path}."))
+        elif key != "seed" and path not in _NOT_A_SETUP:
+            flat[path] = value
+    return flat
+
+
+def _config_key(flat: dict[str, Any] | None) -> str | None:
+    """A flat config as canonical text (None: not known): equal configs, equal keys."""
+    return None if flat is None else params_json(flat)
+
+
+def _differing_keys(configs: Sequence[dict[str, Any] | None]) -> list[str]:
+    """The keys whose value is not the same in all known ``configs`` (missing counts as a value), sorted."""
+    known = [c for c in configs if c is not None]
+    keys = sorted({k for c in known for k in c})
+    return [k for k in keys if len({params_json({"v": c.get(k)}) for c in known}) > 1]
+
+
+def config_params(flat: dict[str, Any] | None, differing: Sequence[str], defaults: dict[str, Any],
+                  max_keys: int) -> dict[str, Any]:
+    """What tells a run's config apart in the params column: each of the ``differing`` keys where it leaves the
+    ``defaults`` (``{"localize.laser_model": "likelihood_field_prob"}``); ``{"config": "default"}`` where it leaves
+    none; ``{"config": "unknown"}`` for a run whose config is not known. Beyond ``max_keys`` keys, the first of
+    them and ``config`` = a short hash of the config with the count of keys left out, so that two configs never
+    share a label. Two runs whose configs differ get different params (one of them leaves the defaults at a key
+    where they differ)."""
+    if flat is None:
+        return {"config": "unknown"}
+    own = {k: flat.get(k) for k in differing if params_json({"v": flat.get(k)}) != params_json({"v": defaults.get(k)})}
+    if not own:
+        return {"config": "default"}
+    if len(own) <= max_keys:
+        return own
+    shown = dict(list(own.items())[:max_keys])
+    digest = hashlib.sha256(params_json(flat).encode()).hexdigest()[:8]
+    return {**shown, "config": f"{digest} (+{len(own) - max_keys} keys)"}
 
 
 def _short_labels(paths: set[str]) -> dict[str, str]:
@@ -414,7 +476,7 @@ def evaluate_runs(runs: Sequence[RunTables], config: DoorbatchConfig, *,
     rows: list[MetricRow] = []
     series: list[ErrorSeries] = []
     door_series: list[DoorStateSeries] = []
-    for run in with_setups_told_apart(runs):
+    for run in with_setups_told_apart(runs, cfg.params_max_config_keys):
         if len(run.stamps_ns) == 0:
             raise PipelineError(f"run {run.name}: empty trajectory")
         ref = reference if reference is not None else run.reference

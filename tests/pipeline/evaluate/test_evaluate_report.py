@@ -161,9 +161,9 @@ def _result(log: Path, stamps: np.ndarray, pose: np.ndarray, method: str, door_a
 
 
 def _write_run(folder: Path, log: Path, stamps: np.ndarray, pose: np.ndarray, method: str,
-               door_angle: float) -> None:
+               door_angle: float, config: DoorbatchConfig | None = None) -> None:
     write_run_tables(folder, _result(log, stamps, pose, method, door_angle))
-    manifest = Manifest.start(DoorbatchConfig().as_dict(), [log], command="localize", method=method,
+    manifest = Manifest.start((config or DoorbatchConfig()).as_dict(), [log], command="localize", method=method,
                               init="reference")
     manifest.extra.update({"converged_after_s": 0.0, "ambiguous": False, "lost_after_s": []})
     manifest.write(folder / "manifest.json")
@@ -390,6 +390,42 @@ def test_runs_of_one_log_on_different_maps_or_starts_are_not_averaged_together()
     twins = [run("d", 0.1, "reference", "/x/site_a/map/map.yaml"), run("e", 0.2, "reference", "/x/site_b/map/map.yaml")]
     table = summary_table(evaluate_runs(twins, DoorbatchConfig()))
     assert sorted(labels[2] for labels, _ in table.rows) == ["map=site_a/map", "map=site_b/map"]
+
+
+def test_runs_made_with_different_configs_are_not_averaged_as_seeds(tmp_path: Path) -> None:
+    """Three MCL runs of one log with one seed and three configs (the defaults, a Nav2 params file, another beam
+    combination) were one row "mean over seeds": each is a row of its own now, named by the keys where it leaves
+    the defaults; a run that differs from another only in its seed still averages with it."""
+    from doorbatch.pipeline.evaluate.stage import evaluate_run_dirs
+
+    stamps, ref = _straight()
+    log = tmp_path / "normal.mcap"
+    log.write_bytes(b"not read")
+    write_tum(tmp_path / "normal.truth.tum", stamps, *ref.T)
+    nav2 = [f"localize.alpha{i}=0.2" for i in range(1, 5)] + ["localize.z_hit=0.5", "localize.z_rand=0.5"]
+    setups = {"normal_mcl_def": (DoorbatchConfig(), 0.005),
+              "normal_mcl_def_s1": (load_config(overrides=["seed=1"]), 0.007),
+              "normal_mcl_nav2": (load_config(overrides=nav2), 0.029),
+              "normal_mcl_prob": (load_config(overrides=["localize.beam_combination=amcl"]), 0.112)}
+    for name, (config, dy) in setups.items():
+        _write_run(tmp_path / "runs" / name, log, stamps, ref + np.array([0.0, dy, 0.0]), "mcl", 0.0, config)
+    ev = evaluate_run_dirs([tmp_path / "runs" / n for n in setups], tmp_path / "report", DoorbatchConfig())
+    params = {r.run: r.params for r in ev.metrics if r.metric == "ape_trans_rmse"}
+    assert params["normal_mcl_def"] == params["normal_mcl_def_s1"] == {"config": "default"}
+    assert params["normal_mcl_prob"] == {"localize.beam_combination": "amcl"}
+    # six keys leave the defaults: the first four, and a hash that keeps the label apart from any other config's
+    assert {k: v for k, v in params["normal_mcl_nav2"].items() if k != "config"} == {
+        "localize.alpha1": 0.2, "localize.alpha2": 0.2, "localize.alpha3": 0.2, "localize.alpha4": 0.2}
+    assert params["normal_mcl_nav2"]["config"].endswith("(+2 keys)")
+    table = summary_table(ev)
+    rmse = table.value_columns.index("ape_trans_rmse")
+    rows = {labels[2]: (labels[3], values[rmse]) for labels, values in table.rows}
+    assert len(rows) == 3
+    assert rows["config=default"] == ("2", pytest.approx(0.006))
+    assert rows["localize.beam_combination=amcl"] == ("1", pytest.approx(0.112))
+    stored = read_table("metrics", tmp_path / "report" / "metrics.parquet").to_pydict()
+    assert json.loads(next(p for r, p in zip(stored["run"], stored["params"], strict=True)
+                           if r == "normal_mcl_prob")) == {"localize.beam_combination": "amcl"}
 
 
 def test_a_log_without_truth_files_gives_its_reference_topic(tmp_path: Path) -> None:
