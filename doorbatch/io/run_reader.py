@@ -78,7 +78,8 @@ def read_reference(path: Path, config: DoorbatchConfig) -> ReferenceTrajectory:
     rec = load_recording(path, config)
     if rec.reference is None:
         raise InputDataError("--reference: the log has no reference pose topic", path=path)
-    return ReferenceTrajectory(rec.reference.stamps_ns, rec.reference.poses, tuple(rec.warnings))
+    return ReferenceTrajectory(rec.reference.stamps_ns, rec.reference.poses, tuple(rec.warnings),
+                               independent=not rec.reference_is_odometry)
 
 
 def _laserless_reference_topic(path: Path, config: DoorbatchConfig) -> tuple[Path, str] | None:

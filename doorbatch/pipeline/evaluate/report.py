@@ -64,11 +64,14 @@ Int64Array = npt.NDArray[np.int64]
 @dataclass(frozen=True)
 class ReferenceTrajectory:
     """Reference poses (ground truth or SLAM): (N,) stamps in ns, (N, 3) x, y, yaw in the map frame; the
-    warnings of reading them from their log (e.g. repaired CARMEN stamps)."""
+    warnings of reading them from their log (e.g. repaired CARMEN stamps). ``independent`` is False where the
+    reference is the log's odometry moved rigidly (``Recording.reference_is_odometry``: a raw CARMEN log's laser
+    poses): a run's own such reference gets no APE, RPE or global success, which would score the odometry."""
 
     stamps_ns: Int64Array
     pose: FloatArray
     warnings: tuple[str, ...] = ()
+    independent: bool = True
 
 
 @dataclass(frozen=True)
@@ -319,6 +322,7 @@ class Evaluation:
     success: list[SuccessCurve]
     title: str = "doorbatch evaluation"
     left_out: tuple[str, ...] = ()  # batch steps that failed or were blocked: no rows of them (doorbatch run)
+    warnings: tuple[str, ...] = ()  # what the metrics leave out or cannot tell, and why (for the manifest)
 
     def value(self, run: str, metric: str) -> float:
         """The value of one metric of one run (NaN when absent)."""
@@ -466,8 +470,10 @@ def evaluate_runs(runs: Sequence[RunTables], config: DoorbatchConfig, *,
                   maps: Sequence[MapTables] = ()) -> Evaluation:
     """Metrics and plot data of localization runs and door maps (see the module docstring).
 
-    A run with no reference gets only its convergence metrics; a run whose stamps match no reference pose
-    within ``evaluate.max_time_diff_s`` raises.
+    A run with no reference gets only its convergence metrics, and so does a run whose own reference is not
+    independent (its log's odometry moved rigidly, :attr:`ReferenceTrajectory.independent`; a warning says so);
+    a ``reference`` given here is used whatever it is. A run whose stamps match no reference pose within
+    ``evaluate.max_time_diff_s`` raises.
 
     Raises:
         PipelineError: a run and its reference have no pose within the time tolerance.
@@ -476,10 +482,16 @@ def evaluate_runs(runs: Sequence[RunTables], config: DoorbatchConfig, *,
     rows: list[MetricRow] = []
     series: list[ErrorSeries] = []
     door_series: list[DoorStateSeries] = []
+    warnings: list[str] = []
     for run in with_setups_told_apart(runs, cfg.params_max_config_keys):
         if len(run.stamps_ns) == 0:
             raise PipelineError(f"run {run.name}: empty trajectory")
         ref = reference if reference is not None else run.reference
+        if reference is None and ref is not None and not ref.independent:
+            warnings.append(f"run {run.name}: its log's reference is the odometry moved rigidly, no independent "
+                            "reference: APE, RPE and global success are not reported (convergence metrics only); "
+                            "give --reference for a truth")
+            ref = None
         alignment = None
         if ref is not None:
             try:
@@ -500,7 +512,8 @@ def evaluate_runs(runs: Sequence[RunTables], config: DoorbatchConfig, *,
         door_series += state_series
     for door_map in maps:
         rows += _map_rows(door_map, truth if truth is not None else door_map.truth, config)
-    return Evaluation(rows, series, door_series, along_corridor(series, cfg.along_x_bin_m), success_curves(rows))
+    return Evaluation(rows, series, door_series, along_corridor(series, cfg.along_x_bin_m), success_curves(rows),
+                      warnings=tuple(warnings))
 
 
 

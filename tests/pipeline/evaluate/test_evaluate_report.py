@@ -444,6 +444,36 @@ def test_a_log_without_truth_files_gives_its_reference_topic(tmp_path: Path) -> 
     assert read_run_dir(tmp_path / "run", DoorbatchConfig(), find_reference=False).reference is None
 
 
+def test_a_reference_that_is_the_odometry_again_gives_convergence_metrics_only(tmp_path: Path) -> None:
+    """A raw CARMEN log's reference is its odometry moved rigidly: a run was scored against that odometry (APE RMSE
+    7 m, global success 0 % for a run 2 cm off the truth) while a warning said there is no independent reference.
+    Its own reference now gives convergence metrics only, and the warning says so; ``--reference`` is still used."""
+    from tests.conftest import sample_messages, write_messages
+
+    log = write_messages(tmp_path / "raw.mcap", sample_messages(n_scans=30))  # /ground_truth = /odom + (1, 0, 0)
+    i = np.arange(30)
+    stamps = T0 + 100_000_000 * (i + 1)
+    truth = np.stack([0.1 * i + 1, 0.02 * i, 0.01 * i], axis=1)
+    _write_run(tmp_path / "run", log, stamps, truth + np.array([0.0, 0.25, 0.0]), "mcl", 0.0)
+    out = tmp_path / "report"
+    assert main(["evaluate", str(tmp_path / "run"), "-o", str(out), "-q"]) == 0
+    metrics = set(read_table("metrics", out / "metrics.parquet").to_pydict()["metric"])
+    assert "converged" in metrics and not any(m.startswith(("ape_", "rpe_")) for m in metrics), metrics
+    warnings = Manifest.read(out / "manifest.json").warnings
+    assert any("no independent reference" in w and "APE, RPE and global success are not reported" in w
+               for w in warnings), warnings
+    given = tmp_path / "given"
+    assert main(["evaluate", str(tmp_path / "run"), "-o", str(given), "--reference", str(log), "-q"]) == 0
+    table = read_table("metrics", given / "metrics.parquet").to_pydict()
+    rmse = [v for m, v in zip(table["metric"], table["value"], strict=True) if m == "ape_trans_rmse"]
+    assert rmse == pytest.approx([0.25], abs=1e-6)
+    again = ReferenceTrajectory(stamps, truth, independent=False)  # a global start: no success judged against it
+    run = RunTables("g", "raw.mcap", "mcl", stamps, truth, init="global", converged_ns=int(stamps[0]), reference=again)
+    ev = evaluate_runs([run], DoorbatchConfig())
+    assert math.isnan(ev.value("g", "global_success")) and ev.value("g", "converged") == 1.0 and ev.warnings
+    assert evaluate_runs([run], DoorbatchConfig(), reference=again).value("g", "global_success") == 1.0
+
+
 def test_runs_of_one_log_read_its_reference_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """An experiment has tens of runs per log: the log's reference (a whole log read) is read once for all."""
     import doorbatch.io.run_reader as run_reader
