@@ -391,12 +391,24 @@ def _door_state_part(run: RunTables, truth: SimTruth | None, cfg: EvaluateConfig
     return rows, [DoorStateSeries(run.name, run.log, run.method, (series.stamps_ns - t0) / 1e9, series.error_rad)]
 
 
-def _map_rows(door_map: MapTables, truth: SimTruth | None, cfg: DoorbatchConfig) -> list[MetricRow]:
+def _map_rows(door_map: MapTables, truth: SimTruth | None, cfg: DoorbatchConfig) -> tuple[list[MetricRow], list[str]]:
+    """A door map's rows against the truth, and warnings. A truth without ``leaf_observations`` (written by hand)
+    does not tell which doors the laser saw move: every truth door is then one the map should have (the recall of
+    a grid map, which finds moved doors only, is a lower bound), and recall over moved and never-moved doors is
+    not given."""
     if truth is None:
-        return []
+        return [], []
     truth_set, moved = truth_doors(truth, math.radians(cfg.doors.min_opening_deg))
     max_m = cfg.evaluate.door_match_max_hinge_m
-    if door_map.source == "em":  # EM also finds doors that never moved (paper 001): every truth door counts
+    warnings = []
+    if truth.leaf_observations is None:
+        warnings.append(f"map {door_map.name}: the truth has no leaf_observations (which doors the laser saw at two "
+                        f"angles): its doors are scored by position, all {len(moved)} counted as doors the map should "
+                        "have; recall over moved and never-moved doors cannot be told")
+        moved = np.ones(len(moved), dtype=bool)
+        score = score_doors(door_map.doors, truth_set, moved, max_m)
+        extra = []
+    elif door_map.source == "em":  # EM also finds doors that never moved (paper 001): every truth door counts
         score = score_doors(door_map.doors, truth_set, np.ones(len(moved), dtype=bool), max_m)
         found = np.zeros(len(moved), dtype=bool)
         found[[j for _, j in score.matches]] = True
@@ -416,7 +428,7 @@ def _map_rows(door_map: MapTables, truth: SimTruth | None, cfg: DoorbatchConfig)
               ("door_range_error_mean", mean(score.range_error_rad), "rad"),
               ("doors_detected", float(len(door_map.doors)), "count"), ("doors_truth", float(moved.sum()), "count"),
               *extra]
-    return [MetricRow(door_map.name, "", "map", k, float(v), u, door_map.params) for k, v, u in values]
+    return [MetricRow(door_map.name, "", "map", k, float(v), u, door_map.params) for k, v, u in values], warnings
 
 
 def _fraction(found: npt.NDArray[np.bool_]) -> float:
@@ -511,7 +523,9 @@ def evaluate_runs(runs: Sequence[RunTables], config: DoorbatchConfig, *,
         rows += state_rows
         door_series += state_series
     for door_map in maps:
-        rows += _map_rows(door_map, truth if truth is not None else door_map.truth, config)
+        map_rows, map_warnings = _map_rows(door_map, truth if truth is not None else door_map.truth, config)
+        rows += map_rows
+        warnings += map_warnings
     return Evaluation(rows, series, door_series, along_corridor(series, cfg.along_x_bin_m), success_curves(rows),
                       warnings=tuple(warnings))
 

@@ -520,3 +520,34 @@ def test_em_door_maps_count_the_doors_that_never_moved(tmp_path: Path) -> None:
     # the same doors as a grid map: the never-moved ones are not what the grid stage may report
     assert got[("grid", "door_precision")] == pytest.approx(moved.sum() / len(keep))
     assert ("grid", "door_recall_never_moved") not in got
+
+
+def test_a_truth_without_leaf_observations_scores_doors_by_position(tmp_path: Path) -> None:
+    """A hand-written truth lacked ``leaf_observations``: every truth door counted as never moved, and a map whose
+    doors were all within 1 cm got precision 0, recall 1 and no hinge errors. Every truth door is now one the map
+    should have, matched by position, and a warning says moved and never-moved recall cannot be told."""
+    import yaml
+
+    from doorbatch.io.sim_truth import read_truth
+
+    doc = yaml.safe_load((SAMPLE_LOGS / "map.truth.yaml").read_text())
+    del doc["leaf_observations"]
+    doc["world"]["doors"] = doc["world"]["doors"][:3]
+    doc["door_angles"]["rows"] = [r for r in doc["door_angles"]["rows"] if r[1] < 3]
+    world = tmp_path / "truth.yaml"
+    world.write_text(yaml.safe_dump(doc))
+    truth = read_truth(world)
+    hinge = np.array([[d.hinge_x + 0.01, d.hinge_y] for d in truth.doors])
+    doors = DoorSet(hinge, np.array([d.length for d in truth.doors]), np.array([d.closed_yaw for d in truth.doors]),
+                    np.zeros(3), np.full(3, 1.2))
+    out = tmp_path / "report"
+    assert main(["evaluate", str(_map_dir(tmp_path / "map", doors)), "--world", str(world), "-o", str(out), "-q"]) == 0
+    table = read_table("metrics", out / "metrics.parquet").to_pydict()
+    got = dict(zip(table["metric"], table["value"], strict=True))
+    assert got["door_precision"] == 1.0 and got["door_recall"] == 1.0 and got["doors_truth"] == 3
+    assert got["door_hinge_error_mean"] == pytest.approx(0.01)
+    assert "door_recall_moved" not in got and "door_recall_never_moved" not in got
+    warnings = Manifest.read(out / "manifest.json").warnings
+    assert any("no leaf_observations" in w and "cannot be told" in w for w in warnings), warnings
+    # not said is not "the laser saw no leaf" (an empty list), and is written back as not said
+    assert truth.leaf_observations is None and "leaf_observations" not in truth.to_dict()
