@@ -135,6 +135,36 @@ def test_door_state_error_counts_recently_observed_doors_only() -> None:
     assert door_state_errors(stamps, np.zeros(100, np.int32), est, observed, far, truth, 0.3, 0).error_rad.size == 0
 
 
+def test_door_state_error_over_all_matched_doors_shows_doors_never_observed() -> None:
+    """A loc_open RBPF run showed door_state_error_mean 2.4° while two doors sat 136° and 59° off: never observed
+    (their true angle lies outside the mapped range), they never counted. door_state_error_all_mean counts every
+    matched door at every update; door_state_error_mean keeps its definition."""
+    from doorbatch.io.sim_truth import TruthDoor
+    from doorbatch.pipeline.evaluate.report import DoorStateTable
+
+    doors = tuple(TruthDoor(k, f"d{k}", 5.0 * (k + 1), 1.0, 0.9, 0.0, 1, 1.5, 2.0, (0.5,) * 3, (0.1,) * 3)
+                  for k in range(3))
+    truth = SimTruth(generator={}, start_ns=T0, end_ns=T0 + 100 * DT, files={}, world_name="w", wall_height_m=2.0,
+                     segments=np.zeros((0, 2, 2)), segment_kinds=(), doors=doors, passes=(),
+                     angle_stamp_ns=np.full(3, T0), angle_door_id=np.arange(3), angle_rad=np.zeros(3))
+    map_doors = DoorSet(np.array([[5.0, 1.0], [10.0, 1.0], [15.0, 1.0]]), np.full(3, 0.9), np.zeros(3), np.zeros(3),
+                        np.full(3, 0.5))
+    stamps, ref = _straight(50)
+    off = np.radians([2.0, 136.0, 59.0])
+    states = DoorStateTable(np.repeat(stamps, 3), np.tile(np.arange(3, dtype=np.int32), 50), np.tile(off, 50),
+                            np.tile([True, False, False], 50))
+    run = RunTables("r", "loc_open.mcap", "rbpf", stamps, ref, door_states=states, map_doors=map_doors, truth=truth)
+    ev = evaluate_runs([run], DoorbatchConfig())
+    assert ev.value("r", "door_state_error_mean") == pytest.approx(math.radians(2.0))
+    assert ev.value("r", "door_state_error_all_mean") == pytest.approx(np.mean(off))
+    assert next(r.unit for r in ev.metrics if r.metric == "door_state_error_all_mean") == "rad"
+    assert "door_state_error_all_mean" in summary_table(ev).value_columns
+    unseen = replace(run, door_states=replace(states, observed=np.zeros(150, dtype=bool)))  # no door ever observed
+    ev = evaluate_runs([unseen], DoorbatchConfig())
+    assert math.isnan(ev.value("r", "door_state_error_mean"))
+    assert ev.value("r", "door_state_error_all_mean") == pytest.approx(np.mean(off))
+
+
 def test_error_along_the_corridor_averages_runs_per_bin() -> None:
     stamps, ref = _straight(101)  # x from 0 to 5 m
     runs = [RunTables(f"s{k}", "l", "mcl", stamps, ref + np.array([0, 0.1 * (k + 1), 0]), reference=ReferenceTrajectory(
