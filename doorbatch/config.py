@@ -651,6 +651,9 @@ class EvaluateConfig(Section):
     global_success_max_reference_gap_s: float = Field(0.5, gt=0.0)
     # Bin width of the error-along-the-corridor curves (paper 000 Figs. 5-7).
     along_x_bin_m: float = Field(0.5, gt=0.0)
+    # Runs of one log and method made with different configs are told apart in the params column by the config
+    # keys where they differ (and leave the defaults); beyond this many, the first ones and a short hash.
+    params_max_config_keys: int = Field(4, ge=1)
 
 
 class ObjectMapConfig(Section):

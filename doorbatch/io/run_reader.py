@@ -78,7 +78,8 @@ def read_reference(path: Path, config: DoorbatchConfig) -> ReferenceTrajectory:
     rec = load_recording(path, config)
     if rec.reference is None:
         raise InputDataError("--reference: the log has no reference pose topic", path=path)
-    return ReferenceTrajectory(rec.reference.stamps_ns, rec.reference.poses, tuple(rec.warnings))
+    return ReferenceTrajectory(rec.reference.stamps_ns, rec.reference.poses, tuple(rec.warnings),
+                               independent=not rec.reference_is_odometry)
 
 
 def _laserless_reference_topic(path: Path, config: DoorbatchConfig) -> tuple[Path, str] | None:
@@ -197,7 +198,8 @@ def read_run_dir(run_dir: Path, config: DoorbatchConfig, name: str | None = None
         lost_ns=None if "lost_after_s" not in extra else tuple(  # None: a run from before the lost test
             int(stamps[0]) + round(float(t) * 1e9) for t in extra["lost_after_s"] or ()),
         map_doors=read_door_set(maps[0]) if maps and maps[0].is_dir() else None, reference=reference, truth=truth,
-        params=dict(params) if isinstance(params, dict) else {}, map_path=str(inputs[1]) if len(inputs) > 1 else None)
+        params=dict(params) if isinstance(params, dict) else {}, map_path=str(inputs[1]) if len(inputs) > 1 else None,
+        config=dict(manifest.config) if manifest else None)
 
 
 def read_trajectory_file(path: Path, name: str | None = None) -> RunTables:

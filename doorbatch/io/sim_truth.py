@@ -21,6 +21,7 @@ Written next to every simulated log by :func:`doorbatch.sim.simulate.run_simulat
     leaf_observations:               # per pass (stationary interval) and door: laser returns on the leaf,
       columns: [pass, door_id, laser_hits, scans_seen, angle_min, angle_max]   # scans with ≥ 10 of them,
       rows: [...]                    # and the signed angle range over those scans (doors never seen: no row)
+                                     # (optional: without it, evaluation cannot tell which doors the laser saw move)
     people: [{name, radius, height, speed, start_ns, mode, path: [[x, y], ...]}]
     sensors: {laser: {frame_id, x, y, z, yaw}, camera: {frame_id, x, y, z, yaw, width, height, k}}
     scenario: {...}                  # the resolved scenario, as validated
@@ -107,8 +108,9 @@ class SimTruth:
     sensors: dict[str, Any] = field(default_factory=dict)
     scenario: dict[str, Any] = field(default_factory=dict)
     frame_id: str = "map"
-    # (pass, door_id, laser_hits, scans_seen, angle_min, angle_max): what the laser saw of each leaf per pass
-    leaf_observations: tuple[tuple[float, ...], ...] = ()
+    # (pass, door_id, laser_hits, scans_seen, angle_min, angle_max): what the laser saw of each leaf per pass;
+    # None: the file does not say (a truth written by hand), unlike () (the laser saw no leaf)
+    leaf_observations: tuple[tuple[float, ...], ...] | None = ()
 
     def door_angles_at(self, stamps_ns: npt.ArrayLike) -> FloatArray:
         """(K, D) signed door angles at the given stamps (linear between knots, constant outside)."""
@@ -143,8 +145,9 @@ class SimTruth:
             "passes": [{"index": p.index, "name": p.name, "begin_ns": p.begin_ns, "stationary_ns": p.stationary_ns,
                         "end_ns": p.end_ns} for p in self.passes],
             "door_angles": {"columns": ["stamp_ns", "door_id", "angle"], "rows": rows},
-            "leaf_observations": {"columns": ["pass", "door_id", "laser_hits", "scans_seen", "angle_min", "angle_max"],
-                                  "rows": [list(r) for r in self.leaf_observations]},
+            **({} if self.leaf_observations is None else {"leaf_observations": {
+                "columns": ["pass", "door_id", "laser_hits", "scans_seen", "angle_min", "angle_max"],
+                "rows": [list(r) for r in self.leaf_observations]}}),
             "people": [dict(p) for p in self.people],
             "sensors": self.sensors,
             "scenario": self.scenario,
@@ -206,7 +209,8 @@ def read_truth(path: Path) -> SimTruth:
             sensors=dict(doc.get("sensors") or {}),
             scenario=dict(doc.get("scenario") or {}),
             frame_id=str(doc.get("frame_id", "map")),
-            leaf_observations=tuple(tuple(r) for r in (doc.get("leaf_observations") or {}).get("rows", [])),
+            leaf_observations=None if doc.get("leaf_observations") is None else tuple(
+                tuple(r) for r in doc["leaf_observations"].get("rows") or []),
         )
     except (KeyError, TypeError, ValueError, IndexError) as err:
         raise InputDataError(f"truth file is incomplete or malformed ({type(err).__name__}: {err})",

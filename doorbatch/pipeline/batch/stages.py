@@ -76,13 +76,14 @@ def _site_tables(site: Site, out: Path, run_dirs: Sequence[str], config: Doorbat
 def evaluate_site(site: Site, out: Path, run_dirs: Sequence[str], dest: Path, config: DoorbatchConfig,
                   left_out: Sequence[str] = ()) -> list[str]:
     """Metrics, plots and report of the site's map and of each run that succeeded, into ``dest``; the report
-    names the runs ``left_out`` (failed or blocked), and so do the returned warnings."""
+    names the runs ``left_out`` (failed or blocked), and so do the returned warnings, with the evaluation's own
+    (metrics it cannot give, e.g. against a reference that is the odometry again)."""
     from doorbatch.pipeline.evaluate.report import evaluate_runs
 
     tables, maps = _site_tables(site, out, run_dirs, config)
     evaluation = evaluate_runs(tables, config, maps=maps).with_title(f"doorbatch run: site {site.name}", left_out)
     _write_report(evaluation, dest)
-    return [f"left out: {step} (failed or blocked)" for step in left_out]
+    return [*(f"left out: {step} (failed or blocked)" for step in left_out), *evaluation.warnings]
 
 
 def dataset_report(dataset: Dataset, out: Path, evaluations: Sequence[Step], dest: Path,

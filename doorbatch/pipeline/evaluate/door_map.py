@@ -3,7 +3,8 @@
 A detected door matches the nearest unmatched truth door whose hinge lies within ``max_hinge_distance_m``
 (greedy by distance). Only truth doors seen at two or more distinguishable angles (``moved``) should be
 found by the grid stage; a detection matched to a door that never moved counts as a false positive, and
-so does a detection matched to nothing.
+so does a detection matched to nothing. Which doors moved comes from the truth's ``leaf_observations``; a truth
+without them cannot tell, and the caller then counts every truth door (:func:`truth_doors`).
 """
 
 from __future__ import annotations
@@ -133,18 +134,22 @@ def truth_doors(truth: SimTruth, min_opening_rad: float) -> tuple[DoorSet, npt.N
     seen at two or more distinguishable angles (range ≥ ``min_opening_rad``).
 
     Uses the truth's ``leaf_observations`` (per pass, the angles at which the leaf returned enough beams);
-    a door never seen gets an empty range at its first pass's angle and does not count as moved.
+    a door never seen gets an empty range at its first pass's angle and does not count as moved. A truth without
+    them (``None``: written by hand) gives each door the range of the angles it took at the passes (at the knots
+    of ``door_angles`` where there are no passes), what a laser that saw every leaf would have seen.
     """
     doors = truth.doors
-    mids = np.array([(p.stationary_ns + p.end_ns) // 2 for p in truth.passes], dtype=np.int64)
-    first = np.atleast_2d(truth.door_angles_at(mids))[0]
-    lo = np.full(len(doors), np.inf)
-    hi = np.full(len(doors), -np.inf)
-    for _, door_id, _, _, a_min, a_max in truth.leaf_observations:
-        d = int(door_id)
-        lo[d], hi[d] = min(lo[d], a_min), max(hi[d], a_max)
-    never = ~np.isfinite(lo)
-    lo[never], hi[never] = first[never], first[never]
+    angles = _pass_angles(truth)
+    if truth.leaf_observations is None:
+        lo, hi = angles.min(axis=0), angles.max(axis=0)
+    else:
+        lo = np.full(len(doors), np.inf)
+        hi = np.full(len(doors), -np.inf)
+        for _, door_id, _, _, a_min, a_max in truth.leaf_observations:
+            d = int(door_id)
+            lo[d], hi[d] = min(lo[d], a_min), max(hi[d], a_max)
+        never = ~np.isfinite(lo)
+        lo[never], hi[never] = angles[0, never], angles[0, never]
     door_set = DoorSet(
         hinge=np.array([[d.hinge_x, d.hinge_y] for d in doors]).reshape(-1, 2),
         length=np.array([d.length for d in doors]),
@@ -153,3 +158,13 @@ def truth_doors(truth: SimTruth, min_opening_rad: float) -> tuple[DoorSet, npt.N
         angle_max=hi,
     )
     return door_set, (hi - lo) >= min_opening_rad
+
+
+def _pass_angles(truth: SimTruth) -> FloatArray:
+    """(P, D) the doors' angles in the middle of each pass's stationary interval; without passes, at the knots of
+    ``door_angles`` (and at the truth's start), so that there is always a row."""
+    if truth.passes:
+        stamps = np.array([(p.stationary_ns + p.end_ns) // 2 for p in truth.passes], dtype=np.int64)
+    else:
+        stamps = np.unique(np.append(truth.angle_stamp_ns, truth.start_ns))
+    return np.atleast_2d(truth.door_angles_at(stamps)).reshape(len(stamps), len(truth.doors))

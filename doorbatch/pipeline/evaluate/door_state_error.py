@@ -4,7 +4,9 @@ Map doors match truth doors by hinge distance (:func:`door_map.match_by_hinge`).
 door k counts while it was observed within ``window_ns`` before t (an unobserved door's angle is a prior, not
 an estimate); its error is |wrap((closed_yaw_k + α_k(t)) − (closed_yaw_j + α*_j(t)))|, the difference of the
 global leaf directions (so map and truth may differ in closed_yaw). The update's error is the mean over the
-counted doors; updates with none are left out.
+counted doors; updates with none are left out. With ``observed_only=False`` every matched door counts at every
+update, observed or not: a door whose true angle lies outside the range the map gives it is never "observed" (no
+hypothesis fits its leaf), and only this reading shows how far off its estimate stays.
 """
 
 from __future__ import annotations
@@ -32,8 +34,9 @@ class DoorStateErrors:
 
 def door_state_errors(stamps_ns: npt.ArrayLike, door_id: npt.ArrayLike, angle: npt.ArrayLike,
                       observed: npt.ArrayLike, map_doors: DoorSet, truth: SimTruth, max_hinge_distance_m: float,
-                      window_ns: int) -> DoorStateErrors:
-    """Door-state error per update from door_states.parquet's rows (see the module docstring)."""
+                      window_ns: int, *, observed_only: bool = True) -> DoorStateErrors:
+    """Door-state error per update from door_states.parquet's rows (see the module docstring): over the doors
+    observed within ``window_ns``, or (``observed_only=False``) over all matched doors."""
     t_rows = np.asarray(stamps_ns, dtype=np.int64)
     d_rows = np.asarray(door_id, dtype=np.int64)
     updates, u_idx = np.unique(t_rows, return_inverse=True)
@@ -56,7 +59,7 @@ def door_state_errors(stamps_ns: npt.ArrayLike, door_id: npt.ArrayLike, angle: n
     true_dir = np.array([d.closed_yaw for d in truth.doors])[j] + truth.door_angles_at(updates)[:, j]
     est_dir = map_doors.closed_yaw[k] + est[:, k]
     err = np.abs(wrap_angle(est_dir - true_dir))
-    counted = recent & np.isfinite(err)
+    counted = (recent if observed_only else True) & np.isfinite(err)
     n = counted.sum(axis=1)
     keep = n > 0
     mean = np.where(counted, err, 0.0).sum(axis=1)[keep] / n[keep]

@@ -22,13 +22,16 @@ median, std, min, max, as evo, see :mod:`trajectory_metrics`), ``associated_pose
 ``converged`` (0/1), ``time_to_converge_s``, ``ambiguous`` (0/1), ``lost`` (0/1: the run found its scans no
 longer fit the map, ``localize.lost_*``; NaN for a trajectory from another localizer, or a run from before the
 test), ``time_to_lost_s`` and, for global initialization,
-``global_success`` (0/1); with a truth and a door map, ``door_state_error_mean`` / ``_max`` (rad).
+``global_success`` (0/1); with a truth and a door map, ``door_state_error_mean`` / ``_max`` (rad, over the doors
+observed within ``evaluate.door_state_window_s``) and ``door_state_error_all_mean`` (rad, over all matched doors at
+every update, observed or not).
 Per door map with a truth: ``door_precision``, ``door_recall``, ``door_hinge_error_mean`` (m),
 ``door_length_error_mean`` (m, absolute), ``door_range_error_mean`` (rad), ``doors_detected``, ``doors_truth``.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 from collections import defaultdict
@@ -63,11 +66,14 @@ Int64Array = npt.NDArray[np.int64]
 @dataclass(frozen=True)
 class ReferenceTrajectory:
     """Reference poses (ground truth or SLAM): (N,) stamps in ns, (N, 3) x, y, yaw in the map frame; the
-    warnings of reading them from their log (e.g. repaired CARMEN stamps)."""
+    warnings of reading them from their log (e.g. repaired CARMEN stamps). ``independent`` is False where the
+    reference is the log's odometry moved rigidly (``Recording.reference_is_odometry``: a raw CARMEN log's laser
+    poses): a run's own such reference gets no APE, RPE or global success, which would score the odometry."""
 
     stamps_ns: Int64Array
     pose: FloatArray
     warnings: tuple[str, ...] = ()
+    independent: bool = True
 
 
 @dataclass(frozen=True)
@@ -110,17 +116,26 @@ class RunTables:
     params: dict[str, Any] = field(default_factory=dict)
     map_path: str | None = None
     lost_ns: tuple[int, ...] | None = None  # stamps at which the run found itself lost; None: not known
+    # The resolved config the run was made with (its manifest's ``config``); None: not known (a run in memory,
+    # another localizer's trajectory).
+    config: dict[str, Any] | None = None
 
 
-def with_setups_told_apart(runs: Sequence[RunTables]) -> list[RunTables]:
-    """Runs outside an experiment (no params) of one log and method that differ in ``--init`` or in their map
-    get those as params, so that the summary does not average them as if they were seeds of one setup."""
-    setups: dict[tuple[str, str], set[tuple[str, str | None]]] = defaultdict(set)
+def with_setups_told_apart(runs: Sequence[RunTables], max_config_keys: int) -> list[RunTables]:
+    """Runs outside an experiment (no params) of one log and method that differ in ``--init``, in their map or in
+    their resolved config (seeds aside) get those as params, so that the summary does not average them as if they
+    were seeds of one setup. A config difference is told by :func:`config_params`: the keys, among those that differ
+    between the runs, where the run leaves doorbatch's defaults (at most ``max_config_keys`` of them)."""
+    setups: dict[tuple[str, str], set[tuple[str, str | None, str | None]]] = defaultdict(set)
+    flat = {id(run): None if run.config is None else _flat_config(run.config) for run in runs}
     for run in runs:
         if not run.params:
-            setups[(run.log, run.method)].add((run.init, run.map_path))
+            setups[(run.log, run.method)].add((run.init, run.map_path, _config_key(flat[id(run)])))
+    differing = {key: _differing_keys([flat[id(r)] for r in runs if not r.params and (r.log, r.method) == key])
+                 for key, seen in setups.items() if len({c for *_, c in seen}) > 1}
     maps = {r.map_path for r in runs if r.map_path is not None}
     label = _short_labels(maps)
+    defaults = _flat_config(DoorbatchConfig().as_dict())
     out = []
     for run in runs:
         seen = setups.get((run.log, run.method), set())
@@ -128,12 +143,64 @@ def with_setups_told_apart(runs: Sequence[RunTables]) -> list[RunTables]:
             out.append(run)
             continue
         params: dict[str, Any] = {}
-        if len({init for init, _ in seen}) > 1:
+        if len({init for init, _, _ in seen}) > 1:
             params["init"] = run.init
-        if len({m for _, m in seen}) > 1:
+        if len({m for _, m, _ in seen}) > 1:
             params["map"] = label.get(run.map_path) if run.map_path is not None else None
+        if (run.log, run.method) in differing:
+            params.update(config_params(flat[id(run)], differing[(run.log, run.method)], defaults, max_config_keys))
         out.append(replace(run, params=params))
     return out
+
+
+# Config keys that do not tell setups apart: the seed (runs that differ only in it are averaged) and the method
+# (a row of its own already; ``--method`` does not change ``localize.method``).
+_NOT_A_SETUP = ("seed", "localize.method")
+
+
+def _flat_config(tree: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    """A config tree as dotted keys (``localize.sigma_hit_m``) → values, without the keys of :data:`_NOT_A_SETUP`
+    (a ``seed`` at any level)."""
+    flat: dict[str, Any] = {}
+    for key, value in tree.items():
+        path = f"{prefix}{key}"
+        if isinstance(value, dict):
+            flat.update(_flat_config(value, f"{path}."))
+        elif key != "seed" and path not in _NOT_A_SETUP:
+            flat[path] = value
+    return flat
+
+
+def _config_key(flat: dict[str, Any] | None) -> str | None:
+    """A flat config as canonical text (None: not known): equal configs, equal keys."""
+    return None if flat is None else params_json(flat)
+
+
+def _differing_keys(configs: Sequence[dict[str, Any] | None]) -> list[str]:
+    """The keys whose value is not the same in all known ``configs`` (missing counts as a value), sorted."""
+    known = [c for c in configs if c is not None]
+    keys = sorted({k for c in known for k in c})
+    return [k for k in keys if len({params_json({"v": c.get(k)}) for c in known}) > 1]
+
+
+def config_params(flat: dict[str, Any] | None, differing: Sequence[str], defaults: dict[str, Any],
+                  max_keys: int) -> dict[str, Any]:
+    """What tells a run's config apart in the params column: each of the ``differing`` keys where it leaves the
+    ``defaults`` (``{"localize.laser_model": "likelihood_field_prob"}``); ``{"config": "default"}`` where it leaves
+    none; ``{"config": "unknown"}`` for a run whose config is not known. Beyond ``max_keys`` keys, the first of
+    them and ``config`` = a short hash of the config with the count of keys left out, so that two configs never
+    share a label. Two runs whose configs differ get different params (one of them leaves the defaults at a key
+    where they differ)."""
+    if flat is None:
+        return {"config": "unknown"}
+    own = {k: flat.get(k) for k in differing if params_json({"v": flat.get(k)}) != params_json({"v": defaults.get(k)})}
+    if not own:
+        return {"config": "default"}
+    if len(own) <= max_keys:
+        return own
+    shown = dict(list(own.items())[:max_keys])
+    digest = hashlib.sha256(params_json(flat).encode()).hexdigest()[:8]
+    return {**shown, "config": f"{digest} (+{len(own) - max_keys} keys)"}
 
 
 def _short_labels(paths: set[str]) -> dict[str, str]:
@@ -257,6 +324,7 @@ class Evaluation:
     success: list[SuccessCurve]
     title: str = "doorbatch evaluation"
     left_out: tuple[str, ...] = ()  # batch steps that failed or were blocked: no rows of them (doorbatch run)
+    warnings: tuple[str, ...] = ()  # what the metrics leave out or cannot tell, and why (for the manifest)
 
     def value(self, run: str, metric: str) -> float:
         """The value of one metric of one run (NaN when absent)."""
@@ -310,27 +378,47 @@ def _convergence_rows(run: RunTables, reference: ReferenceTrajectory | None, cfg
 
 def _door_state_part(run: RunTables, truth: SimTruth | None, cfg: EvaluateConfig
                      ) -> tuple[list[MetricRow], list[DoorStateSeries]]:
+    """Door-state rows (over the recently observed doors, and over all matched doors) and the plotted series."""
     if truth is None or run.door_states is None or run.map_doors is None or not len(run.map_doors):
         return [], []
-    series = door_state_errors(run.door_states.stamps_ns, run.door_states.door_id, run.door_states.angle,
-                               run.door_states.observed, run.map_doors, truth, cfg.door_match_max_hinge_m,
-                               int(cfg.door_state_window_s * 1e9))
+    s, window_ns = run.door_states, int(cfg.door_state_window_s * 1e9)
+    series = door_state_errors(s.stamps_ns, s.door_id, s.angle, s.observed, run.map_doors, truth,
+                               cfg.door_match_max_hinge_m, window_ns)
+    every = door_state_errors(s.stamps_ns, s.door_id, s.angle, s.observed, run.map_doors, truth,
+                              cfg.door_match_max_hinge_m, window_ns, observed_only=False)
+    rows = []
+    if series.stamps_ns.size:
+        rows += [MetricRow(run.name, run.log, run.method, "door_state_error_mean", float(np.mean(series.error_rad)),
+                           "rad", run.params),
+                 MetricRow(run.name, run.log, run.method, "door_state_error_max", float(np.max(series.error_rad)),
+                           "rad", run.params)]
+    if every.stamps_ns.size:  # also where no door was ever observed: what the observed-only mean cannot show
+        rows.append(MetricRow(run.name, run.log, run.method, "door_state_error_all_mean",
+                              float(np.mean(every.error_rad)), "rad", run.params))
     if series.stamps_ns.size == 0:
-        return [], []
+        return rows, []
     t0 = int(run.stamps_ns[0])
-    rows = [MetricRow(run.name, run.log, run.method, "door_state_error_mean", float(np.mean(series.error_rad)),
-                      "rad", run.params),
-            MetricRow(run.name, run.log, run.method, "door_state_error_max", float(np.max(series.error_rad)),
-                      "rad", run.params)]
     return rows, [DoorStateSeries(run.name, run.log, run.method, (series.stamps_ns - t0) / 1e9, series.error_rad)]
 
 
-def _map_rows(door_map: MapTables, truth: SimTruth | None, cfg: DoorbatchConfig) -> list[MetricRow]:
+def _map_rows(door_map: MapTables, truth: SimTruth | None, cfg: DoorbatchConfig) -> tuple[list[MetricRow], list[str]]:
+    """A door map's rows against the truth, and warnings. A truth without ``leaf_observations`` (written by hand)
+    does not tell which doors the laser saw move: every truth door is then one the map should have (the recall of
+    a grid map, which finds moved doors only, is a lower bound), and recall over moved and never-moved doors is
+    not given."""
     if truth is None:
-        return []
+        return [], []
     truth_set, moved = truth_doors(truth, math.radians(cfg.doors.min_opening_deg))
     max_m = cfg.evaluate.door_match_max_hinge_m
-    if door_map.source == "em":  # EM also finds doors that never moved (paper 001): every truth door counts
+    warnings = []
+    if truth.leaf_observations is None:
+        warnings.append(f"map {door_map.name}: the truth has no leaf_observations (which doors the laser saw at two "
+                        f"angles): its doors are scored by position, all {len(moved)} counted as doors the map should "
+                        "have; recall over moved and never-moved doors cannot be told")
+        moved = np.ones(len(moved), dtype=bool)
+        score = score_doors(door_map.doors, truth_set, moved, max_m)
+        extra = []
+    elif door_map.source == "em":  # EM also finds doors that never moved (paper 001): every truth door counts
         score = score_doors(door_map.doors, truth_set, np.ones(len(moved), dtype=bool), max_m)
         found = np.zeros(len(moved), dtype=bool)
         found[[j for _, j in score.matches]] = True
@@ -350,7 +438,7 @@ def _map_rows(door_map: MapTables, truth: SimTruth | None, cfg: DoorbatchConfig)
               ("door_range_error_mean", mean(score.range_error_rad), "rad"),
               ("doors_detected", float(len(door_map.doors)), "count"), ("doors_truth", float(moved.sum()), "count"),
               *extra]
-    return [MetricRow(door_map.name, "", "map", k, float(v), u, door_map.params) for k, v, u in values]
+    return [MetricRow(door_map.name, "", "map", k, float(v), u, door_map.params) for k, v, u in values], warnings
 
 
 def _fraction(found: npt.NDArray[np.bool_]) -> float:
@@ -404,8 +492,10 @@ def evaluate_runs(runs: Sequence[RunTables], config: DoorbatchConfig, *,
                   maps: Sequence[MapTables] = ()) -> Evaluation:
     """Metrics and plot data of localization runs and door maps (see the module docstring).
 
-    A run with no reference gets only its convergence metrics; a run whose stamps match no reference pose
-    within ``evaluate.max_time_diff_s`` raises.
+    A run with no reference gets only its convergence metrics, and so does a run whose own reference is not
+    independent (its log's odometry moved rigidly, :attr:`ReferenceTrajectory.independent`; a warning says so);
+    a ``reference`` given here is used whatever it is. A run whose stamps match no reference pose within
+    ``evaluate.max_time_diff_s`` raises.
 
     Raises:
         PipelineError: a run and its reference have no pose within the time tolerance.
@@ -414,10 +504,16 @@ def evaluate_runs(runs: Sequence[RunTables], config: DoorbatchConfig, *,
     rows: list[MetricRow] = []
     series: list[ErrorSeries] = []
     door_series: list[DoorStateSeries] = []
-    for run in with_setups_told_apart(runs):
+    warnings: list[str] = []
+    for run in with_setups_told_apart(runs, cfg.params_max_config_keys):
         if len(run.stamps_ns) == 0:
             raise PipelineError(f"run {run.name}: empty trajectory")
         ref = reference if reference is not None else run.reference
+        if reference is None and ref is not None and not ref.independent:
+            warnings.append(f"run {run.name}: its log's reference is the odometry moved rigidly, no independent "
+                            "reference: APE, RPE and global success are not reported (convergence metrics only); "
+                            "give --reference for a truth")
+            ref = None
         alignment = None
         if ref is not None:
             try:
@@ -437,13 +533,17 @@ def evaluate_runs(runs: Sequence[RunTables], config: DoorbatchConfig, *,
         rows += state_rows
         door_series += state_series
     for door_map in maps:
-        rows += _map_rows(door_map, truth if truth is not None else door_map.truth, config)
-    return Evaluation(rows, series, door_series, along_corridor(series, cfg.along_x_bin_m), success_curves(rows))
+        map_rows, map_warnings = _map_rows(door_map, truth if truth is not None else door_map.truth, config)
+        rows += map_rows
+        warnings += map_warnings
+    return Evaluation(rows, series, door_series, along_corridor(series, cfg.along_x_bin_m), success_curves(rows),
+                      warnings=tuple(warnings))
 
 
 
 SUMMARY_METRICS = ("ape_trans_rmse", "ape_trans_max", "ape_rot_rmse", "rpe_trans_rmse", "rpe_rot_rmse",
-                   "time_to_converge_s", "global_success", "lost", "door_state_error_mean")
+                   "time_to_converge_s", "global_success", "lost", "door_state_error_mean",
+                   "door_state_error_all_mean")
 MAP_METRICS = ("door_precision", "door_recall", "door_recall_moved", "door_recall_never_moved",
                "door_hinge_error_mean", "door_length_error_mean", "door_range_error_mean")
 # Door pose experiments (paper 003 Tables I and II; rows from doorbatch.pipeline.doorpose.experiment).

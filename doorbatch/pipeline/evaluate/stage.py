@@ -123,6 +123,8 @@ def evaluate_run_dirs(run_dirs: Sequence[Path], out_dir: Path, config: Doorbatch
     references = [r for r in (ref, *(run.reference for run in runs)) if r is not None]
     for warning in dict.fromkeys(w for r in references for w in r.warnings):  # once each, in order
         manifest.warn(warning)
+    for warning in evaluation.warnings:
+        manifest.warn(warning)
     manifest.extra.update({"runs": len(runs), "maps": len(maps)})
     manifest.finish(timer)
     manifest.write(out_dir / "manifest.json")

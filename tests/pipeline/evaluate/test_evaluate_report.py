@@ -135,6 +135,36 @@ def test_door_state_error_counts_recently_observed_doors_only() -> None:
     assert door_state_errors(stamps, np.zeros(100, np.int32), est, observed, far, truth, 0.3, 0).error_rad.size == 0
 
 
+def test_door_state_error_over_all_matched_doors_shows_doors_never_observed() -> None:
+    """A loc_open RBPF run showed door_state_error_mean 2.4° while two doors sat 136° and 59° off: never observed
+    (their true angle lies outside the mapped range), they never counted. door_state_error_all_mean counts every
+    matched door at every update; door_state_error_mean keeps its definition."""
+    from doorbatch.io.sim_truth import TruthDoor
+    from doorbatch.pipeline.evaluate.report import DoorStateTable
+
+    doors = tuple(TruthDoor(k, f"d{k}", 5.0 * (k + 1), 1.0, 0.9, 0.0, 1, 1.5, 2.0, (0.5,) * 3, (0.1,) * 3)
+                  for k in range(3))
+    truth = SimTruth(generator={}, start_ns=T0, end_ns=T0 + 100 * DT, files={}, world_name="w", wall_height_m=2.0,
+                     segments=np.zeros((0, 2, 2)), segment_kinds=(), doors=doors, passes=(),
+                     angle_stamp_ns=np.full(3, T0), angle_door_id=np.arange(3), angle_rad=np.zeros(3))
+    map_doors = DoorSet(np.array([[5.0, 1.0], [10.0, 1.0], [15.0, 1.0]]), np.full(3, 0.9), np.zeros(3), np.zeros(3),
+                        np.full(3, 0.5))
+    stamps, ref = _straight(50)
+    off = np.radians([2.0, 136.0, 59.0])
+    states = DoorStateTable(np.repeat(stamps, 3), np.tile(np.arange(3, dtype=np.int32), 50), np.tile(off, 50),
+                            np.tile([True, False, False], 50))
+    run = RunTables("r", "loc_open.mcap", "rbpf", stamps, ref, door_states=states, map_doors=map_doors, truth=truth)
+    ev = evaluate_runs([run], DoorbatchConfig())
+    assert ev.value("r", "door_state_error_mean") == pytest.approx(math.radians(2.0))
+    assert ev.value("r", "door_state_error_all_mean") == pytest.approx(np.mean(off))
+    assert next(r.unit for r in ev.metrics if r.metric == "door_state_error_all_mean") == "rad"
+    assert "door_state_error_all_mean" in summary_table(ev).value_columns
+    unseen = replace(run, door_states=replace(states, observed=np.zeros(150, dtype=bool)))  # no door ever observed
+    ev = evaluate_runs([unseen], DoorbatchConfig())
+    assert math.isnan(ev.value("r", "door_state_error_mean"))
+    assert ev.value("r", "door_state_error_all_mean") == pytest.approx(np.mean(off))
+
+
 def test_error_along_the_corridor_averages_runs_per_bin() -> None:
     stamps, ref = _straight(101)  # x from 0 to 5 m
     runs = [RunTables(f"s{k}", "l", "mcl", stamps, ref + np.array([0, 0.1 * (k + 1), 0]), reference=ReferenceTrajectory(
@@ -161,9 +191,9 @@ def _result(log: Path, stamps: np.ndarray, pose: np.ndarray, method: str, door_a
 
 
 def _write_run(folder: Path, log: Path, stamps: np.ndarray, pose: np.ndarray, method: str,
-               door_angle: float) -> None:
+               door_angle: float, config: DoorbatchConfig | None = None) -> None:
     write_run_tables(folder, _result(log, stamps, pose, method, door_angle))
-    manifest = Manifest.start(DoorbatchConfig().as_dict(), [log], command="localize", method=method,
+    manifest = Manifest.start((config or DoorbatchConfig()).as_dict(), [log], command="localize", method=method,
                               init="reference")
     manifest.extra.update({"converged_after_s": 0.0, "ambiguous": False, "lost_after_s": []})
     manifest.write(folder / "manifest.json")
@@ -392,6 +422,42 @@ def test_runs_of_one_log_on_different_maps_or_starts_are_not_averaged_together()
     assert sorted(labels[2] for labels, _ in table.rows) == ["map=site_a/map", "map=site_b/map"]
 
 
+def test_runs_made_with_different_configs_are_not_averaged_as_seeds(tmp_path: Path) -> None:
+    """Three MCL runs of one log with one seed and three configs (the defaults, a Nav2 params file, another beam
+    combination) were one row "mean over seeds": each is a row of its own now, named by the keys where it leaves
+    the defaults; a run that differs from another only in its seed still averages with it."""
+    from doorbatch.pipeline.evaluate.stage import evaluate_run_dirs
+
+    stamps, ref = _straight()
+    log = tmp_path / "normal.mcap"
+    log.write_bytes(b"not read")
+    write_tum(tmp_path / "normal.truth.tum", stamps, *ref.T)
+    nav2 = [f"localize.alpha{i}=0.2" for i in range(1, 5)] + ["localize.z_hit=0.5", "localize.z_rand=0.5"]
+    setups = {"normal_mcl_def": (DoorbatchConfig(), 0.005),
+              "normal_mcl_def_s1": (load_config(overrides=["seed=1"]), 0.007),
+              "normal_mcl_nav2": (load_config(overrides=nav2), 0.029),
+              "normal_mcl_prob": (load_config(overrides=["localize.beam_combination=amcl"]), 0.112)}
+    for name, (config, dy) in setups.items():
+        _write_run(tmp_path / "runs" / name, log, stamps, ref + np.array([0.0, dy, 0.0]), "mcl", 0.0, config)
+    ev = evaluate_run_dirs([tmp_path / "runs" / n for n in setups], tmp_path / "report", DoorbatchConfig())
+    params = {r.run: r.params for r in ev.metrics if r.metric == "ape_trans_rmse"}
+    assert params["normal_mcl_def"] == params["normal_mcl_def_s1"] == {"config": "default"}
+    assert params["normal_mcl_prob"] == {"localize.beam_combination": "amcl"}
+    # six keys leave the defaults: the first four, and a hash that keeps the label apart from any other config's
+    assert {k: v for k, v in params["normal_mcl_nav2"].items() if k != "config"} == {
+        "localize.alpha1": 0.2, "localize.alpha2": 0.2, "localize.alpha3": 0.2, "localize.alpha4": 0.2}
+    assert params["normal_mcl_nav2"]["config"].endswith("(+2 keys)")
+    table = summary_table(ev)
+    rmse = table.value_columns.index("ape_trans_rmse")
+    rows = {labels[2]: (labels[3], values[rmse]) for labels, values in table.rows}
+    assert len(rows) == 3
+    assert rows["config=default"] == ("2", pytest.approx(0.006))
+    assert rows["localize.beam_combination=amcl"] == ("1", pytest.approx(0.112))
+    stored = read_table("metrics", tmp_path / "report" / "metrics.parquet").to_pydict()
+    assert json.loads(next(p for r, p in zip(stored["run"], stored["params"], strict=True)
+                           if r == "normal_mcl_prob")) == {"localize.beam_combination": "amcl"}
+
+
 def test_a_log_without_truth_files_gives_its_reference_topic(tmp_path: Path) -> None:
     from doorbatch.io.run_reader import read_run_dir
     from tests.conftest import sample_messages, write_messages
@@ -406,6 +472,36 @@ def test_a_log_without_truth_files_gives_its_reference_topic(tmp_path: Path) -> 
     ev = evaluate_runs([run], DoorbatchConfig())
     assert ev.value("run", "ape_trans_rmse") == pytest.approx(0.25, abs=1e-6)
     assert read_run_dir(tmp_path / "run", DoorbatchConfig(), find_reference=False).reference is None
+
+
+def test_a_reference_that_is_the_odometry_again_gives_convergence_metrics_only(tmp_path: Path) -> None:
+    """A raw CARMEN log's reference is its odometry moved rigidly: a run was scored against that odometry (APE RMSE
+    7 m, global success 0 % for a run 2 cm off the truth) while a warning said there is no independent reference.
+    Its own reference now gives convergence metrics only, and the warning says so; ``--reference`` is still used."""
+    from tests.conftest import sample_messages, write_messages
+
+    log = write_messages(tmp_path / "raw.mcap", sample_messages(n_scans=30))  # /ground_truth = /odom + (1, 0, 0)
+    i = np.arange(30)
+    stamps = T0 + 100_000_000 * (i + 1)
+    truth = np.stack([0.1 * i + 1, 0.02 * i, 0.01 * i], axis=1)
+    _write_run(tmp_path / "run", log, stamps, truth + np.array([0.0, 0.25, 0.0]), "mcl", 0.0)
+    out = tmp_path / "report"
+    assert main(["evaluate", str(tmp_path / "run"), "-o", str(out), "-q"]) == 0
+    metrics = set(read_table("metrics", out / "metrics.parquet").to_pydict()["metric"])
+    assert "converged" in metrics and not any(m.startswith(("ape_", "rpe_")) for m in metrics), metrics
+    warnings = Manifest.read(out / "manifest.json").warnings
+    assert any("no independent reference" in w and "APE, RPE and global success are not reported" in w
+               for w in warnings), warnings
+    given = tmp_path / "given"
+    assert main(["evaluate", str(tmp_path / "run"), "-o", str(given), "--reference", str(log), "-q"]) == 0
+    table = read_table("metrics", given / "metrics.parquet").to_pydict()
+    rmse = [v for m, v in zip(table["metric"], table["value"], strict=True) if m == "ape_trans_rmse"]
+    assert rmse == pytest.approx([0.25], abs=1e-6)
+    again = ReferenceTrajectory(stamps, truth, independent=False)  # a global start: no success judged against it
+    run = RunTables("g", "raw.mcap", "mcl", stamps, truth, init="global", converged_ns=int(stamps[0]), reference=again)
+    ev = evaluate_runs([run], DoorbatchConfig())
+    assert math.isnan(ev.value("g", "global_success")) and ev.value("g", "converged") == 1.0 and ev.warnings
+    assert evaluate_runs([run], DoorbatchConfig(), reference=again).value("g", "global_success") == 1.0
 
 
 def test_runs_of_one_log_read_its_reference_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -454,3 +550,34 @@ def test_em_door_maps_count_the_doors_that_never_moved(tmp_path: Path) -> None:
     # the same doors as a grid map: the never-moved ones are not what the grid stage may report
     assert got[("grid", "door_precision")] == pytest.approx(moved.sum() / len(keep))
     assert ("grid", "door_recall_never_moved") not in got
+
+
+def test_a_truth_without_leaf_observations_scores_doors_by_position(tmp_path: Path) -> None:
+    """A hand-written truth lacked ``leaf_observations``: every truth door counted as never moved, and a map whose
+    doors were all within 1 cm got precision 0, recall 1 and no hinge errors. Every truth door is now one the map
+    should have, matched by position, and a warning says moved and never-moved recall cannot be told."""
+    import yaml
+
+    from doorbatch.io.sim_truth import read_truth
+
+    doc = yaml.safe_load((SAMPLE_LOGS / "map.truth.yaml").read_text())
+    del doc["leaf_observations"]
+    doc["world"]["doors"] = doc["world"]["doors"][:3]
+    doc["door_angles"]["rows"] = [r for r in doc["door_angles"]["rows"] if r[1] < 3]
+    world = tmp_path / "truth.yaml"
+    world.write_text(yaml.safe_dump(doc))
+    truth = read_truth(world)
+    hinge = np.array([[d.hinge_x + 0.01, d.hinge_y] for d in truth.doors])
+    doors = DoorSet(hinge, np.array([d.length for d in truth.doors]), np.array([d.closed_yaw for d in truth.doors]),
+                    np.zeros(3), np.full(3, 1.2))
+    out = tmp_path / "report"
+    assert main(["evaluate", str(_map_dir(tmp_path / "map", doors)), "--world", str(world), "-o", str(out), "-q"]) == 0
+    table = read_table("metrics", out / "metrics.parquet").to_pydict()
+    got = dict(zip(table["metric"], table["value"], strict=True))
+    assert got["door_precision"] == 1.0 and got["door_recall"] == 1.0 and got["doors_truth"] == 3
+    assert got["door_hinge_error_mean"] == pytest.approx(0.01)
+    assert "door_recall_moved" not in got and "door_recall_never_moved" not in got
+    warnings = Manifest.read(out / "manifest.json").warnings
+    assert any("no leaf_observations" in w and "cannot be told" in w for w in warnings), warnings
+    # not said is not "the laser saw no leaf" (an empty list), and is written back as not said
+    assert truth.leaf_observations is None and "leaf_observations" not in truth.to_dict()
