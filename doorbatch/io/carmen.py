@@ -23,7 +23,9 @@ topic           type                        from
 The file has no index, so :meth:`CarmenReader.open` makes one pass over it: it validates every line,
 counts messages, reads the PARAMs, finds the largest reading and repairs the time stamps
 (:func:`repair_stamps`, then :func:`separate_odom_from_scan_stamps`, so that at a scan's stamp the
-odometry is the scan's own field); :meth:`CarmenReader.raw_messages` then streams a second pass.
+odometry is the scan's own field); :meth:`CarmenReader.raw_messages` then streams a second pass. A log cut short
+(its last line cut mid-write, or a gzip stream that ends early) is read up to the cut, with a warning; every later
+pass stops at the last line the pre-pass took. A malformed line before the last is an error.
 """
 
 from __future__ import annotations
@@ -547,12 +549,22 @@ class CarmenReader(LogReader):
         self._resolution_deg: float | None = None  # PARAM laser_front_laser_resolution
         self._timed = _TIMED  # the keywords this log's messages come from (_TIMED_RAW: RAWLASER1 scans)
         self._truth_lines = False  # the reference comes from TRUEPOS lines, not the laser lines' poses
+        self._last_line: int | None = None  # the last line the pre-pass took: where the later passes stop
 
     # ---- reading lines
 
 
-    def _lines(self) -> Iterator[tuple[int, list[str]]]:
-        """(line number, fields) of every line that is not blank or a comment."""
+    def _lines(self, prepass: bool = False) -> Iterator[tuple[int, list[str]]]:
+        """(line number, fields) of every line that is not blank or a comment.
+
+        The pre-pass (``prepass``) reads to the end; a gzip stream that ends early there (a logger or a copy
+        killed mid-write) ends it at the last complete line, with a warning, where any line came before the cut:
+        those lines are usable, and a log's worth of them should not be refused for its last few bytes. The
+        later passes stop at the last line the pre-pass took (``_last_line``), so that every pass sees the same
+        lines: none reaches a cut, and a log still being written does not grow under the stamps of the first.
+        A corrupt stream (bad data or checksum) stays an error.
+        """
+        limit = None if prepass else self._last_line
         lineno = 0
         try:
             with open_carmen_text(self.path) as text:
@@ -560,7 +572,15 @@ class CarmenReader(LogReader):
                     parts = line.split()
                     if parts and not parts[0].startswith("#"):
                         yield lineno, parts
-        except (EOFError, zlib.error, gzip.BadGzipFile) as err:
+                    if lineno == limit:
+                        return
+        except EOFError as err:
+            if not prepass or lineno == 0:
+                raise LogReadError(f"compressed log is truncated or corrupt after line {lineno}: {err}",
+                                   path=self.path) from err
+            self._warn(f"the compressed log ends early (cut after line {lineno}: {err}): read the {lineno} lines "
+                       "before the cut")
+        except (zlib.error, gzip.BadGzipFile) as err:
             raise LogReadError(f"compressed log is truncated or corrupt after line {lineno}: {err}",
                                path=self.path) from err
         except OSError as err:
@@ -585,24 +605,34 @@ class CarmenReader(LogReader):
         raw_error: LogReadError | None = None  # a malformed RAWLASER1 line matters only if those are the scans
         largest = -math.inf
         band: Float32Array = np.empty(0, dtype=np.float32)  # distinct readings near the largest
-        for lineno, parts in self._lines():
+        last_taken = 0  # the last line read into the index: where the later passes stop
+        cut: tuple[int, str, LogReadError] | None = None  # a malformed line: an error unless it is the last one
+        for lineno, parts in self._lines(prepass=True):
+            if cut is not None:  # a line follows it: not cut short by the end of the log, malformed
+                if cut[1] != _RAWLASER1:
+                    raise cut[2]
+                raw_error, cut = raw_error or cut[2], None
+                counts[_RAWLASER1] += 1
             keyword = parts[0]
             if keyword == "PARAM":
                 if len(parts) < 3:
-                    raise self._error(lineno, parts, "PARAM line needs a name and a value")
+                    cut = (lineno, keyword, self._error(lineno, parts, "PARAM line needs a name and a value"))
+                    continue
                 self.params[parts[1]] = parts[2]
+                last_taken = lineno
                 continue
             if keyword not in _TIMED and keyword != _RAWLASER1:
                 ignored[keyword] += 1
+                last_taken = lineno
                 continue
             try:
                 record = _parse(parts)
             except _MalformedError as err:
-                if keyword != _RAWLASER1:
-                    raise self._error(lineno, parts, str(err)) from err
-                raw_error = raw_error or self._error(lineno, parts, str(err))
-                counts[keyword] += 1
+                error = self._error(lineno, parts, str(err))
+                error.__cause__ = err
+                cut = (lineno, keyword, error)
                 continue
+            last_taken = lineno
             counts[keyword] += 1
             keywords.append(keyword)
             stamps.append(record.stamp_ns)
@@ -614,12 +644,20 @@ class CarmenReader(LogReader):
                 mx, my, myaw = relative(record.robot_pose, record.laser_pose).tolist()
                 mounts.append((mx, my, myaw))
                 robot_yaws.append(record.robot_pose[2])
+        raw_cut = 0  # a cut RAWLASER1 line: counted among those lines as before, but no scan
+        if cut is not None:
+            if cut[1] == _RAWLASER1:
+                counts[_RAWLASER1] += 1
+                raw_cut = 1
+            self._warn(f"the last line is cut short ({cut[2].reason}), as a logger killed mid-write leaves it: "
+                       f"dropped it, read the {cut[0] - 1} lines before it")
+        self._last_line = last_taken
         n_scans = counts[_FLASER] + counts[_ROBOTLASER1]
         if n_scans == 0 and counts[_RAWLASER1]:
             # Choice: the raw front laser only where no line carries it with poses (the logger writes both).
             if raw_error is not None:
                 raise raw_error
-            self._timed, n_scans = _TIMED_RAW, counts[_RAWLASER1]
+            self._timed, n_scans = _TIMED_RAW, counts[_RAWLASER1] - raw_cut
             self._warn(f"scans from {n_scans} RAWLASER1 lines (no FLASER or ROBOTLASER1): they carry no pose, "
                        f"so the log has {'odometry from its ODOM lines' if counts[_ODOM] else 'no odometry'} "
                        f"and {'a reference from its TRUEPOS lines only' if counts[_TRUEPOS] else 'no reference'}")

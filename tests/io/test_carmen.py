@@ -542,11 +542,70 @@ def test_a_log_without_scans_is_an_error(tmp_path: Path, content: str) -> None:
         pass
 
 
-def test_truncated_gzip_is_a_read_error(tmp_path: Path) -> None:
+def test_a_log_whose_last_line_is_cut_keeps_the_lines_before_it_with_a_warning(tmp_path: Path) -> None:
+    """A logger killed mid-write leaves its last line cut short: a user's log of 1100 good lines was refused for
+    it ("line 1110: FLASER line has 23 fields"). The line is dropped with a warning, and every later pass stops
+    where the pre-pass did (the streaming pass used to reach the cut line and fail)."""
+    lines = simple_log(n_scans=10)
+    cut = flaser([1.0] * 180, (1.0, 0.0, 0.0), "102.000000")[:120]
+    path = tmp_path / "cut.log"
+    path.write_text("\n".join([*lines, cut]))  # no newline after the cut line
+    with CarmenReader(path) as reader:
+        assert reader.topics["/scan"].count == 10
+        assert len(reader.warnings) == 1
+        warning = reader.warnings[0]
+        assert f"line {len(lines) + 1}: FLASER line has" in warning and f"the {len(lines)} lines before it" in warning
+        raws = list(reader.raw_messages())
+        assert len([r for r in raws if r.topic == "/scan"]) == 10
+        assert reader.end_ns == max(r.log_time_ns for r in raws)
+    assert len(scans_of(path)) == 10
+
+
+def test_a_raw_only_log_whose_last_rawlaser1_line_is_cut_keeps_its_other_scans(tmp_path: Path) -> None:
+    lines = [odom_line((0.0, 0.0, 0.0), "10.0"), rawlaser1(10.1), rawlaser1(10.3), rawlaser1(10.5)[:40]]
+    path = tmp_path / "raw.log"
+    path.write_text("\n".join(lines))
+    with CarmenReader(path) as reader:
+        assert reader.topics["/scan"].count == 2
+        assert any("line 4: RAWLASER1" in w and "cut short" in w for w in reader.warnings)
+    assert [s.stamp_ns for s in scans_of(path)] == [10_100_000_000, 10_300_000_000]
+
+
+@pytest.mark.parametrize("bad", ["ODOM 1 2 3", "PARAM a"])
+def test_a_malformed_line_before_the_last_is_still_an_error(tmp_path: Path, bad: str) -> None:
+    lines = simple_log(n_scans=3)
+    path = write_log(tmp_path / "bad.log", [*lines[:-1], bad, lines[-1]])
+    with pytest.raises(LogReadError, match=f"line {len(lines)}: "), open_log(path):
+        pass
+
+
+def test_a_truncated_gzip_keeps_the_lines_before_the_cut_with_a_warning(tmp_path: Path) -> None:
+    """A .gz cut at 200 kB was refused whole ("compressed log is truncated or corrupt after line 910"); the
+    complete lines before the cut are read, by every pass alike."""
     full = write_log(tmp_path / "full.log.gz", simple_log(n_scans=200))
     cut = tmp_path / "cut.log.gz"
     cut.write_bytes(full.read_bytes()[: full.stat().st_size // 2])
-    with pytest.raises(LogReadError, match="truncated or corrupt"), open_log(cut):
+    kept = 0  # the complete lines before the cut
+    with gzip.open(cut, "rt") as f, pytest.raises(EOFError):
+        for _ in f:
+            kept += 1
+    assert 10 < kept < 401
+    n_flaser = sum(line.startswith("FLASER") for line in simple_log(n_scans=200)[:kept])
+    with CarmenReader(cut) as reader:
+        assert reader.topics["/scan"].count == n_flaser
+        assert len(reader.warnings) == 1 and "ends early" in reader.warnings[0]
+        assert f"the {kept} lines before the cut" in reader.warnings[0]
+        assert len([r for r in reader.raw_messages() if r.topic == "/scan"]) == n_flaser
+    assert len(scans_of(cut)) == n_flaser
+
+
+def test_a_corrupt_gzip_is_still_a_read_error(tmp_path: Path) -> None:
+    full = write_log(tmp_path / "full.log.gz", simple_log(n_scans=200))
+    data = bytearray(full.read_bytes())
+    data[-8] ^= 0xFF  # the checksum of the data
+    bad = tmp_path / "bad.log.gz"
+    bad.write_bytes(bytes(data))
+    with pytest.raises(LogReadError, match="truncated or corrupt"), open_log(bad):
         pass
 
 
