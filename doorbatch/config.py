@@ -99,8 +99,22 @@ class IoConfig(Section):
     carmen_default_max_range_m: float = Field(80.0, gt=0.0)
     # CARMEN: range_min of the scans (the logs give none; their readings are never 0).
     carmen_range_min_m: float = Field(0.0, ge=0.0)
-    # CARMEN: nominal scan period used to synthesize stamps when the logged ones are unusable.
+    # CARMEN: scan period for synthesized stamps (the logged ones unusable, no logger stamps) where the logged stamps
+    # give no rate of their own: the last resort.
     carmen_scan_period_s: float = Field(0.2, gt=0.0)
+    # CARMEN: the rate of a log's own stamps (their span over the scans between them) synthesizes its stamps where they
+    # span at least this many scans: over fewer, one stamp's resolution weighs too much in it.
+    carmen_rate_min_scans: int = Field(20, ge=2)
+    # ... and where it lies in this range of scan periods (laser scanners run at 100 Hz to 1 Hz at the most; outside
+    # it the logged stamps are garbage that happens to be in order).
+    carmen_rate_min_period_s: float = Field(0.005, gt=0.0)
+    carmen_rate_max_period_s: float = Field(5.0, gt=0.0)
+
+    @model_validator(mode="after")
+    def _check_carmen_rate(self) -> IoConfig:
+        if self.carmen_rate_min_period_s > self.carmen_rate_max_period_s:
+            raise ValueError("carmen_rate_min_period_s must not exceed carmen_rate_max_period_s")
+        return self
 
 
 class LaserConfig(Section):

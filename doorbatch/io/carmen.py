@@ -23,7 +23,9 @@ topic           type                        from
 The file has no index, so :meth:`CarmenReader.open` makes one pass over it: it validates every line,
 counts messages, reads the PARAMs, finds the largest reading and repairs the time stamps
 (:func:`repair_stamps`, then :func:`separate_odom_from_scan_stamps`, so that at a scan's stamp the
-odometry is the scan's own field); :meth:`CarmenReader.raw_messages` then streams a second pass.
+odometry is the scan's own field); :meth:`CarmenReader.raw_messages` then streams a second pass. A log cut short
+(its last line cut mid-write, or a gzip stream that ends early) is read up to the cut, with a warning; every later
+pass stops at the last line the pre-pass took. A malformed line before the last is an error.
 """
 
 from __future__ import annotations
@@ -42,7 +44,7 @@ from typing import IO, Any
 import numpy as np
 import numpy.typing as npt
 
-from doorbatch.config import DoorbatchConfig
+from doorbatch.config import DoorbatchConfig, IoConfig
 from doorbatch.errors import LogReadError
 from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.geometry.se2 import relative
@@ -141,7 +143,7 @@ class StampRepair:
     """Repaired stamps (non-decreasing, one per timed line), how they were made, and what to tell."""
 
     stamps_ns: Int64Array
-    method: str  # "logged" (unchanged), "nudged" or "synthesized"
+    method: str  # "logged" (unchanged), "nudged", "logger" (the logger's own stamps) or "synthesized"
     warnings: tuple[str, ...]
 
 
@@ -292,21 +294,85 @@ def _coarse_message(scan_stamps: Int64Array, coarse: float) -> str:
             f"{resolution:g} s; the logged stamps average {per_scan:.3g} s per scan)")
 
 
-def repair_stamps(stamps_ns: Int64Array, is_scan: BoolArray, scan_period_s: float) -> StampRepair:
+def _logger_stamps(logger_stamps_ns: Int64Array | None, is_scan: BoolArray, t0_ns: int) -> Int64Array | None:
+    """The logger's stamps moved to start at ``t0_ns``, where they can stand in for the ipc stamps; else None.
+
+    Usable: every timed line has one, they never go backwards, and no two scans share one (a clock finer than the
+    scan period: not a coarse one too). They are the logger's receipt times, on one clock for every line, so the
+    lines logged at one instant (a scan, its ODOM and TRUEPOS lines) stay within the logger's latency of each other.
+    """
+    if logger_stamps_ns is None:
+        return None
+    logger = np.asarray(logger_stamps_ns, dtype=np.int64)
+    if logger.shape != is_scan.shape or logger.size == 0 or bool(np.any(logger < 0)):
+        return None
+    if bool(np.any(np.diff(logger) < 0)) or bool(np.any(np.diff(logger[is_scan]) <= 0)):
+        return None
+    offsets = logger - logger[0]
+    if t0_ns + int(offsets[-1]) > _MAX_STAMP_S * _NS:
+        return None
+    result: Int64Array = t0_ns + offsets
+    return result
+
+
+@dataclass(frozen=True, slots=True)
+class ScanRate:
+    """A log's scan period from its own stamps, and what it was measured over."""
+
+    period_s: float
+    span_s: float
+    n_scans: int
+
+
+def log_scan_rate(stamps_ns: Int64Array, kept: Int64Array, is_scan: BoolArray, io: IoConfig) -> ScanRate | None:
+    """The scan period a log's stamps give: the time between two of its scans over the scans between them.
+
+    The two are the first and the last kept scan whose stamp is above the kept scan before it: with coarse
+    stamps (printed at 10 s resolution), the first scans logged after the printed stamp changed, so each is within a
+    scan period of the stamp it shows; the log's first stamp is left out (the log may start anywhere in its
+    interval). None where they span fewer than ``io.carmen_rate_min_scans`` scans or the period falls outside
+    ``io.carmen_rate_min_period_s`` … ``io.carmen_rate_max_period_s`` (stamps in order by chance, not a clock).
+    """
+    scan_number = np.cumsum(is_scan) - 1  # of each timed line: the scans up to it, less one
+    lines = kept[is_scan[kept]]
+    values = stamps_ns[lines]
+    steps = np.flatnonzero(np.diff(values) > 0) + 1
+    if steps.size < 2:
+        return None
+    first, last = lines[steps[0]], lines[steps[-1]]
+    n_scans = int(scan_number[last] - scan_number[first])
+    span_s = float(stamps_ns[last] - stamps_ns[first]) / _NS
+    if n_scans < io.carmen_rate_min_scans:
+        return None
+    period = span_s / n_scans
+    if not io.carmen_rate_min_period_s <= period <= io.carmen_rate_max_period_s:
+        return None
+    return ScanRate(period, span_s, n_scans)
+
+
+def repair_stamps(stamps_ns: Int64Array, is_scan: BoolArray, scan_period_s: float,
+                  logger_stamps_ns: Int64Array | None = None, io: IoConfig | None = None) -> StampRepair:
     """Make the stamps of a CARMEN log's timed lines (in file order) usable and non-decreasing.
 
     - A few stamps out of order or missing (0 or garbage): they are replaced by linear interpolation
       between the nearest kept stamps before and after them ("nudged"); the kept ones are the longest
       non-decreasing run (scans first), so one wild stamp does not drag the others along.
     - More than a quarter of them bad, or coarse stamps (at least half of the consecutive scans share a
-      stamp, as in logs printed at 10 s resolution): scan k gets ``t0 + k·scan_period_s`` (t0: the first
-      kept stamp) and the other lines are spread evenly between the scans around them ("synthesized").
+      stamp, as in logs printed at 10 s resolution): where the lines carry the logger's own stamps and those
+      are usable (:func:`_logger_stamps`), every line takes its logger stamp, moved to start at t0 (the first
+      kept stamp) ("logger"). Else scan k gets ``t0 + k·period`` and the other lines are spread evenly between
+      the scans around them ("synthesized"), the period being the rate of the logged stamps themselves
+      (:func:`log_scan_rate`), or ``scan_period_s`` where they give none. Either way one clock for every line:
+      ODOM and TRUEPOS lines move with the scans, so a reference stays on the scans' clock.
 
     Args:
         stamps_ns: one stamp per timed line in file order, −1 where the line's stamp is not a time.
         is_scan: which of those lines are laser scans.
-        scan_period_s: the nominal scan period for synthesized stamps.
+        scan_period_s: the scan period for synthesized stamps where the log gives no rate (the last resort).
+        logger_stamps_ns: the logger's stamp of each of those lines, −1 where it has none (None: no line has).
+        io: the limits on a log's own rate (``carmen_rate_*``); None: the defaults.
     """
+    io = io or IoConfig()
     stamps = np.asarray(stamps_ns, dtype=np.int64)
     is_scan = np.asarray(is_scan, dtype=bool)
     n = stamps.shape[0]
@@ -317,16 +383,29 @@ def repair_stamps(stamps_ns: Int64Array, is_scan: BoolArray, scan_period_s: floa
     bad = np.ones(n, dtype=bool)
     bad[kept] = False
     n_bad = int(np.count_nonzero(bad))
+    n_scans = int(np.count_nonzero(is_scan))
     what = (f"{n_backward} out of order and {n_missing} missing (0 or not a time) of {n} stamps, "
             f"{int(np.count_nonzero(bad & is_scan))} of them scans")
     coarse = _coarse_fraction(repaired[is_scan]) if kept.size else 0.0
     too_many_bad = kept.size == 0 or n_bad > _MAX_NUDGED_FRACTION * n
     if too_many_bad or coarse >= _COARSE_FRACTION:
         why = f"time stamps are unusable: {what}" if too_many_bad else _coarse_message(repaired[is_scan], coarse)
-        message = (f"{why}; synthesized them from the scan period {scan_period_s:g} s "
-                   f"(io.carmen_scan_period_s) over {int(np.count_nonzero(is_scan))} scans")
         t0 = int(repaired[0]) if kept.size else 0
-        return StampRepair(_synthesize(n, is_scan, t0, scan_period_s), "synthesized", (message,))
+        logger = _logger_stamps(logger_stamps_ns, is_scan, t0)
+        if logger is not None:
+            span = float(logger[-1] - logger[0]) / _NS
+            message = (f"{why}; took the logger's own time stamps instead (the last field of every line: in order, "
+                       f"one per scan), {span:.6g} s over {n_scans} scans")
+            return StampRepair(logger, "logger", (message,))
+        rate = log_scan_rate(stamps, kept, is_scan, io)
+        if rate is not None:
+            period = rate.period_s
+            source = f"the rate of the logged stamps, {rate.span_s:g} s over {rate.n_scans} scans"
+        else:
+            period = scan_period_s
+            source = "io.carmen_scan_period_s: the logged stamps give no rate"
+        message = f"{why}; synthesized them at {period:.6g} s per scan ({source}) over {n_scans} scans"
+        return StampRepair(_synthesize(n, is_scan, t0, period), "synthesized", (message,))
     if n_bad:
         message = (f"time stamps repaired: {what}; replaced them by interpolation between their "
                    f"neighbours so that they are non-decreasing")
@@ -353,6 +432,7 @@ class _Laser:
     intensities: Float32Array | None = None
     tv: float = 0.0
     rv: float = 0.0
+    logger_stamp_ns: int = -1  # the logger's own stamp (−1: none, or not a time)
 
 
 @dataclass(frozen=True, slots=True)
@@ -363,6 +443,7 @@ class _Odom:
     tv: float
     rv: float
     stamp_ns: int
+    logger_stamp_ns: int = -1
 
 
 @dataclass(frozen=True, slots=True)
@@ -371,6 +452,7 @@ class _TruePose:
 
     pose: tuple[float, float, float]
     stamp_ns: int
+    logger_stamp_ns: int = -1
 
 
 def _floats(parts: list[str], what: str, dtype: type[np.floating[Any]] = np.float64) -> npt.NDArray[Any]:
@@ -406,16 +488,29 @@ def _pose(values: npt.NDArray[Any], what: str) -> tuple[float, float, float]:
     return float(x), float(y), float(theta)
 
 
-def _tail_stamp(parts: list[str], start: int, keyword: str) -> int:
-    """The ipc timestamp after the fixed fields (then optionally hostname and logger timestamp)."""
+def _tail_stamp(parts: list[str], start: int, keyword: str) -> tuple[int, int]:
+    """The two stamps after the fixed fields: ``timestamp [hostname logger_timestamp]``, as int ns.
+
+    The first is the ipc stamp the message was published with, the line's time everywhere; the second the
+    logger's own clock when it received the message (CARMEN's writelog.c: seconds since the logger started), −1
+    where the line has none or it is not a time. The logger stamp is read leniently (nothing depends on it but
+    the repair of unusable ipc stamps, :func:`repair_stamps`).
+    """
     tail = len(parts) - start
     if not 1 <= tail <= 3:
         expected = f"{start + 1} to {start + 3}"
         raise _MalformedError(f"{keyword} line has {len(parts)} fields, its counts ask for {expected}")
     try:
-        return parse_stamp_ns(parts[start])
+        stamp = parse_stamp_ns(parts[start])
     except ValueError as err:
         raise _MalformedError(str(err)) from err
+    logger = -1
+    if tail == 3:
+        try:
+            logger = parse_stamp_ns(parts[start + 2])
+        except ValueError:
+            logger = -1
+    return stamp, logger
 
 
 def _parse_flaser(parts: list[str]) -> _Laser:
@@ -423,10 +518,11 @@ def _parse_flaser(parts: list[str]) -> _Laser:
     if len(parts) < 2:
         raise _MalformedError("FLASER line has no reading count")
     n = _count(parts[1], "reading count")
-    stamp = _tail_stamp(parts, 2 + n + 6, _FLASER)
+    stamp, logger = _tail_stamp(parts, 2 + n + 6, _FLASER)
     ranges = _floats(parts[2 : 2 + n], "reading", np.float32)
     poses = _floats(parts[2 + n : 8 + n], "pose")
-    return _Laser(ranges, _pose(poses[:3], "laser pose"), _pose(poses[3:], "odometry pose"), stamp)
+    return _Laser(ranges, _pose(poses[:3], "laser pose"), _pose(poses[3:], "odometry pose"), stamp,
+                  logger_stamp_ns=logger)
 
 
 def _parse_laser_with_header(parts: list[str], n_pose_fields: int) -> _Laser:
@@ -442,7 +538,7 @@ def _parse_laser_with_header(parts: list[str], n_pose_fields: int) -> _Laser:
         raise _MalformedError(f"{keyword} line has {len(parts)} fields, fewer than its {n} readings need")
     n_rem = _count(parts[9 + n], "remission count")
     rest = 10 + n + n_rem
-    stamp = _tail_stamp(parts, rest + n_pose_fields, keyword)
+    stamp, logger = _tail_stamp(parts, rest + n_pose_fields, keyword)
     ranges = _floats(parts[9 : 9 + n], "reading", np.float32)
     remissions = _floats(parts[10 + n : rest], "remission", np.float32)
     _, start, fov, res, max_range = header[:5].tolist()
@@ -472,20 +568,21 @@ def _parse_laser_with_header(parts: list[str], n_pose_fields: int) -> _Laser:
         intensities=remissions if n_rem == n else None,
         tv=tv,
         rv=rv,
+        logger_stamp_ns=logger,
     )
 
 
 def _parse_odom(parts: list[str]) -> _Odom:
     """``ODOM x y theta tv rv accel timestamp [hostname logger_timestamp]``."""
-    stamp = _tail_stamp(parts, 7, _ODOM)
+    stamp, logger = _tail_stamp(parts, 7, _ODOM)
     values = _floats(parts[1:7], "odometry")
-    return _Odom(_pose(values[:3], "odometry pose"), float(values[3]), float(values[4]), stamp)
+    return _Odom(_pose(values[:3], "odometry pose"), float(values[3]), float(values[4]), stamp, logger)
 
 
 def _parse_truepos(parts: list[str]) -> _TruePose:
     """``TRUEPOS true_x true_y true_theta odom_x odom_y odom_theta timestamp [hostname logger_timestamp]``."""
-    stamp = _tail_stamp(parts, 7, _TRUEPOS)
-    return _TruePose(_pose(_floats(parts[1:4], "true pose"), "true pose"), stamp)
+    stamp, logger = _tail_stamp(parts, 7, _TRUEPOS)
+    return _TruePose(_pose(_floats(parts[1:4], "true pose"), "true pose"), stamp, logger)
 
 
 def _parse(parts: list[str]) -> _Laser | _Odom | _TruePose:
@@ -527,7 +624,7 @@ class CarmenReader(LogReader):
 
     After :meth:`open`: ``warnings`` (stamp repairs and other problems, for ``inspect``), ``params``
     (the PARAM lines), ``range_max_m`` and ``range_max_source`` (where the no-return value came from),
-    ``stamp_method`` (``logged``, ``nudged`` or ``synthesized``) and ``ignored_lines`` (keyword → count).
+    ``stamp_method`` (``logged``, ``nudged``, ``logger`` or ``synthesized``) and ``ignored_lines`` (keyword → count).
     """
 
     storage = "carmen"
@@ -547,12 +644,22 @@ class CarmenReader(LogReader):
         self._resolution_deg: float | None = None  # PARAM laser_front_laser_resolution
         self._timed = _TIMED  # the keywords this log's messages come from (_TIMED_RAW: RAWLASER1 scans)
         self._truth_lines = False  # the reference comes from TRUEPOS lines, not the laser lines' poses
+        self._last_line: int | None = None  # the last line the pre-pass took: where the later passes stop
 
     # ---- reading lines
 
 
-    def _lines(self) -> Iterator[tuple[int, list[str]]]:
-        """(line number, fields) of every line that is not blank or a comment."""
+    def _lines(self, prepass: bool = False) -> Iterator[tuple[int, list[str]]]:
+        """(line number, fields) of every line that is not blank or a comment.
+
+        The pre-pass (``prepass``) reads to the end; a gzip stream that ends early there (a logger or a copy
+        killed mid-write) ends it at the last complete line, with a warning, where any line came before the cut:
+        those lines are usable, and a log's worth of them should not be refused for its last few bytes. The
+        later passes stop at the last line the pre-pass took (``_last_line``), so that every pass sees the same
+        lines: none reaches a cut, and a log still being written does not grow under the stamps of the first.
+        A corrupt stream (bad data or checksum) stays an error.
+        """
+        limit = None if prepass else self._last_line
         lineno = 0
         try:
             with open_carmen_text(self.path) as text:
@@ -560,7 +667,15 @@ class CarmenReader(LogReader):
                     parts = line.split()
                     if parts and not parts[0].startswith("#"):
                         yield lineno, parts
-        except (EOFError, zlib.error, gzip.BadGzipFile) as err:
+                    if lineno == limit:
+                        return
+        except EOFError as err:
+            if not prepass or lineno == 0:
+                raise LogReadError(f"compressed log is truncated or corrupt after line {lineno}: {err}",
+                                   path=self.path) from err
+            self._warn(f"the compressed log ends early (cut after line {lineno}: {err}): read the {lineno} lines "
+                       "before the cut")
+        except (zlib.error, gzip.BadGzipFile) as err:
             raise LogReadError(f"compressed log is truncated or corrupt after line {lineno}: {err}",
                                path=self.path) from err
         except OSError as err:
@@ -575,6 +690,7 @@ class CarmenReader(LogReader):
     def open(self) -> None:
         self.warnings, self.params = [], {}
         stamps: list[int] = []
+        logger_stamps: list[int] = []
         is_scan: list[bool] = []
         counts: Counter[str] = Counter()
         ignored: Counter[str] = Counter()
@@ -585,27 +701,38 @@ class CarmenReader(LogReader):
         raw_error: LogReadError | None = None  # a malformed RAWLASER1 line matters only if those are the scans
         largest = -math.inf
         band: Float32Array = np.empty(0, dtype=np.float32)  # distinct readings near the largest
-        for lineno, parts in self._lines():
+        last_taken = 0  # the last line read into the index: where the later passes stop
+        cut: tuple[int, str, LogReadError] | None = None  # a malformed line: an error unless it is the last one
+        for lineno, parts in self._lines(prepass=True):
+            if cut is not None:  # a line follows it: not cut short by the end of the log, malformed
+                if cut[1] != _RAWLASER1:
+                    raise cut[2]
+                raw_error, cut = raw_error or cut[2], None
+                counts[_RAWLASER1] += 1
             keyword = parts[0]
             if keyword == "PARAM":
                 if len(parts) < 3:
-                    raise self._error(lineno, parts, "PARAM line needs a name and a value")
+                    cut = (lineno, keyword, self._error(lineno, parts, "PARAM line needs a name and a value"))
+                    continue
                 self.params[parts[1]] = parts[2]
+                last_taken = lineno
                 continue
             if keyword not in _TIMED and keyword != _RAWLASER1:
                 ignored[keyword] += 1
+                last_taken = lineno
                 continue
             try:
                 record = _parse(parts)
             except _MalformedError as err:
-                if keyword != _RAWLASER1:
-                    raise self._error(lineno, parts, str(err)) from err
-                raw_error = raw_error or self._error(lineno, parts, str(err))
-                counts[keyword] += 1
+                error = self._error(lineno, parts, str(err))
+                error.__cause__ = err
+                cut = (lineno, keyword, error)
                 continue
+            last_taken = lineno
             counts[keyword] += 1
             keywords.append(keyword)
             stamps.append(record.stamp_ns)
+            logger_stamps.append(record.logger_stamp_ns)
             is_scan.append(isinstance(record, _Laser))
             if keyword == _FLASER and isinstance(record, _Laser):
                 largest, band = _update_band(largest, band, record.ranges)
@@ -614,12 +741,20 @@ class CarmenReader(LogReader):
                 mx, my, myaw = relative(record.robot_pose, record.laser_pose).tolist()
                 mounts.append((mx, my, myaw))
                 robot_yaws.append(record.robot_pose[2])
+        raw_cut = 0  # a cut RAWLASER1 line: counted among those lines as before, but no scan
+        if cut is not None:
+            if cut[1] == _RAWLASER1:
+                counts[_RAWLASER1] += 1
+                raw_cut = 1
+            self._warn(f"the last line is cut short ({cut[2].reason}), as a logger killed mid-write leaves it: "
+                       f"dropped it, read the {cut[0] - 1} lines before it")
+        self._last_line = last_taken
         n_scans = counts[_FLASER] + counts[_ROBOTLASER1]
         if n_scans == 0 and counts[_RAWLASER1]:
             # Choice: the raw front laser only where no line carries it with poses (the logger writes both).
             if raw_error is not None:
                 raise raw_error
-            self._timed, n_scans = _TIMED_RAW, counts[_RAWLASER1]
+            self._timed, n_scans = _TIMED_RAW, counts[_RAWLASER1] - raw_cut
             self._warn(f"scans from {n_scans} RAWLASER1 lines (no FLASER or ROBOTLASER1): they carry no pose, "
                        f"so the log has {'odometry from its ODOM lines' if counts[_ODOM] else 'no odometry'} "
                        f"and {'a reference from its TRUEPOS lines only' if counts[_TRUEPOS] else 'no reference'}")
@@ -630,12 +765,14 @@ class CarmenReader(LogReader):
                                path=self.path)
         keep = [k in self._timed for k in keywords]
         stamps = [t for t, k in zip(stamps, keep, strict=True) if k]
+        logger_stamps = [t for t, k in zip(logger_stamps, keep, strict=True) if k]
         is_scan = [v for v, k in zip(is_scan, keep, strict=True) if k]
         self.ignored_lines = dict(sorted(ignored.items()))
         self._read_params(counts[_FLASER], largest, band, mounts, robot_yaws)
         self._check_flaser_fov(flaser_readings)
         repair = repair_stamps(np.array(stamps, dtype=np.int64), np.array(is_scan, dtype=bool),
-                               self.io_config.carmen_scan_period_s)
+                               self.io_config.carmen_scan_period_s, np.array(logger_stamps, dtype=np.int64),
+                               self.io_config)
         self._stamps = repair.stamps_ns
         self.stamp_method = repair.method
         for message in repair.warnings:

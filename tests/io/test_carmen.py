@@ -482,6 +482,89 @@ def test_unusable_stamps_are_synthesized(tmp_path: Path) -> None:
         assert reader.end_ns - reader.start_ns == 6 * 200_000_000
 
 
+def coarse_simulator_log(n_scans: int = 250, period: float = 0.1, t0: float = 1_067_590_003.4,
+                         logger: bool = True) -> list[str]:
+    """A simulator log (ODOM, TRUEPOS, FLASER on one instant per scan) whose ipc stamps are floored to 10 s,
+    with (``logger``) or without exact logger stamps (seconds since the logger started, a few ms apart within an
+    instant as the logger received the three messages)."""
+    lines = ["# message formats defined: PARAM SYNC ODOM FLASER TRUEPOS"]
+    for k in range(n_scans):
+        t = t0 + k * period
+        ipc = f"{10 * math.floor(t / 10):.6f}"
+        tails = [f" host {t - t0 + 0.5 + d:.6f}" if logger else "" for d in (0.001, 0.002, 0.003)]
+        pose = (0.05 * k, 0.0, 0.0)
+        lines += [" ".join(["ODOM", *(f"{v:g}" for v in pose), "0 0 0", ipc]) + tails[0],
+                  " ".join(["TRUEPOS", *(f"{v:g}" for v in (*pose, *pose)), ipc]) + tails[1],
+                  flaser([2.0] * 180, pose, ipc, host=False) + tails[2]]
+    return lines
+
+
+def _clock_of(path: Path) -> tuple[str, list[str], np.ndarray, np.ndarray, np.ndarray]:
+    """Stamp method, warnings, and the stamps of the scans, the reference and the ODOM lines (ns)."""
+    with CarmenReader(path) as reader:
+        raws = list(reader.raw_messages(["/scan", "/ground_truth", "/odom"]))
+        method, warnings = reader.stamp_method, list(reader.warnings)
+    times = [r.log_time_ns for r in raws]
+    assert times == sorted(times)
+    scans, reference, odom = (np.array([r.log_time_ns for r in raws if r.topic == t], dtype=np.int64)
+                              for t in ("/scan", "/ground_truth", "/odom"))
+    return method, warnings, scans, reference, odom[~np.isin(odom, scans)]  # not the scans' odometry fields
+
+
+def test_coarse_stamps_give_way_to_exact_logger_stamps_on_every_line(tmp_path: Path) -> None:
+    """A user's log had ipc stamps floored to 10 s and exact logger stamps at 10 Hz: the stamps were synthesized at
+    0.2 s (a 24.9 s log came out 49.8 s long), and the TRUEPOS lines spread between the scans, so evaluate found
+    "no reference pose within 0.01 s of any estimated pose". The logger stamps are taken for every line instead."""
+    from doorbatch.config import EvaluateConfig
+    from doorbatch.pipeline.evaluate.trajectory_metrics import associate
+
+    method, warnings, scans, reference, odom = _clock_of(write_log(tmp_path / "coarse.log", coarse_simulator_log()))
+    assert method == "logger"
+    assert len(warnings) == 2 and "coarse" in warnings[0] and "logger" in warnings[0]  # and the TRUEPOS note
+    assert scans.size == reference.size == odom.size == 250
+    np.testing.assert_allclose(np.diff(scans), 100_000_000, atol=1_000)
+    assert scans[0] == 1_067_590_000_002_000_000  # from the first logged stamp, as a synthesized clock starts
+    np.testing.assert_allclose(scans - reference, 1_000_000, atol=1_000)  # received 1 ms apart, not re-spread
+    np.testing.assert_allclose(scans - odom, 2_000_000, atol=1_000)
+    pairs = associate(reference, scans, EvaluateConfig().max_time_diff_s)
+    assert len(pairs) == 250
+
+
+def test_coarse_stamps_without_logger_stamps_are_synthesized_at_the_logs_own_rate(tmp_path: Path) -> None:
+    """The same log without logger stamps: the scan rate its coarse stamps give (10 Hz), not
+    io.carmen_scan_period_s (0.2 s), and the ODOM and TRUEPOS lines on the scans' clock."""
+    path = write_log(tmp_path / "coarse.log", coarse_simulator_log(logger=False))
+    method, warnings, scans, reference, odom = _clock_of(path)
+    assert method == "synthesized"
+    period = np.diff(scans)
+    assert abs(float(period.mean()) - 100_000_000) < 1_000_000  # within 1 %: the first and last change of stamp
+    assert np.ptp(period) <= 1
+    assert "coarse" in warnings[0] and "rate of the logged stamps" in warnings[0]
+    for other in (reference, odom):  # the same clock: each within the scan period before its scan
+        gap = scans - other
+        assert other.size == 250 and bool(np.all((gap > 0) & (gap < period.mean())))
+
+
+def test_the_configured_scan_period_is_the_last_resort() -> None:
+    """Logger stamps that go backwards are not used, and stamps too coarse to give a rate over
+    io.carmen_rate_min_scans scans leave io.carmen_scan_period_s."""
+    s = 1_000_000_000
+    is_scan = np.ones(30, dtype=bool)
+    coarse = np.full(30, 100 * s, dtype=np.int64)
+    coarse[15:] = 110 * s  # one change of stamp: no span between two changes
+    logger = np.arange(30, dtype=np.int64) * (s // 10)
+    logger[7] = 0
+    result = repair_stamps(coarse, is_scan, 0.2, logger)
+    assert result.method == "synthesized" and "io.carmen_scan_period_s" in result.warnings[0]
+    np.testing.assert_array_equal(np.diff(result.stamps_ns), 200_000_000)
+    coarse[25:] = 120 * s  # two changes, 10 scans apart: fewer than io.carmen_rate_min_scans
+    assert "io.carmen_scan_period_s" in repair_stamps(coarse, is_scan, 0.2, logger).warnings[0]
+    few = IoConfig(carmen_rate_min_scans=10)
+    result = repair_stamps(coarse, is_scan, 0.2, logger, few)
+    assert "rate of the logged stamps" in result.warnings[0]
+    np.testing.assert_array_equal(np.diff(result.stamps_ns), s)
+
+
 def test_repair_keeps_scans_and_ignores_one_wild_stamp() -> None:
     s = 1_000_000_000
     stamps = np.array([1 * s, 2 * s, 900 * s, 3 * s, 4 * s, 5 * s, 6 * s], dtype=np.int64)
@@ -542,11 +625,70 @@ def test_a_log_without_scans_is_an_error(tmp_path: Path, content: str) -> None:
         pass
 
 
-def test_truncated_gzip_is_a_read_error(tmp_path: Path) -> None:
+def test_a_log_whose_last_line_is_cut_keeps_the_lines_before_it_with_a_warning(tmp_path: Path) -> None:
+    """A logger killed mid-write leaves its last line cut short: a user's log of 1100 good lines was refused for
+    it ("line 1110: FLASER line has 23 fields"). The line is dropped with a warning, and every later pass stops
+    where the pre-pass did (the streaming pass used to reach the cut line and fail)."""
+    lines = simple_log(n_scans=10)
+    cut = flaser([1.0] * 180, (1.0, 0.0, 0.0), "102.000000")[:120]
+    path = tmp_path / "cut.log"
+    path.write_text("\n".join([*lines, cut]))  # no newline after the cut line
+    with CarmenReader(path) as reader:
+        assert reader.topics["/scan"].count == 10
+        assert len(reader.warnings) == 1
+        warning = reader.warnings[0]
+        assert f"line {len(lines) + 1}: FLASER line has" in warning and f"the {len(lines)} lines before it" in warning
+        raws = list(reader.raw_messages())
+        assert len([r for r in raws if r.topic == "/scan"]) == 10
+        assert reader.end_ns == max(r.log_time_ns for r in raws)
+    assert len(scans_of(path)) == 10
+
+
+def test_a_raw_only_log_whose_last_rawlaser1_line_is_cut_keeps_its_other_scans(tmp_path: Path) -> None:
+    lines = [odom_line((0.0, 0.0, 0.0), "10.0"), rawlaser1(10.1), rawlaser1(10.3), rawlaser1(10.5)[:40]]
+    path = tmp_path / "raw.log"
+    path.write_text("\n".join(lines))
+    with CarmenReader(path) as reader:
+        assert reader.topics["/scan"].count == 2
+        assert any("line 4: RAWLASER1" in w and "cut short" in w for w in reader.warnings)
+    assert [s.stamp_ns for s in scans_of(path)] == [10_100_000_000, 10_300_000_000]
+
+
+@pytest.mark.parametrize("bad", ["ODOM 1 2 3", "PARAM a"])
+def test_a_malformed_line_before_the_last_is_still_an_error(tmp_path: Path, bad: str) -> None:
+    lines = simple_log(n_scans=3)
+    path = write_log(tmp_path / "bad.log", [*lines[:-1], bad, lines[-1]])
+    with pytest.raises(LogReadError, match=f"line {len(lines)}: "), open_log(path):
+        pass
+
+
+def test_a_truncated_gzip_keeps_the_lines_before_the_cut_with_a_warning(tmp_path: Path) -> None:
+    """A .gz cut at 200 kB was refused whole ("compressed log is truncated or corrupt after line 910"); the
+    complete lines before the cut are read, by every pass alike."""
     full = write_log(tmp_path / "full.log.gz", simple_log(n_scans=200))
     cut = tmp_path / "cut.log.gz"
     cut.write_bytes(full.read_bytes()[: full.stat().st_size // 2])
-    with pytest.raises(LogReadError, match="truncated or corrupt"), open_log(cut):
+    kept = 0  # the complete lines before the cut
+    with gzip.open(cut, "rt") as f, pytest.raises(EOFError):
+        for _ in f:
+            kept += 1
+    assert 10 < kept < 401
+    n_flaser = sum(line.startswith("FLASER") for line in simple_log(n_scans=200)[:kept])
+    with CarmenReader(cut) as reader:
+        assert reader.topics["/scan"].count == n_flaser
+        assert len(reader.warnings) == 1 and "ends early" in reader.warnings[0]
+        assert f"the {kept} lines before the cut" in reader.warnings[0]
+        assert len([r for r in reader.raw_messages() if r.topic == "/scan"]) == n_flaser
+    assert len(scans_of(cut)) == n_flaser
+
+
+def test_a_corrupt_gzip_is_still_a_read_error(tmp_path: Path) -> None:
+    full = write_log(tmp_path / "full.log.gz", simple_log(n_scans=200))
+    data = bytearray(full.read_bytes())
+    data[-8] ^= 0xFF  # the checksum of the data
+    bad = tmp_path / "bad.log.gz"
+    bad.write_bytes(bytes(data))
+    with pytest.raises(LogReadError, match="truncated or corrupt"), open_log(bad):
         pass
 
 
