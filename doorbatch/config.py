@@ -688,7 +688,8 @@ class ObjectMapConfig(Section):
     # of a 181-beam 5 Hz one's: the paper's ρ are set for full data, so a sparse laser must not be thinned;
     # stage.strides_for_rate), or dense_kept_beams_per_s where that thins more (a laser denser than the
     # 720-beam 15 Hz one, whose 2,700 kept a second are the most the search was checked with: a 1081-beam
-    # 40 Hz laser kept at 1/4 made the priors 4 times weaker against its evidence; docs/results.md, "A dense laser").
+    # 40 Hz laser kept at 1/4 cost 2.4 GB and lost a door's motion; docs/results.md, "Other people's robots,
+    # round two").
     scan_stride: int = Field(0, ge=0)
     beam_stride: int = Field(0, ge=0)
     kept_beams_per_s: float = Field(800.0, gt=0.0)
