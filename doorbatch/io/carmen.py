@@ -303,8 +303,16 @@ def _logger_stamps(logger_stamps_ns: Int64Array | None, is_scan: BoolArray, t0_n
     """
     if logger_stamps_ns is None:
         return None
-    logger = np.asarray(logger_stamps_ns, dtype=np.int64)
-    if logger.shape != is_scan.shape or logger.size == 0 or bool(np.any(logger < 0)):
+    logger = np.asarray(logger_stamps_ns, dtype=np.int64).copy()
+    if logger.shape != is_scan.shape or logger.size == 0:
+        return None
+    if logger.size > 2 and logger[-1] < 0 and bool(np.all(logger[:-1] >= 0)):
+        # the last line's tail cut by a killed logger: a scan came a scan period after the scan before it; any
+        # other line with the line before it
+        scans = logger[:-1][is_scan[:-1]]
+        cut_scan = bool(is_scan[-1]) and scans.size >= 2
+        logger[-1] = int(scans[-1] + np.median(np.diff(scans))) if cut_scan else logger[-2]
+    if bool(np.any(logger < 0)):
         return None
     if bool(np.any(np.diff(logger) < 0)) or bool(np.any(np.diff(logger[is_scan]) <= 0)):
         return None

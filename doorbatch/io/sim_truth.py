@@ -169,6 +169,21 @@ def write_truth(truth: SimTruth, path: Path) -> None:
     atomic_write_text(path, text)
 
 
+def _leaf_observations(value: object) -> tuple[tuple[Any, ...], ...] | None:
+    """The truth's ``leaf_observations`` rows: None where the key is missing (a hand-written truth), empty for an
+    empty list or mapping.
+
+    Raises:
+        TypeError: neither a mapping with ``rows`` nor a list of rows.
+    """
+    if value is None:
+        return None
+    rows = value.get("rows") if isinstance(value, dict) else value
+    if not isinstance(rows, (list, tuple)) and rows is not None:
+        raise TypeError(f"leaf_observations: expected rows, got {type(rows).__name__}")
+    return tuple(tuple(r) for r in rows or [])
+
+
 def read_truth(path: Path) -> SimTruth:
     """Read a truth file.
 
@@ -209,8 +224,7 @@ def read_truth(path: Path) -> SimTruth:
             sensors=dict(doc.get("sensors") or {}),
             scenario=dict(doc.get("scenario") or {}),
             frame_id=str(doc.get("frame_id", "map")),
-            leaf_observations=None if doc.get("leaf_observations") is None else tuple(
-                tuple(r) for r in doc["leaf_observations"].get("rows") or []),
+            leaf_observations=_leaf_observations(doc.get("leaf_observations")),
         )
     except (KeyError, TypeError, ValueError, IndexError) as err:
         raise InputDataError(f"truth file is incomplete or malformed ({type(err).__name__}: {err})",

@@ -140,7 +140,8 @@ def run_map(logs: Sequence[Path], out: Path, config: DoorbatchConfig, stages: Se
                                 "grid_doors_kept": sum(r.source == "grid" for r in rows),
                                 "classes_given": classes is not None,
                                 "scan_stride": em.strides[0], "beam_stride": em.strides[1],
-                                "final_beams": em.final_beams, "final_scan_thinning": em.final_scan_thinning}
+                                "final_beams": em.final_beams, "final_scan_thinning": em.final_scan_thinning,
+                                "final_scan_stride": em.final_strides[0], "final_beam_stride": em.final_strides[1]}
         if em.final_scan_thinning > 1:
             manifest.warn(f"em: the final wall step kept 1 scan in {em.final_scan_thinning} ({em.final_beams} beams; "
                           f"em.final_max_beams {config.em.final_max_beams})")

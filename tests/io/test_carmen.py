@@ -530,6 +530,18 @@ def test_coarse_stamps_give_way_to_exact_logger_stamps_on_every_line(tmp_path: P
     assert len(pairs) == 250
 
 
+def test_a_last_line_cut_in_its_logger_stamp_keeps_the_logger_clock(tmp_path: Path) -> None:
+    """A killed logger cut the last line after its hostname: it still parses, without a logger stamp, and that one
+    missing stamp had sent the whole log back to synthesized stamps. It takes a scan period after the line before."""
+    lines = coarse_simulator_log()
+    last = max(i for i, line in enumerate(lines) if line.startswith("FLASER"))
+    lines = lines[:last + 1]
+    lines[-1] = lines[-1].rsplit(" ", 1)[0]  # the logger stamp cut off
+    method, _, scans, _, _ = _clock_of(write_log(tmp_path / "cut.log", lines))
+    assert method == "logger"
+    np.testing.assert_allclose(np.diff(scans), 100_000_000, atol=1_000)
+
+
 def test_coarse_stamps_without_logger_stamps_are_synthesized_at_the_logs_own_rate(tmp_path: Path) -> None:
     """The same log without logger stamps: the scan rate its coarse stamps give (10 Hz), not
     io.carmen_scan_period_s (0.2 s), and the ODOM and TRUEPOS lines on the scans' clock."""

@@ -21,6 +21,7 @@ from contextlib import contextmanager
 from typing import Any, ParamSpec, TypeVar
 
 from doorbatch.errors import OptionalDependencyError, UsageError
+from doorbatch.progress import set_progress_enabled
 
 log = logging.getLogger(__name__)
 P = ParamSpec("P")
@@ -46,7 +47,9 @@ class InlineExecutor(Executor):
 def _worker_init(parent_pid: int) -> None:
     """A pool worker: Ctrl-C goes to the main process alone; and the worker dies with the main process (Linux's
     PR_SET_PDEATHSIG), which a SIGKILL (the OOM killer, ``kill -9`` of the cron job) would otherwise leave
-    orphaned, writing into OUT without the lock's holder and then idle for good."""
+    orphaned, writing into OUT without the lock's holder and then idle for good. It draws no progress bars of its
+    own (the em stage's): the main process shows one per kind of step."""
+    set_progress_enabled(False)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     # only a worker the main process forked itself (a forkserver's children have the server as parent)

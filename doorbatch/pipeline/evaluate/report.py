@@ -127,7 +127,9 @@ def with_setups_told_apart(runs: Sequence[RunTables], max_config_keys: int) -> l
     were seeds of one setup. A config difference is told by :func:`config_params`: the keys, among those that differ
     between the runs, where the run leaves doorbatch's defaults (at most ``max_config_keys`` of them)."""
     setups: dict[tuple[str, str], set[tuple[str, str | None, str | None]]] = defaultdict(set)
-    flat = {id(run): None if run.config is None else _flat_config(run.config) for run in runs}
+    defaults = _flat_config(DoorbatchConfig().as_dict())
+    # a key an older manifest lacks (a newer doorbatch added it) took its default then
+    flat = {id(run): None if run.config is None else {**defaults, **_flat_config(run.config)} for run in runs}
     for run in runs:
         if not run.params:
             setups[(run.log, run.method)].add((run.init, run.map_path, _config_key(flat[id(run)])))
@@ -135,7 +137,6 @@ def with_setups_told_apart(runs: Sequence[RunTables], max_config_keys: int) -> l
                  for key, seen in setups.items() if len({c for *_, c in seen}) > 1}
     maps = {r.map_path for r in runs if r.map_path is not None}
     label = _short_labels(maps)
-    defaults = _flat_config(DoorbatchConfig().as_dict())
     out = []
     for run in runs:
         seen = setups.get((run.log, run.method), set())

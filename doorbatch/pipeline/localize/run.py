@@ -269,7 +269,7 @@ def start_scan_index(rec: Recording, start: StartPose) -> int:
 
 def _reset_indices(rec: Recording, resets: Sequence[StartPose], first_i: int) -> dict[int, StartPose]:
     """The scan index at which each later initial pose takes effect (:func:`start_scan_index`; the last of several
-    before one scan wins); those at or before the start, or after the last scan, are dropped."""
+    before one scan wins, the start's own scan included); those after the last scan are dropped."""
     at: dict[int, StartPose] = {}
     for r in resets:
         try:
@@ -277,7 +277,7 @@ def _reset_indices(rec: Recording, resets: Sequence[StartPose], first_i: int) ->
         except PipelineError:
             rec.warnings.append(f"--init {r.topic}: a message after the last scan is not used")
             continue
-        if i > first_i:
+        if i >= first_i:  # at the start's own scan: the later message replaces the start
             at[i] = r
     return at
 
@@ -347,8 +347,8 @@ def with_laser_odometry(rec: Recording, config: DoorbatchConfig) -> Recording:
         raise PipelineError(f"{rec.path}: no odometry, and scan matching gave no scan a pose")
     note = ("no odometry (nav_msgs/Odometry or TF odom→base_link): the motion input is the scans matched at "
             "constant velocity (laser odometry); a featureless corridor leaves it guessing along the corridor")
-    return replace(rec, odometry=PoseSeries(matched.stamps_ns[matched.valid], matched.poses[matched.valid], "odom"),
-                   warnings=[*rec.warnings, note])
+    odometry = PoseSeries(matched.stamps_ns[matched.valid], matched.poses[matched.valid], config.frames.odom)
+    return replace(rec, odometry=odometry, warnings=[*rec.warnings, note])
 
 
 def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchConfig, method: str = "rbpf",

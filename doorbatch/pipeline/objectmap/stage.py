@@ -204,6 +204,7 @@ class ObjectMapResult:
     strides: tuple[int, int]  # the search's (scan, beam) strides; 0: not resolved (beams given directly)
     final_beams: int = 0  # beams of the final wall step (0: none)
     final_scan_thinning: int = 1  # its 1 scan in k (em.final_max_beams)
+    final_strides: tuple[int, int] = (1, 1)  # its (scan, beam) strides (em.final_kept_beams_per_s)
 
 
 def _covered_fraction(wall: Wall, s0: float, s1: float) -> float:
@@ -403,7 +404,8 @@ def build_object_map(beams: BeamSet, config: ObjectMapConfig, classes: ClassPara
     state, doors = without_plain_still_doors(beams, state, describe_doors(beams, state, config), config)
     return ObjectMapResult(state.obj_map, doors, state.log_posterior, len(beams), trace, time.perf_counter() - t0,
                            (config.scan_stride, config.beam_stride), 0 if final is None else len(final.beams),
-                           1 if final is None else final.scan_thinning)
+                           1 if final is None else final.scan_thinning,
+                           (max(config.final_scan_stride, 1), max(config.final_beam_stride, 1)))
 
 
 def em_stage(recordings: Sequence[Recording], passes: Sequence[PassPoses], config: DoorbatchConfig,

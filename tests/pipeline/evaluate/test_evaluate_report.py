@@ -437,11 +437,18 @@ def test_runs_made_with_different_configs_are_not_averaged_as_seeds(tmp_path: Pa
               "normal_mcl_def_s1": (load_config(overrides=["seed=1"]), 0.007),
               "normal_mcl_nav2": (load_config(overrides=nav2), 0.029),
               "normal_mcl_prob": (load_config(overrides=["localize.beam_combination=amcl"]), 0.112)}
+    setups["normal_mcl_def_old"] = (load_config(overrides=["seed=2"]), 0.006)
     for name, (config, dy) in setups.items():
         _write_run(tmp_path / "runs" / name, log, stamps, ref + np.array([0.0, dy, 0.0]), "mcl", 0.0, config)
+    # a run of an older doorbatch: its manifest lacks a key added since, which took its default then
+    old = tmp_path / "runs" / "normal_mcl_def_old" / "manifest.json"
+    manifest = json.loads(old.read_text())
+    del manifest["config"]["localize"]["pose_estimate"]
+    old.write_text(json.dumps(manifest))
     ev = evaluate_run_dirs([tmp_path / "runs" / n for n in setups], tmp_path / "report", DoorbatchConfig())
     params = {r.run: r.params for r in ev.metrics if r.metric == "ape_trans_rmse"}
-    assert params["normal_mcl_def"] == params["normal_mcl_def_s1"] == {"config": "default"}
+    assert params["normal_mcl_def"] == params["normal_mcl_def_s1"] == params["normal_mcl_def_old"] == {
+        "config": "default"}
     assert params["normal_mcl_prob"] == {"localize.beam_combination": "amcl"}
     # six keys leave the defaults: the first four, and a hash that keeps the label apart from any other config's
     assert {k: v for k, v in params["normal_mcl_nav2"].items() if k != "config"} == {
@@ -451,7 +458,7 @@ def test_runs_made_with_different_configs_are_not_averaged_as_seeds(tmp_path: Pa
     rmse = table.value_columns.index("ape_trans_rmse")
     rows = {labels[2]: (labels[3], values[rmse]) for labels, values in table.rows}
     assert len(rows) == 3
-    assert rows["config=default"] == ("2", pytest.approx(0.006))
+    assert rows["config=default"] == ("3", pytest.approx(0.006))
     assert rows["localize.beam_combination=amcl"] == ("1", pytest.approx(0.112))
     stored = read_table("metrics", tmp_path / "report" / "metrics.parquet").to_pydict()
     assert json.loads(next(p for r, p in zip(stored["run"], stored["params"], strict=True)
@@ -581,3 +588,7 @@ def test_a_truth_without_leaf_observations_scores_doors_by_position(tmp_path: Pa
     assert any("no leaf_observations" in w and "cannot be told" in w for w in warnings), warnings
     # not said is not "the laser saw no leaf" (an empty list), and is written back as not said
     assert truth.leaf_observations is None and "leaf_observations" not in truth.to_dict()
+    for empty in ([], {"rows": []}):  # an empty list read as a mapping had raised AttributeError, a traceback
+        doc["leaf_observations"] = empty
+        world.write_text(yaml.safe_dump(doc))
+        assert read_truth(world).leaf_observations == ()

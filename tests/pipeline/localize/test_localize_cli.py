@@ -486,6 +486,18 @@ def test_a_start_yaw_beyond_a_turn_is_asked_about(sample_map: Path) -> None:
     assert note is not None and "radians" in note and "1.571" in note
 
 
+def test_an_initialpose_corrected_before_the_first_scan_starts_from_the_correction(sample_map: Path,
+                                                                                    tmp_path: Path) -> None:
+    """An operator's misclick 3 m off, corrected before the next scan: both messages fall on one scan, the start's;
+    the correction is the start (it had been dropped silently: the run began 3 m off and stayed there)."""
+    log, _ = _with_initial_poses(tmp_path, [(40, 3.0), (40, 0.2)])
+    run = tmp_path / "run"
+    assert main(["localize", str(log), "--map", str(sample_map), "-o", str(run), "--method", "mcl",
+                 "--init", "/initialpose", "-q"]) == 0
+    err = _errors(run, log)
+    assert err.mean() < 0.1
+
+
 def test_annotated_map_to_odom_hangs_from_the_logs_odometry_frame(sample_map: Path, tmp_path: Path) -> None:
     """A Nav2 file's ``odom_frame_id: wheel_odom`` (frames.odom) on a log whose odometry is in ``odom``: the run
     read the log's odometry, but annotated.mcap's map→odom named wheel_odom, a tree the robot was not in, without

@@ -172,6 +172,7 @@ def test_map_cli_writes_the_em_outputs_and_applies_classes(tiny_site: list[Path]
     assert manifest["extra"]["stages"] == ["grid", "em"] and manifest["extra"]["em"]["doors"] == 2
     em = manifest["extra"]["em"]
     assert em["final_beams"] >= em["beams"] > 0 and em["final_scan_thinning"] == 1
+    assert (em["final_scan_stride"], em["final_beam_stride"]) == (1, 1)  # a 360-beam 10 Hz laser: every beam
     assert not any("final wall step" in w for w in manifest["warnings"])
     out2 = tmp_path / "map2"
     assert main(["map", logs[1], "-o", str(out2), "--classes", str(out / "classes.json"), *sets, "--json"]) == 0
