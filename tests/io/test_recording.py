@@ -73,16 +73,24 @@ def test_odometry_of_a_footprint_frame_is_moved_to_base_link(write_log: Callable
     np.testing.assert_allclose(rec.odometry.poses[:, 2], yaw + 0.2, atol=1e-9)
 
 
-def test_tf_odometry_in_an_odometry_frame_of_another_name(write_log: Callable[..., Path]) -> None:
-    # a PR2-style tree: odom_combined → base_link, no odom frame, no /odom topic
+def _pr2_messages(footprint: bool) -> list[tuple[str, str, int, object]]:
+    """Six scans of a PR2-style tree: odom_combined → base_link (``footprint``: odom_combined → base_footprint
+    moving and base_footprint → base_link fixed, both on /tf), no odom frame, no /odom topic, no reference."""
     msgs = []
     for topic, msgtype, t, msg in sample_messages(n_scans=6):
         if topic in ("/odom", "/ground_truth"):
             continue
         if topic == "/tf":
             msg.transforms[0].header.frame_id = "odom_combined"
+            if footprint:
+                msg.transforms[0].child_frame_id = "base_footprint"
+                msg.transforms.append(m.planar_transform(t, "base_footprint", "base_link", 0.0, 0.0, 0.0))
         msgs.append((topic, msgtype, t, msg))
-    rec = load_recording(write_log("pr2.mcap", msgs))
+    return msgs
+
+
+def test_tf_odometry_in_an_odometry_frame_of_another_name(write_log: Callable[..., Path]) -> None:
+    rec = load_recording(write_log("pr2.mcap", _pr2_messages(footprint=False)))
     assert rec.odometry is not None and rec.odometry.frame_id == "odom_combined"
     np.testing.assert_allclose(rec.odometry.poses[:, 0], 0.1 * np.arange(6), atol=1e-12)
     assert any("odom_combined" in w and "frames.odom" in w for w in rec.warnings)
@@ -93,16 +101,7 @@ def test_a_fixed_mount_republished_on_tf_is_not_taken_for_the_odometry(write_log
     republished on /tf (robot_state_publisher), no odom frame, no /odom topic. Before, the fixed edge was the
     first dynamic one above base_link and its parent, base_footprint, the odometry frame: a robot that never
     moved. The odometry is read in odom_combined, the parent of the first edge that moves."""
-    msgs = []
-    for topic, msgtype, t, msg in sample_messages(n_scans=6):
-        if topic in ("/odom", "/ground_truth"):
-            continue
-        if topic == "/tf":
-            msg.transforms[0].header.frame_id = "odom_combined"
-            msg.transforms[0].child_frame_id = "base_footprint"
-            msg.transforms.append(m.planar_transform(t, "base_footprint", "base_link", 0.0, 0.0, 0.0))
-        msgs.append((topic, msgtype, t, msg))
-    rec = load_recording(write_log("pr2_mount.mcap", msgs))
+    rec = load_recording(write_log("pr2_mount.mcap", _pr2_messages(footprint=True)))
     assert rec.odometry is not None and rec.odometry.frame_id == "odom_combined"
     np.testing.assert_allclose(rec.odometry.poses[:, 0], 0.1 * np.arange(6), atol=1e-12)
 
