@@ -77,7 +77,9 @@ def decode_scan(msg: Any, log_time_ns: int, topic: str, msgtype: str = LASERSCAN
         LogContentError: zero angle increment, or a ranges length that disagrees with the angles.
     """
     multi = msgtype == MULTI_ECHO_LASERSCAN
-    ranges = _first_echoes(msg.ranges) if multi else np.asarray(msg.ranges, dtype=np.float32)
+    # copies: the deserializer's arrays are views into the whole message's buffer, which a recording that keeps
+    # every scan's ranges would otherwise keep alive (twice the memory on a laser with intensities)
+    ranges = _first_echoes(msg.ranges) if multi else np.array(msg.ranges, dtype=np.float32)
     expected = expected_beam_count(msg.angle_min, msg.angle_max, msg.angle_increment)
     if expected < 0:
         raise LogContentError(f"scan has angle_increment {msg.angle_increment}", topic=topic)
@@ -88,7 +90,7 @@ def decode_scan(msg: Any, log_time_ns: int, topic: str, msgtype: str = LASERSCAN
             f"angle_increment {msg.angle_increment:.6f}",
             topic=topic,
         )
-    intensities = _first_echoes(msg.intensities) if multi else np.asarray(msg.intensities, dtype=np.float32)
+    intensities = _first_echoes(msg.intensities) if multi else np.array(msg.intensities, dtype=np.float32)
     return Scan(
         stamp_ns=stamp_to_ns(msg.header.stamp),
         log_time_ns=log_time_ns,

@@ -81,6 +81,8 @@ def test_records_hold_the_written_values(write_log: Callable[..., Path]) -> None
         assert scan.stamp_ns == msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
         np.testing.assert_array_equal(scan.ranges, msg.ranges)
         assert scan.frame_id == "laser"
+        # own copies: a view into the message's buffer kept every scan's whole message (intensities too) alive
+        assert scan.ranges.flags.owndata and (scan.intensities is None or scan.intensities.flags.owndata)
     assert [d.class_id for d in dets[0].detections] == ["door", "handle"]
     assert dets[0].detections[0].center_x == 30.0
 
