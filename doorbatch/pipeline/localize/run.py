@@ -441,6 +441,12 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
         track.add(scan.stamp_ns, mean, cov, odom[i], len(p), diag.neff, dmean, dstd, observed, p.pose[pick])
     if not track.stamps:
         raise PipelineError(f"{log_path}: no scan had an odometry pose; nothing was localized")
+    if len(track.stamps) == 1 and len(rec.scans) - first_i > 1:
+        warnings.append(f"1 filter update over {len(rec.scans) - first_i} scans: the odometry "
+                        f"({rec.odometry.frame_id}) never moved the robot by update_min_d {lc.update_min_d} m or "
+                        f"update_min_a "
+                        f"{lc.update_min_a} rad (a robot that stood still, or an odometry frame that does not move: "
+                        "see frames.odom)")
     return track.result(Path(log_path).name, method, state.particles.n_doors, converged_ns,
                         multimodal(state.particles, lc), warnings, rec.log_clock, lost_ns, rec.odometry.frame_id)
 

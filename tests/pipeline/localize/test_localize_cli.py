@@ -515,3 +515,16 @@ def test_annotated_map_to_odom_hangs_from_the_logs_odometry_frame(sample_map: Pa
     assert ("map", "odom") in parents and ("map", "wheel_odom") not in parents
     warnings = json.loads((run / "manifest.json").read_text())["warnings"]
     assert any("wheel_odom" in w and "map→odom" in w for w in warnings)
+
+
+def test_a_run_with_one_update_over_many_scans_says_why(sample_map: Path, tmp_path: Path) -> None:
+    """A PR2 tree whose fixed base_footprint → base_link edge was taken for the odometry gave 1 update over 489
+    scans and exit 0 without a word. Odometry that never passes update_min_d / update_min_a is now warned (here by
+    thresholds no motion of the log reaches)."""
+    run = tmp_path / "run"
+    assert main(["localize", str(SAMPLE_LOGS / "loc_open.mcap"), "--map", str(sample_map), "-o", str(run),
+                 "--method", "mcl", "--set", "localize.update_min_d=1000", "--set", "localize.update_min_a=1000",
+                 "-q"]) == 0
+    assert len(read_table("trajectory", run / "trajectory.parquet")) == 1
+    warnings = json.loads((run / "manifest.json").read_text())["warnings"]
+    assert any("1 filter update over" in w and "frames.odom" in w for w in warnings)
