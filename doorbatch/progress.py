@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -36,5 +37,20 @@ def progress_bar(total: int | None, description: str, unit: str = "msg") -> Iter
         return
     from tqdm import tqdm
 
-    with tqdm(total=total, desc=description, unit=unit, leave=False, dynamic_ncols=True) as bar:
+    with tqdm(total=total, desc=description, unit=unit, leave=False, **_width()) as bar:
         yield bar
+
+
+def _width() -> dict[str, object]:
+    """tqdm's size: the terminal's, its width followed as it is resized; 80 columns and 24 rows where the terminal
+    reports none (a pty that ``script``, ``ssh -t`` from a job runner or a container's ``-t`` opens without a
+    size: tqdm took 0 rows for "no room" and drew nothing at all)."""
+    try:
+        size = os.get_terminal_size(sys.stderr.fileno())
+        columns, lines = size.columns, size.lines
+    except (OSError, ValueError, AttributeError):
+        columns = lines = 0
+    shape: dict[str, object] = {"dynamic_ncols": True} if columns > 0 else {"ncols": 80}
+    if lines <= 0:
+        shape["nrows"] = 24
+    return shape
