@@ -111,7 +111,7 @@ class TfBuffer:
         """Whether the edge into ``child`` is dynamic and its transform changes over the log (a fixed mount
         republished on /tf, as a ROS 1 robot_state_publisher does, is dynamic but does not move)."""
         edge = self._edges[child]
-        if edge.static or len(edge.stamps) < 2:
+        if edge.static or edge.constant:
             return False
         trans, rot = np.asarray(edge.translations), np.asarray(edge.rotations)
         turned = 1.0 - np.abs(rot @ rot[0]) / (np.linalg.norm(rot, axis=1) * np.linalg.norm(rot[0]))  # q ≡ −q

@@ -16,7 +16,7 @@ import numpy.typing as npt
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from doorbatch.pipeline.localize.particles import ParticleSet
+from doorbatch.pipeline.localize.particles import ParticleSet, weighted_pose_mean
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -51,6 +51,4 @@ def heaviest_cluster_mean(particles: ParticleSet, bin_xy_m: float, bin_yaw_rad: 
     labels = cluster_labels(particles.pose, bin_xy_m, bin_yaw_rad)
     weight = particles.weight
     mask = labels == int(np.argmax(np.bincount(labels, weights=weight)))
-    w = weight[mask] / weight[mask].sum()
-    pose = particles.pose[mask]
-    return np.array([w @ pose[:, 0], w @ pose[:, 1], np.arctan2(w @ np.sin(pose[:, 2]), w @ np.cos(pose[:, 2]))])
+    return weighted_pose_mean(particles.pose[mask], weight[mask] / weight[mask].sum())

@@ -15,6 +15,13 @@ import numpy.typing as npt
 FloatArray = npt.NDArray[np.float64]
 
 
+def weighted_pose_mean(pose: FloatArray, weight: FloatArray) -> FloatArray:
+    """Σ w·(x, y) and the circular mean of the yaw, atan2(Σ w sin θ, Σ w cos θ), of (N, 3) poses; ``weight``
+    sums to 1."""
+    return np.array([weight @ pose[:, 0], weight @ pose[:, 1],
+                     np.arctan2(weight @ np.sin(pose[:, 2]), weight @ np.cos(pose[:, 2]))])
+
+
 @dataclass
 class ParticleSet:
     """N particles: pose (N, 3), weight (N,), door angle mean and variance (N, D)."""
@@ -55,9 +62,7 @@ class ParticleSet:
     def mean_and_covariance(self) -> tuple[FloatArray, FloatArray]:
         """Weighted mean pose (circular mean of yaw) and 3×3 covariance (yaw residuals wrapped)."""
         w = self.weight
-        mean = np.empty(3)
-        mean[:2] = w @ self.pose[:, :2]
-        mean[2] = np.arctan2(w @ np.sin(self.pose[:, 2]), w @ np.cos(self.pose[:, 2]))
+        mean = weighted_pose_mean(self.pose, w)
         d = self.pose - mean
         d[:, 2] = np.arctan2(np.sin(d[:, 2]), np.cos(d[:, 2]))
         cov = (d * w[:, None]).T @ d

@@ -128,10 +128,12 @@ def em_strides(recordings: Sequence[Recording], config: ObjectMapConfig) -> tupl
 def with_strides(recordings: Sequence[Recording], config: ObjectMapConfig) -> ObjectMapConfig:
     """``config`` with the search's and the final wall step's strides resolved for these logs
     (:func:`em_strides`, :func:`final_strides_for_rate`)."""
-    scan_stride, beam_stride = em_strides(recordings, config)
-    final_scan, final_beam = config.final_scan_stride, config.final_beam_stride
-    if not (final_scan and final_beam):
-        final_scan, final_beam = final_strides_for_rate(beams_per_second(recordings), config)
+    searched = config.scan_stride and config.beam_stride
+    final = config.final_scan_stride and config.final_beam_stride
+    rate = 0.0 if searched and final else beams_per_second(recordings)
+    scan_stride, beam_stride = (config.scan_stride, config.beam_stride) if searched else strides_for_rate(rate, config)
+    final_scan, final_beam = ((config.final_scan_stride, config.final_beam_stride) if final
+                              else final_strides_for_rate(rate, config))
     return config.model_copy(update={"scan_stride": scan_stride, "beam_stride": beam_stride,
                                      "final_scan_stride": final_scan, "final_beam_stride": final_beam})
 
@@ -163,7 +165,8 @@ def final_step_beams(recordings: Sequence[Recording], passes: Sequence[PassPoses
     step is off."""
     if not config.final_recut_sweeps:
         return None
-    config = with_strides(recordings, config)
+    if not (config.final_scan_stride and config.final_beam_stride):  # em_stage has resolved them already
+        config = with_strides(recordings, config)
     scans = [pass_scans(r, p, config.final_scan_stride, config) for r, p in zip(recordings, passes, strict=True)]
 
     def count(thin: int) -> int:
