@@ -14,7 +14,12 @@ becomes the ``localize`` key of the same name, and the ones the file leaves out 
   ``resample_neff_ratio`` becomes 1.0; it skips a beam by the share of the particles that explain it
   (``beam_skip_support: particles``); its recovery averages the weights per particle weighed
   (``recovery_average_per_particle``: ``pf_update_sensor``'s ``w_avg /= set->sample_count``); and it publishes
-  the mean of its heaviest cluster of particles (``pose_estimate: heaviest_cluster``).
+  the mean of its heaviest cluster of particles (``pose_estimate: heaviest_cluster``). It weighs every particle at
+  its own pose, also while the cloud is spread (``global_smoothing: false``: no region-averaged, tempered
+  weighting), and a global start draws ``max_particles`` (``pf_init_model``; ``global_particles``).
+- Values the node replaces at start (a negative ``laser_likelihood_max_dist``, ``max_particles`` or
+  ``min_particles``, ``resample_interval`` below 1, ``min_particles`` above ``max_particles``) are replaced the
+  same way, with the node's warning.
 - ``base_frame_id``, ``odom_frame_id``, ``global_frame_id`` and ``scan_topic`` set ``frames`` and ``topics``
   only where the file gives them (nav2's default base frame, base_footprint, is often not in a log's tree).
 - An initial pose (``set_initial_pose``) is not a config value here: the warning names the ``--init`` to pass.
@@ -304,12 +309,14 @@ def translate_amcl_parameters(params: Mapping[str, Any], source: str = "config")
     """
     given = dict(params)
     merged = {**NAV2_AMCL_DEFAULTS, **{k: v for k, v in given.items() if k in NAV2_AMCL_DEFAULTS}}
+    warnings: list[str] = _substitute_as_amcl_node(merged)
     localize: dict[str, Any] = {name: merged[name] for name in _SAME_NAME}
     localize["resample_neff_ratio"] = 1.0  # nav2_amcl resamples every resample_interval updates, no Neff test
     localize["beam_skip_support"] = "particles"  # and counts the particles that explain a beam
     localize["recovery_average_per_particle"] = True  # pf_update_sensor: w_avg /= set->sample_count
     localize["pose_estimate"] = "heaviest_cluster"  # amcl publishes its heaviest cluster's mean
-    warnings: list[str] = []
+    localize["global_smoothing"] = False  # amcl weighs each particle at its own pose, never a region's average
+    localize["global_particles"] = merged["max_particles"]  # pf_init_model: a global start draws max_samples
 
     model = str(merged["robot_model_type"])
     if model not in _ROBOT_MODELS:
@@ -348,6 +355,35 @@ def translate_amcl_parameters(params: Mapping[str, Any], source: str = "config")
     warnings += _unknown(given, set(NAV2_AMCL_DEFAULTS) | _NO_EFFECT_OFFLINE | set(_INITIAL_POSE))
     ignored = sorted(k for k in given if k in _NO_EFFECT_OFFLINE)
     return AmclTranslation(tree, warnings, ignored)
+
+
+# AmclNode::initParameters' semantic checks: (parameter, is it out of range, the value the node takes instead).
+_AMCL_NODE_SUBSTITUTES: tuple[tuple[str, Any, Any], ...] = (
+    ("laser_likelihood_max_dist", lambda v: v < 0, 2.0),
+    ("max_particles", lambda v: v < 0, 2000),
+    ("min_particles", lambda v: v < 0, 500),
+    ("resample_interval", lambda v: v <= 0, 1),
+)
+
+
+def _substitute_as_amcl_node(merged: dict[str, Any]) -> list[str]:
+    """Replace in ``merged`` the values nav2_amcl's ``initParameters`` replaces (a negative likelihood distance or
+    particle count, a resample_interval below 1, min_particles above max_particles: max_particles becomes
+    min_particles), as the node does, with its warnings; values that are not numbers are left to the config's
+    validation."""
+    warnings: list[str] = []
+    for name, out_of_range, default in _AMCL_NODE_SUBSTITUTES:
+        value = merged[name]
+        if isinstance(value, int | float) and not isinstance(value, bool) and out_of_range(value):
+            warnings.append(f"amcl {name}: {value!r} is not allowed; nav2_amcl runs with {default!r} instead, "
+                            "and so does this run")
+            merged[name] = default
+    low, high = merged["min_particles"], merged["max_particles"]
+    if all(isinstance(v, int | float) and not isinstance(v, bool) for v in (low, high)) and low > high:
+        warnings.append(f"amcl min_particles {low!r} > max_particles {high!r}: nav2_amcl sets max_particles to "
+                        "min_particles, and so does this run")
+        merged["max_particles"] = low
+    return warnings
 
 
 def _start_hint(names: str, x: float, y: float, yaw: float) -> str:

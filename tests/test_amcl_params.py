@@ -116,6 +116,35 @@ def test_what_cannot_be_translated_is_a_config_error(tmp_path: Path, text: str, 
         _load(tmp_path, text)
 
 
+def test_a_parameter_file_weighs_each_particle_at_its_pose_and_starts_global_with_max_particles(
+        tmp_path: Path) -> None:
+    """AMCL has no region-averaged (smoothed, tempered) weighting, and pf_init_model draws max_samples."""
+    assert DoorbatchConfig().localize.global_smoothing  # doorbatch's own default smooths
+    for text in (NAV2_PARAMS, "amcl:\n  ros__parameters:\n    max_particles: 3000\n",
+                 "odom_model_type: diff\nmax_particles: 4000\n"):
+        lc = _load(tmp_path, text).localize
+        assert not lc.global_smoothing
+        assert lc.global_particles == lc.max_particles != DoorbatchConfig().localize.global_particles
+
+
+@pytest.mark.parametrize(("params", "expected"), [
+    ({"laser_likelihood_max_dist": -1.0}, {"laser_likelihood_max_dist": 2.0}),
+    ({"max_particles": -5}, {"max_particles": 2000}),
+    ({"min_particles": -1}, {"min_particles": 500}),
+    ({"resample_interval": 0}, {"resample_interval": 1}),
+    ({"min_particles": 3000, "max_particles": 1000}, {"min_particles": 3000, "max_particles": 3000}),
+    ({"min_particles": -1, "max_particles": 300}, {"min_particles": 500, "max_particles": 500}),
+])
+def test_values_nav2_amcl_replaces_at_start_are_replaced_with_its_warning(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture, params: dict[str, float], expected: dict[str, float]) -> None:
+    """AmclNode::initParameters' semantic checks: the node warns and runs on; so does the replay."""
+    text = "amcl:\n  ros__parameters:\n" + "".join(f"    {k}: {v}\n" for k, v in params.items())
+    with caplog.at_level(logging.WARNING):
+        lc = _load(tmp_path, text).localize
+    assert {k: getattr(lc, k) for k in expected} == expected
+    assert "nav2_amcl" in caplog.text and next(iter(params)) in caplog.text
+
+
 # ROS 1 amcl (navigation's amcl_node.cpp, noetic) defaults, written out here from its source as the test's truth.
 ROS1_DEFAULTS = {"alpha1": 0.2, "alpha2": 0.2, "alpha3": 0.2, "alpha4": 0.2, "alpha5": 0.2, "z_hit": 0.95,
                  "z_rand": 0.05, "sigma_hit": 0.2, "laser_likelihood_max_dist": 2.0, "laser_max_range": -1.0,
