@@ -461,6 +461,12 @@ class LocalizeConfig(Section):
     # Nav2 robot_model_type: "differential" (the model above) or "omnidirectional" (Nav2's OmniMotionModel, for
     # holonomic bases: translation, rotation and a sideways strafe; motion_model.sample_motion_model_omni).
     robot_model_type: Literal["differential", "omnidirectional"] = "differential"
+    # ... unless not set (config, parameter file or --set) and the log's odometry moves across its heading for
+    # more than this share of its travel (geometry.odometry.sideways_share over steps of sideways_step_m): a
+    # holonomic base, localized with "omnidirectional" and a warning. Measured: the sample's differential robot
+    # 0.003, the CARMEN logs' corrected poses 0.04-0.09, a simulated mecanum base 0.41 (session 27).
+    omni_sideways_share: float = Field(0.25, gt=0.0, le=1.0)
+    sideways_step_m: float = Field(0.1, gt=0.0)
     # Strafe noise from translation (omnidirectional only). Nav2's defaults give it alpha3's value; so do we.
     alpha5: float = Field(0.015, ge=0.0)
     # ROS 1 amcl's odom_model_type diff and omni (its default, before the -corrected models): each noise's α-sum

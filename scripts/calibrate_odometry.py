@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from doorbatch.config import DoorbatchConfig
+from doorbatch.geometry.odometry import sideways_share
 from doorbatch.geometry.se2 import interpolate_poses
 from doorbatch.io.recording import load_recording
 from doorbatch.pipeline.localize.calibrate import estimate_alphas, estimate_omni_alphas
@@ -35,6 +36,11 @@ def main() -> None:
         odo_all.append(odo[ok])
         ref_all.append(ref[ok])
     omni = args.model == "omnidirectional"
+    lc = DoorbatchConfig().localize
+    share = max(sideways_share(o[:, 0], o[:, 1], o[:, 2], lc.sideways_step_m) for o in odo_all)
+    if not omni and share > lc.omni_sideways_share:
+        print(f"# the odometry moves sideways for {100 * share:.0f} % of its travel (a holonomic base): "
+              "fit it with --model omnidirectional")
     fit = estimate_omni_alphas if omni else estimate_alphas
     fits = [fit(o, r) for o, r in zip(odo_all, ref_all, strict=True)]
     n = np.array([f.increments for f in fits], dtype=float)

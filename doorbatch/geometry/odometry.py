@@ -12,6 +12,7 @@ is taken as a pure rotation: δrot1 = 0, δrot2 = θ' − θ (Nav2 AMCL uses 0.0
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -69,3 +70,25 @@ def increment_variances(rot1: npt.ArrayLike, trans: npt.ArrayLike, rot2: npt.Arr
     r1, r2 = rotation_noise_magnitude(rot1), rotation_noise_magnitude(rot2)
     return a1 * r1**2 + a2 * tr**2, a3 * tr**2 + a4 * (r1**2 + r2**2), a1 * r2**2 + a2 * tr**2
 
+
+
+def sideways_share(x: npt.ArrayLike, y: npt.ArrayLike, yaw: npt.ArrayLike, step_m: float) -> float:
+    """The share of the travel that goes across the heading: Σ δtrans·|sin(δrot1 − Δθ/2)| / Σ δtrans over steps
+    between poses at least ``step_m`` apart (each step ends at the first pose ``step_m`` or more from where it
+    began, so that the jitter of a slow or standing robot makes no step).
+
+    δrot1 − Δθ/2 is the bearing of the step against the heading halfway along it: 0 (or π, backwards) for any
+    arc a differential-drive base can drive, since an arc's chord points along its mid heading; ±π/2 for a
+    holonomic base strafing. NaN when no two poses lie ``step_m`` apart.
+    """
+    px, py, pyaw = (np.asarray(v, dtype=np.float64).ravel() for v in (x, y, yaw))
+    keep = [0]
+    for i in range(1, len(px)):  # sequential by nature (each step starts where the last ended); once per log
+        if math.hypot(px[i] - px[keep[-1]], py[i] - py[keep[-1]]) >= step_m:
+            keep.append(i)
+    if len(keep) < 2:
+        return float("nan")
+    inc = odometry_increments(px[keep], py[keep], pyaw[keep])
+    dyaw = wrap_angle(inc.rot1 + inc.rot2)
+    across = inc.trans * np.abs(np.sin(inc.rot1 - dyaw / 2.0))
+    return float(across.sum() / inc.trans.sum())

@@ -23,6 +23,7 @@ import numpy.typing as npt
 
 from doorbatch.config import DoorbatchConfig, LocalizeConfig, parse_init
 from doorbatch.errors import PipelineError, UsageError
+from doorbatch.geometry.odometry import sideways_share
 from doorbatch.geometry.se2 import interpolate_poses
 from doorbatch.io.log_clock import LogClock
 from doorbatch.io.map_server import read_map
@@ -351,6 +352,29 @@ def with_laser_odometry(rec: Recording, config: DoorbatchConfig) -> Recording:
     return replace(rec, odometry=odometry, warnings=[*rec.warnings, note])
 
 
+def motion_model_for(odometry: PoseSeries, lc: LocalizeConfig) -> tuple[LocalizeConfig, str | None]:
+    """The ``localize`` section with the motion model the odometry needs, and a warning when it moves sideways.
+
+    Odometry that moves across its heading for more than ``omni_sideways_share`` of its travel
+    (:func:`~doorbatch.geometry.odometry.sideways_share`) comes from a holonomic base: the differential model would
+    take each strafe as a turn of ±90°, there and back, with the rotation noise of both. Then, unless the config
+    names ``robot_model_type``, the omnidirectional model is used; if it names ``differential``, it is kept.
+    """
+    if lc.robot_model_type != "differential":
+        return lc, None
+    pose = odometry.poses
+    share = sideways_share(pose[:, 0], pose[:, 1], pose[:, 2], lc.sideways_step_m)
+    if not share > lc.omni_sideways_share:
+        return lc, None
+    moved = f"the odometry moves sideways for {100 * share:.0f} % of its travel (a holonomic base)"
+    if "robot_model_type" in lc.model_fields_set:
+        return lc, (f"{moved}, but the config sets robot_model_type differential, which takes each strafe as a turn "
+                    "of ±90° there and back; set localize.robot_model_type=omnidirectional (and alpha5)")
+    return (lc.model_copy(update={"robot_model_type": "omnidirectional"}),
+            f"{moved}: localized with robot_model_type omnidirectional (Nav2's OmniMotionModel, strafe noise alpha5 "
+            f"{lc.alpha5:g}); set localize.robot_model_type=differential to keep the differential model")
+
+
 def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchConfig, method: str = "rbpf",
                        init: Init = "reference", progress: Callable[[int], object] | None = None,
                        resets: Sequence[StartPose] = ()) -> LocalizationResult:
@@ -375,6 +399,7 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
     if rec.odometry is None:
         rec = with_laser_odometry(rec, config)
     assert rec.odometry is not None
+    lc, motion_note = motion_model_for(rec.odometry, lc)
     odom, odom_ok = interpolate_poses(rec.odometry.stamps_ns, rec.odometry.poses, rec.scans.stamps_ns,
                                       int(config.mapping.max_pose_gap_s * 1e9))
     state = MclState(_initial_particles(rec, lmap, init, method, lc, rng), global_start=init == "global")
@@ -385,7 +410,7 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
     reset_at = _reset_indices(rec, resets, first_i)
     converged_ns = None if init == "global" else int(rec.scans.stamps_ns[first_i])
     monitor = ConvergenceMonitor()  # convergence claims of a global run; lost detection of every run
-    warnings = list(rec.warnings)  # the run's own, not added to the caller's recording
+    warnings = [*rec.warnings, *([motion_note] if motion_note else [])]  # the run's own, not the recording's
     lost = barred = False
     lost_ns: list[int] = []
     last_s: float | None = None

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
+from doorbatch.geometry.se2 import compose, relative
 from doorbatch.maps import OccupancyMap
 from doorbatch.pipeline.localize.likelihood_field import BeamSet, select_beams
 from doorbatch.sim.raycast import cast_rays
@@ -88,3 +89,14 @@ def loop_trajectory(n: int) -> FloatArray:
     y = 2.2 + 1.0 * np.sin(t)
     yaw = np.arctan2(np.gradient(y), np.gradient(x))
     return np.stack([x, y, yaw], axis=1)
+
+
+def axis_scaled_odometry(truth: FloatArray, rng: np.random.Generator) -> FloatArray:
+    """Odometry (N, 3) from ``truth``'s robot-frame steps, 3 % long along x and 3 % short along y, with white
+    noise (3 mm, 4 mrad): a holonomic base's drift, starting at the origin."""
+    steps = relative(truth[:-1], truth[1:])
+    noisy = steps * [1.03, 0.97, 1.0] + rng.normal(0.0, [0.003, 0.003, 0.004], steps.shape)
+    odom = np.zeros_like(truth)
+    for k, step in enumerate(noisy, start=1):
+        odom[k] = compose(odom[k - 1], step)
+    return odom
