@@ -189,6 +189,28 @@ def test_inspect_names_what_an_unused_map_or_initial_pose_can_be_given_as(
     assert "unused (a start pose: localize --init /initialpose)" in out
 
 
+def test_a_second_laser_and_an_ekfs_odometry_are_named_not_dropped_silently(
+        write_log: Callable[..., Path], capsys: pytest.CaptureFixture[str]) -> None:
+    """Two lasers: the one read and the one not are a problem inspect lists, and a warning every run carries; an
+    unused Odometry topic (an EKF's) is offered as odometry, not as a start pose in the map."""
+    from doorbatch.config import DoorbatchConfig
+    from doorbatch.io.recording import load_recording
+    from tests.conftest import sample_messages
+
+    messages = sample_messages()
+    extra = [("/scan_rear" if t == "/scan" else "/odometry/filtered", kind, at, msg)
+             for t, kind, at, msg in messages if t in ("/scan", "/odom")]
+    log_path = write_log("two_lasers.mcap", sorted([*messages, *extra], key=lambda m: m[2]))
+    assert main(["inspect", str(log_path)]) == 0
+    out = capsys.readouterr().out
+    assert "2 laser scan topics: /scan is read" in out and "/scan_rear not" in out
+    assert "unused (odometry or a reference: --set topics.odometry=/odometry/filtered" in out
+    rec = load_recording(log_path, DoorbatchConfig())
+    assert any("/scan_rear not" in w for w in rec.warnings)
+    chosen = load_recording(log_path, DoorbatchConfig.model_validate({"topics": {"scan": "/scan_rear"}}))
+    assert not any("laser scan topics" in w for w in chosen.warnings)  # a choice the user made is no news
+
+
 def test_a_bag_folder_without_metadata_names_its_mcap(write_log: Callable[..., Path], tmp_path: Path,
                                                       capsys: pytest.CaptureFixture[str]) -> None:
     folder = tmp_path / "rosbag2_2026_11_26"

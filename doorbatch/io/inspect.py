@@ -19,7 +19,7 @@ import numpy as np
 from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import LogContentError
 from doorbatch.geometry.tf_buffer import TfBuffer
-from doorbatch.io.decode import decode_scan, decode_transforms, stamp_to_ns
+from doorbatch.io.decode import ODOMETRY, decode_scan, decode_transforms, stamp_to_ns
 from doorbatch.io.map_topic import OCCUPANCY_GRID
 from doorbatch.io.pose_topic import POSE_TYPES
 from doorbatch.io.reader import most_are_bad, open_log
@@ -55,9 +55,12 @@ class Problem:
 
 
 def _unused_hint(info: TopicInfo) -> str | None:
-    """What an unused topic can still be given as: a map (``--map LOG``) or a start pose (``--init TOPIC``)."""
+    """What an unused topic can still be given as: a map (``--map LOG``), odometry or a reference (an Odometry
+    topic: ``topics.odometry``, ``topics.reference``) or a start pose (``--init TOPIC``)."""
     if info.msgtype == OCCUPANCY_GRID:
         return "a map: localize --map LOG"
+    if info.msgtype == ODOMETRY:  # an EKF's /odometry/filtered: poses in the odom frame, no start in the map's
+        return f"odometry or a reference: --set topics.odometry={info.name} (or topics.reference)"
     if info.msgtype in POSE_TYPES:
         return f"a start pose: localize --init {info.name}"
     return None

@@ -203,6 +203,7 @@ class LogReader(ABC):
                 if err.path is not None:
                     raise
                 raise LogContentError(err.reason, path=self.path, topic=err.topic) from err
+            self.warnings += [f"{self.path}: {note}" for note in self._roles.notes]
         return self._roles
 
     def messages(self, roles: Iterable[Role] | None = None, start_ns: int | None = None,

@@ -31,6 +31,8 @@ class RoleAssignment:
 
     topics: dict[Role, tuple[str, ...]] = field(default_factory=dict)
     reasons: dict[str, str] = field(default_factory=dict)
+    # Choices a user should hear of: a role detected among several topics whose others are not read.
+    notes: list[str] = field(default_factory=list)
 
     def topic(self, role: Role) -> str | None:
         """The single topic of a role, or None."""
@@ -136,6 +138,7 @@ def assign_roles(topics: Mapping[str, TopicInfo], overrides: TopicsConfig | None
         chosen[role] = tuple(names)
 
     taken = {n for names in chosen.values() for n in names}
+    notes: list[str] = []
 
     def free(role: Role) -> list[TopicInfo]:
         return [t for t in topics.values() if t.msgtype in _TYPES[role] and t.name not in taken]
@@ -169,9 +172,14 @@ def assign_roles(topics: Mapping[str, TopicInfo], overrides: TopicsConfig | None
                     reasons[name] = f"type {topics[name].msgtype} ({kind} transforms)"
                 taken.update(tfs)
             continue
-        pick = _pick(role, free(role))
+        candidates = free(role)
+        pick = _pick(role, candidates)
         if pick:
             chosen[role] = (pick[0].name,)
             reasons[pick[0].name] = pick[1]
             taken.add(pick[0].name)
-    return RoleAssignment(topics=chosen, reasons=reasons)
+            if role is Role.SCAN and len(candidates) > 1:
+                others = sorted(c.name for c in candidates if c is not pick[0])
+                notes.append(f"{len(candidates)} laser scan topics: {pick[0].name} is read ({pick[1]}), "
+                             f"{', '.join(others)} not (one laser per run; topics.scan chooses)")
+    return RoleAssignment(topics=chosen, reasons=reasons, notes=notes)
