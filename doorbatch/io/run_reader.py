@@ -56,8 +56,9 @@ def is_map_dir(path: Path) -> bool:
 
 def read_reference(path: Path, config: DoorbatchConfig) -> ReferenceTrajectory:
     """A reference trajectory from a TUM file (``.tum``/``.txt``), from a pose topic of a log (``LOG:/TOPIC``,
-    :func:`split_pose_topic_run`), or from a log's reference pose topic: the robot's pose at the scans
-    (:func:`~doorbatch.io.recording.load_recording`), or, in a log without a laser (a motion-capture or
+    :func:`split_pose_topic_run`), or from a log's reference pose topic as
+    :func:`~doorbatch.io.recording.load_recording` reads it (at the topic's own stamps, not resampled at the scans;
+    a CARMEN log's corrected poses are at its scans), or, in a log without a laser (a motion-capture or
     ground-truth recording), the topic's poses as they are.
 
     Raises:
@@ -217,9 +218,9 @@ def read_trajectory_file(path: Path, name: str | None = None) -> RunTables:
 
 
 def _foreign_run(name: str, log: str, method: str, stamps_ns: npt.NDArray[np.int64], pose: FloatArray) -> RunTables:
-    """Another localizer's trajectory as a run: tracked from its first pose, no door states, no reference of its
-    own."""
-    return RunTables(name=name, log=log, method=method, stamps_ns=stamps_ns, pose=pose, converged_ns=int(stamps_ns[0]))
+    """Another localizer's trajectory as a run: no convergence or ambiguity reported (NaN in the metrics, not
+    "converged at its first pose"), no door states, no reference of its own."""
+    return RunTables(name=name, log=log, method=method, stamps_ns=stamps_ns, pose=pose, convergence_reported=False)
 
 
 def split_pose_topic_run(path: Path) -> tuple[Path, str] | None:

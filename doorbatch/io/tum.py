@@ -9,6 +9,7 @@ z only; reading keeps x, y and the heading (yaw) of the quaternion.
 from __future__ import annotations
 
 import decimal
+import logging
 from pathlib import Path
 from typing import NamedTuple
 
@@ -19,8 +20,13 @@ from doorbatch.errors import InputDataError
 from doorbatch.io.atomic import atomic_write_text
 
 HEADER = "# timestamp x y z qx qy qz qw\n"
+# Beyond these a trajectory is not planar, and scoring its (x, y, yaw) leaves something out: a warning says so.
+PLANAR_Z_RANGE_M = 0.05  # a floor robot's height wanders by centimetres (a SLAM's z drift, a ramp)
+PLANAR_TILT_DEG = 5.0  # a base rocks a few degrees; a handheld or legged recording more
 NS_PER_S = 1_000_000_000
 _INT64_MIN, _INT64_MAX = int(np.iinfo(np.int64).min), int(np.iinfo(np.int64).max)
+
+log = logging.getLogger(__name__)
 
 Int64Array = npt.NDArray[np.int64]
 FloatArray = npt.NDArray[np.float64]
@@ -119,10 +125,12 @@ def _yaw(q: FloatArray) -> FloatArray:
 
 
 def read_tum(path: Path) -> TumTrajectory:
-    """Read a TUM file into planar poses (z, roll and pitch are dropped).
+    """Read a TUM file into planar poses (z, roll and pitch are dropped; a warning is logged when z ranges over
+    more than ``PLANAR_Z_RANGE_M`` or a pose tilts by more than ``PLANAR_TILT_DEG``).
 
     Raises:
-        InputDataError: The file cannot be read, or a line is malformed (names the file and line number).
+        InputDataError: The file cannot be read, a line is malformed (names the file and line number), or the
+            stamps go backwards (evo refuses such a trajectory too; the line is named).
     """
     try:
         text = Path(path).read_text(encoding="utf-8")
@@ -140,5 +148,25 @@ def read_tum(path: Path) -> TumTrajectory:
         stamps.append(stamp)
         values.append(floats)
     table = np.array(values, dtype=np.float64).reshape(-1, 7)
-    return TumTrajectory(np.array(stamps, dtype=np.int64), table[:, 0].copy(), table[:, 1].copy(),
+    stamp_ns = np.array(stamps, dtype=np.int64)
+    back = np.flatnonzero(np.diff(stamp_ns) < 0)
+    if back.size:
+        before, after = (format_stamp(int(stamp_ns[k])) for k in (back[0], back[0] + 1))
+        raise InputDataError(f"stamps go backwards {back.size} time(s), first after the {back[0] + 1}. pose "
+                             f"({before} then {after} s); sort the file by time (sort -n)", path=path)
+    _warn_if_not_planar(path, table)
+    return TumTrajectory(stamp_ns, table[:, 0].copy(), table[:, 1].copy(),
                          _yaw(table[:, 3:]))
+
+
+def _warn_if_not_planar(path: Path, table: FloatArray) -> None:
+    """Log a warning when the poses (rows x y z qx qy qz qw) leave the plane: z ranges beyond
+    ``PLANAR_Z_RANGE_M``, or the body's z axis tilts beyond ``PLANAR_TILT_DEG`` (cos tilt = 1 − 2(qx² + qy²))."""
+    if not len(table):
+        return
+    z_range = float(np.ptp(table[:, 2]))
+    q = table[:, 3:7] / np.linalg.norm(table[:, 3:7], axis=1, keepdims=True)
+    tilt = float(np.degrees(np.arccos(np.clip(1.0 - 2.0 * (q[:, 0] ** 2 + q[:, 1] ** 2), -1.0, 1.0))).max())
+    if z_range > PLANAR_Z_RANGE_M or tilt > PLANAR_TILT_DEG:
+        log.warning("%s: not planar (z ranges over %.3f m, tilt up to %.1f°); scored as x, y and yaw only, as "
+                    "doorbatch's runs are", path, z_range, tilt)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import math
 from pathlib import Path
 
@@ -43,6 +44,7 @@ def test_parse_stamp_is_exact_decimal(text: str, ns: int) -> None:
 def test_write_read_round_trip(tmp_path_factory: pytest.TempPathFactory,
                                poses: list[tuple[int, float, float, float]]) -> None:
     path = tmp_path_factory.mktemp("tum") / "trajectory.tum"
+    poses = sorted(poses, key=lambda p: p[0])  # a trajectory is in time order (read_tum refuses one that is not)
     stamp = np.array([p[0] for p in poses], dtype=np.int64)
     x, y, yaw = (np.array([p[k] for p in poses], dtype=np.float64) for k in (1, 2, 3))
     write_tum(path, stamp, x, y, yaw)
@@ -99,6 +101,31 @@ def test_bad_line_names_file_and_line_number(tmp_path: Path, line: str, message:
         read_tum(path)
     assert info.value.path == str(path)
     assert "line 3" in str(info.value)
+
+
+def test_stamps_going_backwards_are_refused_with_the_file_and_pose(tmp_path: Path) -> None:
+    path = tmp_path / "shuffled.tum"
+    path.write_text("0.0 0 0 0 0 0 0 1\n0.2 1 0 0 0 0 0 1\n0.1 2 0 0 0 0 0 1\n0.1 2 0 0 0 0 0 1\n")
+    with pytest.raises(InputDataError, match=r"backwards 1 time\(s\), first after the 2\. pose") as info:
+        read_tum(path)
+    assert info.value.path == str(path)
+
+
+def test_a_trajectory_that_leaves_the_plane_is_read_in_it_with_a_warning(tmp_path: Path,
+                                                                         caplog: pytest.LogCaptureFixture) -> None:
+    tilt = math.radians(10.0)  # a 10° pitch on the second pose, and a 0.2 m climb
+    path = tmp_path / "handheld.tum"
+    path.write_text(f"0.0 0 0 0 0 0 0 1\n1.0 1 0 0.2 0 {math.sin(tilt / 2)} 0 {math.cos(tilt / 2)}\n")
+    with caplog.at_level(logging.WARNING):
+        back = read_tum(path)
+    assert back.x.tolist() == [0.0, 1.0]
+    assert "not planar (z ranges over 0.200 m, tilt up to 10.0°)" in caplog.text
+    caplog.clear()
+    flat = tmp_path / "flat.tum"
+    flat.write_text("0.0 0 0 0.01 0 0 0 1\n1.0 1 0 0.02 0 0 0.3 0.95\n")
+    with caplog.at_level(logging.WARNING):
+        read_tum(flat)
+    assert caplog.text == ""
 
 
 def test_missing_file_is_input_data_error(tmp_path: Path) -> None:

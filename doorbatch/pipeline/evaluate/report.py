@@ -116,6 +116,9 @@ class RunTables:
     params: dict[str, Any] = field(default_factory=dict)
     map_path: str | None = None
     lost_ns: tuple[int, ...] | None = None  # stamps at which the run found itself lost; None: not known
+    # False for another localizer's trajectory (TUM, a pose topic): it says nothing of convergence or ambiguity,
+    # so converged, time_to_converge_s and ambiguous are NaN, not "converged at its first pose".
+    convergence_reported: bool = True
     # The resolved config the run was made with (its manifest's ``config``); None: not known (a run in memory,
     # another localizer's trajectory).
     config: dict[str, Any] | None = None
@@ -359,11 +362,13 @@ def _convergence_rows(run: RunTables, reference: ReferenceTrajectory | None, cfg
     the run's poses through for its APE (:class:`~.trajectory_metrics.TrajectoryErrors`), so that success is
     judged in the same frame (a map built from scan matching is in its odometry's frame, not the reference's)."""
     t0 = int(run.stamps_ns[0])
+    told = run.convergence_reported
     after = math.nan if run.converged_ns is None else (run.converged_ns - t0) / 1e9
-    rows = [MetricRow(run.name, run.log, run.method, "converged", float(run.converged_ns is not None), "bool",
-                      run.params),
+    rows = [MetricRow(run.name, run.log, run.method, "converged",
+                      float(run.converged_ns is not None) if told else math.nan, "bool", run.params),
             MetricRow(run.name, run.log, run.method, "time_to_converge_s", after, "s", run.params),
-            MetricRow(run.name, run.log, run.method, "ambiguous", float(run.ambiguous), "bool", run.params),
+            MetricRow(run.name, run.log, run.method, "ambiguous", float(run.ambiguous) if told else math.nan, "bool",
+                      run.params),
             MetricRow(run.name, run.log, run.method, "lost",
                       math.nan if run.lost_ns is None else float(bool(run.lost_ns)), "bool", run.params),
             MetricRow(run.name, run.log, run.method, "time_to_lost_s",

@@ -251,6 +251,11 @@ def test_another_localizers_tum_trajectory_is_scored_beside_a_run(tmp_path: Path
     rmse = {r: v for r, m, v in zip(table["run"], table["metric"], table["value"], strict=True)
             if m == "ape_trans_rmse"}
     assert rmse == pytest.approx({"rbpf": 0.05, "amcl": 0.1})
+    told = {(r, m): v for r, m, v in zip(table["run"], table["metric"], table["value"], strict=True)
+            if m in ("converged", "time_to_converge_s", "ambiguous")}
+    assert told[("rbpf", "converged")] == 1.0 and told[("rbpf", "ambiguous")] == 0.0
+    # a TUM file says nothing of convergence: unknown, not "converged at its first pose, never ambiguous"
+    assert all(math.isnan(told[("amcl", m)]) for m in ("converged", "time_to_converge_s", "ambiguous"))
     assert main(args) == 2  # a TUM file has no log beside which to find its reference
     assert "--reference" in capsys.readouterr().err
     # the same poses straight from a recorded session's /amcl_pose (LOG:/TOPIC), no export
