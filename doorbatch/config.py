@@ -651,6 +651,12 @@ class EvaluateConfig(Section):
     max_time_diff_s: float = Field(0.01, gt=0.0)
     # evo --align: none (the map frame is shared) or se2 (Umeyama without scale on the planar positions).
     align: Literal["none", "se2"] = "none"
+    # Without --align: a run whose APE RMSE is above frame_hint_min_ape_m and falls below frame_hint_ratio of it
+    # under an SE(2) alignment is in another frame than its reference (a map built from scan matching or
+    # odometry lies in its first pass's odometry frame): a warning names --align se2 (expert choice: a rigid
+    # offset explains 80 % of a metre-sized error only when the frames differ, not when the run is lost).
+    frame_hint_min_ape_m: float = Field(1.0, gt=0.0)
+    frame_hint_ratio: float = Field(0.2, gt=0.0, le=1.0)
     # evo --delta D --delta_unit m; --all_pairs; rel_delta_tol (all-pairs mode only).
     rpe_delta_m: float = Field(1.0, gt=0.0)
     rpe_all_pairs: bool = False

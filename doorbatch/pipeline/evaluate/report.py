@@ -356,6 +356,23 @@ def _trajectory_rows(run: RunTables, errs: TrajectoryErrors, cfg: EvaluateConfig
     return rows
 
 
+def _frame_hint(run: RunTables, errs: TrajectoryErrors, ref: ReferenceTrajectory, cfg: EvaluateConfig) -> list[str]:
+    """A warning when the run's APE is mostly a rigid offset (``frame_hint_min_ape_m``, ``frame_hint_ratio``):
+    the run and its reference are in different frames, and ``--align se2`` scores it in the reference's."""
+    rmse = float(np.sqrt(np.mean(errs.ape_m**2)))
+    if not rmse > cfg.frame_hint_min_ape_m or len(errs.ape_m) < 3:
+        return []
+    aligned = trajectory_errors(run.stamps_ns, run.pose, ref.stamps_ns, ref.pose, max_diff_s=cfg.max_time_diff_s,
+                                align=Alignment.SE2, rpe_delta_m=cfg.rpe_delta_m)
+    rmse_aligned = float(np.sqrt(np.mean(aligned.ape_m**2)))
+    if rmse_aligned > cfg.frame_hint_ratio * rmse:
+        return []
+    x, y, yaw = aligned.alignment
+    return [f"run {run.name}: APE RMSE {rmse:.2f} m, {rmse_aligned:.3f} m after a rigid motion ({x:.2f} m, {y:.2f} m, "
+            f"{math.degrees(yaw):.1f}°): the run is in another frame than its reference (a map built from scanmatch or "
+            "odometry poses lies in its first pass's odometry frame); --align se2 scores it in the reference's"]
+
+
 def _convergence_rows(run: RunTables, reference: ReferenceTrajectory | None, cfg: EvaluateConfig,
                       alignment: FloatArray | None = None) -> list[MetricRow]:
     """Convergence, loss and (a global start) success rows; ``alignment``: the rigid motion ``--align se2`` put
@@ -531,6 +548,11 @@ def evaluate_runs(runs: Sequence[RunTables], config: DoorbatchConfig, *,
                 raise PipelineError(f"run {run.name}: {err}") from err
             rows += _trajectory_rows(run, errs, cfg)
             alignment = errs.alignment if Alignment(cfg.align) is Alignment.SE2 else None
+            if alignment is not None:
+                rows += [MetricRow(run.name, run.log, run.method, f"alignment_{k}", float(v), u, run.params)
+                         for k, v, u in zip(("x", "y", "yaw"), alignment, ("m", "m", "rad"), strict=True)]
+            else:
+                warnings += _frame_hint(run, errs, ref, cfg)
             series.append(ErrorSeries(run.name, run.log, run.method, run.params,
                                       (errs.stamps_ns - int(run.stamps_ns[0])) / 1e9, errs.reference[:, 0],
                                       errs.ape_m, errs.ape_rad))

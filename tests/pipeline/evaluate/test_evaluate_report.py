@@ -101,10 +101,27 @@ def test_global_success_is_judged_after_the_alignment_asked_for() -> None:
     estimate = compose(np.broadcast_to(-frame, ref.shape), ref)  # not the inverse: any rigid motion will do
     run = RunTables("other_frame", "l", "mcl", stamps, estimate, init="global", converged_ns=int(stamps[20]))
     reference = ReferenceTrajectory(stamps, ref)
-    assert evaluate_runs([run], DoorbatchConfig(), reference=reference).value("other_frame", "global_success") == 0.0
+    plain = evaluate_runs([run], DoorbatchConfig(), reference=reference)
+    assert plain.value("other_frame", "global_success") == 0.0
+    assert len(plain.warnings) == 1 and "--align se2" in plain.warnings[0]  # the user hears why, and the fix
     aligned = evaluate_runs([run], load_config(overrides=["evaluate.align=se2"]), reference=reference)
     assert aligned.value("other_frame", "ape_trans_max") < 1e-9
     assert aligned.value("other_frame", "global_success") == 1.0
+    # the alignment is reported, so that a run turned by 180° (or any wrong frame) shows
+    back = compose(np.broadcast_to([aligned.value("other_frame", f"alignment_{k}") for k in ("x", "y", "yaw")],
+                                   estimate.shape), estimate)
+    np.testing.assert_allclose(back, ref, atol=1e-9)
+    assert not aligned.warnings
+
+
+def test_a_lost_run_is_not_taken_for_another_frame() -> None:
+    """A run that wandered off (no rigid motion explains its error) gets no frame hint."""
+    stamps, ref = _straight()
+    rng = np.random.default_rng(0)
+    lost = ref + np.cumsum(rng.normal(0.0, [0.3, 0.3, 0.05], ref.shape), axis=0)
+    ev = evaluate_runs([RunTables("lost", "l", "mcl", stamps, lost)], DoorbatchConfig(),
+                       reference=ReferenceTrajectory(stamps, ref))
+    assert ev.value("lost", "ape_trans_rmse") > 1.0 and not ev.warnings
 
 
 def test_global_success_interpolates_a_reference_at_its_own_rate() -> None:
