@@ -72,11 +72,15 @@ class LocalizationMap:
     field: DistanceField
     free: FreeCells
     doors: DoorSet
+    # A doorbatch map's pose source (its manifest's): "scanmatch" and "odometry" maps lie in their first pass's
+    # odometry frame, not a reference's. None: not known (another tool's map).
+    pose_source: str | None = None
 
     @classmethod
-    def of(cls, occ: OccupancyMap, doors: DoorSet, config: LocalizeConfig) -> LocalizationMap:
+    def of(cls, occ: OccupancyMap, doors: DoorSet, config: LocalizeConfig,
+           pose_source: str | None = None) -> LocalizationMap:
         """The map ``occ`` with ``doors``, its likelihood field as the config asks and its free cells."""
-        return cls(occ, localization_field(occ, config), free_cells(occ), doors)
+        return cls(occ, localization_field(occ, config), free_cells(occ), doors, pose_source)
 
 
 def is_map_log(map_path: Path) -> bool:
@@ -115,7 +119,18 @@ def load_localization_map(map_path: Path, config: LocalizeConfig) -> Localizatio
         doors_path = map_doors_file(map_path)
         doors = read_door_set(doors_path.parent) if doors_path is not None else DoorSet.empty()
     doors = with_closed_in_range(doors)
-    return LocalizationMap.of(occ, doors, config)
+    return LocalizationMap.of(occ, doors, config, map_pose_source(map_path))
+
+
+def map_pose_source(map_path: Path) -> str | None:
+    """The pose source a doorbatch map directory was built from (``manifest.json``), or None."""
+    from doorbatch.io.manifest import Manifest
+
+    folder = map_path if map_path.is_dir() else map_path.parent
+    if not (folder / "manifest.json").is_file() or not (folder / "map.yaml").is_file():
+        return None
+    source = Manifest.read(folder / "manifest.json").extra.get("pose_source")
+    return str(source) if source is not None else None
 
 
 def truth_localization_map(truth_path: Path, config: LocalizeConfig) -> LocalizationMap:
@@ -315,12 +330,38 @@ def localize(log_path: Path, lmap: LocalizationMap, config: DoorbatchConfig, met
     if isinstance(start, StartPose) and start.frame_id not in ("", config.frames.map):
         rec.warnings.append(f"--init {start.topic}: its pose is in frame {start.frame_id!r}, taken as the map frame "
                             f"{config.frames.map!r}")
+    if start != "global" and (note := start_fit_note(rec, lmap, start, config.localize)):
+        rec.warnings.append(note)
     if start == "reference" and rec.reference_is_odometry:
         rec.warnings.append("--init reference: the reference repeats the odometry (moved rigidly), so it may be no "
                             "map frame at all (a raw CARMEN log's): the start is its first pose, right where the map "
                             "lies in the reference's frame (doorbatch map puts it there from such logs); else give "
                             "--init X,Y,YAW or --init global")
     return localize_recording(rec, lmap, config, method, start, progress, resets)
+
+
+def start_fit_note(rec: Recording, lmap: LocalizationMap, init: Init, lc: LocalizeConfig) -> str | None:
+    """A warning when the first scan does not fit the map at the start pose (under ``lost_min_fit`` of its hits
+    within ``lost_fit_distance_m``): the start is in another frame than the map (a reference in a simulator's
+    world frame against a map from scan-matched poses, in the odometry's frame), or wrong."""
+    if init == "reference":
+        if rec.reference is None:
+            return None
+        pose, ok = interpolate_poses(rec.reference.stamps_ns, rec.reference.poses, rec.scans.stamps_ns[:1])
+        start, i = (pose[0] if ok[0] else rec.reference.poses[0]), 0
+    elif isinstance(init, StartPose):
+        start, i = init.pose, min(start_scan_index(rec, init), len(rec.scans) - 1)
+    else:
+        start, i = np.asarray(init, dtype=np.float64), 0
+    fit = scan_fit(lmap.field, start, rec.scans.hits_base(i), lc.lost_fit_distance_m)
+    if not fit < lc.lost_min_fit:  # NaN: too few hits to tell
+        return None
+    name = init.topic if isinstance(init, StartPose) else "reference" if init == "reference" else "X,Y,YAW"
+    frame = (f"; the map was built from {lmap.pose_source} poses, so it lies in its first pass's odometry frame, "
+             "not the reference's" if init == "reference" and lmap.pose_source in ("scanmatch", "odometry") else "")
+    return (f"--init {name}: at the start pose ({start[0]:.2f}, {start[1]:.2f}, {start[2]:.2f}) only {fit:.0%} of the "
+            f"first scan's hits lie within {lc.lost_fit_distance_m} m of the map's walls{frame}: the start and the map "
+            "may be in different frames; --init global or --init X,Y,YAW in the map's frame")
 
 
 def init_cell_note(occ: OccupancyMap, init: tuple[float, float, float]) -> str | None:

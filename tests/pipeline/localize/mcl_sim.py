@@ -6,6 +6,7 @@ import numpy as np
 import numpy.typing as npt
 
 from doorbatch.geometry.se2 import compose, relative
+from doorbatch.io.recording import PoseSeries, Recording, ScanSet
 from doorbatch.maps import OccupancyMap
 from doorbatch.pipeline.localize.likelihood_field import BeamSet, select_beams
 from doorbatch.sim.raycast import cast_rays
@@ -100,3 +101,18 @@ def axis_scaled_odometry(truth: FloatArray, rng: np.random.Generator) -> FloatAr
     for k, step in enumerate(noisy, start=1):
         odom[k] = compose(odom[k - 1], step)
     return odom
+
+
+def room_recording(truth: FloatArray, odom: FloatArray, rng: np.random.Generator,
+                   reference: FloatArray | None = None, period_ns: int = 100_000_000) -> Recording:
+    """A log in the room as a recording: 360° scans ray cast from ``truth`` (1 cm noise) every ``period_ns``, the
+    ``odom`` poses as odometry and, if given, ``reference`` as its reference pose topic."""
+    ranges, angles = zip(*(scan_ranges(asymmetric_room(), pose, noise_m=0.01, rng=rng) for pose in truth),
+                         strict=True)
+    n = len(truth)
+    stamps = np.arange(n, dtype=np.int64) * period_ns
+    scans = ScanSet(stamps, [r.astype(np.float32) for r in ranges], np.full(n, angles[0][0]),
+                    np.full(n, angles[0][1] - angles[0][0]), np.full(n, 0.05), np.full(n, 12.0),
+                    np.broadcast_to(np.array([[1.0, 0.0, LASER_X], [0.0, 1.0, 0.0]]), (n, 2, 3)).copy(), "laser")
+    ref = None if reference is None else PoseSeries(stamps, reference, "map")
+    return Recording("room.mcap", scans, PoseSeries(stamps, odom, "odom"), ref)

@@ -1,18 +1,16 @@
-"""A holonomic base's log: localize sees the odometry strafe and takes the omnidirectional model, unless the config
-names the model (then it warns)."""
+"""What localize checks before it runs: a holonomic base's odometry (it strafes) takes the omnidirectional model
+unless the config names one, and a start pose where the first scan does not fit the map is told."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from mcl_sim import LASER_X, asymmetric_room, axis_scaled_odometry, loop_trajectory, room_map, scan_ranges
+from mcl_sim import axis_scaled_odometry, loop_trajectory, room_map, room_recording
 
 from doorbatch.config import DoorbatchConfig, load_config
-from doorbatch.io.recording import PoseSeries, Recording, ScanSet
+from doorbatch.io.recording import Recording
 from doorbatch.maps import DoorSet
-from doorbatch.pipeline.localize.run import LocalizationMap, localize_recording, motion_model_for
-
-PERIOD_NS = 100_000_000
+from doorbatch.pipeline.localize.run import LocalizationMap, localize_recording, motion_model_for, start_fit_note
 
 
 def _strafing_recording(differential: bool = False) -> tuple[Recording, np.ndarray]:
@@ -23,14 +21,7 @@ def _strafing_recording(differential: bool = False) -> tuple[Recording, np.ndarr
         truth[:, 2] = 0.0
     rng = np.random.default_rng(3)
     odom = axis_scaled_odometry(truth, rng)
-    segments = asymmetric_room()
-    ranges, angles = zip(*(scan_ranges(segments, pose, noise_m=0.01, rng=rng) for pose in truth), strict=True)
-    n = len(truth)
-    stamps = np.arange(n, dtype=np.int64) * PERIOD_NS
-    scans = ScanSet(stamps, [r.astype(np.float32) for r in ranges], np.full(n, angles[0][0]),
-                    np.full(n, angles[0][1] - angles[0][0]), np.full(n, 0.05), np.full(n, 12.0),
-                    np.broadcast_to(np.array([[1.0, 0.0, LASER_X], [0.0, 1.0, 0.0]]), (n, 2, 3)).copy(), "laser")
-    return Recording("strafe.mcap", scans, PoseSeries(stamps, odom, "odom"), None), truth
+    return room_recording(truth, odom, rng), truth
 
 
 @pytest.mark.parametrize("config_sets_it", [False, True])
@@ -59,3 +50,25 @@ def test_a_differential_base_keeps_the_differential_model_without_a_word() -> No
     assert strafing.odometry is not None
     chosen, note = motion_model_for(strafing.odometry, lc)
     assert chosen.robot_model_type == "omnidirectional" and note is not None
+
+
+def test_a_reference_in_another_frame_than_the_map_is_told_at_the_start() -> None:
+    """--init reference where the reference's frame is not the map's (a simulator's world frame against a map from
+    scan-matched poses, in the odometry's frame): the first scan does not fit there, and the warning says why."""
+    truth = loop_trajectory(60)
+    rng = np.random.default_rng(5)
+    odom = axis_scaled_odometry(truth, rng)
+    shifted = truth + np.array([13.0, -4.0, 0.0])  # the reference's frame 13 m away from the map's
+    config = DoorbatchConfig()
+    for reference, source, told in ((truth, "reference", False), (shifted, "reference", True),
+                                    (shifted, "scanmatch", True)):
+        rec = room_recording(truth, odom, np.random.default_rng(1), reference=reference)
+        lmap = LocalizationMap.of(room_map(), DoorSet.empty(), config.localize, pose_source=source)
+        note = start_fit_note(rec, lmap, "reference", config.localize)
+        assert (note is not None) == told
+        if note is not None:
+            assert "--init global" in note and ("odometry frame" in note) == (source == "scanmatch")
+    good = room_recording(truth, odom, np.random.default_rng(1))
+    lmap = LocalizationMap.of(room_map(), DoorSet.empty(), config.localize)
+    assert start_fit_note(good, lmap, tuple(truth[0]), config.localize) is None
+    assert start_fit_note(good, lmap, (truth[0, 0], truth[0, 1], truth[0, 2] + 1.5), config.localize) is not None
