@@ -430,7 +430,10 @@ def _map_rows(door_map: MapTables, truth: SimTruth | None, cfg: DoorbatchConfig)
     a grid map, which finds moved doors only, is a lower bound), and recall over moved and never-moved doors is
     not given."""
     if truth is None:
-        return [], []
+        return ([MetricRow(door_map.name, "", "map", "doors_detected", float(len(door_map.doors)), "count",
+                           door_map.params)],
+                [f"map {door_map.name}: no mapping truth (--world FILE.truth.yaml, or <log stem>.truth.yaml beside its "
+                 "logs): only doors_detected is reported"])
     truth_set, moved = truth_doors(truth, math.radians(cfg.doors.min_opening_deg))
     max_m = cfg.evaluate.door_match_max_hinge_m
     warnings = []

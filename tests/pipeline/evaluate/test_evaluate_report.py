@@ -412,6 +412,15 @@ def test_door_maps_are_scored_against_the_mapping_truth(tmp_path: Path) -> None:
     assert main([*args[:-1], "--world", str(SAMPLE_LOGS / "map.truth.yaml")]) == 0  # the same truth, given
 
 
+def test_a_door_map_without_a_truth_counts_its_doors_and_says_why_no_more(tmp_path: Path) -> None:
+    from doorbatch.pipeline.evaluate.report import MapTables
+
+    doors = DoorSet(np.array([[1.0, 2.0], [4.0, 0.0]]), np.array([0.9, 0.8]), np.zeros(2), np.zeros(2), np.ones(2))
+    ev = evaluate_runs([], DoorbatchConfig(), maps=[MapTables("own_robot", doors, None)])
+    assert [(r.metric, r.value) for r in ev.metrics] == [("doors_detected", 2.0)]
+    assert len(ev.warnings) == 1 and "--world" in ev.warnings[0]
+
+
 def test_summary_rows_follow_the_particle_count_numerically() -> None:
     stamps, ref = _straight(50)
     runs = [RunTables(f"r{n}", "l", "mcl", stamps, ref, reference=ReferenceTrajectory(stamps, ref),
