@@ -362,8 +362,11 @@ def _frame_hint(run: RunTables, errs: TrajectoryErrors, ref: ReferenceTrajectory
     rmse = float(np.sqrt(np.mean(errs.ape_m**2)))
     if not rmse > cfg.frame_hint_min_ape_m or len(errs.ape_m) < 3:
         return []
-    aligned = trajectory_errors(run.stamps_ns, run.pose, ref.stamps_ns, ref.pose, max_diff_s=cfg.max_time_diff_s,
-                                align=Alignment.SE2, rpe_delta_m=cfg.rpe_delta_m)
+    try:
+        aligned = trajectory_errors(run.stamps_ns, run.pose, ref.stamps_ns, ref.pose, max_diff_s=cfg.max_time_diff_s,
+                                    align=Alignment.SE2, rpe_delta_m=cfg.rpe_delta_m)
+    except PipelineError:  # a robot that stood still: no rigid motion to fit, no hint to give
+        return []
     rmse_aligned = float(np.sqrt(np.mean(aligned.ape_m**2)))
     if rmse_aligned > cfg.frame_hint_ratio * rmse:
         return []

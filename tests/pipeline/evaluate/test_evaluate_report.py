@@ -114,6 +114,15 @@ def test_global_success_is_judged_after_the_alignment_asked_for() -> None:
     assert not aligned.warnings
 
 
+def test_a_robot_that_stood_still_far_off_is_scored_without_a_frame_hint() -> None:
+    """No rigid motion can be fitted to poses that never move; the APE stands, no hint, no error."""
+    stamps, ref = _straight(50)
+    ref[:] = ref[0]
+    ev = evaluate_runs([RunTables("still", "l", "mcl", stamps, ref + np.array([3.0, 0.0, 0.0]))], DoorbatchConfig(),
+                       reference=ReferenceTrajectory(stamps, ref))
+    assert ev.value("still", "ape_trans_rmse") == pytest.approx(3.0) and not ev.warnings
+
+
 def test_a_lost_run_is_not_taken_for_another_frame() -> None:
     """A run that wandered off (no rigid motion explains its error) gets no frame hint."""
     stamps, ref = _straight()
