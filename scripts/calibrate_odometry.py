@@ -37,7 +37,8 @@ def main() -> None:
         ref_all.append(ref[ok])
     omni = args.model == "omnidirectional"
     lc = DoorbatchConfig().localize
-    share = max(sideways_share(o[:, 0], o[:, 1], o[:, 2], lc.sideways_step_m) for o in odo_all)
+    shares = [sideways_share(o[:, 0], o[:, 1], o[:, 2], lc.sideways_step_m) for o in odo_all]
+    share = max((s for s in shares if not np.isnan(s)), default=0.0)  # NaN: a log that never moved a step
     if not omni and share > lc.omni_sideways_share:
         print(f"# the odometry moves sideways for {100 * share:.0f} % of its travel (a holonomic base): "
               "fit it with --model omnidirectional")

@@ -71,7 +71,6 @@ def increment_variances(rot1: npt.ArrayLike, trans: npt.ArrayLike, rot2: npt.Arr
     return a1 * r1**2 + a2 * tr**2, a3 * tr**2 + a4 * (r1**2 + r2**2), a1 * r2**2 + a2 * tr**2
 
 
-
 def sideways_share(x: npt.ArrayLike, y: npt.ArrayLike, yaw: npt.ArrayLike, step_m: float) -> float:
     """The share of the travel that goes across the heading: Σ δtrans·|sin(δrot1 − Δθ/2)| / Σ δtrans over steps
     between poses at least ``step_m`` apart (each step ends at the first pose ``step_m`` or more from where it

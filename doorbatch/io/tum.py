@@ -130,7 +130,7 @@ def read_tum(path: Path) -> TumTrajectory:
 
     Raises:
         InputDataError: The file cannot be read, a line is malformed (names the file and line number), or the
-            stamps go backwards (evo refuses such a trajectory too; the line is named).
+            stamps go backwards (evo refuses such a trajectory too; the pose where they do is named).
     """
     try:
         text = Path(path).read_text(encoding="utf-8")

@@ -344,6 +344,8 @@ def start_fit_note(rec: Recording, lmap: LocalizationMap, init: Init, lc: Locali
     """A warning when the first scan does not fit the map at the start pose (under ``lost_min_fit`` of its hits
     within ``lost_fit_distance_m``): the start is in another frame than the map (a reference in a simulator's
     world frame against a map from scan-matched poses, in the odometry's frame), or wrong."""
+    if not len(rec.scans):
+        return None
     if init == "reference":
         if rec.reference is None:
             return None
