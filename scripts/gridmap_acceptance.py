@@ -6,7 +6,7 @@ already, run ``build_map`` (reference poses), and score the result against the s
 
 Usage::
 
-    python scripts/gridmap_acceptance.py [--work DIR] [--site WORLD:SEED ...] [--json]
+    python scripts/gridmap_acceptance.py [--work DIR] [--site WORLD:SEED ...] [--set section.key=value ...] [--json]
 
 Sites: the bundled sample (``datasets/sample``, office_corridor seed 1) and office_corridor seed 2,
 l_corridor seed 3, double_door seed 4; ``--site`` replaces the simulated ones (e.g.
@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 from scipy.ndimage import maximum_filter
 
-from doorbatch.config import DoorbatchConfig
+from doorbatch.config import DoorbatchConfig, load_config
 from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.io.map_server import read_map
 from doorbatch.io.sim_truth import SimTruth, read_truth
@@ -154,8 +154,9 @@ def main() -> None:
     parser.add_argument("--work", type=Path, help="folder for the simulated logs (kept; reused when present)")
     parser.add_argument("--site", action="append", help="WORLD:SEED to simulate instead of the default three")
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
+    parser.add_argument("--set", action="append", default=[], dest="sets", help="config override, section.key=value")
     args = parser.parse_args()
-    config = DoorbatchConfig()
+    config = load_config(None, args.sets)
     specs = args.site or list(DEFAULT_SITES)
     with tempfile.TemporaryDirectory(prefix="gridmap_acceptance_") as tmp:
         work = args.work or Path(tmp)
