@@ -73,6 +73,10 @@ class IoConfig(Section):
     tf_extrapolation_limit_s: float = Field(0.1, ge=0.0)
     # A scan in a frame with no transform to base_link is an error unless this says to assume identity.
     assume_identity_laser_tf: bool = False
+    # ... or unless this gives the laser's mount in base_link, [x, y, z] in m and [roll, pitch, yaw] in rad (ROS
+    # fixed-axis RPY, as a static_transform_publisher takes them; an upside-down laser has roll π): for a log
+    # recorded after /tf_static was latched. Used only where the log's TF does not take the laser to the base.
+    laser_mount: tuple[float, float, float, float, float, float] | None = None
     # Pair images/detections/colors with scans by nearest stamp within this tolerance.
     stamp_tolerance_s: float = Field(0.05, ge=0.0)
     # Scans and odometry whose header stamps sit apart from their log times by medians that differ more than
@@ -427,7 +431,7 @@ class MappingConfig(Section):
     # A reference that jitters from pose to pose by more than these (white noise: pipeline/poses/pose_jitter.py)
     # blurs the map by about σ_yaw·range + σ_xy: a warning names --pose-source scanmatch. Measured: exact
     # ground truth 0 (the sample, two other simulators), Gazebo p3d with gaussianNoise 0.01 gives 0.0100 m and
-    # 0.57° (session 27). Expert choice: a tenth of a 5 cm cell, and 0.25° (2 cm at 5 m).
+    # 0.57° (session 28). Expert choice: a tenth of a 5 cm cell, and 0.25° (2 cm at 5 m).
     reference_jitter_max_m: float = Field(0.005, gt=0.0)
     reference_jitter_max_deg: float = Field(0.25, gt=0.0)
     # Passes after the first must start within this distance of where the previous one's odometry ended
@@ -470,7 +474,7 @@ class LocalizeConfig(Section):
     # ... unless not set (config, parameter file or --set) and the log's odometry moves across its heading for
     # more than this share of its travel (geometry.odometry.sideways_share over steps of sideways_step_m): a
     # holonomic base, localized with "omnidirectional" and a warning. Measured: the sample's differential robot
-    # 0.003, the CARMEN logs' corrected poses 0.04-0.09, a simulated mecanum base 0.41 (session 27).
+    # 0.003, the CARMEN logs' corrected poses 0.04-0.09, a simulated mecanum base 0.41 (session 28).
     omni_sideways_share: float = Field(0.25, gt=0.0, le=1.0)
     sideways_step_m: float = Field(0.1, gt=0.0)
     # Strafe noise from translation (omnidirectional only). Nav2's defaults give it alpha3's value; so do we.

@@ -252,10 +252,13 @@ def _check_roles(report: LogReport, chosen: dict[Role, tuple[str, ...]], scan_fr
         elif odom_frame != frames.odom:
             add(Problem(Severity.WARNING, None, odometry_frame_note(odom_frame, frames.odom, frames.base_link)))
     assume = config.io.assume_identity_laser_tf
+    mount = config.io.laser_mount
     for frame in sorted(scan_frames):
         if frame != frames.base_link and not tf.can_transform(frames.base_link, frame):
             message = f"no transform from the laser frame {frame!r} to {frames.base_link!r}"
-            if assume:
+            if mount is not None:
+                add(Problem(Severity.WARNING, scan[0] if scan else None, f"{message}; io.laser_mount {list(mount)}"))
+            elif assume:
                 add(Problem(Severity.WARNING, scan[0] if scan else None, message + "; assuming identity"))
             else:
                 add(Problem(Severity.ERROR, scan[0] if scan else None,

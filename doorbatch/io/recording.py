@@ -268,8 +268,9 @@ def missing_laser_tf_hint(tf: TfBuffer, base: str, laser: str | None = None) -> 
     if laser is not None and tf.frames and laser not in tf.frames:
         return (f"no transform in the log names the laser frame {laser!r}: a recording started after /tf_static was "
                 "latched, or a later piece of one split in pieces? doorbatch map borrows the mount from a piece "
-                "given with it that has it; io.assume_identity_laser_tf=true takes the laser at the base's origin, "
-                "upright, wrong for any other mount")
+                "given with it that has it; --set io.laser_mount=[x,y,z,roll,pitch,yaw] gives the mount; "
+                "io.assume_identity_laser_tf=true takes the laser at the base's origin, upright, wrong for any other "
+                "mount")
     if tf.frames and base not in tf.frames:
         dynamic = sorted((parent, child) for parent, child, static in tf.edges() if not static)
         guess = next((c for p, c in dynamic if "odom" in p), None) or next(
@@ -535,6 +536,11 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
                 colors.append(rec)
         borrowed = (borrow_mounts(tf, borrowed_mounts) if scans and borrowed_mounts
                     and not tf.can_transform(config.frames.base_link, scans[0].frame_id) else None)
+        if (scans and config.io.laser_mount is not None
+                and not tf.can_transform(config.frames.base_link, scans[0].frame_id)):
+            tf.add(configured_mount(config, scans[0].frame_id))
+            borrowed = (f"no transform in the log takes the laser frame {scans[0].frame_id!r} to "
+                        f"{config.frames.base_link!r}: io.laser_mount {list(config.io.laser_mount)} is used")
         frames, base_note = resolve_base_frame(tf, config.frames)
         odom, notes = odometry_poses(odom, tf, reader.roles.topic(Role.ODOMETRY) is not None, frames)
         notes += [f"{path}: {borrowed}"] if borrowed else []
@@ -593,6 +599,17 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
                         "odometry was replaced by its corrected poses)")
     return Recording(str(path), scan_set, odometry, reference, aligned, warnings, valid, repeats,
                      timed.log_clock, tuple(tf.static_transforms()))
+
+
+def configured_mount(config: DoorbatchConfig, laser_frame: str) -> Transform:
+    """``io.laser_mount`` (x, y, z, roll, pitch, yaw of the laser in base_link) as a static transform
+    base_link → ``laser_frame``; R = Rz(yaw)·Ry(pitch)·Rx(roll), ROS's fixed-axis RPY."""
+    from scipy.spatial.transform import Rotation
+
+    assert config.io.laser_mount is not None
+    x, y, z, roll, pitch, yaw = config.io.laser_mount
+    return Transform(0, config.frames.base_link, laser_frame, np.array([x, y, z], dtype=np.float64),
+                     Rotation.from_euler("xyz", [roll, pitch, yaw]).as_quat(), static=True)
 
 
 def borrow_mounts(tf: TfBuffer, mounts: Sequence[Transform]) -> str | None:

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from doorbatch.config import DoorbatchConfig, IoConfig
+from doorbatch.config import DoorbatchConfig, IoConfig, load_config
 from doorbatch.errors import LogContentError
 from doorbatch.io import ros_messages as m
 from doorbatch.io.recording import load_recording, unset_stamps
@@ -38,6 +39,21 @@ def test_missing_laser_transform_is_an_error_unless_assumed(write_log: Callable[
         load_recording(path)
     rec = load_recording(path, DoorbatchConfig(io=IoConfig(assume_identity_laser_tf=True)))
     np.testing.assert_allclose(rec.scans.laser_to_base[0], [[1, 0, 0], [0, 1, 0]])
+
+
+def test_a_laser_mount_given_in_the_config_stands_in_for_a_missing_tf_static(write_log: Callable[..., Path]) -> None:
+    """A recording started after /tf_static was latched: io.laser_mount (x y z roll pitch yaw) gives the mount the
+    log lacks (upside down: roll π mirrors the fan), with a warning; the log's own TF wins where it has one."""
+    with_tf = load_recording(write_log("tf.mcap", sample_messages(3)))
+    path = write_log("notf.mcap", [m for m in sample_messages(3) if m[0] != "/tf_static"])
+    mounted = load_recording(path, load_config(None, ["io.laser_mount=[0.2,0,0.3,0,0,0]"]))
+    np.testing.assert_allclose(mounted.scans.laser_to_base, with_tf.scans.laser_to_base, atol=1e-12)
+    assert any("io.laser_mount" in w for w in mounted.warnings)
+    flipped = load_recording(path, load_config(None, [f"io.laser_mount=[0.2,0,0.3,{math.pi},0,0]"]))
+    np.testing.assert_allclose(flipped.scans.laser_to_base[0], [[1, 0, 0.2], [0, -1, 0]], atol=1e-12)
+    ignored = load_recording(write_log("tf2.mcap", sample_messages(3)),
+                             load_config(None, [f"io.laser_mount=[0,0,0,{math.pi},0,0]"]))
+    np.testing.assert_allclose(ignored.scans.laser_to_base, with_tf.scans.laser_to_base, atol=1e-12)
 
 
 def _footprint_robot(odom_topic: bool) -> list[tuple[str, str, int, object]]:
