@@ -181,7 +181,7 @@ def continues(prev: Recording, nxt: Recording, config: DoorbatchConfig) -> bool:
 
 
 def time_order(recordings: Sequence[Recording], config: DoorbatchConfig) -> list[int] | None:
-    """The passes' indices in the order of their first scans' stamps, where they were given in another order and
+    """The passes' indices in the order of their first scans' times, where they were given in another order and
     either happened one after another on one clock (each pass's scans start after the one before it ends: passes
     recorded apart, or one recording's pieces that a shell glob lists as ``run_10.bag`` before ``run_2.bag``) or
     chain only in that order (a pass's odometry continues the one before it: :func:`continues`). The grid stage
@@ -193,11 +193,14 @@ def time_order(recordings: Sequence[Recording], config: DoorbatchConfig) -> list
     if len(recordings) < 2 or any(len(r.scans) == 0 for r in recordings):
         return None
     given = list(range(len(recordings)))
-    by_time = sorted(given, key=lambda i: int(recordings[i].scans.stamps_ns[0]))
+    # On the recorder's clock (Recording.log_clock): a simulated run's stamps are sim time, which starts again with
+    # every launch of the simulator, so passes recorded an hour apart may stamp in the opposite order.
+    first = [r.log_clock.log_time_at(int(r.scans.stamps_ns[0])) for r in recordings]
+    last = [r.log_clock.log_time_at(int(r.scans.stamps_ns[-1])) for r in recordings]
+    by_time = sorted(given, key=lambda i: first[i])
     if by_time == given:
         return None
-    if all(int(recordings[b].scans.stamps_ns[0]) > int(recordings[a].scans.stamps_ns[-1])
-           for a, b in itertools.pairwise(by_time)):
+    if all(first[b] > last[a] for a, b in itertools.pairwise(by_time)):
         return by_time
     if any(r.odometry is None for r in recordings):
         return None
@@ -211,7 +214,8 @@ def time_order(recordings: Sequence[Recording], config: DoorbatchConfig) -> list
 def mapping_passes(logs: Sequence[Path], config: DoorbatchConfig, with_colors: bool = False
                    ) -> tuple[list[Path], list[Recording], str | None]:
     """The logs as the passes ``doorbatch map`` builds from: read as passes of one robot (:func:`load_passes`),
-    put in the order of their first stamps where they happened one after another or only that order chains
+    put in the order of their first scans (on the recorder's clock) where they happened one after another or only
+    that order chains
     (:func:`time_order`; the logs in that order and a note saying so), and cut by ``mapping.pass_duration_s``
     (:func:`~doorbatch.pipeline.time_passes.split_into_passes`)."""
     paths = [Path(p) for p in logs]
@@ -220,7 +224,7 @@ def mapping_passes(logs: Sequence[Path], config: DoorbatchConfig, with_colors: b
     note = None
     if order is not None:
         paths, recordings = [paths[i] for i in order], [recordings[i] for i in order]
-        note = ("the passes were not given in the order of their first scans' stamps: mapped in that order "
+        note = ("the passes were not given in the order of their first scans' times: mapped in that order "
                 f"({', '.join(p.name for p in paths)}), the order they happened in (the grid stage classifies each "
                 "pass against the passes before it)")
     return paths, split_into_passes(recordings, config.mapping.pass_duration_s), note
