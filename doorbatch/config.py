@@ -390,6 +390,11 @@ class DoorDetectionConfig(Section):
     # observed angles; the other state of a leaf seen at one angle only), and for the closed leaf in the
     # doorway (hit before, not while the leaf stood open). Not hit in a pass where the leaf stood elsewhere.
     static_partner_search: bool = True
+    # ... only for a leaf seen at its one angle in at least this many scans (or as fallen cells, a pass's
+    # evidence): a walking person beside a pillar or a wall end makes a leaf-long line once, a door standing open
+    # is seen scan after scan (a person grazing a pillar gave a false door from 1 scan; session 28). Expert
+    # choice: 0.3 s of a 10 Hz laser.
+    lone_min_scans: int = Field(3, ge=1)
     partner_min_fraction: float = Field(0.85, gt=0.0, le=1.0)
     partner_end_clear_m: float = Field(0.2, ge=0.0)
     # The partner's free end: the last occupied cell along it before a gap longer than this (a slanted

@@ -437,7 +437,7 @@ def group_doors(leaves: Leaves, config: DoorDetectionConfig, grid: LogOddsGrid |
         free = ~used[g.leaf]
         if free.sum() < 1:
             continue
-        door = _door_from_group(g.subset(free), gap, config, grid, occupied)
+        door = _door_from_group(g.subset(free), gap, config, grid, occupied, _scans_seen(leaves, g.leaf[free], config))
         if door is not None:
             used[g.leaf] = True
             doors.append(door)
@@ -470,13 +470,21 @@ class _Observed:
         return {int(t) for t in self.when if not math.isnan(t)}
 
 
+def _scans_seen(leaves: Leaves, leaf: IntArray, config: DoorDetectionConfig) -> int:
+    """In how many scans the leaves ``leaf`` were seen: distinct scans of the transient ones, and
+    ``lone_min_scans`` for any fallen one (cells that held the leaf through a pass)."""
+    source, instance = leaves.source[leaf], leaves.instance[leaf]
+    fallen = config.lone_min_scans if (source == SOURCE_FALLEN).any() else 0
+    return len(np.unique(instance[source == SOURCE_TRANSIENT])) + fallen
+
+
 def _door_from_group(g: _Hinged, gap: float, config: DoorDetectionConfig, grid: LogOddsGrid | None,
-                     occupied: BoolArray | None) -> DetectedDoor | None:
+                     occupied: BoolArray | None, scans_seen: int) -> DetectedDoor | None:
     labels = angle_modes(g.yaw, gap)
     obs = _Observed(g.near, g.far, g.yaw, g.when, labels, _mode_yaws(g.yaw, labels))
     use_grid = grid is not None and occupied is not None and config.static_partner_search
     if obs.modes.size == 1:
-        if not use_grid or grid is None or occupied is None:
+        if not use_grid or grid is None or occupied is None or scans_seen < config.lone_min_scans:
             return None
         if not _lone_partner(grid, occupied, g, obs, config):
             return None
