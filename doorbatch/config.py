@@ -666,6 +666,12 @@ class EvaluateConfig(Section):
     max_time_diff_s: float = Field(0.01, gt=0.0)
     # evo --align: none (the map frame is shared) or se2 (Umeyama without scale on the planar positions).
     align: Literal["none", "se2"] = "none"
+    # evo --t_offset: added to every run's stamps before they are matched with the reference (a localizer that
+    # stamped on another clock, a known latency).
+    t_offset_s: float = 0.0
+    # A run of which fewer than this share of poses find a reference pose within max_time_diff_s gets a warning
+    # (clocks apart, a tolerance too tight for the reference's rate): its metrics stand on the poses that did.
+    min_associated_share: float = Field(0.9, ge=0.0, le=1.0)
     # Without --align: a run whose APE RMSE is above frame_hint_min_ape_m and falls below frame_hint_ratio of it
     # under an SE(2) alignment is in another frame than its reference (a map built from scan matching or
     # odometry lies in its first pass's odometry frame): a warning names --align se2 (expert choice: a rigid

@@ -356,6 +356,17 @@ def _trajectory_rows(run: RunTables, errs: TrajectoryErrors, cfg: EvaluateConfig
     return rows
 
 
+def shifted_in_time(run: RunTables, offset_ns: int) -> RunTables:
+    """``run`` with every time it holds moved by ``offset_ns`` (evo's ``--t_offset``: the estimate's stamps)."""
+    if not offset_ns:
+        return run
+    states = run.door_states
+    return replace(run, stamps_ns=run.stamps_ns + offset_ns,
+                   converged_ns=None if run.converged_ns is None else run.converged_ns + offset_ns,
+                   lost_ns=None if run.lost_ns is None else tuple(t + offset_ns for t in run.lost_ns),
+                   door_states=None if states is None else replace(states, stamps_ns=states.stamps_ns + offset_ns))
+
+
 def _frame_hint(run: RunTables, errs: TrajectoryErrors, ref: ReferenceTrajectory, cfg: EvaluateConfig) -> list[str]:
     """A warning when the run's APE is mostly a rigid offset (``frame_hint_min_ape_m``, ``frame_hint_ratio``):
     the run and its reference are in different frames, and ``--align se2`` scores it in the reference's."""
@@ -537,6 +548,7 @@ def evaluate_runs(runs: Sequence[RunTables], config: DoorbatchConfig, *,
     for run in with_setups_told_apart(runs, cfg.params_max_config_keys):
         if len(run.stamps_ns) == 0:
             raise PipelineError(f"run {run.name}: empty trajectory")
+        run = shifted_in_time(run, round(cfg.t_offset_s * 1e9))
         ref = reference if reference is not None else run.reference
         if reference is None and ref is not None and not ref.independent:
             warnings.append(f"run {run.name}: its log's reference is the odometry moved rigidly, no independent "
@@ -553,6 +565,11 @@ def evaluate_runs(runs: Sequence[RunTables], config: DoorbatchConfig, *,
             except PipelineError as err:
                 raise PipelineError(f"run {run.name}: {err}") from err
             rows += _trajectory_rows(run, errs, cfg)
+            if len(errs.ape_m) < cfg.min_associated_share * len(run.stamps_ns):
+                warnings.append(f"run {run.name}: only {len(errs.ape_m)} of its {len(run.stamps_ns)} poses have a "
+                                f"reference pose within {cfg.max_time_diff_s} s (evaluate.max_time_diff_s, evo "
+                                "--t_max_diff); its metrics stand on those. A reference sparser than the run, or "
+                                "stamps on another clock (evaluate.t_offset_s, evo --t_offset)?")
             alignment = errs.alignment if Alignment(cfg.align) is Alignment.SE2 else None
             if alignment is not None:
                 rows += [MetricRow(run.name, run.log, run.method, f"alignment_{k}", float(v), u, run.params)

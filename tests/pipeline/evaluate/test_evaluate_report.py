@@ -114,6 +114,24 @@ def test_global_success_is_judged_after_the_alignment_asked_for() -> None:
     assert not aligned.warnings
 
 
+def test_a_run_stamped_late_is_matched_after_t_offset_and_a_sparse_match_is_told() -> None:
+    """A localizer that stamped 0.3 s late (another clock): at evo's default tolerance its poses meet the wrong
+    reference poses, 0.15 m off along the drive; --t_offset -0.3 (evaluate.t_offset_s) puts them back. A
+    reference of which only every 4th stamp is within the tolerance leaves a quarter of the poses: a warning."""
+    stamps, ref = _straight()
+    late = RunTables("late", "l", "mcl", stamps + 300_000_000, ref)
+    reference = ReferenceTrajectory(stamps, ref)
+    plain = evaluate_runs([late], DoorbatchConfig(), reference=reference)
+    assert plain.value("late", "ape_trans_mean") == pytest.approx(0.15, abs=1e-9)
+    shifted = evaluate_runs([late], load_config(overrides=["evaluate.t_offset_s=-0.3"]), reference=reference)
+    assert shifted.value("late", "ape_trans_max") == pytest.approx(0.0, abs=1e-9)
+    assert not plain.warnings and not shifted.warnings
+    sparse = evaluate_runs([RunTables("dense", "l", "mcl", stamps, ref)], DoorbatchConfig(),
+                           reference=ReferenceTrajectory(stamps[::4], ref[::4]))
+    assert sparse.value("dense", "associated_poses") == 50
+    assert len(sparse.warnings) == 1 and "only 50 of its 200 poses" in sparse.warnings[0]
+
+
 def test_a_robot_that_stood_still_far_off_is_scored_without_a_frame_hint() -> None:
     """No rigid motion can be fitted to poses that never move; the APE stands, no hint, no error."""
     stamps, ref = _straight(50)
