@@ -45,7 +45,7 @@ import numpy.typing as npt
 
 from doorbatch.config import DoorbatchConfig, EvaluateConfig
 from doorbatch.errors import PipelineError
-from doorbatch.geometry.se2 import compose
+from doorbatch.geometry.se2 import compose, interpolate_poses
 from doorbatch.io.sim_truth import SimTruth
 from doorbatch.maps import DoorSet
 from doorbatch.pipeline.evaluate.door_map import score_doors, truth_doors
@@ -356,6 +356,27 @@ def _trajectory_rows(run: RunTables, errs: TrajectoryErrors, cfg: EvaluateConfig
     return rows
 
 
+def reference_at(ref: ReferenceTrajectory, stamps_ns: Int64Array, max_gap_ns: int) -> ReferenceTrajectory:
+    """``ref`` interpolated at ``stamps_ns`` (SE(2): positions linearly, the heading along the shorter arc) where
+    reference poses at most ``max_gap_ns`` apart bracket the stamp (``evaluate.reference_at_run_stamps``)."""
+    pose, valid = interpolate_poses(ref.stamps_ns, ref.pose, stamps_ns, max_gap_ns)
+    return replace(ref, stamps_ns=np.asarray(stamps_ns, dtype=np.int64)[valid], pose=pose[valid])
+
+
+def _sparse_match_note(run: RunTables, matched: int, ref: ReferenceTrajectory, cfg: EvaluateConfig) -> str:
+    """The warning for a run of which few poses found a reference pose: how many, and why it may be so (a
+    reference whose poses lie further apart than twice the tolerance: the tolerance that pairs every pose)."""
+    note = (f"run {run.name}: only {matched} of its {len(run.stamps_ns)} poses have a reference pose within "
+            f"{cfg.max_time_diff_s} s (evaluate.max_time_diff_s, evo --t_max_diff); its metrics stand on those")
+    period_s = float(np.median(np.diff(ref.stamps_ns))) / 1e9 if len(ref.stamps_ns) > 1 else 0.0
+    if period_s > 2.0 * cfg.max_time_diff_s:
+        return (f"{note}. The reference's poses are {1e3 * period_s:.0f} ms apart: --set "
+                "evaluate.reference_at_run_stamps=true scores every pose against the reference interpolated at its "
+                f"stamp (evaluate.max_time_diff_s={period_s / 2:.3g} pairs every pose with its nearest, up to that far "
+                "off in time)")
+    return f"{note}. Stamps on another clock than the reference's? (evaluate.t_offset_s, evo --t_offset)"
+
+
 def shifted_in_time(run: RunTables, offset_ns: int) -> RunTables:
     """``run`` with every time it holds moved by ``offset_ns`` (evo's ``--t_offset``: the estimate's stamps)."""
     if not offset_ns:
@@ -556,6 +577,8 @@ def evaluate_runs(runs: Sequence[RunTables], config: DoorbatchConfig, *,
                             "give --reference for a truth")
             ref = None
         alignment = None
+        if ref is not None and cfg.reference_at_run_stamps:
+            ref = reference_at(ref, run.stamps_ns, round(cfg.global_success_max_reference_gap_s * 1e9))
         if ref is not None:
             try:
                 errs = trajectory_errors(run.stamps_ns, run.pose, ref.stamps_ns, ref.pose,
@@ -566,10 +589,7 @@ def evaluate_runs(runs: Sequence[RunTables], config: DoorbatchConfig, *,
                 raise PipelineError(f"run {run.name}: {err}") from err
             rows += _trajectory_rows(run, errs, cfg)
             if len(errs.ape_m) < cfg.min_associated_share * len(run.stamps_ns):
-                warnings.append(f"run {run.name}: only {len(errs.ape_m)} of its {len(run.stamps_ns)} poses have a "
-                                f"reference pose within {cfg.max_time_diff_s} s (evaluate.max_time_diff_s, evo "
-                                "--t_max_diff); its metrics stand on those. A reference sparser than the run, or "
-                                "stamps on another clock (evaluate.t_offset_s, evo --t_offset)?")
+                warnings.append(_sparse_match_note(run, len(errs.ape_m), ref, cfg))
             alignment = errs.alignment if Alignment(cfg.align) is Alignment.SE2 else None
             if alignment is not None:
                 rows += [MetricRow(run.name, run.log, run.method, f"alignment_{k}", float(v), u, run.params)

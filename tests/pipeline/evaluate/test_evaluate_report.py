@@ -130,6 +130,25 @@ def test_a_run_stamped_late_is_matched_after_t_offset_and_a_sparse_match_is_told
                            reference=ReferenceTrajectory(stamps[::4], ref[::4]))
     assert sparse.value("dense", "associated_poses") == 50
     assert len(sparse.warnings) == 1 and "only 50 of its 200 poses" in sparse.warnings[0]
+    assert "400 ms apart" in sparse.warnings[0] and "evaluate.max_time_diff_s=0.2 " in sparse.warnings[0]
+
+
+def test_a_25_hz_truth_is_interpolated_at_10_hz_updates_when_asked() -> None:
+    """Filter updates at scan stamps 13 ms past a 25 Hz truth's, the estimate exactly on the truth, 1 m/s: evo's
+    0.01 s pairs some updates (a warning says so), 0.02 s pairs all but up to 20 ms off (2 cm); the reference
+    interpolated at each update's stamp scores all of them at their own time: no error."""
+    t_ref = T0 + 40_000_000 * np.arange(250, dtype=np.int64)
+    ref = np.stack([(t_ref - T0) / 1e9, np.zeros(250), np.zeros(250)], axis=1)  # 1 m/s along x
+    t_run = T0 + 13_000_000 + 100_000_000 * np.arange(90, dtype=np.int64)
+    run = RunTables("r", "l", "mcl", t_run, np.stack([(t_run - T0) / 1e9, np.zeros(90), np.zeros(90)], axis=1))
+    reference = ReferenceTrajectory(t_ref, ref)
+    evo = evaluate_runs([run], DoorbatchConfig(), reference=reference)
+    assert evo.value("r", "associated_poses") < 60 and len(evo.warnings) == 1
+    assert "reference_at_run_stamps=true" in evo.warnings[0]
+    wide = evaluate_runs([run], load_config(overrides=["evaluate.max_time_diff_s=0.02"]), reference=reference)
+    assert wide.value("r", "associated_poses") == 90 and wide.value("r", "ape_trans_max") > 0.01
+    at = evaluate_runs([run], load_config(overrides=["evaluate.reference_at_run_stamps=true"]), reference=reference)
+    assert at.value("r", "associated_poses") == 90 and at.value("r", "ape_trans_max") < 1e-9 and not at.warnings
 
 
 def test_a_robot_that_stood_still_far_off_is_scored_without_a_frame_hint() -> None:
