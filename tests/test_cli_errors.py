@@ -211,6 +211,23 @@ def test_a_second_laser_and_an_ekfs_odometry_are_named_not_dropped_silently(
     assert not any("laser scan topics" in w for w in chosen.warnings)  # a choice the user made is no news
 
 
+def test_inspect_says_which_clock_the_scans_are_timed_by(write_log: Callable[..., Path],
+                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    """A simulated run recorded on wall-clock time: header stamps in sim time from 300 s, running at 0.8 of the
+    recording's pace; the rates inspect prints are the recorder's, and the Clock line says so."""
+    import numpy as np
+
+    from doorbatch.io.inspect import clock_line
+    from tests.conftest import sample_messages
+
+    assert main(["inspect", str(write_log("same.mcap", sample_messages()))]) == 0
+    assert "Clock:      scan header stamps, on the recorder's clock" in capsys.readouterr().out
+    sim = np.int64(300_000_000_000) + np.arange(50, dtype=np.int64) * 80_000_000
+    wall = np.int64(1_700_000_000_000_000_000) + np.arange(50, dtype=np.int64) * 100_000_000
+    line = clock_line(sim, wall, 0.5)
+    assert "another clock" in line and "from 300.000 s" in line and "advancing 0.80 s per recorded second" in line
+
+
 def test_a_bag_folder_without_metadata_names_its_mcap(write_log: Callable[..., Path], tmp_path: Path,
                                                       capsys: pytest.CaptureFixture[str]) -> None:
     folder = tmp_path / "rosbag2_2026_11_26"

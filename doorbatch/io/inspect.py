@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import LogContentError
@@ -102,6 +103,9 @@ class LogReport:
     problems: list[Problem] = field(default_factory=list)
     odometry: str = "none"  # where the odometry comes from: an Odometry topic, or TF odom → base
     reference: str = "none"  # where the reference comes from: a pose topic, or TF map → base (a localizer's)
+    # The clock doorbatch times the scans by: their header stamps, and how those relate to the recorder's clock
+    # (Duration, Start, End and the rates are by log time).
+    clock: str = "scan header stamps, on the recorder's clock"
 
     @property
     def errors(self) -> list[Problem]:
@@ -290,12 +294,28 @@ def _check_stamps(report: LogReport, stats: dict[str, _TopicStats], role_of: dic
                         f"(longest {gaps.max() / 1e9:.3f} s)"))
 
 
+def clock_line(stamps_ns: npt.NDArray[np.int64], log_ns: npt.NDArray[np.int64], mismatch_s: float) -> str:
+    """What clock the scans' header stamps are on: the recorder's (median stamp − log time within
+    ``mismatch_s``), or another (a simulator's sim time recorded on wall-clock time), with where the stamps start
+    and how fast they run against the recording."""
+    if not stamps_ns.size or abs(float(np.median(log_ns - stamps_ns))) <= mismatch_s * 1e9:
+        return "scan header stamps, on the recorder's clock"
+    span_log = float(log_ns[-1] - log_ns[0])
+    rate = f", advancing {float(stamps_ns[-1] - stamps_ns[0]) / span_log:.2f} s per recorded second" if span_log > 0 \
+        else ""
+    return (f"scan header stamps, on another clock than the recorder's (sim time?): from {stamps_ns[0] / 1e9:.3f} s"
+            f"{rate}; Duration, Start, End and the rates above are the recorder's")
+
+
 def _check_clocks(report: LogReport, stats: dict[str, _TopicStats], role_of: dict[str, Role], tf: TfBuffer,
                   config: DoorbatchConfig) -> None:
     """Scan and odometry header stamps on two clocks (:func:`doorbatch.io.recording.on_one_clock`); without an
     odometry topic, the odometry from TF."""
     of = {role_of.get(name): st for name, st in stats.items() if st.stamps}
     scan, odom = of.get(Role.SCAN), of.get(Role.ODOMETRY)
+    if scan is not None:
+        report.clock = clock_line(np.asarray(scan.stamps, dtype=np.int64), np.asarray(scan.log_times, dtype=np.int64),
+                                  config.io.clock_mismatch_s)
     if scan is not None and odom is None and Role.ODOMETRY not in role_of.values():
         frames, _ = resolve_base_frame(tf, config.frames)
         poses, _ = tf_odometry(tf, frames.odom, frames.base_link)
