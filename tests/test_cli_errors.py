@@ -129,9 +129,13 @@ def test_unset_stamps_and_two_clocks_are_reported(write_log: Callable[..., Path]
     messages = sample_messages(5)
     for k, msg in enumerate(msg for topic, _, _, msg in messages if topic == "/scan"):
         msg.header = m.header(10_000_000 * k, msg.header.frame_id)  # a device clock from 0
-    problems = _problems(capsys, write_log("device.mcap", messages))
+    device = write_log("device.mcap", messages)
+    problems = _problems(capsys, device)
     assert not any("are 0" in p["message"] for p in problems)  # the first stamp is the clock's start, not unset
     assert any("different clocks" in p["message"] for p in problems)
+    assert main(["inspect", str(device)]) == 0
+    assert "Clock:      log times: the scan and odometry header stamps are on different clocks" in \
+        capsys.readouterr().out
     for k, msg in enumerate(msg for topic, _, _, msg in messages if topic == "/scan"):
         msg.header = m.header(5 * 10**9 + 10_000_000 * k if k else 0, msg.header.frame_id)  # the first one unset
     problems = _problems(capsys, write_log("unset.mcap", messages))

@@ -324,6 +324,7 @@ def _check_clocks(report: LogReport, stats: dict[str, _TopicStats], role_of: dic
     lags = None if scan is None or odom is None else clock_lags_s(scan.stamps, scan.log_times, odom.stamps,
                                                                   odom.log_times, config.io.clock_mismatch_s)
     if lags is not None:
+        report.clock = "log times: the scan and odometry header stamps are on different clocks (Problems)"
         report.problems.append(Problem(
             Severity.WARNING, None, f"scan and odometry header stamps are on different clocks (median stamp − log "
                                     f"time {lags[0]:+.3f} s and {lags[1]:+.3f} s): map and localize time them by "
