@@ -5,15 +5,19 @@ YAML fields: ``image`` (path relative to the YAML file), ``resolution`` (m/cell)
 (``trinary``, ``scale`` or ``raw``; default trinary). The image's top row is the map's highest y.
 
 Reading follows ROS 1 map_server (image_loader.cpp) for each pixel: ``a`` is the mean of its color
-channels (alpha excluded), ``255 - a`` if negate; ``p = (255 - a) / 255``.
+channels (alpha excluded, except in trinary mode, where both map_servers average the alpha channel in with the
+colors "to preserve existing behavior": an opaque grey 205 is 217.5, free), ``255 - a`` if negate;
+``p = (255 - a) / 255``.
 
 - trinary: p > occupied_thresh → 100, p < free_thresh → 0, else −1.
 - scale: as trinary, but in between → ``1 + 98 · (p − free) / (occ − free)`` truncated (1..99), or −1 where
   the pixel is fully transparent.
 - raw: the value ``a`` itself where it is 0..100, else −1.
 
-Images: PGM P5 (8-bit binary) and P2 (ASCII) are parsed here; anything else (PNG, BMP, ...) is decoded by
-OpenCV. Writing always gives trinary ``.pgm`` P5: occupied 0, free 254, unknown 205 (DESIGN.md, Outputs).
+Images: PGM P5 (binary, 8- or 16-bit) and P2 (ASCII) are parsed here; anything else (PNG, BMP, ...) is decoded
+by OpenCV. Samples are scaled to 0..255 by their maximum value (maxval, or 65535 for a 16-bit PNG), as the image
+libraries map_server uses do. Writing always gives trinary ``.pgm`` P5: occupied 0, free 254, unknown 205
+(DESIGN.md, Outputs).
 """
 
 from __future__ import annotations
@@ -222,27 +226,29 @@ def _pgm_header(data: bytes, path: Path) -> tuple[bytes, int, int, int, int]:
         width, height, maxval = (int(t) for t in tokens[1:])
     except ValueError:
         raise InputDataError(f"PGM header is malformed: {b' '.join(tokens)!r}", path=path) from None
-    if width <= 0 or height <= 0 or not 0 < maxval < 256:
-        raise InputDataError(f"PGM must be 8-bit with a positive size, got {width}x{height} "
+    if width <= 0 or height <= 0 or not 0 < maxval < 65536:
+        raise InputDataError(f"PGM must have a positive size and a maxval of 1..65535, got {width}x{height} "
                              f"maxval {maxval}", path=path)
     return tokens[0], width, height, maxval, pos
 
 
 def decode_pgm(data: bytes, path: Path) -> UInt8Array:
-    """An 8-bit PGM (P5 binary or P2 ASCII) as a (height, width) uint8 array, row 0 the top row.
+    """A PGM (P5 binary or P2 ASCII) as a (height, width) uint8 array, row 0 the top row.
 
-    Samples are scaled to 0..255 when maxval < 255 (as SDL_image, which map_server uses, does).
+    Samples are scaled to 0..255 by maxval (as SDL_image and GraphicsMagick, which the map_servers use, do); a
+    binary PGM with maxval above 255 has two bytes per sample, most significant first (netpbm).
 
     Raises:
-        InputDataError: Not a P2/P5 PGM, 16-bit, truncated, or a sample above maxval (names ``path``).
+        InputDataError: Not a P2/P5 PGM, truncated, or a sample above maxval (names ``path``).
     """
     magic, width, height, maxval, pos = _pgm_header(data, path)
     count = width * height
     if magic == b"P5":
-        raster = data[pos + 1 : pos + 1 + count]  # exactly one whitespace byte follows maxval
-        if len(raster) < count:
-            raise InputDataError(f"PGM is truncated: {len(raster)} of {count} pixels", path=path)
-        samples = np.frombuffer(raster, dtype=np.uint8).astype(np.int64)
+        width_b = 2 if maxval > 255 else 1
+        raster = data[pos + 1 : pos + 1 + count * width_b]  # exactly one whitespace byte follows maxval
+        if len(raster) < count * width_b:
+            raise InputDataError(f"PGM is truncated: {len(raster) // width_b} of {count} pixels", path=path)
+        samples = np.frombuffer(raster, dtype=">u2" if width_b == 2 else np.uint8).astype(np.int64)
     elif magic == b"P2":
         try:
             samples = np.array(data[pos:].split(), dtype=np.int64)
@@ -258,14 +264,17 @@ def decode_pgm(data: bytes, path: Path) -> UInt8Array:
 
 
 def _decode_other(data: bytes, path: Path) -> UInt8Array:
-    """Any image OpenCV reads (PNG, BMP, ...), unchanged: (H, W), (H, W, 3) or (H, W, 4), 8-bit."""
+    """Any image OpenCV reads (PNG, BMP, ...): (H, W), (H, W, 3) or (H, W, 4), 8-bit (a 16-bit image scaled
+    to 0..255 by 65535)."""
     import cv2
 
     image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
     if image is None:
         raise InputDataError("not an image OpenCV can decode", path=path)
+    if image.dtype == np.uint16:
+        return (image.astype(np.int64) * 255 // 65535).astype(np.uint8)
     if image.dtype != np.uint8:
-        raise InputDataError(f"map image must be 8-bit, got {image.dtype}", path=path)
+        raise InputDataError(f"map image must be 8- or 16-bit, got {image.dtype}", path=path)
     return np.asarray(image, dtype=np.uint8)
 
 
@@ -284,20 +293,21 @@ def load_image(path: Path) -> UInt8Array:
     return _decode_other(data, path)
 
 
-def _mean_and_opaque(pixels: UInt8Array) -> tuple[FloatArray, npt.NDArray[np.bool_]]:
-    """Per pixel: mean of the color channels (alpha excluded), and whether alpha is nonzero."""
+def _mean_and_opaque(pixels: UInt8Array, alpha_in_mean: bool = False) -> tuple[FloatArray, npt.NDArray[np.bool_]]:
+    """Per pixel: mean of the color channels (alpha excluded unless ``alpha_in_mean``: trinary mode, as both
+    map_servers average it in), and whether alpha is nonzero."""
     if pixels.ndim == 2:
         return pixels.astype(np.float64), np.ones(pixels.shape, dtype=np.bool_)
     channels = pixels.shape[2]
     has_alpha = channels in (2, 4)
-    color = pixels[..., : channels - 1] if has_alpha else pixels
+    color = pixels[..., : channels - 1] if has_alpha and not alpha_in_mean else pixels
     opaque = pixels[..., -1] > 0 if has_alpha else np.ones(pixels.shape[:2], dtype=np.bool_)
     return color.mean(axis=2, dtype=np.float64), opaque
 
 
 def pixels_to_occupancy(pixels: UInt8Array, meta: MapYaml) -> Int8Array:
     """map_server's interpretation of the pixels (see the module docstring), in image orientation."""
-    mean, opaque = _mean_and_opaque(pixels)
+    mean, opaque = _mean_and_opaque(pixels, alpha_in_mean=meta.mode is MapMode.TRINARY)
     if meta.negate:
         mean = 255.0 - mean
     if meta.mode is MapMode.RAW:

@@ -206,7 +206,9 @@ def test_yaml_numbers_written_like_1e_minus_5_are_accepted(tmp_path: Path) -> No
         ("image: [unclosed\n", None, "m.yaml", "not valid YAML"),
         ("image: m.pgm\nresolution: 0.1\norigin: [0, 0, 0]\n", b"", "m.pgm", "cannot read"),
         ("image: m.pgm\nresolution: 0.1\norigin: [0, 0, 0]\n", b"P5\n4 4\n255\n\x00\x00", "m.pgm", "truncated"),
-        ("image: m.pgm\nresolution: 0.1\norigin: [0, 0, 0]\n", b"P5\n4 4\n65535\n", "m.pgm", "8-bit"),
+        ("image: m.pgm\nresolution: 0.1\norigin: [0, 0, 0]\n", b"P5\n4 4\n65536\n", "m.pgm", "1..65535"),
+        ("image: m.pgm\nresolution: 0.1\norigin: [0, 0, 0]\n", b"P5\n4 4\n65535\n" + bytes(30), "m.pgm",
+         "truncated: 15 of 16"),
         ("image: m.pgm\nresolution: 0.1\norigin: [0, 0, 0]\n", b"P2\n2 1\n255\n1 300\n", "m.pgm", "outside"),
         ("image: m.pgm\nresolution: 0.1\norigin: [0, 0, 0]\n", b"garbage bytes", "m.pgm", "decode"),
     ],
@@ -226,3 +228,32 @@ def test_missing_yaml_names_it(tmp_path: Path) -> None:
     with pytest.raises(InputDataError) as info:
         read_map(tmp_path / "nothing.yaml")
     assert info.value.path == str(tmp_path / "nothing.yaml")
+
+
+def test_16_bit_images_read_as_their_8_bit_shades(tmp_path: Path) -> None:
+    """A 16-bit PGM (two bytes per sample, most significant first) and a 16-bit PNG scale by their maximum, as
+    GraphicsMagick (Nav2's map_server) does: the same map as the 8-bit image of the same shades."""
+    shades = np.array([[0, 254, 205], [254, 0, 254]], dtype=np.uint8)
+    wide = (shades.astype(np.uint16) * 257).astype(">u2")  # 8-bit v is 16-bit 257·v
+    (tmp_path / "m8.pgm").write_bytes(encode_pgm(shades))
+    (tmp_path / "m16.pgm").write_bytes(b"P5\n3 2\n65535\n" + wide.tobytes())
+    assert cv2.imwrite(str(tmp_path / "m16.png"), wide.astype(np.uint16))
+    maps = []
+    for name in ("m8.pgm", "m16.pgm", "m16.png"):
+        (tmp_path / f"{name}.yaml").write_text(f"image: {name}\nresolution: 0.1\norigin: [0, 0, 0]\n")
+        maps.append(read_map(tmp_path / f"{name}.yaml").occupancy)
+    assert maps[0].tolist() == [[0, 100, 0], [100, 0, -1]]  # flipped: the image's top row is the map's last
+    assert all(np.array_equal(m, maps[0]) for m in maps[1:])
+
+
+def test_trinary_mode_averages_alpha_in_as_both_map_servers_do(tmp_path: Path) -> None:
+    """image_loader.cpp / Nav2 map_io: in trinary mode the alpha channel is averaged in with the colors ("to
+    preserve existing behavior"): an opaque grey 205 is (3·205 + 255)/4 = 217.5, p = 0.147 < free_thresh, free; in
+    scale mode alpha is left out: 205 is p = 0.196, just above free_thresh, ROS 1's 1 + 98·ratio = 1."""
+    rgba = np.zeros((1, 2, 4), dtype=np.uint8)
+    rgba[0, 0] = (205, 205, 205, 255)  # opaque grey
+    rgba[0, 1] = (0, 0, 0, 255)  # opaque black: (0·3 + 255)/4 = 63.75, p = 0.75, occupied
+    assert cv2.imwrite(str(tmp_path / "m.png"), rgba)
+    for mode, expected in (("trinary", [0, 100]), ("scale", [1, 100])):
+        (tmp_path / f"{mode}.yaml").write_text(f"image: m.png\nresolution: 0.1\norigin: [0, 0, 0]\nmode: {mode}\n")
+        assert read_map(tmp_path / f"{mode}.yaml").occupancy[0].tolist() == expected
