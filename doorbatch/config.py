@@ -71,6 +71,12 @@ class IoConfig(Section):
     gap_factor: float = Field(5.0, gt=1.0)
     # Transforms farther than this outside the buffered time span are an error instead of a clamp.
     tf_extrapolation_limit_s: float = Field(0.1, ge=0.0)
+    # A laser whose sweep (time_increment · beams) lets the robot move a beam end point at sweep_check_range_m by
+    # more than this during one scan gets a warning: doorbatch places every beam at the scan's stamp (no
+    # deskewing). Expert choice: two cells at 5 m, at the robot's median speed and turn rate (a 10 Hz laser on a
+    # robot that turns now and then stays below it; a 5 Hz rotating lidar at 1 m/s does not).
+    sweep_smear_warn_m: float = Field(0.1, gt=0.0)
+    sweep_check_range_m: float = Field(5.0, gt=0.0)
     # A scan in a frame with no transform to base_link is an error unless this says to assume identity.
     assume_identity_laser_tf: bool = False
     # ... or unless this gives the laser's mount in base_link, [x, y, z] in m and [roll, pitch, yaw] in rad (ROS

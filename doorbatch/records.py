@@ -50,6 +50,8 @@ class Scan:
     range_max: float
     ranges: Float32Array
     intensities: Float32Array | None = None
+    # Time from the first beam to the last (|time_increment| · (beams − 1)); 0 where the driver leaves it unset.
+    sweep_s: float = 0.0
 
     @property
     def angles(self) -> FloatArray:

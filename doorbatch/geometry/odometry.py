@@ -91,3 +91,21 @@ def sideways_share(x: npt.ArrayLike, y: npt.ArrayLike, yaw: npt.ArrayLike, step_
     dyaw = wrap_angle(inc.rot1 + inc.rot2)
     across = inc.trans * np.abs(np.sin(inc.rot1 - dyaw / 2.0))
     return float(across.sum() / inc.trans.sum())
+
+
+def sweep_smear_m(sweep_s: float, stamps_ns: npt.ArrayLike, poses: npt.ArrayLike, range_m: float,
+                  quantile: float = 0.5) -> float:
+    """How far a beam end point at ``range_m`` moves while a laser sweeps for ``sweep_s``: (v + ω·range)·sweep,
+    v and ω the ``quantile`` of the speed and turn rate between consecutive ``poses`` (N, 3) at ``stamps_ns``
+    (odometry). 0 for a sweep of 0 (time_increment unset) or fewer than two poses."""
+    t = np.asarray(stamps_ns, dtype=np.int64)
+    p = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    if sweep_s <= 0.0 or len(t) < 2:
+        return 0.0
+    dt = np.diff(t) / 1e9
+    ok = dt > 0
+    if not ok.any():
+        return 0.0
+    v = np.hypot(np.diff(p[:, 0]), np.diff(p[:, 1]))[ok] / dt[ok]
+    w = np.abs(wrap_angle(np.diff(p[:, 2])))[ok] / dt[ok]
+    return float((np.quantile(v, quantile) + np.quantile(w, quantile) * range_m) * sweep_s)

@@ -18,6 +18,7 @@ import numpy.typing as npt
 
 from doorbatch.config import DoorbatchConfig, FramesConfig
 from doorbatch.errors import LaserMountError, LogContentError, TransformError
+from doorbatch.geometry.odometry import sweep_smear_m
 from doorbatch.geometry.rotations import yaw_of_matrix
 from doorbatch.geometry.se2 import compose, interpolate_poses
 from doorbatch.geometry.tf_buffer import TfBuffer
@@ -591,6 +592,14 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
         aligned, valid = camera_beam_colors(path, scans, tf, config)
         if not any(v.any() for v in valid):
             aligned, valid = None, None
+    sweep = float(np.median([s.sweep_s for s in scans]))
+    if odometry is not None and (smear := sweep_smear_m(sweep, odometry.stamps_ns, odometry.poses,
+                                                         config.io.sweep_check_range_m)) > config.io.sweep_smear_warn_m:
+        warnings.append(f"{path}: the laser takes {1e3 * sweep:.0f} ms per sweep (time_increment) while the robot "
+                        f"moves: a beam end point at {config.io.sweep_check_range_m:g} m moves {smear:.2f} m (median "
+                        "speed and turn rate) during one scan, and doorbatch places every beam at the scan's stamp "
+                        "(no deskewing): expect doubled walls in the map and a less exact pose; a driver or filter "
+                        "that deskews the scans (or a slower robot) avoids it")
     repeats = odometry_to_reference(reference, odometry, scan_set.stamps_ns, config)
     if repeats is not None:
         warnings.append(f"{path}: the reference poses are the odometry moved rigidly (within "

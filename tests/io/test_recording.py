@@ -56,6 +56,23 @@ def test_a_laser_mount_given_in_the_config_stands_in_for_a_missing_tf_static(wri
     np.testing.assert_allclose(ignored.scans.laser_to_base, with_tf.scans.laser_to_base, atol=1e-12)
 
 
+@pytest.mark.parametrize(("sweep_s", "told"), [(0.2, True), (0.05, False), (0.0, False)])
+def test_a_laser_that_sweeps_while_the_robot_moves_is_told(write_log: Callable[..., Path], sweep_s: float,
+                                                           told: bool) -> None:
+    """The sample robot drives 1.02 m/s turning 0.1 rad/s: a 0.2 s sweep moves a beam end at 5 m by
+    (1.02 + 0.1·5)·0.2 = 0.30 m, which doorbatch does not deskew (a warning); 0.05 s moves it 0.08 m (below the
+    0.1 m of io.sweep_smear_warn_m); a driver that leaves time_increment 0 tells nothing."""
+    messages = sample_messages(10)
+    for topic, _, _, msg in messages:
+        if topic == "/scan":
+            msg.time_increment = sweep_s / (len(msg.ranges) - 1)
+    rec = load_recording(write_log("sweep.mcap", messages))
+    note = [w for w in rec.warnings if "per sweep" in w]
+    assert bool(note) == told
+    if told:
+        assert "200 ms per sweep" in note[0] and "moves 0.30 m" in note[0]
+
+
 def _footprint_robot(odom_topic: bool) -> list[tuple[str, str, int, object]]:
     """The sample messages re-framed as a TurtleBot-like robot: odom → base_footprint (dynamic; the /odom
     topic's child frame, or TF only) and base_footprint → base_link static, 0.1 m ahead and turned 0.2 rad;
