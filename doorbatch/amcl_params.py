@@ -16,7 +16,8 @@ becomes the ``localize`` key of the same name, and the ones the file leaves out 
   (``recovery_average_per_particle``: ``pf_update_sensor``'s ``w_avg /= set->sample_count``); and it publishes
   the mean of its heaviest cluster of particles (``pose_estimate: heaviest_cluster``). It weighs every particle at
   its own pose, also while the cloud is spread (``global_smoothing: false``: no region-averaged, tempered
-  weighting), and a global start draws ``max_particles`` (``pf_init_model``; ``global_particles``).
+  weighting), and a global start draws ``max_particles`` (``pf_init_model``; ``global_particles``). Its map holds
+  obstacles at 100 and free cells at 0 only (``convertMap``: ``map_occupied_at_least``, ``map_free_at_most``).
 - Values the node replaces at start (a negative ``laser_likelihood_max_dist``, ``max_particles`` or
   ``min_particles``, ``resample_interval`` below 1, ``min_particles`` above ``max_particles``) are replaced the
   same way, with the node's warning.
@@ -317,6 +318,8 @@ def translate_amcl_parameters(params: Mapping[str, Any], source: str = "config")
     localize["pose_estimate"] = "heaviest_cluster"  # amcl publishes its heaviest cluster's mean
     localize["global_smoothing"] = False  # amcl weighs each particle at its own pose, never a region's average
     localize["global_particles"] = merged["max_particles"]  # pf_init_model: a global start draws max_samples
+    localize["map_occupied_at_least"] = 100  # convertMap: a cell of 100 is an obstacle, of 0 free, else unknown
+    localize["map_free_at_most"] = 0
 
     model = str(merged["robot_model_type"])
     if model not in _ROBOT_MODELS:

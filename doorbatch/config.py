@@ -525,6 +525,12 @@ class LocalizeConfig(Section):
     beam_skip_support: Literal["posterior", "particles"] = "posterior"
     # End points in unknown cells: their real distance to the nearest obstacle (nav2_amcl), or the maximum.
     unknown_as_max_dist: bool = False
+    # Map cells (OccupancyGrid percent) that are walls for the likelihood field, and free for a global start:
+    # map_server's thresholds (occupied_thresh 0.65, free_thresh 0.196). AMCL's convertMap takes 100 and 0 only;
+    # an AMCL parameter file sets those (the same on a trinary map; a probability map, e.g. Cartographer's,
+    # has walls and free cells in between).
+    map_occupied_at_least: int = Field(65, ge=1, le=100)
+    map_free_at_most: int = Field(19, ge=0, le=99)
     # Where the particles x beams work runs: "numpy", or "torch" on torch_device (needs the torch extra): the
     # likelihood field's lookups (pipeline/localize/torch_field.py, the same cells), beam skipping, and the RBPF's
     # door terms while tracking (torch_door_likelihood.py). On a CPU NumPy is faster; a GPU pays from a few

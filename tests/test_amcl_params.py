@@ -125,6 +125,7 @@ def test_a_parameter_file_weighs_each_particle_at_its_pose_and_starts_global_wit
         lc = _load(tmp_path, text).localize
         assert not lc.global_smoothing
         assert lc.global_particles == lc.max_particles != DoorbatchConfig().localize.global_particles
+        assert (lc.map_occupied_at_least, lc.map_free_at_most) == (100, 0)  # convertMap's obstacles and free cells
 
 
 @pytest.mark.parametrize(("params", "expected"), [

@@ -80,7 +80,7 @@ class LocalizationMap:
     def of(cls, occ: OccupancyMap, doors: DoorSet, config: LocalizeConfig,
            pose_source: str | None = None) -> LocalizationMap:
         """The map ``occ`` with ``doors``, its likelihood field as the config asks and its free cells."""
-        return cls(occ, localization_field(occ, config), free_cells(occ), doors, pose_source)
+        return cls(occ, localization_field(occ, config), free_cells(occ, config.map_free_at_most), doors, pose_source)
 
 
 def is_map_log(map_path: Path) -> bool:
@@ -159,6 +159,7 @@ def localization_field(occ: OccupancyMap, config: LocalizeConfig) -> DistanceFie
         check_device(config.torch_device)
         device = config.torch_device
     return build_distance_field(occ, config.laser_likelihood_max_dist, config.unknown_as_max_dist,
+                                config.map_occupied_at_least,
                                 torch_device=device)
 
 

@@ -206,3 +206,22 @@ def test_laser_offset_is_honoured() -> None:
     poses = truth + np.array([[0.0, 0.0, 0.0], [0.2, 0.0, 0.0], [-0.2, 0.0, 0.0]])
     ll = scan_log_likelihood(poses, beams, field, config)
     assert int(np.argmax(ll)) == 0
+
+
+def test_which_map_cells_are_walls_and_free_follows_the_config() -> None:
+    """A probability map (Cartographer's): a wall of 81, floor of 10. map_server's thresholds (the default) make
+    the 81s walls and the 10s free; AMCL's convertMap (an AMCL parameter file) takes only 100 and 0, so it sees no
+    wall and no free cell there."""
+    from doorbatch.config import load_config
+    from doorbatch.maps import DoorSet, OccupancyMap
+    from doorbatch.pipeline.localize.run import LocalizationMap
+
+    occ = np.full((20, 20), 10, dtype=np.int8)
+    occ[:, 10] = 81
+    grid = OccupancyMap(occ, 0.05, 0.0, 0.0)
+    ours = LocalizationMap.of(grid, DoorSet.empty(), LocalizeConfig())
+    amcl_like = LocalizationMap.of(grid, DoorSet.empty(), load_config(
+        None, ["localize.map_occupied_at_least=100", "localize.map_free_at_most=0"]).localize)
+    assert float(ours.field.dist[5, 10]) == 0.0 and len(ours.free) == 20 * 19
+    assert float(amcl_like.field.dist[5, 10]) == pytest.approx(LocalizeConfig().laser_likelihood_max_dist)
+    assert len(amcl_like.free) == 0
