@@ -374,15 +374,18 @@ def _substitute_as_amcl_node(merged: dict[str, Any]) -> list[str]:
     particle count, a resample_interval below 1, min_particles above max_particles: max_particles becomes
     min_particles), as the node does, with its warnings; values that are not numbers are left to the config's
     validation."""
+    def number(v: Any) -> bool:
+        return isinstance(v, int | float) and not isinstance(v, bool)
+
     warnings: list[str] = []
     for name, out_of_range, default in _AMCL_NODE_SUBSTITUTES:
         value = merged[name]
-        if isinstance(value, int | float) and not isinstance(value, bool) and out_of_range(value):
+        if number(value) and out_of_range(value):
             warnings.append(f"amcl {name}: {value!r} is not allowed; nav2_amcl runs with {default!r} instead, "
                             "and so does this run")
             merged[name] = default
     low, high = merged["min_particles"], merged["max_particles"]
-    if all(isinstance(v, int | float) and not isinstance(v, bool) for v in (low, high)) and low > high:
+    if number(low) and number(high) and low > high:
         warnings.append(f"amcl min_particles {low!r} > max_particles {high!r}: nav2_amcl sets max_particles to "
                         "min_particles, and so does this run")
         merged["max_particles"] = low

@@ -21,6 +21,7 @@ from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import LogContentError
 from doorbatch.geometry.tf_buffer import TfBuffer
 from doorbatch.io.decode import ODOMETRY, decode_scan, decode_transforms, stamp_to_ns
+from doorbatch.io.log_clock import LogClock
 from doorbatch.io.map_topic import OCCUPANCY_GRID
 from doorbatch.io.pose_topic import POSE_TYPES
 from doorbatch.io.reader import most_are_bad, open_log
@@ -295,10 +296,10 @@ def _check_stamps(report: LogReport, stats: dict[str, _TopicStats], role_of: dic
 
 
 def clock_line(stamps_ns: npt.NDArray[np.int64], log_ns: npt.NDArray[np.int64], mismatch_s: float) -> str:
-    """What clock the scans' header stamps are on: the recorder's (median stamp − log time within
-    ``mismatch_s``), or another (a simulator's sim time recorded on wall-clock time), with where the stamps start
-    and how fast they run against the recording."""
-    if not stamps_ns.size or abs(float(np.median(log_ns - stamps_ns))) <= mismatch_s * 1e9:
+    """What clock the scans' header stamps are on: the recorder's (one clock for :meth:`LogClock.of_pairs`), or
+    another (a simulator's sim time recorded on wall-clock time), with where the stamps start and how fast they
+    run against the recording."""
+    if not LogClock.of_pairs(log_ns, stamps_ns, mismatch_s).offset_ns:
         return "scan header stamps, on the recorder's clock"
     span_log = float(log_ns[-1] - log_ns[0])
     rate = f", advancing {float(stamps_ns[-1] - stamps_ns[0]) / span_log:.2f} s per recorded second" if span_log > 0 \

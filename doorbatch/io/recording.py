@@ -537,14 +537,15 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
                 colors.append(rec)
         borrowed = (borrow_mounts(tf, borrowed_mounts) if scans and borrowed_mounts
                     and not tf.can_transform(config.frames.base_link, scans[0].frame_id) else None)
+        mounted = None
         if (scans and config.io.laser_mount is not None
                 and not tf.can_transform(config.frames.base_link, scans[0].frame_id)):
             tf.add(configured_mount(config, scans[0].frame_id))
-            borrowed = (f"no transform in the log takes the laser frame {scans[0].frame_id!r} to "
-                        f"{config.frames.base_link!r}: io.laser_mount {list(config.io.laser_mount)} is used")
+            mounted = (f"no transform in the log takes the laser frame {scans[0].frame_id!r} to "
+                       f"{config.frames.base_link!r}: io.laser_mount {list(config.io.laser_mount)} is used")
         frames, base_note = resolve_base_frame(tf, config.frames)
         odom, notes = odometry_poses(odom, tf, reader.roles.topic(Role.ODOMETRY) is not None, frames)
-        notes += [f"{path}: {borrowed}"] if borrowed else []
+        notes += [f"{path}: {n}" for n in (borrowed, mounted) if n]
         notes += model_states_note(reader) if not ref else []
         if reader.roles.topic(Role.REFERENCE) is None:
             ref, note = tf_reference(tf, frames)

@@ -186,10 +186,7 @@ def _initial_particles(rec: Recording, lmap: LocalizationMap, init: Init, method
         if init == "reference":
             if rec.reference is None:
                 raise PipelineError(f"{rec.path}: --init reference but the log has no reference pose topic")
-            pose, ok = interpolate_poses(rec.reference.stamps_ns, rec.reference.poses, rec.scans.stamps_ns[:1])
-            if not ok[0]:
-                pose = rec.reference.poses[:1]
-            mean = pose[0]
+            mean = reference_start(rec.reference, int(rec.scans.stamps_ns[0]))
         else:
             mean = np.asarray(init, dtype=np.float64)
         particles = initial_particles(mean, config, rng)
@@ -197,6 +194,13 @@ def _initial_particles(rec: Recording, lmap: LocalizationMap, init: Init, method
     doors = lmap.doors if d else subset_doors(lmap.doors, np.zeros(0, dtype=np.intp))
     particles.door_mean, particles.door_var = initial_door_states(doors, len(particles), init == "global", config, rng)
     return particles
+
+
+def reference_start(reference: PoseSeries, stamp_ns: int) -> FloatArray:
+    """The reference pose at ``stamp_ns`` (the first scan's): interpolated, or its first pose where it does not
+    cover that stamp (``--init reference``)."""
+    pose, ok = interpolate_poses(reference.stamps_ns, reference.poses, np.array([stamp_ns], dtype=np.int64))
+    return np.asarray(pose[0] if ok[0] else reference.poses[0], dtype=np.float64)
 
 
 def initial_door_states(doors: DoorSet, n: int, global_start: bool, config: LocalizeConfig,
@@ -350,8 +354,7 @@ def start_fit_note(rec: Recording, lmap: LocalizationMap, init: Init, lc: Locali
     if init == "reference":
         if rec.reference is None:
             return None
-        pose, ok = interpolate_poses(rec.reference.stamps_ns, rec.reference.poses, rec.scans.stamps_ns[:1])
-        start, i = (pose[0] if ok[0] else rec.reference.poses[0]), 0
+        start, i = reference_start(rec.reference, int(rec.scans.stamps_ns[0])), 0
     elif isinstance(init, StartPose):
         start, i = init.pose, min(start_scan_index(rec, init), len(rec.scans) - 1)
     else:

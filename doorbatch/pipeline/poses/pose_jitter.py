@@ -43,25 +43,19 @@ def _robust_std(values: FloatArray) -> FloatArray:
     return MAD_TO_STD * np.median(np.abs(values - np.median(values, axis=0)), axis=0)
 
 
-def _step_changes(poses: FloatArray) -> FloatArray:
-    """Body-frame increments between consecutive poses (K−1, 3), headings wrapped."""
-    inc = relative(poses[:-1], poses[1:])
-    inc[:, 2] = wrap_angle(inc[:, 2])
-    return inc
-
-
 def pose_jitter(poses: npt.ArrayLike, odometry: npt.ArrayLike | None = None) -> PoseJitter:
     """The white noise of ``poses`` (K, 3) from pose to pose (module docstring); ``odometry`` (K, 3): the odometry
     at the same stamps, when there is one. NaN for fewer than four poses."""
     p = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
     if len(p) < 4:
         return PoseJitter(math.nan, math.nan)
-    inc = _step_changes(p)
+    inc = relative(p[:-1], p[1:])  # body-frame increments, headings wrapped
     change = np.diff(inc, axis=0)
     change[:, 2] = wrap_angle(change[:, 2])
     sigma = _robust_std(change) / math.sqrt(6.0)  # (b)
     if odometry is not None:
-        diff = inc - _step_changes(np.asarray(odometry, dtype=np.float64).reshape(-1, 3))
+        odo = np.asarray(odometry, dtype=np.float64).reshape(-1, 3)
+        diff = inc - relative(odo[:-1], odo[1:])
         diff[:, 2] = wrap_angle(diff[:, 2])
         sigma = np.minimum(sigma, _robust_std(diff) / math.sqrt(2.0))  # (a)
     return PoseJitter(float(max(sigma[0], sigma[1])), float(sigma[2]))
