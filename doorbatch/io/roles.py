@@ -91,16 +91,31 @@ def is_initial_pose_topic(name: str) -> bool:
     return any(w in ("initialpose", "initial") for w in _words(name))
 
 
+# Lasers with at least this share of the busiest one's messages are as busy (two lasers at one rate, a few
+# messages apart): among them the first name in sort order wins (stage_ros's /base_scan_0, its first laser).
+_AS_BUSY_SHARE = 0.9
+
+
 def _pick(role: Role, candidates: list[TopicInfo]) -> tuple[TopicInfo, str] | None:
-    """The preferred topic among candidates of the right type: a name tried first, else the busiest."""
+    """The preferred topic among candidates of the right type: a name tried first, else the busiest; among lasers
+    about as busy (``_AS_BUSY_SHARE``), the first by name."""
     if not candidates:
         return None
     by_name = {c.name: c for c in candidates}
     for name in _NAMES[role]:
         if name in by_name:
             return by_name[name], f"type {by_name[name].msgtype}, name {name} is tried first"
-    best = max(candidates, key=lambda c: (c.count, c.name))
-    why = f"type {best.msgtype}" + (f", most messages of {len(candidates)}" if len(candidates) > 1 else "")
+    if role is not Role.SCAN:
+        best = max(candidates, key=lambda c: (c.count, c.name))
+        return best, f"type {best.msgtype}" + (f", most messages of {len(candidates)}" if len(candidates) > 1 else "")
+    most = max(c.count for c in candidates)
+    busy = sorted((c for c in candidates if c.count >= _AS_BUSY_SHARE * most), key=lambda c: c.name)
+    best = busy[0]
+    why = f"type {best.msgtype}"
+    if len(busy) > 1:
+        why += f", first by name of {len(busy)} about as busy"
+    elif len(candidates) > 1:
+        why += f", most messages of {len(candidates)}"
     return best, why
 
 
