@@ -27,7 +27,7 @@ from doorbatch.io.manifest import Manifest
 from doorbatch.io.mapdir import door_set_of, read_door_set
 from doorbatch.io.parquet import read_table
 from doorbatch.io.pose_topic import POSE_TYPES, read_pose_topic
-from doorbatch.io.sim_truth import SimTruth, output_paths, read_truth
+from doorbatch.io.sim_truth import SimTruth, merge_truths, output_paths, read_truth
 from doorbatch.io.tum import read_tum
 from doorbatch.pipeline.evaluate.report import DoorStateTable, MapTables, ReferenceTrajectory, RunTables
 
@@ -241,15 +241,20 @@ def read_pose_topic_run(log_path: Path, topic: str, name: str | None = None) -> 
 
 
 def read_map_dir(map_dir: Path, name: str | None = None) -> MapTables:
-    """A map directory's doors, with the mapping truth next to its first log when present."""
+    """A map directory's doors, with the mapping truth next to its logs when present: ``<stem>.truth.yaml`` beside
+    each log (passes recorded apart, a truth each: merged, :func:`merge_truths`), else ``map.truth.yaml`` beside
+    the first (the sample's layout)."""
     map_dir = Path(map_dir)
     truth: SimTruth | None = None
     manifest_path = map_dir / "manifest.json"
     if manifest_path.is_file():
         logs = _input_paths(Manifest.read(manifest_path))
-        candidates = [_sibling(p, "truth") for p in logs] + [p.parent / "map.truth.yaml" for p in logs[:1]]
-        found = next((c for c in candidates if c.is_file()), None)
-        truth = read_truth(found) if found is not None else None
+        own = list(dict.fromkeys(c for c in (_sibling(p, "truth") for p in logs) if c.is_file()))
+        shared = [p.parent / "map.truth.yaml" for p in logs[:1] if (p.parent / "map.truth.yaml").is_file()]
+        if len(own) > 1:
+            truth = merge_truths([read_truth(p) for p in own], own)
+        elif own or shared:
+            truth = read_truth((own or shared)[0])
     if not (map_dir / "doors.parquet").is_file():
         return MapTables(name or map_dir.name, read_door_set(map_dir), truth)
     table = read_table("doors", map_dir / "doors.parquet").to_pydict()

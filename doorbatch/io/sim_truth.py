@@ -32,7 +32,9 @@ exactly: ``np.interp(t, stamps_of_door, angles_of_door)``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -184,11 +186,26 @@ def _leaf_observations(value: object) -> tuple[tuple[Any, ...], ...] | None:
     return tuple(tuple(r) for r in rows or [])
 
 
+_NO_COLOR = (math.nan, math.nan, math.nan)
+
+
+def _truth_door(d: dict[str, Any], wall_height_m: float) -> TruthDoor:
+    """A door entry; what scoring does not need (name, height, colours, handle) may be left out of a hand-written
+    truth."""
+    door_id = int(d["door_id"])
+    return TruthDoor(door_id, str(d.get("name", f"door{door_id}")), float(d["hinge_x"]), float(d["hinge_y"]),
+                     float(d["length"]), float(d["closed_yaw"]), int(d["opening_sign"]), float(d["max_angle"]),
+                     float(d.get("height", wall_height_m)), tuple(d.get("color_mean_rgb", _NO_COLOR)),
+                     tuple(d.get("color_std_rgb", _NO_COLOR)), d.get("handle"))
+
+
 def read_truth(path: Path) -> SimTruth:
-    """Read a truth file.
+    """Read a truth file. Required: ``format``, ``world.doors`` (``door_id``, hinge, ``length``, ``closed_yaw``,
+    ``opening_sign``, ``max_angle`` each) and ``door_angles``; the rest of the layout above may be left out of a
+    truth written by hand (empty or NaN where scoring does not use it).
 
     Raises:
-        InputDataError: unreadable, not YAML, another format, or a missing key.
+        InputDataError: unreadable, not YAML, another format, or a missing required key (named).
     """
     try:
         doc = yaml.safe_load(Path(path).read_text())
@@ -196,27 +213,38 @@ def read_truth(path: Path) -> SimTruth:
         raise InputDataError(f"cannot read truth file: {err}", path=path) from err
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise InputDataError(f"not a doorbatch truth file (expected format {FORMAT})", path=path)
+    where = "world"
     try:
         world = doc["world"]
+        wall_height_m = float(world.get("wall_height_m", math.nan))
+        doors = []
+        for k, d in enumerate(world["doors"]):
+            where = f"world.doors[{k}]"
+            doors.append(_truth_door(d, wall_height_m))
+        where = "door_angles"
         rows = np.asarray(doc["door_angles"]["rows"], dtype=object).reshape(-1, 3)
-        doors = tuple(
-            TruthDoor(int(d["door_id"]), str(d["name"]), float(d["hinge_x"]), float(d["hinge_y"]),
-                      float(d["length"]), float(d["closed_yaw"]), int(d["opening_sign"]), float(d["max_angle"]),
-                      float(d["height"]), tuple(d["color_mean_rgb"]), tuple(d["color_std_rgb"]), d.get("handle"))
-            for d in world["doors"]
-        )
+        where = "passes"
+        passes = tuple(TruthPass(int(p["index"]), str(p.get("name", f"pass{p['index']}")), int(p["begin_ns"]),
+                                 int(p["stationary_ns"]), int(p["end_ns"])) for p in doc.get("passes") or ())
+        where = "world.segments"
+        segments = np.asarray(world.get("segments", []), dtype=np.float64).reshape(-1, 2, 2)
+        where = "leaf_observations"
+        leaves = _leaf_observations(doc.get("leaf_observations"))
+        unknown = sorted({int(r[1]) for r in leaves or ()} - {d.door_id for d in doors})
+        if unknown:
+            raise InputDataError(f"truth file's leaf_observations name door_id {unknown}, which world.doors lacks",
+                                 path=path)
         return SimTruth(
-            generator=dict(doc["generator"]),
-            start_ns=int(doc["start_ns"]),
-            end_ns=int(doc["end_ns"]),
-            files=dict(doc["files"]),
-            world_name=str(world["name"]),
-            wall_height_m=float(world["wall_height_m"]),
-            segments=np.asarray(world["segments"], dtype=np.float64).reshape(-1, 2, 2),
-            segment_kinds=tuple(world["segment_kinds"]),
-            doors=doors,
-            passes=tuple(TruthPass(int(p["index"]), str(p["name"]), int(p["begin_ns"]), int(p["stationary_ns"]),
-                                   int(p["end_ns"])) for p in doc["passes"]),
+            generator=dict(doc.get("generator") or {}),
+            start_ns=int(doc.get("start_ns", int(rows[:, 0].min()) if len(rows) else 0)),
+            end_ns=int(doc.get("end_ns", int(rows[:, 0].max()) if len(rows) else 0)),
+            files=dict(doc.get("files") or {}),
+            world_name=str(world.get("name", "")),
+            wall_height_m=wall_height_m,
+            segments=segments,
+            segment_kinds=tuple(world.get("segment_kinds", ("wall",) * len(segments))),
+            doors=tuple(doors),
+            passes=passes,
             angle_stamp_ns=np.array([int(v) for v in rows[:, 0]], dtype=np.int64),
             angle_door_id=np.array([int(v) for v in rows[:, 1]], dtype=np.int64),
             angle_rad=np.array([float(v) for v in rows[:, 2]], dtype=np.float64),
@@ -224,8 +252,55 @@ def read_truth(path: Path) -> SimTruth:
             sensors=dict(doc.get("sensors") or {}),
             scenario=dict(doc.get("scenario") or {}),
             frame_id=str(doc.get("frame_id", "map")),
-            leaf_observations=_leaf_observations(doc.get("leaf_observations")),
+            leaf_observations=leaves,
         )
-    except (KeyError, TypeError, ValueError, IndexError) as err:
-        raise InputDataError(f"truth file is incomplete or malformed ({type(err).__name__}: {err})",
+    except KeyError as err:
+        raise InputDataError(f"truth file lacks {where}'s key {err} (required: world.doors with door_id, hinge_x, "
+                             "hinge_y, length, closed_yaw, opening_sign, max_angle; door_angles.rows)",
                              path=path) from err
+    except (TypeError, ValueError, IndexError, AttributeError) as err:
+        raise InputDataError(f"truth file is malformed at {where} ({type(err).__name__}: {err})", path=path) from err
+
+
+def merge_truths(truths: Sequence[SimTruth], paths: Sequence[Path]) -> SimTruth:
+    """One truth for passes recorded apart, each beside its own truth file (a simulator restarted per pass: clocks
+    that overlap, Gazebo and Stage starting at 0): the first file's world; every file's passes, door angles and
+    leaf observations put on one time line, file after file (each shifted to start 1 s after the previous one
+    ends), with each file's door angles held from its start to its end so that none leans toward the next file's.
+
+    Raises:
+        InputDataError: the files describe different doors (ids, or hinges more than 1 cm apart).
+    """
+    first = truths[0]
+    hinges = {d.door_id: (d.hinge_x, d.hinge_y) for d in first.doors}
+    rows: list[tuple[int, int, float]] = []
+    passes: list[TruthPass] = []
+    leaves: list[tuple[float, ...]] | None = []
+    end_ns = first.start_ns - 1_000_000_000
+    for truth, path in zip(truths, paths, strict=True):
+        other = {d.door_id: (d.hinge_x, d.hinge_y) for d in truth.doors}
+        if other.keys() != hinges.keys() or any(math.dist(other[k], hinges[k]) > 0.01 for k in hinges):
+            raise InputDataError(f"the mapping truths beside a map's logs describe different doors than {paths[0]}",
+                                 path=path)
+        shift = end_ns + 1_000_000_000 - truth.start_ns
+        ends = np.array([truth.start_ns, truth.end_ns], dtype=np.int64)
+        held = truth.door_angles_at(ends)  # (2, D)
+        for k, door in enumerate(truth.doors):
+            own = truth.angle_door_id == door.door_id
+            knots = zip([*ends, *truth.angle_stamp_ns[own]], [*held[:, k], *truth.angle_rad[own]], strict=True)
+            rows += [(int(s) + shift, door.door_id, float(a)) for s, a in knots]
+        base = len(passes)
+        passes += [TruthPass(base + j, p.name, p.begin_ns + shift, p.stationary_ns + shift, p.end_ns + shift)
+                   for j, p in enumerate(truth.passes)]
+        if truth.leaf_observations is None or leaves is None:
+            leaves = None
+        else:
+            leaves += [(base + int(r[0]), *r[1:]) for r in truth.leaf_observations]
+        end_ns = truth.end_ns + shift
+    rows.sort(key=lambda r: (r[1], r[0]))
+    table = np.array(rows, dtype=object).reshape(-1, 3)
+    return replace(first, end_ns=end_ns, passes=tuple(passes),
+                   angle_stamp_ns=np.array([int(v) for v in table[:, 0]], dtype=np.int64),
+                   angle_door_id=np.array([int(v) for v in table[:, 1]], dtype=np.int64),
+                   angle_rad=np.array([float(v) for v in table[:, 2]], dtype=np.float64),
+                   leaf_observations=None if leaves is None else tuple(leaves))

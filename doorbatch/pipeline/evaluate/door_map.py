@@ -145,8 +145,9 @@ def truth_doors(truth: SimTruth, min_opening_rad: float) -> tuple[DoorSet, npt.N
     else:
         lo = np.full(len(doors), np.inf)
         hi = np.full(len(doors), -np.inf)
+        index = {door.door_id: k for k, door in enumerate(doors)}
         for _, door_id, _, _, a_min, a_max in truth.leaf_observations:
-            d = int(door_id)
+            d = index[int(door_id)]  # a hand-written truth may number its doors from 1
             lo[d], hi[d] = min(lo[d], a_min), max(hi[d], a_max)
         never = ~np.isfinite(lo)
         lo[never], hi[never] = angles[0, never], angles[0, never]

@@ -22,7 +22,7 @@ import numpy as np
 import numpy.typing as npt
 
 from doorbatch.config import DoorbatchConfig, LocalizeConfig, parse_init
-from doorbatch.errors import PipelineError, UsageError
+from doorbatch.errors import InputDataError, PipelineError, UsageError
 from doorbatch.geometry.odometry import sideways_share
 from doorbatch.geometry.se2 import interpolate_poses
 from doorbatch.io.log_clock import LogClock
@@ -139,6 +139,8 @@ def truth_localization_map(truth_path: Path, config: LocalizeConfig) -> Localiza
     from doorbatch.io.sim_truth import read_truth
 
     truth = read_truth(truth_path)
+    if "map_static" not in truth.files:
+        raise InputDataError("truth file names no files.map_static (the simulator's door-less map)", path=truth_path)
     occ = read_map(truth_path.parent / truth.files["map_static"])
     ds = truth.doors
     reach = np.array([d.opening_sign * d.max_angle for d in ds])

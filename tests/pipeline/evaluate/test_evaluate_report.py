@@ -669,3 +669,62 @@ def test_a_truth_without_leaf_observations_scores_doors_by_position(tmp_path: Pa
         doc["leaf_observations"] = empty
         world.write_text(yaml.safe_dump(doc))
         assert read_truth(world).leaf_observations == ()
+
+
+def test_a_minimal_hand_written_truth_scores_a_map(tmp_path: Path) -> None:
+    """A Stage user's truth: format, the doors' geometry (numbered from 1), door_angles and leaf_observations, no
+    names, heights, colours, segments, generator or files. Each missing key had stopped evaluate with a bare
+    ``KeyError: 'color_mean_rgb'`` (exit 3), one key per try; a leaf row of door 3 had indexed the third door. A
+    missing required key is named."""
+    import yaml
+
+    doors = [{"door_id": k + 1, "hinge_x": 2.0 + 3.0 * k, "hinge_y": 1.0, "length": 0.9, "closed_yaw": 0.0,
+              "opening_sign": 1, "max_angle": 1.6} for k in range(3)]
+    doc = {"format": "doorbatch-sim-truth/1", "world": {"doors": doors},
+           "door_angles": {"columns": ["stamp_ns", "door_id", "angle"],
+                           "rows": [[0, k + 1, 0.0] for k in range(3)] + [[10**9, k + 1, 1.0] for k in range(3)]},
+           "leaf_observations": {"rows": [[0, 3, 40, 12, 0.0, 1.0], [0, 1, 40, 12, 0.0, 0.0]]}}
+    world = tmp_path / "hand.truth.yaml"
+    world.write_text(yaml.safe_dump(doc))
+    found = DoorSet(np.array([[8.01, 1.0]]), np.array([0.9]), np.array([0.0]), np.zeros(1), np.ones(1))
+    out = tmp_path / "report"
+    assert main(["evaluate", str(_map_dir(tmp_path / "map", found)), "--world", str(world), "-o", str(out), "-q"]) == 0
+    table = read_table("metrics", out / "metrics.parquet").to_pydict()
+    got = dict(zip(table["metric"], table["value"], strict=True))
+    # only door 3 (id 3, the third) was seen at two angles: the one found is it
+    assert got["doors_truth"] == 1 and got["door_precision"] == 1.0 and got["door_recall"] == 1.0
+    assert got["door_hinge_error_mean"] == pytest.approx(0.01)
+    del doc["world"]["doors"][1]["closed_yaw"]
+    world.write_text(yaml.safe_dump(doc))
+    assert main(["evaluate", str(tmp_path / "map"), "--world", str(world), "-o", str(tmp_path / "r2"), "-q"]) == 3
+
+
+def test_passes_recorded_apart_with_a_truth_each_are_scored_against_all_of_them(tmp_path: Path) -> None:
+    """Stage or Gazebo restarted per pass: each pass's log has its own truth, every clock starting at 0. The map
+    had been scored against the first pass's truth alone (range error 1.25 rad, no warning); the truths are now
+    merged onto one time line, each pass's angles its own."""
+    import yaml
+
+    from doorbatch.io.manifest import Manifest
+
+    logs = []
+    for k, angle in enumerate((0.0, 1.2)):
+        log = tmp_path / "logs" / f"pass{k + 1}.bag"
+        log.parent.mkdir(exist_ok=True)
+        log.write_bytes(b"a log")
+        doc = {"format": "doorbatch-sim-truth/1", "start_ns": 0, "end_ns": 10**10,
+               "world": {"doors": [{"door_id": 0, "hinge_x": 3.0, "hinge_y": 1.0, "length": 0.9, "closed_yaw": 0.0,
+                                    "opening_sign": 1, "max_angle": 1.6}]},
+               "passes": [{"index": 0, "begin_ns": 0, "stationary_ns": 0, "end_ns": 10**10}],
+               "door_angles": {"rows": [[0, 0, angle]]}}
+        (log.parent / f"pass{k + 1}.truth.yaml").write_text(yaml.safe_dump(doc))
+        logs.append(log)
+    folder = _map_dir(tmp_path / "map", DoorSet(np.array([[3.0, 1.0]]), np.array([0.9]), np.zeros(1), np.zeros(1),
+                                                np.full(1, 1.2)))
+    Manifest.start(DoorbatchConfig().as_dict(), logs, command="map").write(folder / "manifest.json")
+    out = tmp_path / "report"
+    assert main(["evaluate", str(folder), "-o", str(out), "-q"]) == 0
+    table = read_table("metrics", out / "metrics.parquet").to_pydict()
+    got = dict(zip(table["metric"], table["value"], strict=True))
+    assert got["door_precision"] == 1.0 and got["doors_truth"] == 1
+    assert got["door_range_error_mean"] == pytest.approx(0.0, abs=1e-9)
