@@ -77,6 +77,12 @@ class IoConfig(Section):
     # robot that turns now and then stays below it; a 5 Hz rotating lidar at 1 m/s does not).
     sweep_smear_warn_m: float = Field(0.1, gt=0.0)
     sweep_check_range_m: float = Field(5.0, gt=0.0)
+    # An odometry step farther than odometry_jump_min_m, or turning more than odometry_jump_min_deg, that lands within
+    # odometry_restart_at_zero_m of the origin is a driver restarting at zero: it is taken out, with a warning.
+    # Expert choice: a restart lands on (0, 0) to the bit; half a metre is no 50 Hz step of a wheeled base.
+    odometry_jump_min_m: float = Field(0.5, gt=0.0)
+    odometry_jump_min_deg: float = Field(30.0, gt=0.0)
+    odometry_restart_at_zero_m: float = Field(0.001, ge=0.0)
     # A scan in a frame with no transform to base_link is an error unless this says to assume identity.
     assume_identity_laser_tf: bool = False
     # ... or unless this gives the laser's mount in base_link, [x, y, z] in m and [roll, pitch, yaw] in rad (ROS

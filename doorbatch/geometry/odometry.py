@@ -109,3 +109,31 @@ def sweep_smear_m(sweep_s: float, stamps_ns: npt.ArrayLike, poses: npt.ArrayLike
     v = np.hypot(np.diff(p[:, 0]), np.diff(p[:, 1]))[ok] / dt[ok]
     w = np.abs(wrap_angle(np.diff(p[:, 2])))[ok] / dt[ok]
     return float((np.quantile(v, quantile) + np.quantile(w, quantile) * range_m) * sweep_s)
+
+
+def odometry_jumps(poses: npt.ArrayLike, min_jump_m: float, min_jump_rad: float, at_zero_m: float
+                   ) -> npt.NDArray[np.intp]:
+    """Indices ``i`` of odometry steps ``i − 1 → i`` no wheel made: a step farther than ``min_jump_m`` or turning
+    more than ``min_jump_rad`` that lands within ``at_zero_m`` of the frame's origin (a driver that restarted, its
+    odometry starting again at (0, 0); the heading may come from a compass). Speed is no test: real logs with
+    coarse or synthesized stamps (CARMEN's) show steps of metres in a fifth of a second."""
+    p = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    if p.shape[0] < 2:
+        return np.zeros(0, dtype=np.intp)
+    dist = np.hypot(np.diff(p[:, 0]), np.diff(p[:, 1]))
+    turn = np.abs(wrap_angle(np.diff(p[:, 2])))
+    at_zero = np.hypot(p[1:, 0], p[1:, 1]) <= at_zero_m
+    return np.flatnonzero(at_zero & ((dist > min_jump_m) | (turn > min_jump_rad))) + 1
+
+
+def bridged_jumps(poses: npt.ArrayLike, jumps: npt.ArrayLike) -> FloatArray:
+    """The odometry with each jump taken out: from a jump at ``i`` on, every pose is moved rigidly so that pose
+    ``i`` equals pose ``i − 1`` (p'_k = p'_{i−1} ⊕ p_i⁻¹ ⊕ p_k), the motion after the jump kept as it was
+    reported. The step across the jump becomes no motion (one message period lost: a choice, as the motion in
+    it is unknown)."""
+    from doorbatch.geometry.se2 import compose, relative
+
+    out = np.array(poses, dtype=np.float64).reshape(-1, 3)
+    for i in np.asarray(jumps, dtype=np.intp):
+        out[i:] = compose(out[i - 1], relative(out[i], out[i:]))
+    return out

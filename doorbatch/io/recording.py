@@ -18,7 +18,7 @@ import numpy.typing as npt
 
 from doorbatch.config import DoorbatchConfig, FramesConfig
 from doorbatch.errors import LaserMountError, LogContentError, TransformError
-from doorbatch.geometry.odometry import sweep_smear_m
+from doorbatch.geometry.odometry import bridged_jumps, odometry_jumps, sweep_smear_m
 from doorbatch.geometry.rotations import yaw_of_matrix
 from doorbatch.geometry.se2 import compose, interpolate_poses
 from doorbatch.geometry.tf_buffer import TfBuffer
@@ -553,6 +553,8 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
         timed = on_one_clock(scans, odom, ref, config.io.clock_mismatch_s)
         scans = timed.scans
         odometry, reference = robot_pose_series(timed.odom, timed.ref, tf, frames)
+        odometry, jump_note = without_odometry_jumps(odometry, config)
+        notes += [f"{path}: {jump_note}"] if jump_note else []
         warnings = [*reader.warnings, *(f"{path}: {n}" for n in timed.notes), *([base_note] if base_note else []),
                     *notes]
         camera = reader.roles.topic(Role.IMAGE) is not None and reader.roles.topic(Role.CAMERA_INFO) is not None
@@ -609,6 +611,28 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
                         "odometry was replaced by its corrected poses)")
     return Recording(str(path), scan_set, odometry, reference, aligned, warnings, valid, repeats,
                      timed.log_clock, tuple(tf.static_transforms()))
+
+
+def without_odometry_jumps(odometry: PoseSeries | None, config: DoorbatchConfig
+                           ) -> tuple[PoseSeries | None, str | None]:
+    """The odometry with its restarts (:func:`~doorbatch.geometry.odometry.odometry_jumps`: a driver that restarted
+    at zero) bridged, and a note naming them; a localizer or scan matcher fed the jump would take it as motion."""
+    if odometry is None:
+        return None, None
+    io = config.io
+    jumps = odometry_jumps(odometry.poses, io.odometry_jump_min_m, math.radians(io.odometry_jump_min_deg),
+                           io.odometry_restart_at_zero_m)
+    if not jumps.size:
+        return odometry, None
+    t0 = int(odometry.stamps_ns[0])
+    steps = np.hypot(*(odometry.poses[jumps, :2] - odometry.poses[jumps - 1, :2]).T)
+    said = ", ".join(f"{(int(odometry.stamps_ns[i]) - t0) / 1e9:.1f} s ({d:.2f} m)"
+                     for i, d in list(zip(jumps, steps, strict=True))[:5])
+    more = f" and {jumps.size - 5} more" if jumps.size > 5 else ""
+    note = (f"the odometry jumps back to (0, 0) {jumps.size} time(s) (at {said}{more} after its start: a driver "
+            "that restarted): each jump is taken out, the odometry after it continuing from the pose before "
+            "(io.odometry_jump_min_m, _min_deg, io.odometry_restart_at_zero_m)")
+    return replace(odometry, poses=bridged_jumps(odometry.poses, jumps)), note
 
 
 def configured_mount(config: DoorbatchConfig, laser_frame: str) -> Transform:

@@ -1,0 +1,53 @@
+"""Odometry jumps no wheel made (a driver restarting at zero): found and taken out."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from doorbatch.geometry.odometry import bridged_jumps, odometry_jumps
+from doorbatch.geometry.se2 import compose, relative
+
+JUMP = {"min_jump_m": 0.5, "min_jump_rad": math.radians(30), "at_zero_m": 0.001}
+
+
+def _drive(n: int, seed: int) -> np.ndarray:
+    """A 50 Hz odometry at up to 1 m/s and 1 rad/s."""
+    rng = np.random.default_rng(seed)
+    steps = np.column_stack([rng.uniform(0.0, 0.02, n - 1), np.zeros(n - 1), rng.uniform(-0.02, 0.02, n - 1)])
+    poses = [np.zeros(3)]
+    for s in steps:
+        poses.append(compose(poses[-1], s))
+    return np.array(poses)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 10_000), st.integers(100, 900), st.floats(-3.0, 3.0))
+def test_a_restart_at_zero_is_found_and_bridged(seed: int, at: int, yaw0: float) -> None:
+    """The driver restarts at step ``at``: from there it reports its motion from (0, 0, yaw0). The jump is found
+    there (and nowhere else), and bridging it keeps every reported step but the one across it, which becomes
+    no motion."""
+    truth = _drive(1000, seed)
+    start = np.array([25.0, -4.0, 1.0])
+    odom = compose(start, truth)
+    odom[at:] = compose(np.array([0.0, 0.0, yaw0]), relative(truth[at], truth[at:]))
+    jumps = odometry_jumps(odom, **JUMP)
+    assert jumps.tolist() == [at]
+    fixed = bridged_jumps(odom, jumps)
+    steps, want = relative(fixed[:-1], fixed[1:]), relative(truth[:-1], truth[1:])
+    keep = np.arange(999) != at - 1
+    np.testing.assert_allclose(steps[keep], want[keep], atol=1e-9)
+    np.testing.assert_allclose(steps[at - 1], 0.0, atol=1e-12)
+    np.testing.assert_allclose(fixed[:at], odom[:at])
+
+
+def test_long_steps_that_do_not_land_at_zero_are_not_jumps() -> None:
+    """3 m between two messages (a gap, or a CARMEN log's coarse stamps), a message repeated, a turn of 57° in one
+    step: no restart. A turn of 57° onto (0, 0) from a robot standing near it is one."""
+    poses = np.array([[0.2, 0, 0], [0.22, 0, 0], [3.22, 0, 0], [3.22, 0, 0], [3.22, 0, 1.0]], dtype=np.float64)
+    assert odometry_jumps(poses, **JUMP).size == 0
+    near = np.array([[0.1, 0.1, 0.0], [0.0, 0.0, 1.0]])
+    assert odometry_jumps(near, **JUMP).tolist() == [1]
