@@ -28,6 +28,7 @@ from doorbatch.io.reader import most_are_bad, open_log
 from doorbatch.io.recording import (
     buffered_transforms,
     clock_lags_s,
+    lost_times_note,
     missing_laser_tf_hint,
     odometry_frame,
     odometry_frame_note,
@@ -279,7 +280,11 @@ def _check_stamps(report: LogReport, stats: dict[str, _TopicStats], role_of: dic
                                                                              Role.REFERENCE) else ""
             report.problems.append(Problem(Severity.WARNING, name, f"stamps go backwards {st.backwards} time(s): "
                                                                    f"first {st.first_backwards}{sorted_note}"))
-        unset = int(unset_stamps(st.header_stamps).sum())
+        unset_at = unset_stamps(st.header_stamps)
+        if role is Role.SCAN and len(st.log_times) == len(st.header_stamps):
+            lost = lost_times_note(np.where(unset_at, st.log_times, st.header_stamps).tolist())
+            report.problems.extend([Problem(Severity.ERROR, name, lost)] if lost else [])
+        unset = int(unset_at.sum())
         if unset:
             report.problems.append(Problem(Severity.WARNING, name, f"{unset} of {st.count} header stamps "
                                                                    f"are 0 (unset): their log time stands in"))

@@ -560,6 +560,8 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
         camera = reader.roles.topic(Role.IMAGE) is not None and reader.roles.topic(Role.CAMERA_INFO) is not None
     if not scans:
         raise LogContentError("scan topic has no messages", path=path, topic=scan_topic)
+    if lost := lost_times_note([s.stamp_ns for s in scans]):
+        raise LogContentError(lost, path=path, topic=scan_topic)
     base = frames.base_link
     try:
         affines = np.stack([_planar_affine(tf, base, s.frame_id, s.stamp_ns, config.io.assume_identity_laser_tf)
@@ -611,6 +613,18 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
                         "odometry was replaced by its corrected poses)")
     return Recording(str(path), scan_set, odometry, reference, aligned, warnings, valid, repeats,
                      timed.log_clock, tuple(tf.static_transforms()))
+
+
+def lost_times_note(stamps_ns: Sequence[int]) -> str | None:
+    """Why scans whose stamps (header, or log time where unset) take fewer distinct values than half their number
+    cannot be placed in time, else None (a few repeats are a merge's duplicates; this is no clock)."""
+    distinct = len(set(stamps_ns))
+    if len(stamps_ns) < 10 or distinct >= 0.5 * len(stamps_ns):
+        return None
+    return (f"{len(stamps_ns)} scans carry only {distinct} distinct stamp(s), header and log time alike (first "
+            f"{stamps_ns[0]} ns): their times are lost (a converter that stamped them from a field that is 0, e.g. "
+            "orebro's CARMEN ipc_timestamp); re-stamp the log, or read the CARMEN log itself, whose stamps doorbatch "
+            "synthesizes")
 
 
 def without_odometry_jumps(odometry: PoseSeries | None, config: DoorbatchConfig
