@@ -246,9 +246,12 @@ def read_map_dir(map_dir: Path, name: str | None = None) -> MapTables:
     the first (the sample's layout)."""
     map_dir = Path(map_dir)
     truth: SimTruth | None = None
+    pose_source: str | None = None
     manifest_path = map_dir / "manifest.json"
     if manifest_path.is_file():
-        logs = _input_paths(Manifest.read(manifest_path))
+        manifest = Manifest.read(manifest_path)
+        pose_source = str(manifest.extra["pose_source"]) if "pose_source" in manifest.extra else None
+        logs = _input_paths(manifest)
         own = list(dict.fromkeys(c for c in (_sibling(p, "truth") for p in logs) if c.is_file()))
         shared = [p.parent / "map.truth.yaml" for p in logs[:1] if (p.parent / "map.truth.yaml").is_file()]
         if len(own) > 1:
@@ -256,8 +259,8 @@ def read_map_dir(map_dir: Path, name: str | None = None) -> MapTables:
         elif own or shared:
             truth = read_truth((own or shared)[0])
     if not (map_dir / "doors.parquet").is_file():
-        return MapTables(name or map_dir.name, read_door_set(map_dir), truth)
+        return MapTables(name or map_dir.name, read_door_set(map_dir), truth, pose_source=pose_source)
     table = read_table("doors", map_dir / "doors.parquet").to_pydict()
     return MapTables(name or map_dir.name, door_set_of(table), truth,
-                     source="em" if "em" in table["source"] else "grid")
+                     source="em" if "em" in table["source"] else "grid", pose_source=pose_source)
 

@@ -242,6 +242,9 @@ class MapTables:
     params: dict[str, Any] = field(default_factory=dict)
     # "em" when doors.parquet holds the EM stage's doors (moved and never moved), else "grid" (moved only).
     source: str = "grid"
+    # The poses the map was built from (its manifest's pose_source): scanmatch and odometry maps lie in their first
+    # pass's odometry frame, not a truth's world frame.
+    pose_source: str | None = None
 
 
 @dataclass(frozen=True)
@@ -493,6 +496,11 @@ def _map_rows(door_map: MapTables, truth: SimTruth | None, cfg: DoorbatchConfig)
     def mean(a: FloatArray) -> float:
         return float(np.mean(np.abs(a))) if a.size else math.nan
 
+    if door_map.pose_source in ("scanmatch", "odometry") and len(door_map.doors) and not score.precision >= 0.5:
+        warnings.append(f"map {door_map.name}: built from {door_map.pose_source} poses, it lies in its first pass's "
+                        f"odometry frame, and its doors match the truth's world frame poorly (precision "
+                        f"{score.precision:.2f}): map from the reference (--pose-source reference) to score it, or "
+                        "expect the frames to differ by the first pass's start pose")
     values = [("door_precision", score.precision, "ratio"), ("door_recall", score.recall, "ratio"),
               ("door_hinge_error_mean", mean(score.hinge_error_m), "m"),
               ("door_length_error_mean", mean(score.length_error_m), "m"),

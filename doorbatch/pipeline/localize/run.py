@@ -362,6 +362,12 @@ def start_fit_note(rec: Recording, lmap: LocalizationMap, init: Init, lc: Locali
     else:
         start, i = np.asarray(init, dtype=np.float64), 0
     fit = scan_fit(lmap.field, start, rec.scans.hits_base(i), lc.lost_fit_distance_m)
+    other_frame = init == "reference" and lmap.pose_source in ("scanmatch", "odometry")
+    if other_frame and not fit < lc.lost_min_fit:  # a shift along a corridor keeps the hits on its walls
+        return (f"--init reference: the map was built from {lmap.pose_source} poses, so it lies in its first pass's "
+                f"odometry frame, and the reference's start ({start[0]:.2f}, {start[1]:.2f}, {start[2]:.2f}) is in the "
+                "reference's frame: where they differ (a simulator's world frame), the run is offset by the difference "
+                "though the first scan fits the map; --init X,Y,YAW in the map's frame, or a map from the reference")
     if not fit < lc.lost_min_fit:  # NaN: too few hits to tell
         return None
     name = init.topic if isinstance(init, StartPose) else "reference" if init == "reference" else "X,Y,YAW"

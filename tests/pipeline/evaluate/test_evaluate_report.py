@@ -728,3 +728,24 @@ def test_passes_recorded_apart_with_a_truth_each_are_scored_against_all_of_them(
     got = dict(zip(table["metric"], table["value"], strict=True))
     assert got["door_precision"] == 1.0 and got["doors_truth"] == 1
     assert got["door_range_error_mean"] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_a_scan_matched_map_scored_against_a_world_frame_truth_is_told_why(tmp_path: Path) -> None:
+    """A map built from scan-matched poses lies in its first pass's odometry frame, 1 m from the truth's world
+    frame: precision 0, recall 0, and no word. A warning now names the frames; a reference map is not told."""
+    from doorbatch.io.sim_truth import read_truth
+    from doorbatch.pipeline.evaluate.door_map import truth_doors
+
+    doors, moved = truth_doors(read_truth(SAMPLE_LOGS / "map.truth.yaml"),
+                               math.radians(DoorbatchConfig().doors.min_opening_deg))
+    shifted = DoorSet(doors.hinge[moved] + np.array([1.0, 0.0]), doors.length[moved], doors.closed_yaw[moved],
+                      doors.angle_min[moved], doors.angle_max[moved])
+    for source, told in (("scanmatch", True), ("reference", False)):
+        folder = _map_dir(tmp_path / source, shifted)
+        manifest = Manifest.read(folder / "manifest.json")
+        manifest.extra["pose_source"] = source
+        manifest.write(folder / "manifest.json")
+        out = tmp_path / f"report_{source}"
+        assert main(["evaluate", str(folder), "-o", str(out), "-q"]) == 0
+        warnings = Manifest.read(out / "manifest.json").warnings
+        assert any("first pass's odometry frame" in w and "precision 0.00" in w for w in warnings) == told, warnings
