@@ -550,7 +550,7 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
         if reader.roles.topic(Role.REFERENCE) is None:
             ref, note = tf_reference(tf, frames)
             notes += [note] if note else []
-        timed = on_one_clock(scans, odom, ref, config.io.clock_mismatch_s)
+        timed = without_repeated_scans(on_one_clock(scans, odom, ref, config.io.clock_mismatch_s))
         scans = timed.scans
         odometry, reference = robot_pose_series(timed.odom, timed.ref, tf, frames)
         odometry, jump_note = without_odometry_jumps(odometry, config)
@@ -613,6 +613,20 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
                         "odometry was replaced by its corrected poses)")
     return Recording(str(path), scan_set, odometry, reference, aligned, warnings, valid, repeats,
                      timed.log_clock, tuple(tf.static_transforms()))
+
+
+def without_repeated_scans(timed: OneClock) -> OneClock:
+    """``timed`` without the scans that repeat the one before them (same stamp, same ranges: bags merged, a topic
+    recorded twice), with a note; the map would integrate each copy as new evidence."""
+    scans = timed.scans
+    keep = [k for k in range(len(scans)) if not k or scans[k].stamp_ns != scans[k - 1].stamp_ns
+            or not np.array_equal(scans[k].ranges, scans[k - 1].ranges, equal_nan=True)]
+    if len(keep) == len(scans):
+        return timed
+    note = (f"{len(scans) - len(keep)} of {len(scans)} scans repeat the one before them (same stamp and ranges: "
+            "merged bags, a topic recorded twice): each is read once")
+    return replace(timed, scans=[scans[k] for k in keep], header_stamps_ns=[timed.header_stamps_ns[k] for k in keep],
+                   notes=[*timed.notes, note])
 
 
 def lost_times_note(stamps_ns: Sequence[int]) -> str | None:

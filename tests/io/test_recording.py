@@ -619,3 +619,22 @@ def test_only_an_edge_whose_every_stamp_is_unset_is_timed_by_log_time() -> None:
     np.testing.assert_allclose(buf.lookup("odom", "base_link", T0 + 250_000_000)[0, 3], 0.25)
     assert buf.stamps("other") == [0, *(2_000_000_000 + k * 100_000_000 for k in range(1, 5))]
     assert note is not None and "odom→base_link (5 of 5)" in note and "other" not in note
+
+
+def test_scans_recorded_twice_are_read_once(write_log: Callable[..., Path]) -> None:
+    """Bags merged with a copy of /scan: each scan twice, at its stamp. The map had integrated both copies (385
+    cells of the sample turned from unknown to free, 4 doors for 2 from odometry poses); the copies are dropped,
+    with a note, and the recording equals the clean one. A scan at the same stamp with other ranges is kept."""
+    messages = sample_messages(8)
+    doubled = sorted([*messages, *[msg for msg in messages if msg[0] == "/scan"][:5]], key=lambda msg: msg[2])
+    clean = load_recording(write_log("clean.mcap", messages), DoorbatchConfig())
+    rec = load_recording(write_log("doubled.mcap", doubled), DoorbatchConfig())
+    assert np.array_equal(rec.scans.stamps_ns, clean.scans.stamps_ns)
+    assert any("5 of 13 scans repeat the one before them" in w for w in rec.warnings), rec.warnings
+    topic, kind, at, scan = next(msg for msg in messages if msg[0] == "/scan")
+    other = m.laser_scan(scan.header.stamp.sec * 10**9 + scan.header.stamp.nanosec, scan.header.frame_id,
+                         scan.angle_min, scan.angle_increment, scan.range_min, scan.range_max,
+                         np.asarray(scan.ranges) + 0.5)
+    twin = load_recording(write_log("twin.mcap", sorted([*messages, (topic, kind, at, other)], key=lambda x: x[2])),
+                          DoorbatchConfig())
+    assert len(twin.scans.stamps_ns) == len(clean.scans.stamps_ns) + 1
