@@ -89,6 +89,9 @@ class IoConfig(Section):
     # fixed-axis RPY, as a static_transform_publisher takes them; an upside-down laser has roll π): for a log
     # recorded after /tf_static was latched. Used only where the log's TF does not take the laser to the base.
     laser_mount: tuple[float, float, float, float, float, float] | None = None
+    # Added to every scan's stamp once the scans are on one clock with the odometry: a driver that stamps its scans
+    # when they arrive, late by its latency, takes minus that latency (−0.08 for 80 ms), as urg_node's time_offset.
+    scan_time_offset_s: float = 0.0
     # Pair images/detections/colors with scans by nearest stamp within this tolerance.
     stamp_tolerance_s: float = Field(0.05, ge=0.0)
     # Scans and odometry whose header stamps sit apart from their log times by medians that differ more than

@@ -551,7 +551,8 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
             ref, note = tf_reference(tf, frames)
             notes += [note] if note else []
         timed = without_repeated_scans(on_one_clock(scans, odom, ref, config.io.clock_mismatch_s))
-        scans = timed.scans
+        offset_ns = round(config.io.scan_time_offset_s * 1e9)
+        scans = [replace(s, stamp_ns=s.stamp_ns + offset_ns) for s in timed.scans] if offset_ns else timed.scans
         odometry, reference = robot_pose_series(timed.odom, timed.ref, tf, frames)
         odometry, jump_note = without_odometry_jumps(odometry, config)
         notes += [f"{path}: {jump_note}"] if jump_note else []
