@@ -411,6 +411,12 @@ def test_a_run_in_memory_scores_as_its_run_directory(tmp_path: Path) -> None:
     assert a.value("r", "door_state_error_mean") == pytest.approx(np.mean(np.abs(0.45 - truth_angle)))
 
 
+def _map_metrics(out: Path) -> dict[str, float]:
+    """Metric → value of a report on one map."""
+    table = read_table("metrics", out / "metrics.parquet").to_pydict()
+    return dict(zip(table["metric"], table["value"], strict=True))
+
+
 def _map_dir(folder: Path, doors: DoorSet, source: str = "grid") -> Path:
     import shutil
 
@@ -656,8 +662,7 @@ def test_a_truth_without_leaf_observations_scores_doors_by_position(tmp_path: Pa
                     np.zeros(3), np.full(3, 1.2))
     out = tmp_path / "report"
     assert main(["evaluate", str(_map_dir(tmp_path / "map", doors)), "--world", str(world), "-o", str(out), "-q"]) == 0
-    table = read_table("metrics", out / "metrics.parquet").to_pydict()
-    got = dict(zip(table["metric"], table["value"], strict=True))
+    got = _map_metrics(out)
     assert got["door_precision"] == 1.0 and got["door_recall"] == 1.0 and got["doors_truth"] == 3
     assert got["door_hinge_error_mean"] == pytest.approx(0.01)
     assert "door_recall_moved" not in got and "door_recall_never_moved" not in got
@@ -689,8 +694,7 @@ def test_a_minimal_hand_written_truth_scores_a_map(tmp_path: Path) -> None:
     found = DoorSet(np.array([[8.01, 1.0]]), np.array([0.9]), np.array([0.0]), np.zeros(1), np.ones(1))
     out = tmp_path / "report"
     assert main(["evaluate", str(_map_dir(tmp_path / "map", found)), "--world", str(world), "-o", str(out), "-q"]) == 0
-    table = read_table("metrics", out / "metrics.parquet").to_pydict()
-    got = dict(zip(table["metric"], table["value"], strict=True))
+    got = _map_metrics(out)
     # only door 3 (id 3, the third) was seen at two angles: the one found is it
     assert got["doors_truth"] == 1 and got["door_precision"] == 1.0 and got["door_recall"] == 1.0
     assert got["door_hinge_error_mean"] == pytest.approx(0.01)
@@ -724,8 +728,7 @@ def test_passes_recorded_apart_with_a_truth_each_are_scored_against_all_of_them(
     Manifest.start(DoorbatchConfig().as_dict(), logs, command="map").write(folder / "manifest.json")
     out = tmp_path / "report"
     assert main(["evaluate", str(folder), "-o", str(out), "-q"]) == 0
-    table = read_table("metrics", out / "metrics.parquet").to_pydict()
-    got = dict(zip(table["metric"], table["value"], strict=True))
+    got = _map_metrics(out)
     assert got["door_precision"] == 1.0 and got["doors_truth"] == 1
     assert got["door_range_error_mean"] == pytest.approx(0.0, abs=1e-9)
 
