@@ -152,6 +152,7 @@ def _format_report(report: Any) -> str:
     lines.append(f"Odometry:   {report.odometry}")
     lines.append(f"Reference:  {report.reference}")
     lines.append(f"Clock:      {report.clock}")
+    lines.append(f"Laser:      {report.laser}")
     lines.append("Problems:" if report.problems else "Problems:   none")
     for p in report.problems:
         lines.append(f"  {p.severity.value:<7} {p.topic + ': ' if p.topic else ''}{p.message}")

@@ -92,6 +92,9 @@ class IoConfig(Section):
     # Added to every scan's stamp once the scans are on one clock with the odometry: a driver that stamps its scans
     # when they arrive, late by its latency, takes minus that latency (−0.08 for 80 ms), as urg_node's time_offset.
     scan_time_offset_s: float = 0.0
+    # inspect warns of a laser narrower than this (a depth camera as a laser, 58-90°): door leaves are seen in part
+    # and briefly. Expert choice: a third of a turn, wider than any depth camera, narrower than any 2D lidar.
+    narrow_fov_warn_deg: float = Field(120.0, gt=0.0)
     # Pair images/detections/colors with scans by nearest stamp within this tolerance.
     stamp_tolerance_s: float = Field(0.05, ge=0.0)
     # Scans and odometry whose header stamps sit apart from their log times by medians that differ more than

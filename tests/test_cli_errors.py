@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Callable
 from pathlib import Path
 
@@ -159,6 +160,24 @@ def test_scans_whose_times_are_lost_are_refused_not_drawn_at_one_pose(
     assert "error   /scan: 12 scans carry only 1 distinct stamp(s)" in capsys.readouterr().out
     code, err = _run(capsys, "map", str(path), "-o", str(path.parent / "map"))
     assert code == 3 and "their times are lost" in _one_line(err)
+
+
+def test_inspect_describes_the_laser_and_warns_of_a_narrow_one(
+        write_log: Callable[..., Path], capsys: pytest.CaptureFixture[str]) -> None:
+    """A depth camera as the laser (58°, 5 m): inspect said "Problems: none", though doors were then missed and
+    global localization failed. It now prints the laser (beams, field of view, ranges) and warns of a narrow one."""
+    messages = sample_messages(5)
+    assert main(["inspect", str(write_log("wide.mcap", messages))]) == 0
+    out = capsys.readouterr().out
+    assert "Laser:      /scan: 181 beams over" in out and "field of view" not in out
+    for topic, _, _, msg in messages:
+        if topic == "/scan":
+            msg.angle_increment = math.radians(58.0) / len(msg.ranges)
+            msg.angle_min = -math.radians(29.0)
+            msg.angle_max = msg.angle_min + msg.angle_increment * (len(msg.ranges) - 1)
+    assert main(["inspect", str(write_log("narrow.mcap", messages))]) == 0
+    out = capsys.readouterr().out
+    assert "181 beams over 58.0°" in out and "warning /scan: a field of view of 58°" in out
 
 
 def test_unknown_config_key_names_the_closest(write_log: Callable[..., Path],

@@ -8,6 +8,7 @@ doorbatch's stages, a ``warning`` is worth knowing.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from enum import StrEnum
@@ -38,7 +39,7 @@ from doorbatch.io.recording import (
     unset_stamps,
 )
 from doorbatch.io.roles import TopicInfo
-from doorbatch.records import Role, Transform
+from doorbatch.records import Role, Scan, Transform
 
 
 class Severity(StrEnum):
@@ -108,6 +109,8 @@ class LogReport:
     # The clock doorbatch times the scans by: their header stamps, and how those relate to the recorder's clock
     # (Duration, Start, End and the rates are by log time).
     clock: str = "scan header stamps, on the recorder's clock"
+    # The laser read: beams, field of view, range limits, and the share of beams that return.
+    laser: str = "none"
 
     @property
     def errors(self) -> list[Problem]:
@@ -164,6 +167,8 @@ def inspect_log(path: Path, config: DoorbatchConfig | None = None,
         role_of = roles.role_of()
         scan_topic = roles.topic(Role.SCAN)
         bad_scans: list[str] = []  # reasons, one per scan that cannot be decoded
+        first_scan: Scan | None = None
+        beams_seen = beams_hit = 0
         for raw in reader.raw_messages():
             st = stats.setdefault(raw.topic, _TopicStats())
             st.count += 1
@@ -190,9 +195,15 @@ def inspect_log(path: Path, config: DoorbatchConfig | None = None,
                 st.last_stamp_ns = stamp
             if raw.topic == scan_topic:
                 try:
-                    scan_frames.add(decode_scan(raw.msg, raw.log_time_ns, raw.topic, raw.msgtype).frame_id)
+                    scan = decode_scan(raw.msg, raw.log_time_ns, raw.topic, raw.msgtype)
                 except LogContentError as err:
                     bad_scans.append(err.reason)
+                else:
+                    scan_frames.add(scan.frame_id)
+                    first_scan = first_scan or scan
+                    r = scan.ranges
+                    beams_seen += r.shape[0]
+                    beams_hit += int(np.count_nonzero((r >= scan.range_min) & (r < scan.range_max)))
             if progress is not None:
                 progress(1)
         if bad_scans and scan_topic is not None:  # as LogReader.messages: skipped unless most are bad
@@ -217,10 +228,27 @@ def inspect_log(path: Path, config: DoorbatchConfig | None = None,
             frames=sorted(tf.frames | scan_frames), problems=problems,
         )
     report.duration_s = (report.end_ns - report.start_ns) / 1e9
+    if first_scan is not None and scan_topic is not None:
+        _describe_laser(report, scan_topic, first_scan, beams_hit / max(beams_seen, 1), config.io.narrow_fov_warn_deg)
     _check_roles(report, roles.topics, scan_frames, tf, config, stats)
     _check_stamps(report, stats, role_of, config.io.gap_factor)
     _check_clocks(report, stats, role_of, tf, config)
     return report
+
+
+def _describe_laser(report: LogReport, topic: str, scan: Scan, returned: float, narrow_deg: float) -> None:
+    """The laser line of a report, and a warning for a field of view under ``narrow_deg``."""
+    n = scan.ranges.shape[0]
+    fov_deg = math.degrees(abs(scan.angle_increment) * n)
+    ends = sorted(math.degrees(scan.angle_min + k * scan.angle_increment) for k in (0, n - 1))
+    report.laser = (f"{topic}: {n} beams over {fov_deg:.1f}° ({ends[0]:.1f}° to {ends[1]:.1f}°), "
+                    f"{scan.range_min:g} to {scan.range_max:g} m, {returned:.0%} of beams return")
+    if fov_deg < narrow_deg:
+        report.problems.append(Problem(
+            Severity.WARNING, topic,
+            f"a field of view of {fov_deg:.0f}° (a depth camera's?): door leaves are seen in part and briefly, so "
+            "doors can be missed, scan matching falls back to odometry more often, and global localization has "
+            "little to go on; tracking from a known start works (docs/results.md, round four)"))
 
 
 def _rate(st: _TopicStats | None) -> float:
