@@ -22,7 +22,7 @@ from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import LogContentError
 from doorbatch.geometry.tf_buffer import TfBuffer
 from doorbatch.io.decode import ODOMETRY, decode_scan, decode_transforms, stamp_to_ns
-from doorbatch.io.log_clock import LogClock
+from doorbatch.io.log_clock import LogClock, long_gaps
 from doorbatch.io.map_topic import OCCUPANCY_GRID
 from doorbatch.io.pose_topic import POSE_TYPES
 from doorbatch.io.reader import most_are_bad, open_log
@@ -316,16 +316,13 @@ def _check_stamps(report: LogReport, stats: dict[str, _TopicStats], role_of: dic
         if unset:
             report.problems.append(Problem(Severity.WARNING, name, f"{unset} of {st.count} header stamps "
                                                                    f"are 0 (unset): their log time stands in"))
-        if len(st.periods) >= 10:
-            periods = np.asarray(st.periods, dtype=np.float64)
-            nominal = float(np.median(periods))
-            if nominal > 0:
-                gaps = periods[periods > gap_factor * nominal]
-                if gaps.size:
-                    report.problems.append(Problem(
-                        Severity.WARNING, name,
-                        f"{gaps.size} gap(s) in time longer than {gap_factor:g}× the {nominal / 1e9:.3f} s period "
-                        f"(longest {gaps.max() / 1e9:.3f} s)"))
+        periods = np.asarray(st.periods, dtype=np.float64)
+        gaps = periods[long_gaps(periods, gap_factor)]
+        if gaps.size:
+            report.problems.append(Problem(
+                Severity.WARNING, name,
+                f"{gaps.size} gap(s) in time longer than {gap_factor:g}× the {np.median(periods) / 1e9:.3f} s period "
+                f"(longest {gaps.max() / 1e9:.3f} s)"))
 
 
 def clock_line(stamps_ns: npt.NDArray[np.int64], log_ns: npt.NDArray[np.int64], mismatch_s: float) -> str:

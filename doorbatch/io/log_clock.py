@@ -70,3 +70,13 @@ class LogClock:
     def log_time_at(self, stamp_ns: int) -> int:
         """The recorder's clock at a stamp."""
         return stamp_ns if not self.log_ns.size else _map(stamp_ns, *self._by_stamp)
+
+
+def long_gaps(periods_ns: npt.ArrayLike, factor: float, min_periods: int = 10) -> npt.NDArray[np.bool_]:
+    """Which periods between consecutive messages are gaps: longer than ``factor`` × their median (a topic's
+    nominal period); none with fewer than ``min_periods`` periods, whose median says little."""
+    periods = np.asarray(periods_ns, dtype=np.float64).reshape(-1)
+    if periods.size < min_periods:
+        return np.zeros(periods.size, dtype=bool)
+    nominal = float(np.median(periods))
+    return periods > factor * nominal if nominal > 0 else np.zeros(periods.size, dtype=bool)

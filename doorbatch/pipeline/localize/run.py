@@ -25,7 +25,7 @@ from doorbatch.config import DoorbatchConfig, LocalizeConfig, parse_init
 from doorbatch.errors import InputDataError, PipelineError, UsageError
 from doorbatch.geometry.odometry import sideways_share
 from doorbatch.geometry.se2 import interpolate_poses
-from doorbatch.io.log_clock import LogClock
+from doorbatch.io.log_clock import LogClock, long_gaps
 from doorbatch.io.map_server import read_map
 from doorbatch.io.map_topic import read_map_topic
 from doorbatch.io.mapdir import read_door_set
@@ -339,6 +339,7 @@ def localize(log_path: Path, lmap: LocalizationMap, config: DoorbatchConfig, met
                             f"{config.frames.map!r}")
     if start != "global" and (note := start_fit_note(rec, lmap, start, config.localize)):
         rec.warnings.append(note)
+    rec.warnings.extend(gap_notes(rec, config.io.gap_factor))
     if start == "reference" and rec.reference_is_odometry:
         rec.warnings.append("--init reference: the reference repeats the odometry (moved rigidly), so it may be no "
                             "map frame at all (a raw CARMEN log's): the start is its first pose, right where the map "
@@ -376,6 +377,19 @@ def start_fit_note(rec: Recording, lmap: LocalizationMap, init: Init, lc: Locali
     return (f"--init {name}: at the start pose ({start[0]:.2f}, {start[1]:.2f}, {start[2]:.2f}) only {fit:.0%} of the "
             f"first scan's hits lie within {lc.lost_fit_distance_m} m of the map's walls{frame}: the start and the map "
             "may be in different frames; --init global or --init X,Y,YAW in the map's frame")
+
+
+def gap_notes(rec: Recording, gap_factor: float) -> list[str]:
+    """A warning where the scans stop for longer than ``gap_factor`` × their period (``io.gap_factor``, as ``inspect``
+    tells): the run has no poses there. (Across an odometry gap the motion is interpolated: ``inspect`` tells it.)"""
+    stamps = rec.scans.stamps_ns
+    at = np.flatnonzero(long_gaps(np.diff(stamps), gap_factor))
+    if not at.size:
+        return []
+    t0 = int(stamps[0])
+    spans = ", ".join(f"{(int(stamps[i]) - t0) / 1e9:.1f}–{(int(stamps[i + 1]) - t0) / 1e9:.1f} s" for i in at[:5])
+    return [f"{at.size} gap(s) in the scans ({spans}{' …' if at.size > 5 else ''} after the first scan): the "
+            "trajectory has no poses there"]
 
 
 def init_cell_note(occ: OccupancyMap, init: tuple[float, float, float]) -> str | None:

@@ -3,6 +3,9 @@ unless the config names one, and a start pose where the first scan does not fit 
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from pathlib import Path
+
 import numpy as np
 import pytest
 from mcl_sim import axis_scaled_odometry, loop_trajectory, room_map, room_recording
@@ -75,3 +78,17 @@ def test_a_reference_in_another_frame_than_the_map_is_told_at_the_start() -> Non
     lmap = LocalizationMap.of(room_map(), DoorSet.empty(), config.localize)
     assert start_fit_note(good, lmap, tuple(truth[0]), config.localize) is None
     assert start_fit_note(good, lmap, (truth[0, 0], truth[0, 1], truth[0, 2] + 1.5), config.localize) is not None
+
+
+def test_a_gap_in_the_scans_is_told_in_the_run(write_log: Callable[..., Path]) -> None:
+    """5 s without scans: inspect told it, the run's trajectory just had a hole. The run now says where."""
+    from doorbatch.io.recording import load_recording
+    from doorbatch.pipeline.localize.run import gap_notes
+    from tests.conftest import sample_messages
+
+    messages = sample_messages(30)
+    scans = [k for k, msg in enumerate(messages) if msg[0] == "/scan"]
+    holed = [msg for k, msg in enumerate(messages) if k not in scans[12:20]]
+    assert gap_notes(load_recording(write_log("whole.mcap", messages), DoorbatchConfig()), 5.0) == []
+    notes = gap_notes(load_recording(write_log("holed.mcap", holed), DoorbatchConfig()), 5.0)
+    assert len(notes) == 1 and notes[0].startswith("1 gap(s) in the scans (") and "no poses there" in notes[0]
