@@ -250,11 +250,14 @@ def check_common_frame(recordings: Sequence[Recording], source: str, config: Doo
             raise PipelineError(f"{nxt.path}: passes have disjoint coordinate frames: without a reference, "
                                 "several passes need one continuous odometry frame")
         jump_m, jump_deg = odometry_jump(prev, nxt)
+        have = all(r.reference is not None and not r.reference_is_odometry for r in recordings)
+        reference = ("the logs have a reference pose topic: --pose-source reference (what is chosen when none is "
+                     "given) uses it" if have else "give a reference pose topic")
         raise PipelineError(
             f"{nxt.path}: passes have disjoint coordinate frames: its odometry starts {jump_m:.2f} m and "
             f"{jump_deg:.1f}° from where {Path(prev.path).name} ended (mapping.odometry_continuity_m = "
-            f"{config.mapping.odometry_continuity_m}, _deg = {config.mapping.odometry_continuity_deg}); give a "
-            "reference pose topic, map the logs separately, or "
+            f"{config.mapping.odometry_continuity_m}, _deg = {config.mapping.odometry_continuity_deg}); {reference}, "
+            "map the logs separately, or "
             "try --set mapping.join_passes=true (each pass placed on the map of the ones before it by global "
             "localization)")
 

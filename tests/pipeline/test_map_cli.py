@@ -561,3 +561,25 @@ def test_an_odometry_restart_where_the_last_pass_ended_but_turned_does_not_conti
         poses = compose(np.broadcast_to(start, rec.odometry.poses.shape), rec.odometry.poses - rec.odometry.poses[0])
         nxt = replace(rec, odometry=replace(rec.odometry, poses=poses))
         assert continues(rec, nxt, config) is expected, turn_deg
+
+
+def test_odometry_passes_apart_with_a_reference_are_told_to_use_it(write_log: Callable[..., Path], tmp_path: Path,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """Stage passes recorded apart, mapped with --pose-source odometry: the refusal asked for a reference pose
+    topic, which the logs have. It now says so; logs without one are still asked for one."""
+    from tests.conftest import sample_messages
+
+    messages = sample_messages(30)
+    for k, msg in enumerate(msg for topic, _, _, msg in messages if topic == "/ground_truth"):
+        msg.pose.pose.position.x += 0.01 * k  # the odometry drifts from the truth: a reference of its own
+    a = write_log("a.mcap", messages)
+    b = write_log("b.mcap", messages)
+    code = main(["map", str(a), str(b), "-o", str(tmp_path / "out"), "--pose-source", "odometry"])
+    err = capsys.readouterr().err
+    assert code == 3 and "disjoint coordinate frames" in err
+    assert "the logs have a reference pose topic: --pose-source reference" in err
+    bare = [msg for msg in sample_messages(30) if msg[0] != "/ground_truth"]
+    code = main(["map", str(write_log("c.mcap", bare)), str(write_log("d.mcap", bare)), "-o", str(tmp_path / "o2"),
+                 "--pose-source", "odometry"])
+    err = capsys.readouterr().err
+    assert code == 3 and "give a reference pose topic" in err
