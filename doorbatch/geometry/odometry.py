@@ -20,6 +20,7 @@ import numpy as np
 import numpy.typing as npt
 
 from doorbatch.geometry.rotations import wrap_angle
+from doorbatch.geometry.se2 import compose, relative
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -131,8 +132,6 @@ def bridged_jumps(poses: npt.ArrayLike, jumps: npt.ArrayLike) -> FloatArray:
     ``i`` equals pose ``i − 1`` (p'_k = p'_{i−1} ⊕ p_i⁻¹ ⊕ p_k), the motion after the jump kept as it was
     reported. The step across the jump becomes no motion (one message period lost: a choice, as the motion in
     it is unknown)."""
-    from doorbatch.geometry.se2 import compose, relative
-
     out = np.array(poses, dtype=np.float64).reshape(-1, 3)
     for i in np.asarray(jumps, dtype=np.intp):
         out[i:] = compose(out[i - 1], relative(out[i], out[i:]))

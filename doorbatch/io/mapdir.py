@@ -16,6 +16,7 @@ from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.io import ros_messages as rm
 from doorbatch.io.annotated_mcap import Annotation, on_log_clock
 from doorbatch.io.log_clock import LogClock
+from doorbatch.io.manifest import Manifest
 from doorbatch.io.map_server import write_map
 from doorbatch.io.parquet import read_table, write_table
 from doorbatch.io.preview import PreviewDoor, render_preview, write_preview
@@ -54,6 +55,24 @@ def write_map_dir(out: Path, static_map: OccupancyMap, doors: Sequence[PreviewDo
     write_table("doors", doors_columns(doors, n_observations, source), out / "doors.parquet")
     write_preview(out / "preview.png", render_preview(static_map, doors, trajectories, walls=walls))
     return [out / "map.yaml", out / "map.pgm", out / "doors.parquet", out / "preview.png"]
+
+
+# Pose sources whose maps lie in their first pass's odometry frame, not a reference's (world) frame.
+ODOMETRY_FRAME_SOURCES = ("scanmatch", "odometry")
+
+
+def manifest_pose_source(manifest: Manifest) -> str | None:
+    """The pose source a map was built from, as its manifest records it, or None."""
+    source = manifest.extra.get("pose_source")
+    return str(source) if source is not None else None
+
+
+def map_pose_source(map_path: Path) -> str | None:
+    """The pose source a doorbatch map directory was built from (``manifest.json``), or None."""
+    folder = map_path if map_path.is_dir() else map_path.parent
+    if not (folder / "manifest.json").is_file() or not (folder / "map.yaml").is_file():
+        return None
+    return manifest_pose_source(Manifest.read(folder / "manifest.json"))
 
 
 def read_door_set(map_dir: Path) -> DoorSet:

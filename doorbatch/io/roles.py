@@ -105,11 +105,9 @@ def _pick(role: Role, candidates: list[TopicInfo]) -> tuple[TopicInfo, str] | No
     for name in _NAMES[role]:
         if name in by_name:
             return by_name[name], f"type {by_name[name].msgtype}, name {name} is tried first"
-    if role is not Role.SCAN:
-        best = max(candidates, key=lambda c: (c.count, c.name))
-        return best, f"type {best.msgtype}" + (f", most messages of {len(candidates)}" if len(candidates) > 1 else "")
     most = max(c.count for c in candidates)
-    busy = sorted((c for c in candidates if c.count >= _AS_BUSY_SHARE * most), key=lambda c: c.name)
+    busy = (sorted((c for c in candidates if c.count >= _AS_BUSY_SHARE * most), key=lambda c: c.name)
+            if role is Role.SCAN else [max(candidates, key=lambda c: (c.count, c.name))])
     best = busy[0]
     why = f"type {best.msgtype}"
     if len(busy) > 1:

@@ -24,7 +24,7 @@ import numpy.typing as npt
 from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import InputDataError
 from doorbatch.io.manifest import Manifest
-from doorbatch.io.mapdir import door_set_of, read_door_set
+from doorbatch.io.mapdir import door_set_of, manifest_pose_source, read_door_set
 from doorbatch.io.parquet import read_table
 from doorbatch.io.pose_topic import POSE_TYPES, read_pose_topic
 from doorbatch.io.sim_truth import SimTruth, merge_truths, output_paths, read_truth
@@ -250,7 +250,7 @@ def read_map_dir(map_dir: Path, name: str | None = None) -> MapTables:
     manifest_path = map_dir / "manifest.json"
     if manifest_path.is_file():
         manifest = Manifest.read(manifest_path)
-        pose_source = str(manifest.extra["pose_source"]) if "pose_source" in manifest.extra else None
+        pose_source = manifest_pose_source(manifest)
         logs = _input_paths(manifest)
         own = list(dict.fromkeys(c for c in (_sibling(p, "truth") for p in logs) if c.is_file()))
         shared = [p.parent / "map.truth.yaml" for p in logs[:1] if (p.parent / "map.truth.yaml").is_file()]

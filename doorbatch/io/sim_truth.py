@@ -298,9 +298,8 @@ def merge_truths(truths: Sequence[SimTruth], paths: Sequence[Path]) -> SimTruth:
             leaves += [(base + int(r[0]), *r[1:]) for r in truth.leaf_observations]
         end_ns = truth.end_ns + shift
     rows.sort(key=lambda r: (r[1], r[0]))
-    table = np.array(rows, dtype=object).reshape(-1, 3)
     return replace(first, end_ns=end_ns, passes=tuple(passes),
-                   angle_stamp_ns=np.array([int(v) for v in table[:, 0]], dtype=np.int64),
-                   angle_door_id=np.array([int(v) for v in table[:, 1]], dtype=np.int64),
-                   angle_rad=np.array([float(v) for v in table[:, 2]], dtype=np.float64),
+                   angle_stamp_ns=np.array([r[0] for r in rows], dtype=np.int64),
+                   angle_door_id=np.array([r[1] for r in rows], dtype=np.int64),
+                   angle_rad=np.array([r[2] for r in rows], dtype=np.float64),
                    leaf_observations=None if leaves is None else tuple(leaves))

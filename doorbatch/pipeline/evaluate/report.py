@@ -46,6 +46,7 @@ import numpy.typing as npt
 from doorbatch.config import DoorbatchConfig, EvaluateConfig
 from doorbatch.errors import PipelineError
 from doorbatch.geometry.se2 import compose, interpolate_poses
+from doorbatch.io.mapdir import ODOMETRY_FRAME_SOURCES
 from doorbatch.io.sim_truth import SimTruth
 from doorbatch.maps import DoorSet
 from doorbatch.pipeline.evaluate.door_map import score_doors, truth_doors
@@ -496,7 +497,7 @@ def _map_rows(door_map: MapTables, truth: SimTruth | None, cfg: DoorbatchConfig)
     def mean(a: FloatArray) -> float:
         return float(np.mean(np.abs(a))) if a.size else math.nan
 
-    if door_map.pose_source in ("scanmatch", "odometry") and len(door_map.doors) and not score.precision >= 0.5:
+    if door_map.pose_source in ODOMETRY_FRAME_SOURCES and len(door_map.doors) and not score.precision >= 0.5:
         warnings.append(f"map {door_map.name}: built from {door_map.pose_source} poses, it lies in its first pass's "
                         f"odometry frame, and its doors match the truth's world frame poorly (precision "
                         f"{score.precision:.2f}): map from the reference (--pose-source reference) to score it, or "

@@ -28,7 +28,7 @@ from doorbatch.geometry.se2 import interpolate_poses
 from doorbatch.io.log_clock import LogClock, long_gaps
 from doorbatch.io.map_server import read_map
 from doorbatch.io.map_topic import read_map_topic
-from doorbatch.io.mapdir import read_door_set
+from doorbatch.io.mapdir import ODOMETRY_FRAME_SOURCES, map_pose_source, read_door_set
 from doorbatch.io.pose_topic import StartPose, read_start_poses
 from doorbatch.io.recording import PoseSeries, Recording, load_recording
 from doorbatch.io.roles import is_initial_pose_topic
@@ -120,17 +120,6 @@ def load_localization_map(map_path: Path, config: LocalizeConfig) -> Localizatio
         doors = read_door_set(doors_path.parent) if doors_path is not None else DoorSet.empty()
     doors = with_closed_in_range(doors)
     return LocalizationMap.of(occ, doors, config, map_pose_source(map_path))
-
-
-def map_pose_source(map_path: Path) -> str | None:
-    """The pose source a doorbatch map directory was built from (``manifest.json``), or None."""
-    from doorbatch.io.manifest import Manifest
-
-    folder = map_path if map_path.is_dir() else map_path.parent
-    if not (folder / "manifest.json").is_file() or not (folder / "map.yaml").is_file():
-        return None
-    source = Manifest.read(folder / "manifest.json").extra.get("pose_source")
-    return str(source) if source is not None else None
 
 
 def truth_localization_map(truth_path: Path, config: LocalizeConfig) -> LocalizationMap:
@@ -363,7 +352,7 @@ def start_fit_note(rec: Recording, lmap: LocalizationMap, init: Init, lc: Locali
     else:
         start, i = np.asarray(init, dtype=np.float64), 0
     fit = scan_fit(lmap.field, start, rec.scans.hits_base(i), lc.lost_fit_distance_m)
-    other_frame = init == "reference" and lmap.pose_source in ("scanmatch", "odometry")
+    other_frame = init == "reference" and lmap.pose_source in ODOMETRY_FRAME_SOURCES
     if other_frame and not fit < lc.lost_min_fit:  # a shift along a corridor keeps the hits on its walls
         return (f"--init reference: the map was built from {lmap.pose_source} poses, so it lies in its first pass's "
                 f"odometry frame, and the reference's start ({start[0]:.2f}, {start[1]:.2f}, {start[2]:.2f}) is in the "
@@ -373,7 +362,7 @@ def start_fit_note(rec: Recording, lmap: LocalizationMap, init: Init, lc: Locali
         return None
     name = init.topic if isinstance(init, StartPose) else "reference" if init == "reference" else "X,Y,YAW"
     frame = (f"; the map was built from {lmap.pose_source} poses, so it lies in its first pass's odometry frame, "
-             "not the reference's" if init == "reference" and lmap.pose_source in ("scanmatch", "odometry") else "")
+             "not the reference's" if other_frame else "")
     return (f"--init {name}: at the start pose ({start[0]:.2f}, {start[1]:.2f}, {start[2]:.2f}) only {fit:.0%} of the "
             f"first scan's hits lie within {lc.lost_fit_distance_m} m of the map's walls{frame}: the start and the map "
             "may be in different frames; --init global or --init X,Y,YAW in the map's frame")
