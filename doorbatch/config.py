@@ -71,10 +71,14 @@ class IoConfig(Section):
     gap_factor: float = Field(5.0, gt=1.0)
     # Transforms farther than this outside the buffered time span are an error instead of a clamp.
     tf_extrapolation_limit_s: float = Field(0.1, ge=0.0)
+    # Deskew scans whose laser sets time_increment: each beam is moved to where the laser stood at the scan's stamp
+    # (the first beam's time, as sensor_msgs/LaserScan defines it), with the odometry interpolated at each beam's
+    # time (geometry/deskew). Off: every beam is placed at the stamp.
+    deskew: bool = True
     # A laser whose sweep (time_increment · beams) lets the robot move a beam end point at sweep_check_range_m by
-    # more than this during one scan gets a warning: doorbatch places every beam at the scan's stamp (no
-    # deskewing). Expert choice: two cells at 5 m, at the robot's median speed and turn rate (a 10 Hz laser on a
-    # robot that turns now and then stays below it; a 5 Hz rotating lidar at 1 m/s does not).
+    # more than this during one scan gets a warning when the scans are not deskewed (no odometry, or deskew off).
+    # Expert choice: two cells at 5 m, at the robot's median speed and turn rate (a 10 Hz laser on a robot that
+    # turns now and then stays below it; a 5 Hz rotating lidar at 1 m/s does not).
     sweep_smear_warn_m: float = Field(0.1, gt=0.0)
     sweep_check_range_m: float = Field(5.0, gt=0.0)
     # An odometry step farther than odometry_jump_min_m, or turning more than odometry_jump_min_deg, that lands within

@@ -50,13 +50,19 @@ class Scan:
     range_max: float
     ranges: Float32Array
     intensities: Float32Array | None = None
-    # Time from the first beam to the last (|time_increment| · (beams − 1)); 0 where the driver leaves it unset.
-    sweep_s: float = 0.0
+    # Time between beams (LaserScan.time_increment): beam i was measured at stamp + i · time_increment_s (the stamp
+    # is the first beam's time); 0 where the driver leaves it unset.
+    time_increment_s: float = 0.0
 
     @property
     def angles(self) -> FloatArray:
         """Beam angles in the laser frame (rad)."""
         return self.angle_min + self.angle_increment * np.arange(self.ranges.shape[0], dtype=np.float64)
+
+    @property
+    def sweep_s(self) -> float:
+        """Time from the first beam to the last, |time_increment| · (beams − 1)."""
+        return abs(self.time_increment_s) * max(int(self.ranges.shape[0]) - 1, 0)
 
 
 @dataclass(frozen=True, slots=True)

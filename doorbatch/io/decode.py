@@ -101,7 +101,7 @@ def decode_scan(msg: Any, log_time_ns: int, topic: str, msgtype: str = LASERSCAN
         range_max=float(msg.range_max),
         ranges=ranges,
         intensities=intensities if intensities.shape[0] == ranges.shape[0] else None,
-        sweep_s=abs(float(getattr(msg, "time_increment", 0.0))) * max(ranges.shape[0] - 1, 0),
+        time_increment_s=float(getattr(msg, "time_increment", 0.0)),
     )
 
 

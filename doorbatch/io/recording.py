@@ -18,6 +18,7 @@ import numpy.typing as npt
 
 from doorbatch.config import DoorbatchConfig, FramesConfig
 from doorbatch.errors import LaserMountError, LogContentError, TransformError
+from doorbatch.geometry.deskew import deskewed_scans
 from doorbatch.geometry.odometry import bridged_jumps, odometry_jumps, sweep_smear_m
 from doorbatch.geometry.rotations import yaw_of_matrix
 from doorbatch.geometry.se2 import compose, interpolate_poses
@@ -31,6 +32,9 @@ from doorbatch.records import BeamColors, Pose2D, Role, Scan, Transform
 FloatArray = npt.NDArray[np.float64]
 R = TypeVar("R", Scan, Pose2D)
 Int64Array = npt.NDArray[np.int64]
+# A sweep (time_increment × beams) this much longer than the scan period is no sweep: rotating lidars sweep within a
+# period. Expert choice: 10 % above it, for jitter in the stamps.
+_SWEEP_OVER_PERIOD = 1.1
 
 
 @dataclass(frozen=True)
@@ -576,9 +580,22 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
     if no_return_code:
         range_max, code_note = with_no_return_code([s.ranges for s in scans], range_max, config)
     warnings += [n for n in (note, code_note) if n]
+    ranges = [s.ranges for s in scans]
+    stamps_ns = np.array([s.stamp_ns for s in scans], dtype=np.int64)
+    sources: list[npt.NDArray[np.intp] | None] = []
+    sweep = float(np.median([s.sweep_s for s in scans]))
+    period_s = float(np.median(np.diff(stamps_ns))) / 1e9 if len(scans) > 1 else math.inf
+    if sweep > period_s * _SWEEP_OVER_PERIOD:
+        warnings.append(f"{path}: the laser's time_increment × beams is {1e3 * sweep:.0f} ms, longer than its scan "
+                        f"period ({1e3 * period_s:.0f} ms): a driver that wrote something else there; the scans are "
+                        "not deskewed")
+    elif config.io.deskew and odometry is not None and sweep > 0.0:
+        ranges, sources = deskewed_scans(ranges, stamps_ns, [s.time_increment_s for s in scans],
+                                          [s.angle_min for s in scans], [s.angle_increment for s in scans],
+                                          range_min, range_max, affines, odometry.stamps_ns, odometry.poses)
     scan_set = ScanSet(
-        stamps_ns=np.array([s.stamp_ns for s in scans], dtype=np.int64),
-        ranges=[s.ranges for s in scans],
+        stamps_ns=stamps_ns,
+        ranges=ranges,
         angle_min=np.array([s.angle_min for s in scans]),
         angle_increment=np.array([s.angle_increment for s in scans]),
         range_min=range_min,
@@ -598,14 +615,17 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
         aligned, valid = camera_beam_colors(path, scans, tf, config)
         if not any(v.any() for v in valid):
             aligned, valid = None, None
-    sweep = float(np.median([s.sweep_s for s in scans]))
-    if odometry is not None and (smear := sweep_smear_m(sweep, odometry.stamps_ns, odometry.poses,
-                                                         config.io.sweep_check_range_m)) > config.io.sweep_smear_warn_m:
+    if aligned is not None and any(src is not None for src in sources):  # colours follow their beams
+        aligned, valid = moved_beam_colors(aligned, valid, sources)
+    deskewed = sum(src is not None for src in sources)
+    if (odometry is not None and deskewed < 0.5 * len(scans) and sweep <= period_s * _SWEEP_OVER_PERIOD
+            and (smear := sweep_smear_m(sweep, odometry.stamps_ns, odometry.poses,
+                                        config.io.sweep_check_range_m)) > config.io.sweep_smear_warn_m):
+        why = "io.deskew is off" if not config.io.deskew else f"the odometry spans {deskewed} of {len(scans)} sweeps"
         warnings.append(f"{path}: the laser takes {1e3 * sweep:.0f} ms per sweep (time_increment) while the robot "
                         f"moves: a beam end point at {config.io.sweep_check_range_m:g} m moves {smear:.2f} m (median "
-                        "speed and turn rate) during one scan, and doorbatch places every beam at the scan's stamp "
-                        "(no deskewing): expect doubled walls in the map and a less exact pose; a driver or filter "
-                        "that deskews the scans (or a slower robot) avoids it")
+                        f"speed and turn rate) during one scan, and the scans are not deskewed ({why}): expect "
+                        "doubled walls in the map and a less exact pose")
     repeats = odometry_to_reference(reference, odometry, scan_set.stamps_ns, config)
     if repeats is not None:
         warnings.append(f"{path}: the reference poses are the odometry moved rigidly (within "
@@ -614,6 +634,24 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
                         "odometry was replaced by its corrected poses)")
     return Recording(str(path), scan_set, odometry, reference, aligned, warnings, valid, repeats,
                      timed.log_clock, tuple(tf.static_transforms()))
+
+
+def moved_beam_colors(colors: list[npt.NDArray[np.uint8]], valid: list[npt.NDArray[np.bool_]] | None,
+                      sources: Sequence[npt.NDArray[np.intp] | None]
+                      ) -> tuple[list[npt.NDArray[np.uint8]], list[npt.NDArray[np.bool_]] | None]:
+    """Per-beam colours (and their validity) moved with deskewed beams: fan angle j takes the colour of the measured
+    beam ``sources[i][j]`` (−1: none, colour 0 and invalid); a scan without sources is left as it was."""
+    out_colors, out_valid = [], []
+    for i, (c, src) in enumerate(zip(colors, sources, strict=True)):
+        v = valid[i] if valid is not None else None
+        if src is None:
+            out_colors.append(c)
+            out_valid.append(v if v is not None else np.ones(c.shape[0], dtype=bool))
+            continue
+        has = src >= 0
+        out_colors.append(np.where(has[:, None], c[np.maximum(src, 0)], 0).astype(np.uint8))
+        out_valid.append(has & (v[np.maximum(src, 0)] if v is not None else True))
+    return out_colors, (out_valid if valid is not None else None)
 
 
 def without_repeated_scans(timed: OneClock) -> OneClock:

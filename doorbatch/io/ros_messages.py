@@ -59,15 +59,17 @@ def pose(x: float, y: float, yaw: float, z: float = 0.0) -> Any:
 
 def laser_scan(stamp_ns: int, frame_id: str, angle_min: float, angle_increment: float,
                range_min: float, range_max: float, ranges: npt.ArrayLike,
-               intensities: npt.ArrayLike | None = None, scan_time_s: float = 0.0) -> Any:
-    """sensor_msgs/LaserScan; angle_max follows from the beam count."""
+               intensities: npt.ArrayLike | None = None, scan_time_s: float = 0.0,
+               time_increment_s: float = 0.0) -> Any:
+    """sensor_msgs/LaserScan; angle_max follows from the beam count. ``time_increment_s``: time between beams
+    (the header stamp is the first beam's time; 0: all beams at the stamp)."""
     r = np.asarray(ranges, dtype=np.float32)
     return _t("sensor_msgs/msg/LaserScan")(
         header=header(stamp_ns, frame_id),
         angle_min=float(angle_min),
         angle_max=float(angle_min + angle_increment * (r.shape[0] - 1)),
         angle_increment=float(angle_increment),
-        time_increment=0.0,
+        time_increment=float(time_increment_s),
         scan_time=float(scan_time_s),
         range_min=float(range_min),
         range_max=float(range_max),

@@ -152,6 +152,10 @@ class LaserSpec(_Model):
     dropout_prob: Fraction = 0.01
     spurious_prob: Fraction = 0.0
     mount: MountSpec = MountSpec(x_m=0.2, z_m=0.3)
+    # Time from the first beam to the last: a rotating laser (an LDS or RPLidar at 5 Hz takes most of 0.2 s) sees
+    # each beam from where the robot is at that beam's time, stamps the first beam and sets time_increment.
+    # 0: every beam at the stamp (Gazebo's and Stage's lasers).
+    sweep_s: float = Field(0.0, ge=0)
 
 
 class OdometrySpec(_Model):

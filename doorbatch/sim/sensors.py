@@ -132,7 +132,7 @@ def laser_model(spec: LaserSpec) -> LaserModel:
 class ScanSample:
     """One simulated scan: beam geometry in the map frame, truth, and the measured ranges."""
 
-    origin: FloatArray  # (2,) laser position (map)
+    origin: FloatArray  # (2,) laser position (map); (B, 2) for a sweeping laser, each beam's own
     directions: FloatArray  # (B, 2) unit beam directions (map)
     true_range: FloatArray  # (B,) exact range to the first surface (+inf: none)
     surface: IntArray  # (B,) surface index hit (−1: none)
@@ -142,8 +142,11 @@ class ScanSample:
 def laser_rays(pose: FloatArray, model: LaserModel) -> tuple[FloatArray, FloatArray]:
     """Laser origin (2,) and unit beam directions (B, 2) in the map frame for a robot pose (x, y, yaw).
 
-    origin = p + R(θ)·m, beam i direction = (cos, sin)(θ + yaw_mount + angle_i).
+    origin = p + R(θ)·m, beam i direction = (cos, sin)(θ + yaw_mount + angle_i). For a sweeping laser ``pose`` is
+    (B, 3), beam i taken from pose i: origins (B, 2), each beam from its own origin (:func:`swept_laser_rays`).
     """
+    if np.ndim(pose) == 2:
+        return swept_laser_rays(np.asarray(pose, dtype=np.float64), model)
     x, y, yaw = (float(v) for v in pose)
     c, s = math.cos(yaw), math.sin(yaw)
     mx, my = model.mount_xy_m
@@ -154,9 +157,20 @@ def laser_rays(pose: FloatArray, model: LaserModel) -> tuple[FloatArray, FloatAr
     return origin, model.unit_directions @ np.array([[ch, sh], [-sh, ch]])
 
 
+def swept_laser_rays(poses: FloatArray, model: LaserModel) -> tuple[FloatArray, FloatArray]:
+    """Origins (B, 2) and unit directions (B, 2) of a laser whose beam i is taken at robot pose ``poses[i]``:
+    origin_i = p_i + R(θ_i)·m, direction_i = (cos, sin)(θ_i + yaw_mount + angle_i)."""
+    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    mx, my = model.mount_xy_m
+    origins = np.stack([poses[:, 0] + c * mx - s * my, poses[:, 1] + s * mx + c * my], axis=1)
+    heading = poses[:, 2] + model.mount_yaw_rad + model.angles
+    return origins, np.stack([np.cos(heading), np.sin(heading)], axis=1)
+
+
 def simulate_scan(pose: FloatArray, scene: Scene, model: LaserModel, rng: np.random.Generator,
                   buffers: RayBuffers | None = None) -> ScanSample:
-    """Cast all beams and apply the range model of :class:`~doorbatch.sim.scenario.LaserSpec`.
+    """Cast all beams and apply the range model of :class:`~doorbatch.sim.scenario.LaserSpec`. ``pose``: the
+    robot's (3,) pose, or (B, 3) its pose at each beam's time (a sweeping laser, :func:`swept_laser_rays`).
 
     Draws exactly 4·B uniform/normal numbers per scan (noise, dropout, spurious, spurious range), so the
     random stream does not depend on what the beams hit.

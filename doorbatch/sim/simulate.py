@@ -244,6 +244,7 @@ def plan_messages(plan: Plan, streams: dict[str, np.random.Generator],
     cam = camera_model(s.camera)
     lighting = lighting_of(s.colors)
     buffers = RayBuffers()
+    beam_times = np.linspace(0.0, s.laser.sweep_s, laser.beams)  # s after the stamp (the first beam's time)
 
     for e in order:
         kind, i = int(all_kinds[e]), int(all_index[e])
@@ -268,12 +269,16 @@ def plan_messages(plan: Plan, streams: dict[str, np.random.Generator],
             angles, people_xy = sensing[_Kind.LASER]
             scene = make_scene(plan.world, angles[i], plan.people, people_xy[i])
             pose = np.array([p.x[i], p.y[i], p.yaw[i]])
+            if s.laser.sweep_s > 0.0:  # each beam from where the robot is at its time (a rotating laser)
+                swept = sample_trajectory(plan.trajectory, _seconds(np.array([t]), start)[0] + beam_times)
+                pose = np.stack([swept.x, swept.y, swept.yaw], axis=1)
             sample = simulate_scan(pose, scene, laser, streams["laser"], buffers)
             if observations is not None:
                 observations.add(t, sample.surface, scene.n_static, angles[i])
             yield SimMessage(s.laser.topic, LASERSCAN, t, m.laser_scan(
                 t, s.laser.frame_id, laser.angle_min_rad, laser.angle_increment_rad, laser.range_min_m,
-                laser.range_max_m, sample.ranges.astype(np.float32), scan_time_s=1.0 / s.laser.rate_hz))
+                laser.range_max_m, sample.ranges.astype(np.float32), scan_time_s=1.0 / s.laser.rate_hz,
+                time_increment_s=s.laser.sweep_s / (laser.beams - 1)))
             if s.colors.enabled:
                 points, rgb = beam_colors(sample, scene, laser, s.colors, streams["colors"])
                 yield SimMessage(s.colors.topic, POINTCLOUD2, t,

@@ -56,21 +56,42 @@ def test_a_laser_mount_given_in_the_config_stands_in_for_a_missing_tf_static(wri
     np.testing.assert_allclose(ignored.scans.laser_to_base, with_tf.scans.laser_to_base, atol=1e-12)
 
 
-@pytest.mark.parametrize(("sweep_s", "told"), [(0.2, True), (0.05, False), (0.0, False)])
-def test_a_laser_that_sweeps_while_the_robot_moves_is_told(write_log: Callable[..., Path], sweep_s: float,
-                                                           told: bool) -> None:
-    """The sample robot drives 1.02 m/s turning 0.1 rad/s: a 0.2 s sweep moves a beam end at 5 m by
-    (1.02 + 0.1·5)·0.2 = 0.30 m, which doorbatch does not deskew (a warning); 0.05 s moves it 0.08 m (below the
-    0.1 m of io.sweep_smear_warn_m); a driver that leaves time_increment 0 tells nothing."""
-    messages = sample_messages(10)
-    for topic, _, _, msg in messages:
-        if topic == "/scan":
-            msg.time_increment = sweep_s / (len(msg.ranges) - 1)
-    rec = load_recording(write_log("sweep.mcap", messages))
+@pytest.mark.parametrize(("sweep_s", "deskew", "told"), [(0.09, False, True), (0.05, False, False),
+                                                         (0.0, False, False), (0.09, True, False)])
+def test_a_laser_that_sweeps_while_the_robot_moves_is_told_unless_deskewed(write_log: Callable[..., Path],
+                                                                           sweep_s: float, deskew: bool,
+                                                                           told: bool) -> None:
+    """The sample robot drives 1.02 m/s turning 0.1 rad/s, a scan every 0.1 s: a 0.09 s sweep moves a beam end at
+    5 m by (1.02 + 0.1·5)·0.09 = 0.14 m; with io.deskew off that is a warning; 0.05 s moves it 0.08 m (below the
+    0.1 m of io.sweep_smear_warn_m); a driver that leaves time_increment 0 tells nothing. Deskewed (the default),
+    the scans change and nothing is told."""
+    path = write_log("sweep.mcap", _swept(sample_messages(10), sweep_s))
+    rec = load_recording(path, load_config(None, [f"io.deskew={str(deskew).lower()}"]))
     note = [w for w in rec.warnings if "per sweep" in w]
     assert bool(note) == told
     if told:
-        assert "200 ms per sweep" in note[0] and "moves 0.30 m" in note[0]
+        assert "90 ms per sweep" in note[0] and "moves 0.14 m" in note[0] and "io.deskew is off" in note[0]
+    still = load_recording(path, load_config(None, ["io.deskew=false"]))
+    changed = any(not np.array_equal(a, b, equal_nan=True) for a, b in zip(rec.scans.ranges, still.scans.ranges,
+                                                                            strict=True))
+    assert changed == (deskew and sweep_s > 0)
+
+
+def _swept(messages: list[tuple[str, str, int, object]], sweep_s: float) -> list[tuple[str, str, int, object]]:
+    for topic, _, _, msg in messages:
+        if topic == "/scan":
+            msg.time_increment = sweep_s / (len(msg.ranges) - 1)  # type: ignore[attr-defined]
+    return messages
+
+
+def test_a_sweep_longer_than_the_scan_period_is_not_deskewed(write_log: Callable[..., Path]) -> None:
+    """time_increment × beams = 0.3 s on a laser that scans every 0.1 s is no sweep (a driver that wrote the scan time
+    or a per-beam period in another unit there): the scans are read as measured, with a warning."""
+    path = write_log("bogus.mcap", _swept(sample_messages(10), 0.3))
+    rec = load_recording(path)
+    still = load_recording(path, load_config(None, ["io.deskew=false"]))
+    assert all(np.array_equal(a, b, equal_nan=True) for a, b in zip(rec.scans.ranges, still.scans.ranges, strict=True))
+    assert any("300 ms, longer than its scan period (100 ms)" in w for w in rec.warnings)
 
 
 def _footprint_robot(odom_topic: bool) -> list[tuple[str, str, int, object]]:
