@@ -137,7 +137,8 @@ def ape_rotation(estimate: npt.ArrayLike, reference: npt.ArrayLike) -> FloatArra
 
 def rpe_pairs(poses: npt.ArrayLike, delta_m: float, all_pairs: bool = False,
               rel_delta_tol: float = 0.1) -> tuple[IntArray, IntArray]:
-    """Index pairs (i, j) a path distance ``delta_m`` apart (evo ``filters.filter_pairs_by_path``).
+    """Index pairs (i, j) a path distance ``delta_m`` apart (evo ``filters.filter_pairs_by_path``; consecutive pairs
+    start at pose 0, as in evo ≥ 1.32: evo 1.31 started at the first pose ``delta_m`` along the path).
 
     Raises:
         PipelineError: no pair (the trajectory is shorter than ``delta_m``).
