@@ -110,10 +110,26 @@ def test_the_initial_pose_is_named_as_the_init_to_pass(tmp_path: Path, caplog: p
     ("odom_model_type: ackermann\nodom_alpha1: 0.2\n", "odom_model_type"),
     ("a:\n  amcl:\n    kld_err: 0.01\nb:\n  amcl:\n    kld_err: 0.02\n", "more than one"),
     ("amcl:\n  kld_err: 0.01\n  initial_pose_x: left\n", "initial_pose"),
+    # rclcpp refuses a value whose type is not the declared one: nav2_amcl does not start
+    ("amcl:\n  ros__parameters:\n    z_hit: true\n", "z_hit: True is not a float"),
+    ("amcl:\n  ros__parameters:\n    alpha1: '0.3'\n", "alpha1: '0.3' is not a float"),
+    ("amcl:\n  ros__parameters:\n    max_beams: '45'\n", "max_beams: '45' is not a int"),
+    ("amcl:\n  ros__parameters:\n    max_beams: 45.5\n", "max_beams: 45.5 is not a int"),
+    ("amcl:\n  ros__parameters:\n    do_beamskip: 1\n", "do_beamskip: 1 is not a bool"),
+    ("amcl:\n  ros__parameters:\n    robot_model_type: 3\n", "robot_model_type: 3 is not a str"),
 ])
 def test_what_cannot_be_translated_is_a_config_error(tmp_path: Path, text: str, message: str) -> None:
     with pytest.raises(ConfigError, match=message):
         _load(tmp_path, text)
+
+
+def test_an_integer_for_a_double_is_taken_as_that_double_with_a_note(tmp_path: Path,
+                                                                    caplog: pytest.LogCaptureFixture) -> None:
+    """rclcpp would refuse alpha1: 1 (declared a double); the replay takes it as 1.0 and says how to write it."""
+    with caplog.at_level(logging.WARNING):
+        lc = _load(tmp_path, "amcl:\n  ros__parameters:\n    alpha1: 1\n    max_particles: 2500.0\n").localize
+    assert lc.alpha1 == 1.0 and lc.max_particles == 2500
+    assert "write 1.0" in caplog.text
 
 
 def test_a_parameter_file_weighs_each_particle_at_its_pose_and_starts_global_with_max_particles(
