@@ -55,6 +55,26 @@ def test_clusters_link_chains_of_close_points_eq1() -> None:
     assert len(set(labels.tolist())) == 3
 
 
+def _single_linkage_by_pairs(pts: np.ndarray, eps: float) -> np.ndarray:
+    """Eq. (1) from first principles: every pair closer than ε linked (all n² distances), components numbered in
+    the order of their first point."""
+    from scipy.sparse.csgraph import connected_components
+
+    d = np.hypot(*(pts[:, None, :] - pts[None, :, :]).transpose(2, 0, 1))
+    return connected_components(d < eps, directed=False)[1]
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(600, 1500), st.integers(1, 12), st.floats(0.005, 0.4), st.floats(0.05, 0.5), st.integers(0, 10**6))
+def test_large_point_sets_cluster_as_all_pairs_would_eq1(n: int, k: int, spread_m: float, eps: float,
+                                                          seed: int) -> None:
+    """Beyond DENSE_CLUSTER_MAX points (the leaf ends of a long log, piled at hinges) clustering goes through cells
+    of side ε/√2: the same clusters, numbered alike, as linking every pair closer than ε."""
+    rng = np.random.default_rng(seed)
+    pts = rng.uniform(-5, 5, (k, 2))[rng.integers(0, k, n)] + rng.normal(0.0, spread_m, (n, 2))
+    np.testing.assert_array_equal(cluster_points(pts, eps), _single_linkage_by_pairs(pts, eps))
+
+
 def test_a_straight_cluster_gives_the_mean_line_with_the_longest_length_eq2() -> None:
     seg = fit_leaf(_line((1.0, 1.0), (1.0 + 0.9 * math.cos(0.5), 1.0 + 0.9 * math.sin(0.5)), 30, 0.005), CFG)
     assert seg is not None
