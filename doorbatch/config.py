@@ -76,11 +76,13 @@ class IoConfig(Section):
     # time (geometry/deskew). Off: every beam is placed at the stamp.
     deskew: bool = True
     # A laser whose sweep (time_increment · beams) lets the robot move a beam end point at sweep_check_range_m by
-    # more than this during one scan gets a warning when the scans are not deskewed (no odometry, or deskew off).
-    # Expert choice: two cells at 5 m, at the robot's median speed and turn rate (a 10 Hz laser on a robot that
-    # turns now and then stays below it; a 5 Hz rotating lidar at 1 m/s does not).
+    # more than this during one scan gets a warning when the scans are not deskewed (deskew off, or odometry that
+    # does not span the sweeps). Expert choice: two cells at 5 m.
     sweep_smear_warn_m: float = Field(0.1, gt=0.0)
     sweep_check_range_m: float = Field(5.0, gt=0.0)
+    # The speed and turn rate the smear is told at: this quantile of the odometry's. Expert choice: 0.9, so that a
+    # robot that spins in place a fifth of the time (whose median turn rate is 0) is told of the spins' smear.
+    sweep_check_quantile: float = Field(0.9, gt=0.0, le=1.0)
     # An odometry step farther than odometry_jump_min_m, or turning more than odometry_jump_min_deg, that lands within
     # odometry_restart_at_zero_m of the origin is a driver restarting at zero: it is taken out, with a warning.
     # Expert choice: a restart lands on (0, 0) to the bit; half a metre is no 50 Hz step of a wheeled base.

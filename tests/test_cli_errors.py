@@ -180,6 +180,20 @@ def test_inspect_describes_the_laser_and_warns_of_a_narrow_one(
     assert "181 beams over 58.0°" in out and "warning /scan: a field of view of 58°" in out
 
 
+@pytest.mark.parametrize(("sweep_s", "says"), [(0.09, "sweeps 90 ms (deskewed with the odometry)"),
+                                              (0.3, "warning /scan: time_increment × beams is 300 ms, longer than")])
+def test_inspect_tells_the_lasers_sweep_and_whether_it_is_deskewed(
+        write_log: Callable[..., Path], capsys: pytest.CaptureFixture[str], sweep_s: float, says: str) -> None:
+    """A rotating laser's sweep (time_increment) was told by map and localize only; inspect said "Problems: none"
+    even for a time_increment × beams of 0.3 s on a 10 Hz laser, which is not deskewed."""
+    messages = sample_messages(5)
+    for topic, _, _, msg in messages:
+        if topic == "/scan":
+            msg.time_increment = sweep_s / (len(msg.ranges) - 1)
+    assert main(["inspect", str(write_log("swept.mcap", messages))]) == 0
+    assert says in capsys.readouterr().out
+
+
 def test_unknown_config_key_names_the_closest(write_log: Callable[..., Path],
                                               capsys: pytest.CaptureFixture[str]) -> None:
     code, err = _run(capsys, "inspect", str(write_log("ok.mcap")), "--set", "io.gap_factr=3")

@@ -27,6 +27,7 @@ from doorbatch.io.map_topic import OCCUPANCY_GRID
 from doorbatch.io.pose_topic import POSE_TYPES
 from doorbatch.io.reader import most_are_bad, open_log
 from doorbatch.io.recording import (
+    SWEEP_OVER_PERIOD,
     buffered_transforms,
     clock_lags_s,
     lost_times_note,
@@ -230,6 +231,7 @@ def inspect_log(path: Path, config: DoorbatchConfig | None = None,
     report.duration_s = (report.end_ns - report.start_ns) / 1e9
     if first_scan is not None and scan_topic is not None:
         _describe_laser(report, scan_topic, first_scan, beams_hit / max(beams_seen, 1), config.io.narrow_fov_warn_deg)
+        _describe_sweep(report, scan_topic, first_scan.sweep_s, _rate(stats.get(scan_topic)), config.io.deskew)
     _check_roles(report, roles.topics, scan_frames, tf, config, stats)
     _check_stamps(report, stats, role_of, config.io.gap_factor)
     _check_clocks(report, stats, role_of, tf, config)
@@ -249,6 +251,21 @@ def _describe_laser(report: LogReport, topic: str, scan: Scan, returned: float, 
             f"a field of view of {fov_deg:.0f}° (a depth camera's?): door leaves are seen in part and briefly, so "
             "doors can be missed, scan matching falls back to odometry more often, and global localization has "
             "little to go on; tracking from a known start works (docs/results.md, round four)"))
+
+
+def _describe_sweep(report: LogReport, topic: str, sweep_s: float, rate_hz: float, deskew: bool) -> None:
+    """The laser line's sweep (time_increment), whether the scans are deskewed, and a warning when the
+    sweep is longer than the scan period (a driver that wrote something else there: not deskewed)."""
+    if sweep_s <= 0.0:
+        return
+    period_s = 1.0 / rate_hz if rate_hz > 0 else math.inf
+    if sweep_s > period_s * SWEEP_OVER_PERIOD:
+        report.laser += f", time_increment × beams {1e3 * sweep_s:.0f} ms"
+        report.problems.append(Problem(
+            Severity.WARNING, topic, f"time_increment × beams is {1e3 * sweep_s:.0f} ms, longer than the scan period "
+            f"({1e3 * period_s:.0f} ms): a driver that wrote something else there; the scans are not deskewed"))
+        return
+    report.laser += f", sweeps {1e3 * sweep_s:.0f} ms ({'deskewed with the odometry' if deskew else 'io.deskew off'})"
 
 
 def _rate(st: _TopicStats | None) -> float:

@@ -34,7 +34,7 @@ R = TypeVar("R", Scan, Pose2D)
 Int64Array = npt.NDArray[np.int64]
 # A sweep (time_increment × beams) this much longer than the scan period is no sweep: rotating lidars sweep within a
 # period. Expert choice: 10 % above it, for jitter in the stamps.
-_SWEEP_OVER_PERIOD = 1.1
+SWEEP_OVER_PERIOD = 1.1
 
 
 @dataclass(frozen=True)
@@ -585,11 +585,12 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
     sources: list[npt.NDArray[np.intp] | None] = []
     sweep = float(np.median([s.sweep_s for s in scans]))
     period_s = float(np.median(np.diff(stamps_ns))) / 1e9 if len(scans) > 1 else math.inf
-    if sweep > period_s * _SWEEP_OVER_PERIOD:
+    if sweep > period_s * SWEEP_OVER_PERIOD:
         warnings.append(f"{path}: the laser's time_increment × beams is {1e3 * sweep:.0f} ms, longer than its scan "
                         f"period ({1e3 * period_s:.0f} ms): a driver that wrote something else there; the scans are "
                         "not deskewed")
     elif config.io.deskew and odometry is not None and sweep > 0.0:
+        warnings += [f"{path}: {n}" for n in [end_of_sweep_note(scans, sweep)] if n]
         ranges, sources = deskewed_scans(ranges, stamps_ns, [s.time_increment_s for s in scans],
                                           [s.angle_min for s in scans], [s.angle_increment for s in scans],
                                           range_min, range_max, affines, odometry.stamps_ns, odometry.poses)
@@ -618,14 +619,15 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
     if aligned is not None and any(src is not None for src in sources):  # colours follow their beams
         aligned, valid = moved_beam_colors(aligned, valid, sources)
     deskewed = sum(src is not None for src in sources)
-    if (odometry is not None and deskewed < 0.5 * len(scans) and sweep <= period_s * _SWEEP_OVER_PERIOD
-            and (smear := sweep_smear_m(sweep, odometry.stamps_ns, odometry.poses,
-                                        config.io.sweep_check_range_m)) > config.io.sweep_smear_warn_m):
+    if (odometry is not None and deskewed < 0.5 * len(scans) and sweep <= period_s * SWEEP_OVER_PERIOD
+            and (smear := sweep_smear_m(sweep, odometry.stamps_ns, odometry.poses, config.io.sweep_check_range_m,
+                                        config.io.sweep_check_quantile)) > config.io.sweep_smear_warn_m):
         why = "io.deskew is off" if not config.io.deskew else f"the odometry spans {deskewed} of {len(scans)} sweeps"
         warnings.append(f"{path}: the laser takes {1e3 * sweep:.0f} ms per sweep (time_increment) while the robot "
-                        f"moves: a beam end point at {config.io.sweep_check_range_m:g} m moves {smear:.2f} m (median "
-                        f"speed and turn rate) during one scan, and the scans are not deskewed ({why}): expect "
-                        "doubled walls in the map and a less exact pose")
+                        f"moves: a beam end point at {config.io.sweep_check_range_m:g} m moves {smear:.2f} m (the "
+                        f"{config.io.sweep_check_quantile:.0%} quantile of speed and turn rate) during one scan, "
+                        f"and the scans are not deskewed ({why}): expect doubled walls in the map and a less exact "
+                        "pose")
     repeats = odometry_to_reference(reference, odometry, scan_set.stamps_ns, config)
     if repeats is not None:
         warnings.append(f"{path}: the reference poses are the odometry moved rigidly (within "
@@ -634,6 +636,21 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
                         "odometry was replaced by its corrected poses)")
     return Recording(str(path), scan_set, odometry, reference, aligned, warnings, valid, repeats,
                      timed.log_clock, tuple(tf.static_transforms()))
+
+
+def end_of_sweep_note(scans: Sequence[Scan], sweep_s: float) -> str | None:
+    """A warning when the scans reach the log sooner after their stamp than their sweep lasts (median over the
+    scans, more than 0 and under half the sweep): a scan stamped at its first beam cannot be recorded before its
+    last, so the driver probably stamps the sweep's end, and deskewing (which takes the stamp as the first beam's
+    time, as sensor_msgs/LaserScan defines it) would bend the scans the wrong way. Log times equal to the stamps
+    (a converter's) tell nothing."""
+    lag_s = float(np.median([s.log_time_ns - s.stamp_ns for s in scans])) / 1e9
+    if not 0.0 < lag_s < 0.5 * sweep_s:
+        return None
+    return (f"the scans reach the log {1e3 * lag_s:.0f} ms after their stamps, sooner than their "
+            f"{1e3 * sweep_s:.0f} ms sweep ends: the laser driver probably stamps the end of each sweep, where "
+            "LaserScan's stamp is its first beam; if so, --set io.scan_time_offset_s="
+            f"{-sweep_s:.3f} puts the stamps there (deskewing otherwise bends each scan the wrong way)")
 
 
 def moved_beam_colors(colors: list[npt.NDArray[np.uint8]], valid: list[npt.NDArray[np.bool_]] | None,

@@ -84,6 +84,25 @@ def _swept(messages: list[tuple[str, str, int, object]], sweep_s: float) -> list
     return messages
 
 
+@pytest.mark.parametrize(("lag_ms", "offset_s", "told"), [(5, 0.0, True), (5, -0.09, False), (95, 0.0, False),
+                                                          (0, 0.0, False)])
+def test_scans_recorded_sooner_than_their_sweep_lasts_name_the_end_of_sweep_offset(
+        write_log: Callable[..., Path], lag_ms: int, offset_s: float, told: bool) -> None:
+    """A 90 ms sweep whose scans reach the log 5 ms after their stamp: the driver stamps the sweep's end (a scan
+    stamped at its first beam cannot be logged before its last), and the warning names the offset that moves the
+    stamps there; given it, nothing is told. 95 ms after (a start stamp) or log times equal to the stamps (a
+    converter's) tell nothing."""
+    messages = _swept(sample_messages(10), 0.09)
+    for topic, _, t, msg in messages:
+        if topic == "/scan":
+            msg.header.stamp = m.header(t - lag_ms * 1_000_000, "laser").stamp  # type: ignore[attr-defined]
+    rec = load_recording(write_log("end.mcap", messages), load_config(None, [f"io.scan_time_offset_s={offset_s}"]))
+    note = [w for w in rec.warnings if "end of each sweep" in w]
+    assert bool(note) == told
+    if told:
+        assert "5 ms after their stamps" in note[0] and "io.scan_time_offset_s=-0.090" in note[0]
+
+
 def test_a_sweep_longer_than_the_scan_period_is_not_deskewed(write_log: Callable[..., Path]) -> None:
     """time_increment × beams = 0.3 s on a laser that scans every 0.1 s is no sweep (a driver that wrote the scan time
     or a per-beam period in another unit there): the scans are read as measured, with a warning."""
