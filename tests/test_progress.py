@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import io
 import os
+from collections.abc import Callable
+from pathlib import Path
 
 import pytest
 
@@ -40,3 +42,20 @@ def test_no_bar_off_a_terminal(monkeypatch: pytest.MonkeyPatch) -> None:
     with progress.progress_bar(10, "map") as bar:
         bar.update(1)
     assert out.getvalue() == ""
+
+
+def test_mapping_shows_scan_matching_and_the_grid_scan_by_scan(monkeypatch: pytest.MonkeyPatch,
+                                                               write_log: Callable[..., Path]) -> None:
+    """A 22-minute log sat at "map: 0/1 pass" for ten minutes of scan matching: the matcher and the grid stage now
+    count scans."""
+    from doorbatch.cli import main
+    from tests.conftest import sample_messages
+
+    log = write_log("scans.mcap", sample_messages(20))
+    term = _Terminal()
+    monkeypatch.setattr("sys.stderr", term)
+    monkeypatch.setattr(os, "get_terminal_size", lambda fd=0: os.terminal_size((100, 40)))
+    assert main(["map", str(log), "-o", str(log.parent / "map"), "--pose-source", "scanmatch", "--stages",
+                 "grid"]) == 0
+    assert "map: scan matching" in term.getvalue() and "/19" in term.getvalue()
+    assert "map: grid" in term.getvalue()

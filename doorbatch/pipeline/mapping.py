@@ -38,6 +38,7 @@ from doorbatch.pipeline.gridmap.occupancy import LogOddsGrid, to_occupancy_map
 from doorbatch.pipeline.poses import scan_match_trajectory
 from doorbatch.pipeline.poses.pose_jitter import pose_jitter
 from doorbatch.pipeline.time_passes import split_into_passes
+from doorbatch.progress import Progress, progress_bar
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -330,11 +331,14 @@ def map_scans(rec: Recording, poses: PassPoses, stride: int, dropout_max_beams: 
         yield MapScan(origin, pts[hit] @ rot.T + pose[:2], dirs, float(scans.range_max[i]))
 
 
-def integrate_pass(mapper: GridMapper, rec: Recording, poses: PassPoses, stride: int, dropout_max_beams: int
-                   ) -> None:
-    """Add every valid scan of one pass to the mapper (map frame), then close the pass."""
+def integrate_pass(mapper: GridMapper, rec: Recording, poses: PassPoses, stride: int, dropout_max_beams: int,
+                   bar: Progress | None = None) -> None:
+    """Add every valid scan of one pass to the mapper (map frame), then close the pass (``bar``: advanced per
+    scan added)."""
     for scan in map_scans(rec, poses, stride, dropout_max_beams):
         mapper.add_scan(*scan)
+        if bar is not None:
+            bar.update()
     mapper.end_pass()
 
 
@@ -342,10 +346,11 @@ def grid_of(recordings: Sequence[Recording], passes: Sequence[PassPoses], config
             progress: Callable[[int], object] | None = None) -> GridMapResult:
     """The grid stage over passes at their poses, one after the other (``progress``: called once per pass)."""
     mapper = GridMapper(config.grid, config.doors)
-    for rec, poses in zip(recordings, passes, strict=True):
-        integrate_pass(mapper, rec, poses, config.mapping.scan_stride, config.grid.dropout_max_beams)
-        if progress is not None:
-            progress(1)
+    with progress_bar(None, "map: grid", unit="scan") as bar:  # a long log's pass takes minutes
+        for rec, poses in zip(recordings, passes, strict=True):
+            integrate_pass(mapper, rec, poses, config.mapping.scan_stride, config.grid.dropout_max_beams, bar)
+            if progress is not None:
+                progress(1)
     return mapper.finish()
 
 

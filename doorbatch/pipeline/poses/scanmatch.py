@@ -123,6 +123,7 @@ from doorbatch.pipeline.poses.plicp import (
     plicp_configured,
     scan_lines,
 )
+from doorbatch.progress import progress_bar
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -262,29 +263,31 @@ def scan_match_trajectory(
     placement = _Placement.start(odom.shape[0])
     carried = np.zeros((3, 3))  # uncertainty of the previous pose that no match to the submap took out
     fallback_run = 0  # fallback scans in a row, none of them a keyframe yet
-    for k in range(1, odom.shape[0]):
-        accel_dt_s = None
-        if no_odometry and dt_s is not None:  # constant velocity: the last matched increment, over this interval
-            accel_dt_s = float(dt_s[k - 1])
-            increments[k - 1] = (constant_velocity_increment(out.poses[k - 2], out.poses[k - 1], float(dt_s[k - 2]),
-                                                             accel_dt_s) if k >= 2 else 0.0)
-        prior = compose(out.poses[k - 1], increments[k - 1])
-        cov = propagated_covariance(carried, out.poses[k - 1], increments[k - 1], cfg, accel_dt_s)
-        scan = voxel_downsample(hits[k], cfg.scan_voxel_m)
-        match = match_scan(submap, scan, prior, cov, cfg)
-        _store(out, k, match)
-        carried = cov if match.fallback or match.weak else np.zeros((3, 3))
-        fallback_run = fallback_run + 1 if match.fallback else 0
-        if fallback_run in (0, cfg.fallbacks_before_keyframe) and _is_keyframe(submap.last_keyframe_pose, match.pose,
-                                                                                 cfg):
-            submap = add_keyframe(submap, hits[k], match.pose, cfg, old=_old_keyframes_usable(submap, graph, cfg),
-                                  downsampled=scan)
-            out.keyframe[k], fallback_run = True, 0
-            if cfg.loop_closure:  # weak and fallback keyframes: the odometry's wider covariance (module docstring)
-                graph.add_sequential(match.pose, cov if match.fallback or match.weak else match.covariance, cfg)
-                submap = close_loop(submap, graph, cfg)
-                out.poses[k] = submap.last_keyframe_pose
-        placement.place(k, len(submap.keyframes) - 1, submap.last_keyframe_pose, out.poses[k])
+    with progress_bar(odom.shape[0] - 1, "map: scan matching", unit="scan") as bar:  # long logs take minutes
+        for k in range(1, odom.shape[0]):
+            accel_dt_s = None
+            if no_odometry and dt_s is not None:  # constant velocity: the last matched increment, over this interval
+                accel_dt_s = float(dt_s[k - 1])
+                increments[k - 1] = (constant_velocity_increment(out.poses[k - 2], out.poses[k - 1], float(dt_s[k - 2]),
+                                                                 accel_dt_s) if k >= 2 else 0.0)
+            prior = compose(out.poses[k - 1], increments[k - 1])
+            cov = propagated_covariance(carried, out.poses[k - 1], increments[k - 1], cfg, accel_dt_s)
+            scan = voxel_downsample(hits[k], cfg.scan_voxel_m)
+            match = match_scan(submap, scan, prior, cov, cfg)
+            _store(out, k, match)
+            carried = cov if match.fallback or match.weak else np.zeros((3, 3))
+            fallback_run = fallback_run + 1 if match.fallback else 0
+            if (fallback_run in (0, cfg.fallbacks_before_keyframe)
+                    and _is_keyframe(submap.last_keyframe_pose, match.pose, cfg)):
+                submap = add_keyframe(submap, hits[k], match.pose, cfg, old=_old_keyframes_usable(submap, graph, cfg),
+                                      downsampled=scan)
+                out.keyframe[k], fallback_run = True, 0
+                if cfg.loop_closure:  # weak and fallback keyframes: the odometry's wider covariance (module docstring)
+                    graph.add_sequential(match.pose, cov if match.fallback or match.weak else match.covariance, cfg)
+                    submap = close_loop(submap, graph, cfg)
+                    out.poses[k] = submap.last_keyframe_pose
+            placement.place(k, len(submap.keyframes) - 1, submap.last_keyframe_pose, out.poses[k])
+            bar.update()
     if graph.n_loops:
         _finish_graph(out, graph, placement, cfg)
     if out.fallback.any():
