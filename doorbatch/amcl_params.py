@@ -82,9 +82,8 @@ _ROBOT_MODELS = {
 _FRAMES = {"base_frame_id": "base_link", "odom_frame_id": "odom", "global_frame_id": "map"}
 # Parameters of a live node that change nothing offline (publishing, services, timing, the beam model's terms).
 _NO_EFFECT_OFFLINE = frozenset({
-    "tf_broadcast", "transform_tolerance", "save_pose_rate", "always_reset_initial_pose", "map_topic",
-    "first_map_only", "use_sim_time", "bond_heartbeat_period", "introspection_mode", "z_max", "z_short",
-    "lambda_short", "initial_pose.z",
+    "tf_broadcast", "transform_tolerance", "save_pose_rate", "always_reset_initial_pose", "first_map_only",
+    "use_sim_time", "bond_heartbeat_period", "introspection_mode", "z_max", "z_short", "lambda_short", "initial_pose.z",
 })
 _INITIAL_POSE = ("set_initial_pose", "initial_pose.x", "initial_pose.y", "initial_pose.yaw")
 
@@ -377,6 +376,9 @@ def translate_amcl_parameters(params: Mapping[str, Any], source: str = "config")
     if "scan_topic" in given:
         topic = str(given["scan_topic"])
         tree["topics"] = {"scan": topic if topic.startswith("/") else f"/{topic}"}
+    if "map_topic" in given:  # the OccupancyGrid topic amcl subscribes to: where --map LOG finds the map
+        topic = str(given["map_topic"])
+        localize["map_topic"] = topic if topic.startswith("/") else f"/{topic}"
 
     if given.get("set_initial_pose") is True:
         try:
@@ -429,7 +431,7 @@ def _start_hint(names: str, x: float, y: float, yaw: float) -> str:
 
 def _unknown(given: Mapping[str, Any], known: set[str]) -> list[str]:
     """A warning naming the parameters neither ``known`` nor frames nor the scan topic, if any."""
-    unknown = sorted(k for k in given if k not in known | set(_FRAMES) | {"scan_topic"})
+    unknown = sorted(k for k in given if k not in known | set(_FRAMES) | {"scan_topic", "map_topic"})
     return [f"amcl parameter(s) not known to doorbatch, ignored: {', '.join(unknown)}"] if unknown else []
 
 

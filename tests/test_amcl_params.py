@@ -509,3 +509,10 @@ def test_the_cli_passes_launch_args_and_refuses_malformed_ones(tmp_path: Path,
     assert json.loads(capsys.readouterr().out)["localize"]["alpha1"] == 0.08
     code = main(["config", "--config", str(path), "--launch-arg", "beta:=1"])
     assert code != 0 and "unused args beta" in capsys.readouterr().err
+
+
+def test_the_map_topic_is_where_a_map_log_is_read(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """amcl's map_topic had been dropped as a live node's setting; with --map LOG it names the map's topic."""
+    with caplog.at_level(logging.WARNING):
+        lc = _load(tmp_path, "amcl:\n  ros__parameters:\n    map_topic: my_map\n").localize
+    assert lc.map_topic == "/my_map" and "map_topic" not in caplog.text
