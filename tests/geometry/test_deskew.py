@@ -125,3 +125,22 @@ def test_scans_the_odometry_does_not_span_are_left_as_measured() -> None:
     assert not np.allclose(out[0], ranges, equal_nan=True)
     np.testing.assert_array_equal(out[1], ranges.astype(np.float32))
     np.testing.assert_array_equal(out[2], ranges.astype(np.float32))
+
+
+def test_a_block_of_scans_deskews_as_each_scan_alone() -> None:
+    """Scans go through in blocks (vectorized over scans): each row is what the scan gives alone, with its own
+    fan, mount and motion (full circle and partial fans, one mirrored)."""
+    rng = np.random.default_rng(5)
+    n = 120
+    fans = [(-math.pi, 2 * math.pi / n), (-2.0, 4.0 / (n - 1)), (2.0, -4.0 / (n - 1))]
+    ranges = rng.uniform(0.3, 8.0, (3, n))
+    ranges[rng.random((3, n)) < 0.1] = np.inf
+    mounts = np.stack([_affine(0.1, 0.0, 0.2, False), _affine(0.0, 0.1, -0.3, True), _affine(0.2, 0.1, 3.0, False)])
+    tau = np.linspace(0.0, 0.2, n)[:, None]
+    motion = np.stack([tau * [0.8, 0.05, 1.5], tau * [0.2, 0.0, -2.0], tau * [1.0, 0.0, 0.0]])
+    amin, inc = np.array(fans).T
+    block, block_src = deskewed_ranges(ranges, amin, inc, 0.05, 30.0, mounts, motion)
+    for i in range(3):
+        alone, src = deskewed_ranges(ranges[i], amin[i], inc[i], 0.05, 30.0, mounts[i], motion[i])
+        np.testing.assert_array_equal(block[i], alone)
+        np.testing.assert_array_equal(block_src[i], src)
