@@ -598,6 +598,10 @@ class LocalizeConfig(Section):
     # (pipeline/localize/smoothing.py; Pfaff et al. 2006, regularized PF). Without it global localization
     # collapses on an arbitrary corridor pose after the first scan.
     global_smoothing: bool = True
+    # ... and give particles off the map's free cells weight 0 while it does (the pose prior of a global start,
+    # uniform over free space): the jitter of a stray particle grows with its distance to the others, and a
+    # crowded scan that fits nowhere let such copies spread off the map (mcl.in_free_space).
+    global_free_space_prior: bool = True
     # ... and temper each scan's likelihood (power β ≤ 1) so that one scan shrinks Neff at most by this factor.
     global_min_neff_ratio: float = Field(0.25, gt=0.0, le=1.0)
     # ... and how the region's size enters: "pose" (one Laplace volume factor for the 3-D pose region,

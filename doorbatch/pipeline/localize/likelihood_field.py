@@ -143,9 +143,23 @@ class FreeCells:
     centers: FloatArray
     resolution_m: float
     origin_yaw_rad: float
+    # The map and which of its cells are free, to tell whether a position lies in free space (None: not known).
+    grid: OccupancyMap | None = None
+    free_mask: npt.NDArray[np.bool_] | None = None
 
     def __len__(self) -> int:
         return int(self.centers.shape[0])
+
+    def holds(self, xy_m: npt.ArrayLike) -> npt.NDArray[np.bool_]:
+        """Whether each position (N, 2) lies in a free cell (all True where the map is not known)."""
+        xy = np.asarray(xy_m, dtype=np.float64).reshape(-1, 2)
+        if self.grid is None or self.free_mask is None:
+            return np.ones(xy.shape[0], dtype=bool)
+        ij = self.grid.world_to_cell(xy)
+        inside = self.grid.contains(ij)
+        out = np.zeros(xy.shape[0], dtype=bool)
+        out[inside] = self.free_mask[ij[inside, 0], ij[inside, 1]]
+        return out
 
     def sample_poses(self, n: int, rng: np.random.Generator) -> FloatArray:
         """n poses uniform over the free cells (uniform inside the chosen cell) with yaw uniform in [−π, π).
@@ -222,9 +236,10 @@ def build_distance_field(occupancy_map: OccupancyMap, max_dist_m: float, unknown
 def free_cells(occupancy_map: OccupancyMap, free_at_most: int = FREE_AT_MOST) -> FreeCells:
     """The free cells (0 ≤ value ≤ ``free_at_most``; AMCL: value 0, the same on trinary maps)."""
     occ = occupancy_map.occupancy
-    ij = np.argwhere((occ >= 0) & (occ <= free_at_most))
+    mask = (occ >= 0) & (occ <= free_at_most)
+    ij = np.argwhere(mask)
     return FreeCells(occupancy_map.cell_to_world(ij).reshape(-1, 2), occupancy_map.resolution_m,
-                     occupancy_map.origin_yaw_rad)
+                     occupancy_map.origin_yaw_rad, occupancy_map, mask)
 
 
 class _Scratch:

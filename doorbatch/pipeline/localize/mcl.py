@@ -336,6 +336,8 @@ def finish_step(state: MclState, particles: ParticleSet, log_avg_weight: float, 
     resampling with random-particle injection, the new state and diagnostics."""
     if config.recovery_average_per_particle:  # AMCL's w_avg /= set->sample_count (the count weighed)
         log_avg_weight -= math.log(len(particles))
+    if bandwidth is not None and free is not None and config.global_free_space_prior:
+        particles = in_free_space(particles, free)
     recovery = state.recovery.update(log_avg_weight, config.recovery_alpha_slow, config.recovery_alpha_fast)
     fraction = recovery.random_fraction() if free is not None else 0.0
     neff = particles.neff()
@@ -345,6 +347,18 @@ def finish_step(state: MclState, particles: ParticleSet, log_avg_weight: float, 
         particles, recovery, n_random = resample_if_needed(particles, config, rng, recovery, free, bandwidth)
     diag = StepDiagnostics(True, n_random >= 0, neff, len(particles), fraction, max(n_random, 0), log_avg_weight)
     return MclState(particles, recovery, odom.copy(), state.global_start, updates), diag
+
+
+def in_free_space(particles: ParticleSet, free: FreeCells) -> ParticleSet:
+    """The particles with the pose prior of a global start, uniform over the map's free cells: weight 0 off them
+    (unchanged if that would leave none). Regularized resampling moves each copy by its source's kernel, and the
+    kernel of a particle far from the others is wide: without the prior, copies that strayed outside the map in a
+    scan that fits nowhere (a crowd) spread further each update, to covariances of 10⁶ m²."""
+    off = ~free.holds(particles.pose[:, :2])
+    if not off.any() or off.all():
+        return particles
+    w = np.where(off, 0.0, particles.weight)
+    return replace(particles, weight=w / w.sum())
 
 
 def initial_particles(mean: npt.ArrayLike, config: LocalizeConfig, rng: np.random.Generator,
