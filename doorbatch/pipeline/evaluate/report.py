@@ -407,9 +407,14 @@ def _frame_hint(run: RunTables, errs: TrajectoryErrors, ref: ReferenceTrajectory
     if rmse_aligned > cfg.frame_hint_ratio * rmse:
         return []
     x, y, yaw = aligned.alignment
-    return [f"run {run.name}: APE RMSE {rmse:.2f} m, {rmse_aligned:.3f} m after a rigid motion ({x:.2f} m, {y:.2f} m, "
-            f"{math.degrees(yaw):.1f}°): the run is in another frame than its reference (a map built from scanmatch or "
-            "odometry poses lies in its first pass's odometry frame); --align se2 scores it in the reference's"]
+    head = (f"run {run.name}: APE RMSE {rmse:.2f} m, {rmse_aligned:.3f} m after a rigid motion ({x:.2f} m, {y:.2f} m, "
+            f"{math.degrees(yaw):.1f}°): ")
+    if run.init == "global":  # a lock on a similar place is a rigid offset too, and aligning it away hides it
+        return [head + "a global start that locked on the wrong one of two similar places (its global_success says "
+                "so), or a map in another frame than the reference (one built from scanmatch or odometry poses); "
+                "--align se2 is right only for the latter"]
+    return [head + "the run is in another frame than its reference (a map built from scanmatch or odometry poses lies "
+            "in its first pass's odometry frame); --align se2 scores it in the reference's"]
 
 
 def _convergence_rows(run: RunTables, reference: ReferenceTrajectory | None, cfg: EvaluateConfig,

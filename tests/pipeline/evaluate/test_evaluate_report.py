@@ -104,6 +104,12 @@ def test_global_success_is_judged_after_the_alignment_asked_for() -> None:
     plain = evaluate_runs([run], DoorbatchConfig(), reference=reference)
     assert plain.value("other_frame", "global_success") == 0.0
     assert len(plain.warnings) == 1 and "--align se2" in plain.warnings[0]  # the user hears why, and the fix
+    # a global start may as well have locked on the wrong one of two similar places: the hint says both, and that
+    # aligning is right only for a map in another frame (aligning a wrong lock away would score it a success)
+    assert "locked on the wrong one of two similar places" in plain.warnings[0]
+    assert "right only for the latter" in plain.warnings[0]
+    tracked = evaluate_runs([replace(run, init="reference")], DoorbatchConfig(), reference=reference)
+    assert "locked" not in tracked.warnings[0] and "scores it in the reference's" in tracked.warnings[0]
     aligned = evaluate_runs([run], load_config(overrides=["evaluate.align=se2"]), reference=reference)
     assert aligned.value("other_frame", "ape_trans_max") < 1e-9
     assert aligned.value("other_frame", "global_success") == 1.0
