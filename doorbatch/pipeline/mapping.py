@@ -424,6 +424,11 @@ def build_map(logs: Sequence[Path], config: DoorbatchConfig | None = None,
         raise PipelineError(f"no scan has {article} {source} pose within mapping.max_pose_gap_s "
                             f"({config.mapping.max_pose_gap_s} s) of one: nothing to map (try another --pose-source)")
     warnings += [w for rec in recordings for w in rec.warnings]
+    if len(recordings) == 1:
+        warnings.append(f"{recordings[0].path}: one pass: doors are found where passes see their leaves at different "
+                        "angles (paper 000), so one pass finds few or none, and a leaf that swung in view stays in "
+                        "map.pgm; give several passes, or cut a long log into passes with --set "
+                        "mapping.pass_duration_s=SECONDS")
     for p in passes:
         skipped = int((~p.valid).sum())
         if skipped:

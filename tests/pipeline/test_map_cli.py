@@ -38,6 +38,15 @@ def test_map_on_the_sample_writes_the_map_directory(tmp_path: Path, capsys: pyte
     assert manifest["extra"]["pose_source"] == "reference"
     assert len(manifest["inputs"]) == 3 and manifest["config_hash"]
     assert (out / "preview.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert not any("one pass" in w for w in manifest["warnings"])
+
+
+def test_one_pass_is_told_that_it_finds_few_doors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """One mapping pass found 2 of 10 doors, the leaves that swung in view left in map.pgm, and said nothing."""
+    out = tmp_path / "map"
+    assert main(["map", str(SAMPLE_LOGS / "map_pass1.mcap"), "-o", str(out), "--stages", "grid", "--json"]) == 0
+    warnings = json.loads((out / "manifest.json").read_text())["warnings"]
+    assert any("one pass" in w and "mapping.pass_duration_s" in w for w in warnings)
 
 
 def _with_reference_frame(frame: str) -> list[tuple[str, str, int, object]]:
