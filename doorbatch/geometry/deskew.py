@@ -137,7 +137,7 @@ def _ranges_between(q: FloatArray, hit: npt.NDArray[np.bool_], r: FloatArray, be
     pair = np.repeat(np.arange(k.size), count)
     j = np.repeat(lo, count) + (np.arange(pair.size) - np.repeat(np.cumsum(count) - count, count))
     scan, k = scan[pair], k[pair]
-    full_circle = n * step[scan, 0] >= 2.0 * np.pi - 0.5 * step[scan, 0]
+    full_circle = is_full_circle(step[scan, 0], n)
     j = np.where(full_circle, np.mod(j, n), j)  # a full circle: past the last beam is the first
     keep = (j >= 0) & (j < n)
     scan, k, j = scan[keep], k[keep], j[keep]
@@ -157,9 +157,15 @@ def fan_slots(bearing: FloatArray, angle_min: npt.ArrayLike, angle_increment: np
     the fan (a full circle wraps: beam ``beams`` is beam 0); ``angle_min`` and ``angle_increment`` broadcast."""
     j = np.rint(fan_coordinate(bearing, angle_min, angle_increment, beams)).astype(np.intp)
     step = np.abs(np.asarray(angle_increment, dtype=np.float64))
-    full_circle = beams * step >= 2.0 * np.pi - 0.5 * step
+    full_circle = is_full_circle(step, beams)
     inside = full_circle | ((j >= 0) & (j < beams))
     return np.where(full_circle, np.mod(j, beams), np.clip(j, 0, beams - 1)), np.broadcast_to(inside, j.shape)
+
+
+def is_full_circle(step_rad: npt.ArrayLike, beams: int) -> npt.NDArray[np.bool_]:
+    """Whether a fan of ``beams`` beams ``step_rad`` apart closes the circle (beam ``beams`` would be beam 0)."""
+    step = np.asarray(step_rad, dtype=np.float64)
+    return np.asarray(beams * step >= 2.0 * np.pi - 0.5 * step)
 
 
 def fan_coordinate(bearing: FloatArray, angle_min: npt.ArrayLike, angle_increment: npt.ArrayLike, beams: int
@@ -169,7 +175,7 @@ def fan_coordinate(bearing: FloatArray, angle_min: npt.ArrayLike, angle_incremen
     inc = np.asarray(angle_increment, dtype=np.float64)
     step = np.abs(inc)
     offset = np.mod((bearing - np.asarray(angle_min, dtype=np.float64)) * np.sign(inc), 2.0 * np.pi)
-    partial = beams * step < 2.0 * np.pi - 0.5 * step
+    partial = ~is_full_circle(step, beams)
     offset = np.where(partial & (offset > np.pi + 0.5 * (beams - 1) * step), offset - 2.0 * np.pi, offset)
     return np.asarray(offset / step, dtype=np.float64)
 

@@ -27,11 +27,11 @@ from doorbatch.io.map_topic import OCCUPANCY_GRID
 from doorbatch.io.pose_topic import POSE_TYPES
 from doorbatch.io.reader import most_are_bad, open_log
 from doorbatch.io.recording import (
-    SWEEP_OVER_PERIOD,
     buffered_transforms,
     clock_lags_s,
     lost_times_note,
     missing_laser_tf_hint,
+    no_sweep_note,
     odometry_frame,
     odometry_frame_note,
     resolve_base_frame,
@@ -258,12 +258,9 @@ def _describe_sweep(report: LogReport, topic: str, sweep_s: float, rate_hz: floa
     sweep is longer than the scan period (a driver that wrote something else there: not deskewed)."""
     if sweep_s <= 0.0:
         return
-    period_s = 1.0 / rate_hz if rate_hz > 0 else math.inf
-    if sweep_s > period_s * SWEEP_OVER_PERIOD:
+    if no_sweep := no_sweep_note(sweep_s, 1.0 / rate_hz if rate_hz > 0 else math.inf):
         report.laser += f", time_increment × beams {1e3 * sweep_s:.0f} ms"
-        report.problems.append(Problem(
-            Severity.WARNING, topic, f"time_increment × beams is {1e3 * sweep_s:.0f} ms, longer than the scan period "
-            f"({1e3 * period_s:.0f} ms): a driver that wrote something else there; the scans are not deskewed"))
+        report.problems.append(Problem(Severity.WARNING, topic, no_sweep))
         return
     report.laser += f", sweeps {1e3 * sweep_s:.0f} ms ({'deskewed with the odometry' if deskew else 'io.deskew off'})"
 

@@ -585,10 +585,8 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
     sources: list[npt.NDArray[np.intp] | None] = []
     sweep = float(np.median([s.sweep_s for s in scans]))
     period_s = float(np.median(np.diff(stamps_ns))) / 1e9 if len(scans) > 1 else math.inf
-    if sweep > period_s * SWEEP_OVER_PERIOD:
-        warnings.append(f"{path}: the laser's time_increment × beams is {1e3 * sweep:.0f} ms, longer than its scan "
-                        f"period ({1e3 * period_s:.0f} ms): a driver that wrote something else there; the scans are "
-                        "not deskewed")
+    if no_sweep := no_sweep_note(sweep, period_s):
+        warnings.append(f"{path}: the laser's {no_sweep}")
     elif config.io.deskew and odometry is not None and sweep > 0.0:
         warnings += [f"{path}: {n}" for n in [end_of_sweep_note(scans, sweep)] if n]
         ranges, sources = deskewed_scans(ranges, stamps_ns, [s.time_increment_s for s in scans],
@@ -619,7 +617,7 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
     if aligned is not None and any(src is not None for src in sources):  # colours follow their beams
         aligned, valid = moved_beam_colors(aligned, valid, sources)
     deskewed = sum(src is not None for src in sources)
-    if (odometry is not None and deskewed < 0.5 * len(scans) and sweep <= period_s * SWEEP_OVER_PERIOD
+    if (odometry is not None and deskewed < 0.5 * len(scans) and not no_sweep
             and (smear := sweep_smear_m(sweep, odometry.stamps_ns, odometry.poses, config.io.sweep_check_range_m,
                                         config.io.sweep_check_quantile)) > config.io.sweep_smear_warn_m):
         why = "io.deskew is off" if not config.io.deskew else f"the odometry spans {deskewed} of {len(scans)} sweeps"
@@ -636,6 +634,15 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
                         "odometry was replaced by its corrected poses)")
     return Recording(str(path), scan_set, odometry, reference, aligned, warnings, valid, repeats,
                      timed.log_clock, tuple(tf.static_transforms()))
+
+
+def no_sweep_note(sweep_s: float, period_s: float) -> str | None:
+    """Why a sweep (time_increment × beams) longer than ``SWEEP_OVER_PERIOD`` scan periods is not deskewed (rotating
+    lasers sweep within a period: a driver wrote something else there), else None."""
+    if not sweep_s > period_s * SWEEP_OVER_PERIOD:
+        return None
+    return (f"time_increment × beams is {1e3 * sweep_s:.0f} ms, longer than the scan period ({1e3 * period_s:.0f} ms): "
+            "a driver that wrote something else there; the scans are not deskewed")
 
 
 def end_of_sweep_note(scans: Sequence[Scan], sweep_s: float) -> str | None:
