@@ -23,6 +23,7 @@ import click
 from doorbatch import __version__
 from doorbatch.config import DoorbatchConfig, load_config
 from doorbatch.errors import DoorbatchError, ExitCode, LogContentError, UsageError
+from doorbatch.interrupts import sigterm_as_interrupt
 from doorbatch.progress import set_progress_enabled
 
 log = logging.getLogger("doorbatch")
@@ -409,7 +410,8 @@ def main(argv: list[str] | None = None) -> int:
 
 def _main(argv: list[str] | None) -> int:
     try:
-        cli.main(args=argv, prog_name="doorbatch", standalone_mode=False)
+        with sigterm_as_interrupt():  # a kill unwinds like Ctrl-C: staged output removed, exit 130
+            cli.main(args=argv, prog_name="doorbatch", standalone_mode=False)
     except DoorbatchError as err:
         click.echo(f"error: {err}", err=True)
         return int(err.exit_code)

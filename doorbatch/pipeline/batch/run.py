@@ -13,18 +13,16 @@ The run in outline::
 from __future__ import annotations
 
 import logging
-import signal
-import threading
 import time
 from collections.abc import Iterator, Mapping
 from contextlib import ExitStack, contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from types import FrameType
 from typing import Any
 
 from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import UsageError
+from doorbatch.interrupts import sigterm_as_interrupt
 from doorbatch.io.atomic import atomic_write_text
 from doorbatch.io.dataset import Dataset
 from doorbatch.io.fingerprint_cache import read_fingerprint_cache, write_fingerprint_cache
@@ -86,23 +84,6 @@ class RunSummary:
         failed = f", {self.failed} failed, {self.blocked} blocked" if not self.complete else ""
         return (f"run of {self.dataset}: {self.steps} steps, {self.done} done, {self.up_to_date} up to date"
                 f"{failed} in {self.seconds:.1f} s{where}")
-
-
-@contextmanager
-def sigterm_as_interrupt() -> Iterator[None]:
-    """Turn SIGTERM into ``KeyboardInterrupt`` in the main thread, so that a kill unwinds like Ctrl-C."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    def interrupt(signum: int, frame: FrameType | None) -> None:
-        raise KeyboardInterrupt(f"signal {signum}")
-
-    previous = signal.signal(signal.SIGTERM, interrupt)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
 
 
 @contextmanager
