@@ -436,8 +436,38 @@ def build_map(logs: Sequence[Path], config: DoorbatchConfig | None = None,
     t0 = time.perf_counter()
     result = grid_of(recordings, passes, config, progress)
     seconds["grid"] = time.perf_counter() - t0
+    warnings += disagreement_notes(recordings, passes, result.static_map, source, config)
     return DoorMap(result.static_map, result.doors, passes, source, result.n_dynamic_points, warnings, seconds,
                    result.grid)
+
+
+def free_end_point_share(rec: Recording, poses: PassPoses, occupancy: OccupancyMap, config: DoorbatchConfig) -> float:
+    """The share of a pass's scan end points (placed at its poses) that fall in cells ``occupancy`` holds free."""
+    free_at_most = config.localize.map_free_at_most
+    total = free = 0
+    for scan in map_scans(rec, poses, config.mapping.scan_stride, config.grid.dropout_max_beams):
+        ij = occupancy.world_to_cell(scan.points)
+        inside = occupancy.contains(ij)
+        value = occupancy.occupancy[ij[inside, 0], ij[inside, 1]]
+        total += int(inside.sum())
+        free += int(((value >= 0) & (value <= free_at_most)).sum())
+    return free / total if total else 0.0
+
+
+def disagreement_notes(recordings: Sequence[Recording], passes: Sequence[PassPoses], occupancy: OccupancyMap,
+                       source: str, config: DoorbatchConfig) -> list[str]:
+    """A warning naming the passes whose end points fall in the map's free cells more often than
+    ``mapping.pass_disagreement_warn_share`` (their poses disagree with the map the passes made together)."""
+    shares = [free_end_point_share(rec, p, occupancy, config) for rec, p in zip(recordings, passes, strict=True)]
+    bad = [(rec.path, share) for rec, share in zip(recordings, shares, strict=True)
+           if share > config.mapping.pass_disagreement_warn_share]
+    if not bad:
+        return []
+    listed = "; ".join(f"{share:.0%} of {path}'s" for path, share in bad)
+    hint = " (try --pose-source scanmatch)" if source != "scanmatch" else ""
+    return [f"the {source} poses disagree with the map: {listed} scan end points fall in cells the map holds free "
+            f"(people and doors take a few, up to a fifth in a crowd): walls are smeared and doors found may be "
+            f"false{hint}"]
 
 
 def without_leaves(door_map: DoorMap, doors: Sequence[PreviewDoor], config: DoorbatchConfig) -> DoorMap:
