@@ -465,8 +465,8 @@ class MappingConfig(Section):
     reference_jitter_max_deg: float = Field(0.25, gt=0.0)
     # A pass more than this share of whose scan end points fall in cells the finished map holds free disagrees
     # with the map: its poses are wrong (odometry drift), and doors found may be false; a warning names scan
-    # matching. Measured (session 30): good poses 3-6 % of end points (the sample), 10-22 % in a crowd of 12 people;
-    # odometry poses 64-81 %. Expert choice: a third, above what people and doors take.
+    # matching. Measured (session 30): good poses 3-6 % of end points (the sample), 10-25 % in a crowd of 12 people;
+    # odometry poses 64-81 % (every 10th scan read). Expert choice: a third, above what people and doors take.
     pass_disagreement_warn_share: float = Field(1.0 / 3.0, gt=0.0, le=1.0)
     # Passes after the first must start within this distance of where the previous one's odometry ended
     # when poses come from odometry or scan matching (one odometry frame), else the frames are disjoint.
