@@ -178,7 +178,7 @@ def _roscpp_value(name: str, value: Any, default: Any) -> tuple[Any, str | None]
                      f"its default {default!r}")
 
 
-def _rclcpp_value(name: str, value: Any, default: Any, source: str) -> tuple[str, Any, str | None]:
+def _rclcpp_value(name: str, value: Any, default: Any, source: str) -> tuple[Any, str | None]:
     """``value`` as nav2_amcl's declared parameter of ``default``'s type takes it: rclcpp refuses to start on a
     value of another type, and so does doorbatch (a string or a bool for a number, a number for a bool); an
     integer for a double is taken as that double, with a note that the node would refuse it (and an integral double
@@ -192,9 +192,9 @@ def _rclcpp_value(name: str, value: Any, default: Any, source: str) -> tuple[str
     elif isinstance(default, int | float):
         ok = isinstance(value, int | float) and not isinstance(value, bool)
         if ok and isinstance(default, float) and isinstance(value, int):
-            return name, float(value), (f"amcl {name}: {value!r} is an integer where nav2_amcl declares a double "
-                                        f"(rclcpp refuses it at start-up: write {float(value)!r}); taken as "
-                                        f"{float(value)!r}")
+            return float(value), (f"amcl {name}: {value!r} is an integer where nav2_amcl declares a double "
+                                  f"(rclcpp refuses it at start-up: write {float(value)!r}); taken as "
+                                  f"{float(value)!r}")
         if ok and isinstance(default, int) and not isinstance(value, int):
             ok = float(value).is_integer()
             value = int(value) if ok else value
@@ -203,7 +203,7 @@ def _rclcpp_value(name: str, value: Any, default: Any, source: str) -> tuple[str
     if not ok:
         raise ConfigError(f"{source}: amcl {name}: {value!r} is not a {type(default).__name__} (nav2_amcl refuses "
                           f"to start on it; its default is {default!r})")
-    return name, value, None
+    return value, None
 
 
 def translate_ros1_amcl_parameters(params: Mapping[str, Any], source: str = "config") -> AmclTranslation:
@@ -336,9 +336,9 @@ def translate_amcl_parameters(params: Mapping[str, Any], source: str = "config")
         ConfigError: the beam model, an unknown robot model, or a value of the wrong type.
     """
     given = dict(params)
-    typed = [_rclcpp_value(k, v, NAV2_AMCL_DEFAULTS[k], source) for k, v in given.items() if k in NAV2_AMCL_DEFAULTS]
-    merged = {**NAV2_AMCL_DEFAULTS, **{k: v for k, v, _ in typed}}
-    warnings: list[str] = [note for _, _, note in typed if note] + _substitute_as_amcl_node(merged)
+    typed = {k: _rclcpp_value(k, v, NAV2_AMCL_DEFAULTS[k], source) for k, v in given.items() if k in NAV2_AMCL_DEFAULTS}
+    merged = {**NAV2_AMCL_DEFAULTS, **{k: v for k, (v, _) in typed.items()}}
+    warnings: list[str] = [note for _, note in typed.values() if note] + _substitute_as_amcl_node(merged)
     localize: dict[str, Any] = {name: merged[name] for name in _SAME_NAME}
     localize["resample_neff_ratio"] = 1.0  # nav2_amcl resamples every resample_interval updates, no Neff test
     localize["beam_skip_support"] = "particles"  # and counts the particles that explain a beam

@@ -11,7 +11,7 @@ import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -665,17 +665,15 @@ def moved_beam_colors(colors: list[npt.NDArray[np.uint8]], valid: list[npt.NDArr
                       ) -> tuple[list[npt.NDArray[np.uint8]], list[npt.NDArray[np.bool_]] | None]:
     """Per-beam colours (and their validity) moved with deskewed beams: fan angle j takes the colour of the measured
     beam ``sources[i][j]`` (−1: none, colour 0 and invalid); a scan without sources is left as it was."""
-    out_colors, out_valid = [], []
-    for i, (c, src) in enumerate(zip(colors, sources, strict=True)):
-        v = valid[i] if valid is not None else None
+
+    def moved(values: npt.NDArray[Any], src: npt.NDArray[np.intp] | None, none: Any) -> npt.NDArray[Any]:
         if src is None:
-            out_colors.append(c)
-            out_valid.append(v if v is not None else np.ones(c.shape[0], dtype=bool))
-            continue
-        has = src >= 0
-        out_colors.append(np.where(has[:, None], c[np.maximum(src, 0)], 0).astype(np.uint8))
-        out_valid.append(has & (v[np.maximum(src, 0)] if v is not None else True))
-    return out_colors, (out_valid if valid is not None else None)
+            return values
+        return np.where((src >= 0).reshape(-1, *[1] * (values.ndim - 1)), values[np.maximum(src, 0)], none)
+
+    out_colors = [moved(c, src, 0).astype(np.uint8) for c, src in zip(colors, sources, strict=True)]
+    out_valid = None if valid is None else [moved(v, src, False) for v, src in zip(valid, sources, strict=True)]
+    return out_colors, out_valid
 
 
 def without_repeated_scans(timed: OneClock) -> OneClock:

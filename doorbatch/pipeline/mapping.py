@@ -35,6 +35,7 @@ from doorbatch.maps import OccupancyMap
 from doorbatch.pipeline.gridmap.build import GridMapper, GridMapResult, MapScan
 from doorbatch.pipeline.gridmap.doors import DetectedDoor, remove_leaves
 from doorbatch.pipeline.gridmap.occupancy import LogOddsGrid, to_occupancy_map
+from doorbatch.pipeline.localize.likelihood_field import FreeCells, free_cells
 from doorbatch.pipeline.poses import scan_match_trajectory
 from doorbatch.pipeline.poses.pose_jitter import pose_jitter
 from doorbatch.pipeline.time_passes import split_into_passes
@@ -446,26 +447,24 @@ def build_map(logs: Sequence[Path], config: DoorbatchConfig | None = None,
 _SHARE_SCAN_STRIDE = 10
 
 
-def free_end_point_share(rec: Recording, poses: PassPoses, occupancy: OccupancyMap, config: DoorbatchConfig) -> float:
+def free_end_point_share(rec: Recording, poses: PassPoses, free: FreeCells, config: DoorbatchConfig) -> float:
     """The share of a pass's scan end points (placed at its poses; every ``_SHARE_SCAN_STRIDE``-th mapped scan) that
-    fall in cells ``occupancy`` holds free."""
-    free_at_most = config.localize.map_free_at_most
-    total = free = 0
+    fall in ``free`` cells (the map grows to hold every end point, so none falls outside it)."""
+    total = hits = 0
     stride = config.mapping.scan_stride * _SHARE_SCAN_STRIDE
     for scan in map_scans(rec, poses, stride, config.grid.dropout_max_beams):
-        ij = occupancy.world_to_cell(scan.points)
-        inside = occupancy.contains(ij)
-        value = occupancy.occupancy[ij[inside, 0], ij[inside, 1]]
-        total += int(inside.sum())
-        free += int(((value >= 0) & (value <= free_at_most)).sum())
-    return free / total if total else 0.0
+        held = free.holds(scan.points)
+        total += held.shape[0]
+        hits += int(held.sum())
+    return hits / total if total else 0.0
 
 
 def disagreement_notes(recordings: Sequence[Recording], passes: Sequence[PassPoses], occupancy: OccupancyMap,
                        source: str, config: DoorbatchConfig) -> list[str]:
     """A warning naming the passes whose end points fall in the map's free cells more often than
     ``mapping.pass_disagreement_warn_share`` (their poses disagree with the map the passes made together)."""
-    shares = [free_end_point_share(rec, p, occupancy, config) for rec, p in zip(recordings, passes, strict=True)]
+    free = free_cells(occupancy, config.localize.map_free_at_most)
+    shares = [free_end_point_share(rec, p, free, config) for rec, p in zip(recordings, passes, strict=True)]
     bad = [(rec.path, share) for rec, share in zip(recordings, shares, strict=True)
            if share > config.mapping.pass_disagreement_warn_share]
     if not bad:

@@ -139,11 +139,11 @@ def cluster_points(points: npt.ArrayLike, eps: float) -> IntArray:
     a, b = _cell_links(pts, cells, cell_of, reach)
     graph = coo_matrix((np.ones(a.shape[0]), (a, b)), shape=(cells.shape[0], cells.shape[0]))
     _, cell_label = connected_components(graph, directed=False)
-    labels = cell_label[cell_of]
-    _, first = np.unique(labels, return_index=True)  # number the clusters in the order of their first point
-    rank = np.empty(first.shape[0], dtype=np.int64)
+    labels = cell_label[cell_of]  # components 0 … C − 1, each holding points
+    first = np.unique(labels, return_index=True)[1]  # number the clusters in the order of their first point
+    rank: IntArray = np.empty(first.shape[0], dtype=np.int64)
     rank[np.argsort(first)] = np.arange(first.shape[0])
-    return np.asarray(rank[np.searchsorted(np.unique(labels), labels)], dtype=np.int64)
+    return np.asarray(rank[labels], dtype=np.int64)
 
 
 def _cell_links(pts: FloatArray, cells: npt.NDArray[np.int64], cell_of: IntArray, reach: float

@@ -141,20 +141,23 @@ class FreeCells:
     """Centres (F, 2) of the free cells of a map (map frame), for uniform pose sampling over free space."""
 
     centers: FloatArray
-    resolution_m: float
-    origin_yaw_rad: float
-    # The map and which of its cells are free, to tell whether a position lies in free space (None: not known).
-    grid: OccupancyMap | None = None
-    free_mask: npt.NDArray[np.bool_] | None = None
+    grid: OccupancyMap  # the map
+    free_mask: npt.NDArray[np.bool_]  # (H, W) which of its cells are free
+
+    @property
+    def resolution_m(self) -> float:
+        return self.grid.resolution_m
+
+    @property
+    def origin_yaw_rad(self) -> float:
+        return self.grid.origin_yaw_rad
 
     def __len__(self) -> int:
         return int(self.centers.shape[0])
 
     def holds(self, xy_m: npt.ArrayLike) -> npt.NDArray[np.bool_]:
-        """Whether each position (N, 2) lies in a free cell (all True where the map is not known)."""
+        """Whether each position (N, 2) lies in a free cell (outside the map: no)."""
         xy = np.asarray(xy_m, dtype=np.float64).reshape(-1, 2)
-        if self.grid is None or self.free_mask is None:
-            return np.ones(xy.shape[0], dtype=bool)
         ij = self.grid.world_to_cell(xy)
         inside = self.grid.contains(ij)
         out = np.zeros(xy.shape[0], dtype=bool)
@@ -238,8 +241,7 @@ def free_cells(occupancy_map: OccupancyMap, free_at_most: int = FREE_AT_MOST) ->
     occ = occupancy_map.occupancy
     mask = (occ >= 0) & (occ <= free_at_most)
     ij = np.argwhere(mask)
-    return FreeCells(occupancy_map.cell_to_world(ij).reshape(-1, 2), occupancy_map.resolution_m,
-                     occupancy_map.origin_yaw_rad, occupancy_map, mask)
+    return FreeCells(occupancy_map.cell_to_world(ij).reshape(-1, 2), occupancy_map, mask)
 
 
 class _Scratch:
