@@ -173,6 +173,13 @@ class ScanMatchConfig(Section):
     submap_radius_m: float = Field(10.0, ge=0.0)
     submap_keyframes: int = Field(10, ge=1)
     submap_voxel_m: float = Field(0.05, gt=0.0)
+    # A keyframe within submap_revisit_m and submap_revisit_deg of an older one (older than the last
+    # submap_keyframes, itself no revisit) saw that place from nearly the same pose: it stays out of the submap
+    # while the old keyframes are matched, so that repeated passes do not grow it (their samples mostly lose
+    # the voxel to the older keyframe's anyway). Expert choice: about a keyframe spacing and a 270° laser's
+    # view changing little; 0 keeps every revisit (cost per scan then grows with the passes).
+    submap_revisit_m: float = Field(0.5, ge=0.0)
+    submap_revisit_deg: float = Field(30.0, ge=0.0, le=180.0)
     # A scan becomes a keyframe when it moved or turned this much since the last keyframe.
     keyframe_min_d_m: float = Field(0.3, ge=0.0)
     keyframe_min_a_deg: float = Field(10.0, ge=0.0)
@@ -652,6 +659,14 @@ class LocalizeConfig(Section):
     # (docs/results.md, session 19).
     lost_fit_distance_m: float = Field(0.3, gt=0.0)
     lost_min_fit: float = Field(0.5, ge=0.0, le=1.0)
+    # ... or over lost_max_see_through of the scan's beams (at most lost_see_through_beams of them, spread over
+    # the scan) pass through the map's occupied cells more than lost_fit_distance_m before their hits, for
+    # lost_after_s (a pose shifted along a corridor whose walls keep its hits fitting: pipeline/localize/
+    # convergence.py). Expert choice, measured (docs/results.md, "A localizer's own word"): at the true pose no run
+    # of scans over 0.15 lasted 0.6 s on the sample and the three CARMEN logs (single scans up to 0.36 on orebro);
+    # a pose 1.4-2 m along a doorway corridor 0.16-0.35 (median 0.25).
+    lost_max_see_through: float = Field(0.2, ge=0.0, le=1.0)
+    lost_see_through_beams: int = Field(180, ge=1)
     lost_after_s: float = Field(2.0, ge=0.0)
     relocalize_when_lost: bool = False
     # Multimodal (reported as `ambiguous`): >= ambiguity_min_weight of the weight farther than

@@ -22,6 +22,12 @@ The claimed convergence time is the update at which 3 is met for the streak that
    loss: a uniform start's mean is no pose) is **lost** once, at its mean, under ``lost_min_fit`` of the scan's
    hits lie within ``lost_fit_distance_m`` of the map's occupied cells (:func:`scan_fit`) for ``lost_after_s``,
    whatever its shape by then: the streak and any claim break, and the run may start over from a uniform cloud.
+   Or when over ``lost_max_see_through`` of its beams pass through the map's occupied cells on their way to
+   their hits (:func:`see_through_share`) for ``lost_after_s``: parallel corridor walls keep the hits of a pose
+   shifted along the corridor near walls, but its beams then cross the walls between doorways and the end wall.
+   A beam cannot pass through a wall, so at the true pose on a right map few do (glass, a door mapped closed,
+   a grazing beam's blur); a map lacking what the robot sees (moved furniture, an erased wall) makes hits fit
+   poorly but makes no beam pass through a wall, so the two criteria tell a wrong pose from a wrong map.
 """
 
 from __future__ import annotations
@@ -34,6 +40,7 @@ import numpy.typing as npt
 
 from doorbatch.config import LocalizeConfig
 from doorbatch.geometry.rotations import wrap_angle
+from doorbatch.maps import OccupancyMap
 from doorbatch.pipeline.localize.likelihood_field import DistanceField, cloud_converged, endpoint_distances
 from doorbatch.pipeline.localize.particles import ParticleSet
 
@@ -69,6 +76,45 @@ def scan_fit(field: DistanceField, pose: npt.ArrayLike, hits_base: npt.ArrayLike
                          <= distance_m))
 
 
+def fits(fit: float, through: float, config: LocalizeConfig) -> bool:
+    """Whether a scan fits the map at a pose (criterion 4): enough hits near walls, few beams through them
+    (NaN, no evidence, fits)."""
+    return not (fit < config.lost_min_fit or through > config.lost_max_see_through)
+
+
+def see_through_share(occ: OccupancyMap, pose: npt.ArrayLike, origin_base: npt.ArrayLike, hits_base: npt.ArrayLike,
+                      margin_m: float, occupied_at_least: int, max_beams: int) -> float:
+    """Share of the scan's beams that pass through an occupied cell of the map more than ``margin_m`` before
+    their hit, the robot at ``pose`` (criterion 4); NaN for a scan of fewer than ``MIN_FIT_HITS`` hits.
+
+    Each beam runs from the laser's origin (base_link, (2,)) to its hit (base_link, (B, 2)); it is sampled every
+    half cell up to r − margin_m and passes through a wall where a sample's cell holds at least
+    ``occupied_at_least`` (unknown cells and the grid's outside hold nothing). At most ``max_beams`` beams,
+    evenly spread over the scan, are cast.
+    """
+    hits = np.asarray(hits_base, dtype=np.float64).reshape(-1, 2)
+    if hits.shape[0] < MIN_FIT_HITS:
+        return math.nan
+    if hits.shape[0] > max_beams:
+        hits = hits[np.linspace(0, hits.shape[0] - 1, max_beams).round().astype(np.intp)]
+    p = np.asarray(pose, dtype=np.float64).reshape(3)
+    c, s = math.cos(p[2]), math.sin(p[2])
+    rot = np.array([[c, -s], [s, c]])
+    origin = np.asarray(origin_base, dtype=np.float64).reshape(2) @ rot.T + p[:2]
+    ray = hits @ rot.T + p[:2] - origin
+    reach = np.hypot(ray[:, 0], ray[:, 1]) - margin_m  # samples up to here may not meet a wall
+    if not np.any(reach > 0.0):
+        return 0.0
+    step = occ.resolution_m / 2.0
+    t = step * np.arange(int(np.ceil(float(reach.max()) / step)))
+    unit = ray / np.hypot(ray[:, 0], ray[:, 1])[:, None]
+    cells = occ.world_to_cell(origin + t[None, :, None] * unit[:, None, :])  # (B, T, 2)
+    inside = occ.contains(cells) & (t[None, :] < reach[:, None])
+    wall = np.zeros(inside.shape, dtype=bool)
+    wall[inside] = occ.occupancy[cells[inside][:, 0], cells[inside][:, 1]] >= occupied_at_least
+    return float(np.mean(wall.any(axis=1)))
+
+
 @dataclass(frozen=True)
 class ConvergenceMonitor:
     """The detector's state between updates.
@@ -93,10 +139,11 @@ class ConvergenceMonitor:
     lost: bool = False
 
     def update(self, stamp_ns: int, odom: npt.ArrayLike, particles: ParticleSet, config: LocalizeConfig,
-               fit: float = 1.0) -> ConvergenceMonitor:
-        """The state after one filter update, whose scan fits the map as ``fit`` says (:func:`scan_fit` at the
-        cloud's mean; NaN: no evidence). A claim is withdrawn when the cloud later spreads or splits, or is lost (a
-        hypothesis the scans went on to contradict was not a convergence); a new streak must then hold again."""
+               fit: float = 1.0, through: float = 0.0) -> ConvergenceMonitor:
+        """The state after one filter update, whose scan fits the map as ``fit`` and ``through`` say
+        (:func:`scan_fit` and :func:`see_through_share` at the cloud's mean; NaN: no evidence). A claim is
+        withdrawn when the cloud later spreads or splits, or is lost (a hypothesis the scans went on to contradict
+        was not a convergence); a new streak must then hold again."""
         o = np.asarray(odom, dtype=np.float64).reshape(3)
         step = 0.0 if self.last_odom is None else float(np.hypot(*(o[:2] - self.last_odom[:2])))
         tight = cloud_converged(particles.weight, particles.pose, config) and not multimodal(particles, config)
@@ -104,7 +151,7 @@ class ConvergenceMonitor:
         if math.isnan(fit):  # no evidence: a run of poor fits neither ends nor starts here
             poor = self.poor_fit_since_ns if settled else None
         else:
-            poor = None if fit >= config.lost_min_fit or not settled else (
+            poor = None if fits(fit, through, config) or not settled else (
                 stamp_ns if self.poor_fit_since_ns is None else self.poor_fit_since_ns)
         if poor is not None and (stamp_ns - poor) / 1e9 >= config.lost_after_s:
             return ConvergenceMonitor(None, 0.0, o, None, None, False, lost=True)

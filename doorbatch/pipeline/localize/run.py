@@ -34,7 +34,13 @@ from doorbatch.io.recording import PoseSeries, Recording, load_recording
 from doorbatch.io.roles import is_initial_pose_topic
 from doorbatch.maps import DoorSet, OccupancyMap
 from doorbatch.pipeline.localize.clusters import heaviest_cluster_mean
-from doorbatch.pipeline.localize.convergence import ConvergenceMonitor, multimodal, scan_fit
+from doorbatch.pipeline.localize.convergence import (
+    ConvergenceMonitor,
+    fits,
+    multimodal,
+    scan_fit,
+    see_through_share,
+)
 from doorbatch.pipeline.localize.door_geometry import subset_doors, with_closed_in_range
 from doorbatch.pipeline.localize.likelihood_field import (
     OCCUPIED_AT_LEAST,
@@ -162,6 +168,26 @@ def laser_to_base_4x4(affine: FloatArray) -> FloatArray:
     mat[:2, 3] = affine[:, 2]
     mat[2, 2] = float(np.sign(np.linalg.det(affine[:, :2]))) or 1.0
     return mat
+
+
+def lost_note(t_s: float, recent: Sequence[tuple[int, float, float]], config: LocalizeConfig) -> str:
+    """The warning for a run found lost at ``t_s``, naming the criterion that held over the ``recent`` updates
+    (stamp, :func:`.scan_fit`, :func:`.see_through_share`). Hits off the walls while almost no beam passes through
+    one (a mean share under a quarter of ``lost_max_see_through``, what a right pose shows) suggest a map lacking
+    what the robot sees rather than a wrong pose (:mod:`.convergence`, criterion 4)."""
+    fit = np.array([r[1] for r in recent])
+    through = np.array([r[2] for r in recent])
+    if not np.all(fit < config.lost_min_fit):
+        return (f"lost at {t_s:.1f} s: over {config.lost_max_see_through:.0%} of the scans' beams passed through "
+                f"the map's walls for {config.lost_after_s} s (their hits lay near walls: a pose shifted along a "
+                "corridor, or a kidnapped robot)")
+    note = (f"lost at {t_s:.1f} s: under {config.lost_min_fit:.0%} of the scans' hits within "
+            f"{config.lost_fit_distance_m} m of the map for {config.lost_after_s} s")
+    share = float(np.nanmean(through)) if np.isfinite(through).any() else math.nan
+    if share < config.lost_max_see_through / 4:
+        note += (f"; only {share:.0%} of their beams passed through its walls, so the beams end short of them: the "
+                 "robot is elsewhere, or the map lacks what it sees (moved furniture, a missing wall)")
+    return note
 
 
 def _initial_particles(rec: Recording, lmap: LocalizationMap, init: Init, method: str, config: LocalizeConfig,
@@ -469,8 +495,13 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
     converged_ns = None if init == "global" else int(rec.scans.stamps_ns[first_i])
     monitor = ConvergenceMonitor()  # convergence claims of a global run; lost detection of every run
     warnings = [*rec.warnings, *([motion_note] if motion_note else [])]  # the run's own, not the recording's
+    if lc.relocalize_when_lost and init != "global":
+        warnings.append("localize.relocalize_when_lost spreads a lost cloud again only with --init global: this "
+                        "run, once lost, goes on as it is (its lost times are still reported)")
     lost = barred = False
     lost_ns: list[int] = []
+    fitting_since: int | None = None  # stamp of the first update of the current run of fitting scans
+    recent: list[tuple[int, float, float]] = []  # the last lost_after_s of updates: stamp, fit, see-through
     last_s: float | None = None
     k_draw = max(1, lc.annotate_particles)
     for i in range(len(rec.scans)):
@@ -478,7 +509,7 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
             progress(1)
         if i in reset_at:  # an operator's pose again: a fresh cloud there, updated on this scan (pf_init_ false)
             state = MclState(_initial_particles(rec, lmap, reset_at[i], method, lc, rng))
-            monitor, lost, barred = ConvergenceMonitor(), False, False
+            monitor, lost, barred, fitting_since = ConvergenceMonitor(), False, False, None
             warnings.append(f"--init {reset_at[i].topic}: started anew at "
                             f"{(rec.scans.stamps_ns[i] - rec.scans.stamps_ns[first_i]) / 1e9:.1f} s from its "
                             "message then (AMCL re-initializes on every initial pose)")
@@ -503,8 +534,13 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
         if lc.pose_estimate == "heaviest_cluster":
             mean = heaviest_cluster_mean(p, lc.kld_bin_xy_m, math.radians(lc.kld_bin_yaw_deg))
         dmean, dstd = p.door_estimate()
-        fit = scan_fit(lmap.field, mean, rec.scans.hits_base(i), lc.lost_fit_distance_m)
-        monitor = monitor.update(int(scan.stamp_ns), odom[i], p, lc, fit)
+        hits = rec.scans.hits_base(i)
+        fit = scan_fit(lmap.field, mean, hits, lc.lost_fit_distance_m)
+        through = see_through_share(lmap.occupancy, mean, rec.scans.laser_to_base[i][:, 2], hits,
+                                    lc.lost_fit_distance_m, lc.map_occupied_at_least, lc.lost_see_through_beams)
+        recent = [*(r for r in recent if (scan.stamp_ns - r[0]) / 1e9 <= lc.lost_after_s),
+                  (int(scan.stamp_ns), fit, through)]
+        monitor = monitor.update(int(scan.stamp_ns), odom[i], p, lc, fit, through)
         respread = monitor.lost and init == "global" and lc.relocalize_when_lost
         barred = barred or (monitor.lost and not respread)  # the same cloud, once lost, claims nothing again
         if init == "global":
@@ -512,10 +548,14 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
         if monitor.lost and (respread or not lost):  # once per episode of poor fits, unless spread anew
             lost_ns.append(int(scan.stamp_ns))
             t_s = (scan.stamp_ns - (track.stamps[0] if track.stamps else scan.stamp_ns)) / 1e9  # as manifest_extra
-            warnings.append(f"lost at {t_s:.1f} s: under {lc.lost_min_fit:.0%} of the scans' hits within "
-                            f"{lc.lost_fit_distance_m} m of the map for {lc.lost_after_s} s"
-                            + ("; the cloud was spread over the free space again" if respread else ""))
-        lost = (lost or monitor.lost) and not fit >= lc.lost_min_fit  # NaN (no evidence) keeps an episode going
+            if len(lost_ns) == 1:  # the later episodes in one line at the end
+                warnings.append(lost_note(t_s, recent, lc) + ("; the cloud was spread over the free space again"
+                                                                  if respread else ""))
+        if not math.isnan(fit):  # NaN (no evidence) neither starts nor breaks a run of fitting scans
+            fitting_since = (fitting_since or int(scan.stamp_ns)) if fits(fit, through, lc) else None
+        # an episode ends once the scans fit again for lost_after_s, as it began (a noisy share dips below the bar)
+        lost = (lost or monitor.lost) and not (
+            fitting_since is not None and (scan.stamp_ns - fitting_since) / 1e9 >= lc.lost_after_s)
         if respread:
             state = dataclasses.replace(state, particles=_initial_particles(rec, lmap, "global", method, lc, rng),
                                         recovery=RecoveryState())  # a fresh start, as AMCL's pf_init
@@ -524,6 +564,10 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
         track.add(scan.stamp_ns, mean, cov, odom[i], len(p), diag.neff, dmean, dstd, observed, p.pose[pick])
     if not track.stamps:
         raise PipelineError(f"{log_path}: no scan had an odometry pose; nothing was localized")
+    if len(lost_ns) > 1:
+        again = ", ".join(f"{(t - track.stamps[0]) / 1e9:.1f}" for t in lost_ns[1:])
+        warnings.append(f"lost again at {again} s (each after the scans had fit for {lc.lost_after_s} s; the "
+                        "manifest's lost_after_s lists every episode)")
     if len(track.stamps) == 1 and len(rec.scans) - first_i > 1:
         warnings.append(f"1 filter update over {len(rec.scans) - first_i} scans: the odometry "
                         f"({rec.odometry.frame_id}) never moved the robot by update_min_d {lc.update_min_d} m or "

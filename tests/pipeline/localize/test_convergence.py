@@ -77,11 +77,13 @@ def test_a_claim_is_withdrawn_when_the_cloud_later_splits() -> None:
     assert monitor.converged_ns is None
 
 
-def _fed(fits: list[float]) -> list[ConvergenceMonitor]:
-    """A tight cloud moving at 0.5 m/s at 10 Hz whose scans fit the map as ``fits`` says, one per update."""
+def _fed(fits: list[float], through: list[float] | None = None) -> list[ConvergenceMonitor]:
+    """A tight cloud moving at 0.5 m/s at 10 Hz whose scans fit the map as ``fits`` and ``through`` (the share of
+    beams through its walls; none by default) say, one per update."""
     tight, monitor, states = cloud([(1.0, 2.0, 0.3)], [1.0]), ConvergenceMonitor(), []
     for k, fit in enumerate(fits):
-        monitor = monitor.update(k * 100_000_000, (0.05 * k, 0.0, 0.0), tight, CONFIG, fit)
+        monitor = monitor.update(k * 100_000_000, (0.05 * k, 0.0, 0.0), tight, CONFIG, fit,
+                                 0.0 if through is None else through[k])
         states.append(monitor)
     return states
 
@@ -136,3 +138,85 @@ def test_a_spread_cloud_is_never_lost_whatever_its_mean_fits() -> None:
     for k in range(60):
         monitor = monitor.update(k * 100_000_000, (0.05 * k, 0.0, 0.0), wide, CONFIG, 0.0)
         assert not monitor.lost and monitor.converged_ns is None
+
+
+def test_a_pose_whose_beams_pass_through_walls_is_lost_though_its_hits_fit() -> None:
+    """Criterion 4's second half: hits near walls (0.9) but 30 % of the beams through them for lost_after_s."""
+    states = _fed([0.9] * 52, [0.0] * 31 + [0.3] * 21)
+    assert states[30].converged_ns == 2_000_000_000 and not any(s.lost for s in states[:51])
+    assert states[51].lost and states[51].converged_ns is None
+    assert not any(s.lost for s in _fed([0.9] * 52, [0.0] * 31 + [0.15] * 21))  # under lost_max_see_through
+
+
+def _doorway_corridor() -> np.ndarray:
+    """An outside tester's office: a 2 m wide corridor along x ∈ [0, 24] with a 1 m doorway every 4 m on both
+    walls, each into a 1 m deep alcove; away from the ends every 4 m looks alike."""
+    from mcl_sim import polyline
+
+    walls = [polyline((0.0, -1.0), (0.0, 1.0)), polyline((24.0, -1.0), (24.0, 1.0))]
+    for side in (-1.0, 1.0):
+        x = 0.0
+        for k in range(6):
+            c = 2.0 + 4.0 * k  # a doorway's centre
+            walls.append(polyline((x, side), (c - 0.5, side)))
+            walls.append(polyline((c - 0.5, side), (c - 0.5, 2 * side), (c + 0.5, 2 * side), (c + 0.5, side)))
+            x = c + 0.5
+        walls.append(polyline((x, side), (24.0, side)))
+    return np.concatenate(walls)
+
+
+def test_beams_of_a_pose_shifted_along_a_doorway_corridor_pass_through_its_walls() -> None:
+    """An outside tester's kidnap: 2 m along a corridor with doorways every 4 m, the hits still lie on walls
+    (the hit test's fit stays above 0.5) but the beams into the alcoves now cross the walls between them."""
+    from mcl_sim import LASER_X, rasterize, scan_ranges
+
+    from doorbatch.pipeline.localize.convergence import scan_fit, see_through_share
+    from doorbatch.pipeline.localize.likelihood_field import build_distance_field
+
+    segments = _doorway_corridor()
+    occ = rasterize(segments, (0.0, 24.0), (-2.0, 2.0))
+    field = build_distance_field(occ, 2.0)
+    truth = np.array([10.0, 0.0, 0.0])  # in a doorway pair (elsewhere in the 4 m period 0.14-0.23 pass through)
+    r, a = scan_ranges(segments, truth, n_beams=360, noise_m=0.01, rng=np.random.default_rng(0))
+    ok = np.isfinite(r)
+    hits = np.stack([LASER_X + r[ok] * np.cos(a[ok]), r[ok] * np.sin(a[ok])], axis=1)  # base_link
+    origin = np.array([LASER_X, 0.0])
+
+    def measures(pose: np.ndarray) -> tuple[float, float]:
+        return (scan_fit(field, pose, hits, 0.3), see_through_share(occ, pose, origin, hits, 0.3, 65, 180))
+
+    fit, through = measures(truth)
+    assert fit > 0.95 and through < 0.05
+    fit, through = measures(truth + np.array([2.0, 0.0, 0.0]))
+    assert fit > 0.5 and through > 0.2  # the hits alone would not tell; the beams do
+    fit, through = measures(truth + np.array([4.0, 0.0, 0.0]))  # a whole doorway spacing: no beam can tell
+    assert through < 0.05
+
+
+def test_see_through_share_counts_beams_that_cross_an_occupied_cell_before_their_hit() -> None:
+    from doorbatch.maps import OccupancyMap
+    from doorbatch.pipeline.localize.convergence import see_through_share
+
+    occ = np.zeros((40, 80), dtype=np.int8)
+    occ[:, 20] = 100  # a wall at x = 1.0-1.05 m
+    occ[:, 60] = -1  # an unknown column at x = 3 m holds nothing
+    grid = OccupancyMap(occ, 0.05, 0.0, 0.0)
+    ys = np.linspace(-0.5, 0.5, 10)
+    beyond = np.stack([np.full(10, 2.0), ys], 1)  # hits 1 m behind the wall
+    at_wall = np.stack([np.full(10, 1.1), ys], 1)  # within the margin past the wall
+    pose = (0.0, 1.0, 0.0)
+    assert see_through_share(grid, pose, (0.0, 0.0), np.concatenate([beyond, at_wall]), 0.3, 65, 180) == 0.5
+    assert see_through_share(grid, (2.0, 1.0, 0.0), (0.0, 0.0), beyond, 0.3, 65, 180) == 0.0  # past the wall
+    assert see_through_share(grid, pose, (0.0, 0.0), beyond, 0.3, 65, 4) == 1.0  # at most 4 beams cast
+    assert np.isnan(see_through_share(grid, pose, (0.0, 0.0), beyond[:3], 0.3, 65, 180))  # too few hits
+
+
+def test_the_lost_warning_names_the_criterion_and_what_a_poor_fit_without_beams_through_walls_means() -> None:
+    from doorbatch.pipeline.localize.run import lost_note
+
+    through = lost_note(3.0, [(k, 0.9, 0.3) for k in range(20)], CONFIG)
+    assert through.startswith("lost at 3.0 s: over 20% of the scans' beams passed through the map's walls")
+    short = lost_note(3.0, [(k, 0.2, 0.01) for k in range(20)], CONFIG)
+    assert short.startswith("lost at 3.0 s: under 50% of the scans' hits") and "or the map lacks what it sees" in short
+    both = lost_note(3.0, [(k, 0.2, 0.4) for k in range(20)], CONFIG)  # hits off walls, beams through them
+    assert both.startswith("lost at 3.0 s: under 50%") and "map lacks" not in both

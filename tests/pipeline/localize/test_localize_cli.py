@@ -88,10 +88,12 @@ def test_a_global_run_that_is_lost_claims_nothing(sample_map: Path, tmp_path: Pa
                  "--method", "mcl", "--init", "global", *(a for s in sets for a in ("--set", s)), "-q"]) == 0
     manifest = json.loads((run / "manifest.json").read_text())
     lost = [w for w in manifest["warnings"] if w.startswith("lost at ")]
-    times = np.array([float(w.split()[2]) for w in lost])
+    times = np.array(manifest["extra"]["lost_after_s"])
     assert len(times) >= 1 and times[0] < 15.0 and np.all(np.diff(times) >= 5.0)
-    assert all(w.endswith("spread over the free space again") == relocalize for w in lost)
-    assert relocalize or len(lost) == 1  # one episode: the fit never comes back
+    assert len(lost) == 1 and lost[0].endswith("spread over the free space again") == relocalize
+    assert float(lost[0].split()[2]) == pytest.approx(times[0], abs=0.05)
+    again = [w for w in manifest["warnings"] if w.startswith("lost again at ")]
+    assert len(again) == (len(times) > 1) and (relocalize or len(times) == 1)  # without: the fit never comes back
     assert manifest["extra"]["converged_after_s"] is None
 
 
@@ -121,10 +123,13 @@ def test_a_tracked_run_that_is_lost_says_so_once_and_goes_on(sample_map: Path, t
     monkeypatch.setattr(run_module, "scan_fit", lambda *_: next(fits))
     run = tmp_path / "lost"
     assert main(["localize", str(SAMPLE_LOGS / "loc_open.mcap"), "--map", str(sample_map), "-o", str(run),
-                 "--method", "mcl", "-q"]) == 0
+                 "--method", "mcl", "--set", "localize.relocalize_when_lost=true", "-q"]) == 0
     manifest = json.loads((run / "manifest.json").read_text())
     lost = [w for w in manifest["warnings"] if w.startswith("lost at ")]
     assert len(lost) == 1 and "spread" not in lost[0]
+    assert "beams end short of them" in lost[0]  # only the (patched) hits fit poorly: no beam passes a wall
+    assert any(w.startswith("localize.relocalize_when_lost spreads a lost cloud again only with --init global")
+               for w in manifest["warnings"])  # set, and a tracked run cannot use it
     assert manifest["extra"]["converged_after_s"] == 0.0
     assert _errors(run, SAMPLE_LOGS / "loc_open.mcap").mean() < 0.1  # nothing else changed
 
