@@ -94,7 +94,8 @@ def door_markers(stamp: int, frame: str, doors: DoorSet, angles: np.ndarray) -> 
 def run_annotations(result: LocalizationResult, occ: OccupancyMap, doors: DoorSet, map_frame: str = "map",
                     odom_frame: str = "odom", path_every: int = 10) -> Iterator[Annotation]:
     """The /doorbatch/* messages of a run in time order: the map once, then per update the pose with its
-    covariance, the decimated particles, the doors at their estimated angles, map→odom, and every
+    covariance, the decimated particles, the doors at their estimated angles (an MCL run's without leaves: it
+    estimates none), map→odom, and every
     ``path_every`` updates (and at the end) the path so far."""
     if not len(result):
         return
@@ -112,9 +113,10 @@ def run_annotations(result: LocalizationResult, occ: OccupancyMap, doors: DoorSe
         p = result.particles[i]
         yield Annotation("/doorbatch/particles", "geometry_msgs/msg/PoseArray", t,
                          rm.pose_array(t, map_frame, p[:, 0], p[:, 1], p[:, 2]))
-        if len(doors):
+        if len(doors):  # MCL estimates no door: hinges and opening ranges only
+            angles = result.door_mean[i] if result.door_mean.shape[1] == len(doors) else np.full(len(doors), np.nan)
             yield Annotation("/doorbatch/doors", "visualization_msgs/msg/MarkerArray", t,
-                             door_markers(t, map_frame, doors, result.door_mean[i]))
+                             door_markers(t, map_frame, doors, angles))
         yield map_to_odom_tf(t, result.pose[i], result.odom[i], map_frame, odom_frame)
         if i % path_every == path_every - 1 or i == len(result) - 1:
             yield Annotation("/doorbatch/path", "nav_msgs/msg/Path", t,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -76,3 +77,21 @@ def test_a_long_path_is_thinned_evenly_keeping_its_first_and_latest_pose() -> No
     assert gaps.min() > 0 and gaps.max() - gaps.min() <= 0.1 + 1e-9  # evenly spaced, within one pose
     short = path_so_far(int(stamps[9]), "map", stamps[:10], poses[:10], max_poses=500)
     assert len(short.poses) == 10  # type: ignore[attr-defined]
+
+
+def test_an_mcl_run_shows_the_maps_doors_without_leaves(tmp_path: Path) -> None:
+    """DESIGN's annotated MCAP has /doorbatch/doors for every run; MCL estimates no door angle, so its markers
+    are the map's hinges and opening ranges alone."""
+    log = write_messages(tmp_path / "in.bag", sample_messages(5), fmt="bag")
+    occ = OccupancyMap(np.zeros((20, 30), dtype=np.int8), 0.1, -1.0, -1.0)
+    doors = DoorSet(np.array([[1.0, 1.0], [2.0, 0.0]]), np.array([0.9, 0.8]), np.zeros(2), np.zeros(2),
+                    np.full(2, 1.5))
+    out = tmp_path / "annotated.mcap"
+    mcl = replace(_result(d=0), method="mcl")
+    write_annotated_mcap(log, out, run_annotations(mcl, occ, doors, path_every=2))
+    with AnyReader([out]) as reader:
+        arrays = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages()
+                  if c.topic == "/doorbatch/doors"]
+    assert len(arrays) == 5
+    spaces = [m.ns for m in arrays[0].markers]  # type: ignore[attr-defined]
+    assert sorted(spaces) == ["hinges", "hinges", "ranges", "ranges"]

@@ -610,14 +610,13 @@ def run_localize(log_path: Path, map_path: Path, out: Path, config: DoorbatchCon
         result = localize(log_path, lmap, config, method, parse_init(init), progress)
     with timer("write"):
         files = write_run_tables(out, result)
-        doors = lmap.doors if method == "rbpf" else DoorSet.empty()
         odom_frame = result.odom_frame_id or config.frames.odom
         if odom_frame != config.frames.odom:
             result.warnings.append(f"frames.odom is {config.frames.odom!r} but the log's odometry is in "
                                    f"{odom_frame!r}: annotated.mcap's map→odom transform names {odom_frame!r}, the "
                                    "frame the robot hangs from in the log's own TF tree")
         write_annotated_mcap(log_path, out / "annotated.mcap",
-                             on_log_clock(run_annotations(result, lmap.occupancy, doors, config.frames.map,
+                             on_log_clock(run_annotations(result, lmap.occupancy, lmap.doors, config.frames.map,
                                                           odom_frame), result.log_clock),
                              config)
     for w in result.warnings:
