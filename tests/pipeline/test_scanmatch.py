@@ -283,3 +283,53 @@ def test_without_odometry_scans_are_matched_at_constant_velocity() -> None:
     assert ate_rmse(align_first_pose(standing, ref), ref) > 1.0
     with pytest.raises(ValueError, match="stamps"):
         scan_match_trajectory(scans, None, config.scanmatch)
+
+
+def _laps(n_laps: int) -> np.ndarray:
+    """Up the corridor 20 m and back, ``n_laps`` times (0.1 m per scan)."""
+    up = corridor_truth(200)
+    down = up[::-1].copy()
+    down[:, 2] = wrap_angle(down[:, 2] + np.pi)
+    return np.concatenate([up, down] * n_laps)
+
+
+def _local_keyframes(truth: np.ndarray, cfg: ScanMatchConfig, rng: np.random.Generator) -> list[int]:
+    """The submap's local keyframe count at the far end of each lap, keyframes placed at the true poses."""
+    from doorbatch.pipeline.poses.scanmatch import add_keyframe
+
+    segments = corridor_segments()
+    submap = start_submap(simulate_scan(segments, truth[0], rng), truth[0], cfg)
+    counts = []
+    for k in range(1, truth.shape[0]):
+        pose = truth[k]
+        last = submap.last_keyframe_pose
+        if np.hypot(*(pose[:2] - last[:2])) >= cfg.keyframe_min_d_m or abs(wrap_angle(pose[2] - last[2])) >= np.deg2rad(
+                cfg.keyframe_min_a_deg):
+            submap = add_keyframe(submap, simulate_scan(segments, pose, rng), pose, cfg)
+        if k % 400 == 199:  # the far end, heading up
+            counts.append(len(submap.local_profiles))
+    return counts
+
+
+def test_repeated_passes_leave_the_submap_the_size_of_the_first() -> None:
+    """A 22.5-minute log of 14 passes had 280 keyframes in its submap, every one matched and voted over for each
+    scan, and its scan matching had not finished in 9 minutes. A keyframe that stands within submap_revisit_m and
+    _deg of an older one stays out: the third lap holds what the first way up and down did; with submap_revisit_m = 0
+    each lap adds its keyframes."""
+    cfg = ScanMatchConfig()
+    thinned = _local_keyframes(_laps(3), cfg, np.random.default_rng(5))
+    every = _local_keyframes(_laps(3), cfg.model_copy(update={"submap_revisit_m": 0.0}), np.random.default_rng(5))
+    assert thinned[0] == every[0]  # the first lap has no revisit
+    assert thinned[2] == thinned[1]  # the third holds what the first way up and down made (34 + 44)
+    assert every[2] > every[1] + 0.8 * (every[1] - every[0])  # each lap adds its 68-odd keyframes
+
+
+def test_scan_matching_over_repeated_passes_stays_on_the_truth() -> None:
+    """Two laps with drifting odometry: the revisits matched against the first lap's keyframes alone."""
+    rng = np.random.default_rng(6)
+    truth = _laps(2)
+    scans = [simulate_scan(corridor_segments(), pose, rng) for pose in truth]
+    odom = drifting_odometry(truth, rng)
+    result = scan_match_trajectory(scans, odom, ScanMatchConfig())
+    assert ate_rmse_m(odom, truth) > 0.5
+    assert ate_rmse_m(result.poses, truth) < 0.05 and not result.fallback.any()

@@ -33,7 +33,11 @@ The submap is a local piece of the map built so far: the line samples (:func:`.p
 consecutive hits of one surface, sampled densely, with normals) of every keyframe whose pose lies within
 ``submap_radius_m`` of the newest keyframe, together with the last ``submap_keyframes`` keyframes, in the map
 frame, one sample per voxel (the older keyframe's where they overlap, so that a revisited place is matched
-against how it was first mapped and the drift accumulated since is taken out). A scan becomes a keyframe when it
+against how it was first mapped and the drift accumulated since is taken out). A keyframe that, when made, stood
+within ``submap_revisit_m`` and ``submap_revisit_deg`` of an older one (older than the last ``submap_keyframes``,
+itself no revisit) stays out of it while old keyframes are matched: its samples mostly lose their voxels to the
+older keyframe's anyway, and without this every pass over a place added its keyframes, so that the cost per scan
+grew with the passes (a 22.5-minute log of 14 passes: 280 local keyframes). A scan becomes a keyframe when it
 moved at least ``keyframe_min_d_m`` or turned ``keyframe_min_a_deg`` since the last one; the submap's KD-tree
 and likelihood grid are rebuilt only then, so the cost per scan stays bounded.
 
@@ -176,19 +180,20 @@ class Keyframe:
     in_map: ScanLines  # ``lines`` placed at ``pose``
     reach_m: float  # how far the farthest placed sample lies from the pose on either map axis (0 without samples)
     profile: RangeProfile  # the scan's hits as beams: where it saw free space
+    revisit: bool  # an older keyframe, not itself a revisit, stood within the revisit radius and angle (at creation)
 
     @classmethod
     def at(cls, pose: npt.ArrayLike, lines: ScanLines, scan: FloatArray, path_m: float,
-           profile: RangeProfile) -> Keyframe:
+           profile: RangeProfile, revisit: bool = False) -> Keyframe:
         """The keyframe at ``pose``, its samples placed in the map frame."""
         p = np.asarray(pose, dtype=np.float64)
         in_map = placed(lines, p)
         reach = float(np.abs(in_map.points - p[:2]).max()) if in_map.points.shape[0] else 0.0
-        return cls(p, lines, scan, path_m, in_map, reach, profile)
+        return cls(p, lines, scan, path_m, in_map, reach, profile, revisit)
 
     def moved(self, pose: npt.ArrayLike) -> Keyframe:
         """The keyframe at another pose (after a pose-graph optimization)."""
-        return Keyframe.at(pose, self.lines, self.scan, self.path_m, self.profile)
+        return Keyframe.at(pose, self.lines, self.scan, self.path_m, self.profile, self.revisit)
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -515,6 +520,8 @@ def _build_submap(keyframes: tuple[Keyframe, ...], cfg: ScanMatchConfig, *, old:
     near = np.hypot(*(poses[:, :2] - newest.pose[:2]).T) <= cfg.submap_radius_m
     if not old:
         near &= newest.path_m - np.array([kf.path_m for kf in keyframes]) < cfg.loop_min_travel_m
+    else:  # old ones usable: a revisit adds little to the older keyframe it stands by (module docstring)
+        near &= ~np.array([kf.revisit for kf in keyframes])
     near[-cfg.submap_keyframes :] = True
     local = [keyframes[i] for i in np.flatnonzero(near)]
     reach = newest.reach_m + cfg.correlative_window_max_m if newest.lines.points.shape[0] else math.inf
@@ -524,15 +531,28 @@ def _build_submap(keyframes: tuple[Keyframe, ...], cfg: ScanMatchConfig, *, old:
     return Submap(keyframes, line_reference(pts, nrm), grid, tuple(kf.profile for kf in local), poses[near])
 
 
+def is_revisit(keyframes: Sequence[Keyframe], pose: npt.ArrayLike, cfg: ScanMatchConfig) -> bool:
+    """Whether a new keyframe at ``pose`` revisits a place: some keyframe older than the last
+    ``submap_keyframes``, not itself a revisit, stands within ``submap_revisit_m`` and ``submap_revisit_deg``."""
+    older = keyframes[: max(len(keyframes) - cfg.submap_keyframes, 0)]
+    if not older or cfg.submap_revisit_m <= 0.0:
+        return False
+    poses = np.stack([kf.pose for kf in older])
+    p = np.asarray(pose, dtype=np.float64)
+    close = (np.hypot(*(poses[:, :2] - p[:2]).T) <= cfg.submap_revisit_m) & (
+        np.abs(wrap_angle(poses[:, 2] - p[2])) <= math.radians(cfg.submap_revisit_deg))
+    return bool(np.any(close & ~np.array([kf.revisit for kf in older])))
+
+
 def _keyframe(scan_xy: FloatArray, pose: npt.ArrayLike, path_m: float, cfg: ScanMatchConfig,
-              downsampled: FloatArray | None = None) -> Keyframe:
+              downsampled: FloatArray | None = None, revisit: bool = False) -> Keyframe:
     """The scan's line samples and normals moved into the map frame at ``pose``; ``downsampled``: the scan's
     voxel_downsample when the caller has it."""
     lines = scan_lines(scan_xy, spacing_m=cfg.submap_voxel_m, max_incidence_deg=cfg.line_max_incidence_deg,
                        range_sigma_m=cfg.range_sigma_m, normal_radius_m=cfg.normal_radius_m,
                        max_missing_beams=cfg.line_max_missing_beams)
     scan = voxel_downsample(scan_xy, cfg.scan_voxel_m) if downsampled is None else downsampled
-    return Keyframe.at(pose, lines, scan, path_m, RangeProfile.of_scan(scan_xy))
+    return Keyframe.at(pose, lines, scan, path_m, RangeProfile.of_scan(scan_xy), revisit)
 
 
 def start_submap(scan_xy: FloatArray, pose: npt.ArrayLike, cfg: ScanMatchConfig) -> Submap:
@@ -546,7 +566,9 @@ def add_keyframe(submap: Submap, scan_xy: FloatArray, pose: npt.ArrayLike, cfg: 
     the scan's voxel_downsample when the caller has it)."""
     last = submap.keyframes[-1]
     path_m = last.path_m + float(np.hypot(*(np.asarray(pose, dtype=np.float64)[:2] - last.pose[:2])))
-    return _build_submap((*submap.keyframes, _keyframe(scan_xy, pose, path_m, cfg, downsampled)), cfg, old=old)
+    revisit = is_revisit(submap.keyframes, pose, cfg)
+    return _build_submap((*submap.keyframes, _keyframe(scan_xy, pose, path_m, cfg, downsampled, revisit)), cfg,
+                         old=old)
 
 
 def match_scan(submap: Submap, scan_xy: FloatArray, prior: FloatArray, prior_covariance: FloatArray,
