@@ -36,6 +36,11 @@ TUM_SUFFIXES = (".tum", ".txt", ".csv")  # .csv: the TUM columns comma-separated
 FloatArray = npt.NDArray[np.float64]
 
 
+# What a map and a run directory hold for the next stage (hashed as inputs by evaluate and `doorbatch run`).
+MAP_FILES = ("map.yaml", "map.pgm", "doors.parquet")
+RUN_FILES = ("trajectory.parquet", "door_states.parquet", "trajectory.tum")
+
+
 def is_run_dir(path: Path) -> bool:
     """Whether ``path`` is a localization run directory (has trajectory.parquet)."""
     return (Path(path) / "trajectory.parquet").is_file()

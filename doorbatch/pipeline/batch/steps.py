@@ -21,13 +21,11 @@ from doorbatch.errors import DoorbatchError
 from doorbatch.io.dataset import Dataset, Site
 from doorbatch.io.fingerprint_cache import FingerprintCache
 from doorbatch.io.manifest import utc_now_iso
+from doorbatch.io.run_reader import MAP_FILES, RUN_FILES
 from doorbatch.io.sim_truth import output_paths
 from doorbatch.io.staged_dir import staged_dir
 from doorbatch.pipeline.batch.freshness import StepKey, is_up_to_date, recorded_key, stamp_manifest, step_key
 from doorbatch.pipeline.batch.plan import METRICS_DIR, TRAJECTORIES_DIR, Step, StepKind, map_dir
-
-MAP_FILES = ("map.yaml", "map.pgm", "doors.parquet")
-RUN_FILES = ("trajectory.parquet", "door_states.parquet", "trajectory.tum")
 
 
 class StepStatus(StrEnum):

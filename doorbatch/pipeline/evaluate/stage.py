@@ -23,6 +23,8 @@ from doorbatch.errors import InputDataError, UsageError
 from doorbatch.io.manifest import Manifest, StageTimer
 from doorbatch.io.report_writer import write_report
 from doorbatch.io.run_reader import (
+    MAP_FILES,
+    RUN_FILES,
     is_map_dir,
     is_run_dir,
     is_trajectory_file,
@@ -53,10 +55,12 @@ class _Input:
     topic: tuple[Path, str] | None = None
 
     @property
-    def file(self) -> Path:
-        """What the manifest hashes: the run's trajectory, the TUM file, the topic's log, the map's doors."""
-        return {"run": self.path / "trajectory.parquet", "map": self.path / "doors.parquet", "tum": self.path,
-                "topic": self.topic[0] if self.topic else self.path}[self.kind]
+    def files(self) -> list[Path]:
+        """What the manifest hashes: the run's tables, the map's files, the TUM file, the topic's log."""
+        if self.kind in ("run", "map"):
+            return [self.path / f for f in (RUN_FILES if self.kind == "run" else MAP_FILES)
+                    if (self.path / f).is_file()]
+        return [self.topic[0] if self.topic else self.path]
 
 
 def _classify(path: Path, reference: Path | None) -> _Input:
@@ -93,7 +97,7 @@ def evaluate_run_dirs(run_dirs: Sequence[Path], out_dir: Path, config: Doorbatch
                                 for d in run_dirs))
     items = [_classify(Path(d), reference) for d in unique]
     reference_file = reference if reference is None else (split_pose_topic_run(reference) or (reference,))[0]
-    manifest = Manifest.start(config.as_dict(), [*(i.file for i in items),
+    manifest = Manifest.start(config.as_dict(), [*(f for i in items for f in i.files),
                                                  *(p for p in (reference_file, truth) if p)], command="evaluate")
     if len(unique) < len(run_dirs):  # the same run twice would count twice in every mean
         manifest.warn(f"{len(run_dirs) - len(unique)} argument(s) named a run already given: each is evaluated once")

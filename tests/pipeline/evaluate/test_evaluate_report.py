@@ -291,6 +291,9 @@ def test_evaluate_cli_writes_the_report_directory(tmp_path: Path, capsys: pytest
     png = base64.b64decode(page.split("data:image/png;base64,")[1].split('"')[0])
     assert png.startswith(b"\x89PNG") and "src=\"error_along_x.png\"" not in page  # embedded, not linked
     assert (out / "error_along_x.png").read_bytes()[:4] == b"\x89PNG"
+    hashed = [Path(i["path"]).relative_to(tmp_path).as_posix() for i in Manifest.read(out / "manifest.json").inputs]
+    assert {"runs/mcl/trajectory.parquet", "runs/mcl/door_states.parquet", "runs/rbpf/door_states.parquet"} <= set(
+        hashed)  # door states are scored too
     assert "| loc.mcap | rbpf |" in (out / "report.md").read_text()
     again = tmp_path / "again"  # deterministic: the same inputs give the same bytes (reruns of doorbatch run)
     assert main(["evaluate", str(tmp_path / "runs" / "mcl"), str(tmp_path / "runs" / "rbpf"), "-o", str(again),
@@ -467,6 +470,8 @@ def test_door_maps_are_scored_against_the_mapping_truth(tmp_path: Path) -> None:
     assert got[("shifted", "door_precision")] == pytest.approx((n - 1) / n)
     assert got[("shifted", "door_recall")] == pytest.approx((n - 1) / n)
     assert got[("shifted", "door_length_error_mean")] == pytest.approx(0.05)
+    hashed = {Path(i["path"]).name for i in Manifest.read(out / "manifest.json").inputs}
+    assert {"map.yaml", "map.pgm", "doors.parquet"} <= hashed  # DESIGN: each input file with its hash
     assert main([*args[:-1], "--world", str(SAMPLE_LOGS / "map.truth.yaml")]) == 0  # the same truth, given
 
 
