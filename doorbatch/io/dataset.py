@@ -15,6 +15,7 @@ log fails its own steps, not the whole dataset).
 
 from __future__ import annotations
 
+import difflib
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -58,35 +59,54 @@ def log_name(path: Path) -> str:
         name = stem
 
 
+SITE_KEYS = ("mapping", "localization", "truth")
+
+
+def _layout_error(message: str, where: Path) -> ConfigError:
+    """dataset.yaml is the batch's configuration, as its ``config:`` block is: a layout that does not fit is a config
+    error (exit 2) naming the file."""
+    return ConfigError(f"{where}: {message}")
+
+
+def _closest(unknown: list[str], valid: tuple[str, ...]) -> str:
+    """", did you mean 'x'?" for the first unknown key that resembles a valid one, else ""."""
+    for key in unknown:
+        close = difflib.get_close_matches(str(key), valid, n=1, cutoff=0.6)
+        if close:
+            return f", did you mean {close[0]!r}?"
+    return ""
+
+
 def _paths(root: Path, site: str, key: str, value: Any, where: Path) -> tuple[Path, ...]:
     if value is None:
         return ()
     if isinstance(value, str):
         value = [value]
     if not isinstance(value, list) or not all(isinstance(v, str) and v for v in value):
-        raise InputDataError(f"sites.{site}.{key} must be a list of paths relative to the dataset", path=where)
+        raise _layout_error(f"sites.{site}.{key} must be a list of paths relative to the dataset", where)
     return tuple(root / v for v in value)
 
 
 def _site(root: Path, name: Any, entry: Any, where: Path) -> Site:
     if not isinstance(name, str) or not _SITE_NAME.match(name):
-        raise InputDataError(f"site name {name!r}: use letters, digits, '_', '-', '.' (not first)", path=where)
+        raise _layout_error(f"site name {name!r}: use letters, digits, '_', '-', '.' (not first)", where)
     if not isinstance(entry, dict):
-        raise InputDataError(f"sites.{name} must be a mapping with mapping/localization/truth", path=where)
-    unknown = sorted(set(entry) - {"mapping", "localization", "truth"})
+        raise _layout_error(f"sites.{name} must be a mapping with mapping/localization/truth", where)
+    unknown = sorted(set(entry) - set(SITE_KEYS))
     if unknown:
-        raise InputDataError(f"sites.{name}: unknown key(s) {unknown} (mapping, localization, truth)", path=where)
+        raise _layout_error(f"sites.{name}: unknown key(s) {unknown}{_closest(unknown, SITE_KEYS)} "
+                            "(mapping, localization, truth)", where)
     mapping = _paths(root, name, "mapping", entry.get("mapping"), where)
     if not mapping:
-        raise InputDataError(f"sites.{name}.mapping: at least one mapping log is needed", path=where)
+        raise _layout_error(f"sites.{name}.mapping: at least one mapping log is needed", where)
     localization = _paths(root, name, "localization", entry.get("localization"), where)
     names = [log_name(p) for p in localization]
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
-        raise InputDataError(f"sites.{name}.localization: two logs share the output name(s) {twice}", path=where)
+        raise _layout_error(f"sites.{name}.localization: two logs share the output name(s) {twice}", where)
     truth = entry.get("truth")
     if truth is not None and not (isinstance(truth, str) and truth):
-        raise InputDataError(f"sites.{name}.truth must be a path relative to the dataset", path=where)
+        raise _layout_error(f"sites.{name}.truth must be a path relative to the dataset", where)
     return Site(name, mapping, localization, root / truth if truth else None)
 
 
@@ -94,23 +114,23 @@ def read_dataset(root: Path) -> Dataset:
     """Read ``root/dataset.yaml``.
 
     Raises:
-        InputDataError: no dataset.yaml, bad YAML, or a layout that does not fit (names the key).
+        InputDataError: no dataset.yaml in ``root``.
+        ConfigError: bad YAML, or a layout that does not fit (names the key; the closest valid one for an unknown
+            key).
     """
     root = Path(root)
     where = root / DATASET_FILE
     if not where.is_file():
         raise InputDataError(f"no {DATASET_FILE} in the dataset folder", path=root)
-    try:
-        data = read_yaml_mapping(where)
-    except ConfigError as err:
-        raise InputDataError(str(err)) from err
+    data = read_yaml_mapping(where)  # bad YAML: a ConfigError naming the file
     unknown = sorted(set(data) - {"sites", "config"})
     if unknown:
-        raise InputDataError(f"unknown top-level key(s) {unknown} (sites, config)", path=where)
+        raise _layout_error(f"unknown top-level key(s) {unknown}{_closest(unknown, ('sites', 'config'))} "
+                            "(sites, config)", where)
     sites = data.get("sites")
     if not isinstance(sites, dict) or not sites:
-        raise InputDataError("'sites' must map at least one site name to its logs", path=where)
+        raise _layout_error("'sites' must map at least one site name to its logs", where)
     config = data.get("config") or {}
     if not isinstance(config, dict):
-        raise InputDataError("'config' must be a mapping of config sections", path=where)
+        raise _layout_error("'config' must be a mapping of config sections", where)
     return Dataset(root, tuple(_site(root, k, v, where) for k, v in sites.items()), config)

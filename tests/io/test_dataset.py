@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from doorbatch.errors import ExitCode, InputDataError
+from doorbatch.errors import ConfigError, ExitCode, InputDataError
 from doorbatch.io.dataset import log_name, read_dataset
 from tests.conftest import REPO
 
@@ -34,7 +34,7 @@ def test_log_name_drops_log_suffixes_only(name: str, expected: str) -> None:
 @pytest.mark.parametrize(("text", "message"), [
     ("sites: {}\n", "at least one site"),
     ("sites: {s: {mapping: []}}\n", "at least one mapping log"),
-    ("sites: {s: {mapping: [a.mcap], localisation: [b.mcap]}}\n", "localisation"),
+    ("sites: {s: {mapping: [a.mcap], localisation: [b.mcap]}}\n", "localisation.*did you mean 'localization'"),
     ("sites: {'a/b': {mapping: [a.mcap]}}\n", "site name"),
     ("sites: {'..': {mapping: [a.mcap]}}\n", "site name"),
     ("sites: {.hidden: {mapping: [a.mcap]}}\n", "site name"),
@@ -43,11 +43,13 @@ def test_log_name_drops_log_suffixes_only(name: str, expected: str) -> None:
     ("sites: {s: {mapping: [a.mcap]}}\nextra: 1\n", "unknown top-level"),
     ("sites: [\n", "not valid YAML"),
 ])
-def test_bad_layouts_are_bad_input_naming_the_problem(tmp_path: Path, text: str, message: str) -> None:
+def test_bad_layouts_are_config_errors_naming_the_file_and_problem(tmp_path: Path, text: str, message: str) -> None:
+    """dataset.yaml configures the batch, as its config: block does (a contracts audit found a bad key there exit 3
+    and one in config: exit 2): a config error, exit 2, naming the file."""
     (tmp_path / "dataset.yaml").write_text(text)
-    with pytest.raises(InputDataError, match=message) as err:
+    with pytest.raises(ConfigError, match=message) as err:
         read_dataset(tmp_path)
-    assert err.value.exit_code == ExitCode.BAD_INPUT
+    assert err.value.exit_code == ExitCode.USAGE and "dataset.yaml" in str(err.value)
 
 
 def test_a_folder_without_dataset_yaml_is_named(tmp_path: Path) -> None:

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from enum import StrEnum
 from pathlib import Path
 
-from doorbatch.errors import InputDataError
+from doorbatch.errors import ConfigError
 from doorbatch.io.dataset import DATASET_FILE, Dataset, Site, log_name
 from doorbatch.io.run_lock import LOCK_NAME
 from doorbatch.io.run_log import RUN_LOG
@@ -87,8 +87,8 @@ def plan_steps(dataset: Dataset, methods: list[str]) -> list[Step]:
     steps: list[Step] = []
     for site in dataset.sites:
         if site.name in OUT_ENTRIES:
-            raise InputDataError(f"site name {site.name!r} is taken by OUT/{site.name} of the batch itself; "
-                                 f"rename the site", path=dataset.root / DATASET_FILE)
+            raise ConfigError(f"{dataset.root / DATASET_FILE}: site name {site.name!r} is taken by OUT/{site.name} of "
+                              "the batch itself; rename the site")
         steps += _site_steps(site, methods)
     evaluations = tuple(s.id for s in steps if s.kind is StepKind.EVALUATE)
     steps.append(Step("report", StepKind.REPORT, REPORT_DIR, (), evaluations))

@@ -169,7 +169,7 @@ def run_dataset(dataset: Dataset, out: Path, config: DoorbatchConfig, execution:
     lists failed steps (the caller turns them into exit code 4).
 
     Raises:
-        InputDataError: a site named like one of OUT's own entries (``plan.OUT_ENTRIES``).
+        ConfigError: a site named like one of OUT's own entries (``plan.OUT_ENTRIES``).
         OutputLockedError: another live run holds ``out``.
         OptionalDependencyError: the Dask executor without the ``dask`` extra.
         KeyboardInterrupt: Ctrl-C or SIGTERM; staged folders are removed and completed steps stay.
@@ -205,7 +205,7 @@ def prepare_run(dataset_path: Path, config_file: Path | None, overrides: tuple[s
     ``launch_args``) < the dataset's ``config:`` < ``overrides``.
 
     Raises:
-        InputDataError: a bad dataset.yaml. ConfigError: a bad config.
+        ConfigError: a bad dataset.yaml or config.
     """
     from doorbatch.config import load_config
     from doorbatch.io.dataset import read_dataset

@@ -202,7 +202,7 @@ def test_a_site_named_like_the_batchs_own_outputs_is_refused_before_writing(tiny
     dataset.write_text(dataset.read_text().replace("corridor:", f"{name}:", 1))
     out = tmp_path / "out"
     code = main(["run", str(tiny), "-o", str(out), "-q"])
-    assert code == 3 and f"site name '{name}'" in capsys.readouterr().err
+    assert code == 2 and f"site name '{name}'" in capsys.readouterr().err
     assert not out.exists()
 
 
