@@ -915,6 +915,10 @@ class DoorPoseConfig(Section):
     # leaves are 0.6-1.25 m) is not one (a false box, or a line fitted to an obstacle); 0 and inf disable it.
     door_width_min_m: float = Field(0.5, ge=0.0)
     door_width_max_m: float = Field(1.4, gt=0.0)
+    # Added to every detection message's stamp (s): a detector that stamps its boxes when it publishes them, late by
+    # its latency, takes minus that latency (-0.1 for 100 ms), as io.scan_time_offset_s for scans. Nothing in the
+    # stamps tells a latency of whole camera periods (the boxes then carry the stamp of a later image).
+    detection_time_offset_s: float = 0.0
     # A detection message whose stamp is no image's takes the latest image stamp of its frame up to this much
     # before it (detectors that stamp on publishing); 0 disables.
     max_detection_latency_s: float = Field(0.5, ge=0.0)

@@ -107,7 +107,8 @@ def read_doorpose_inputs(path: Path, config: DoorbatchConfig, detector: ImageDet
         clock = scans_clock(scans, config.io.clock_mismatch_s)
         is_unset = unset_stamps([d.stamp_ns for d in detections])
         unset = int(is_unset.sum())
-        boxes += [replace(d, stamp_ns=clock.stamp_at(d.log_time_ns)) if u else d
+        offset_ns = round(config.doorpose.detection_time_offset_s * 1e9)  # a detector's known latency, taken out
+        boxes += [replace(d, stamp_ns=(clock.stamp_at(d.log_time_ns) if u else d.stamp_ns) + offset_ns)
                   for d, u in zip(detections, is_unset, strict=True)]
         frames, base_note = resolve_base_frame(tf, config.frames)
         odom, notes = odometry_poses(odom, tf, reader.roles.topic(Role.ODOMETRY) is not None, frames)
@@ -121,9 +122,13 @@ def read_doorpose_inputs(path: Path, config: DoorbatchConfig, detector: ImageDet
             boxes, note = _on_image_stamps(boxes, reader, config)
             warnings += [note] if note else []
     if info is None:
-        raise LogContentError("camera_info topic has no messages", path=path)
+        raise LogContentError("camera_info topic has no messages", path=path, topic=info_topic)
     if not scans:
         raise LogContentError("scan topic has no messages", path=path)
+    unknown = sorted({b.frame_id for b in boxes} - {info.frame_id} - tf.frames)
+    if unknown:  # with one camera the boxes are its; with several a wrong one may have been taken
+        warnings.append(f"the boxes name frame(s) {unknown}, which neither the CameraInfo ({info.frame_id!r}) nor TF "
+                        f"knows: taken as {info.frame_id!r}'s (set topics.camera_info if the log has another camera)")
     return DoorPoseInputs(str(path), tf, info, sorted(scans, key=lambda s: s.stamp_ns),
                           sorted(boxes, key=lambda d: d.stamp_ns), reference, odometry, warnings, frames.base_link,
                           clock)
@@ -223,5 +228,7 @@ def _on_image_stamps(boxes: list[Detections], reader: LogReader, config: Doorbat
         else:
             out.append(b)
     note = (f"{moved} of {len(boxes)} detection messages carry no image's stamp: given the stamp of the latest image "
-            f"before them (detections stamped on publishing?)") if moved else None
+            f"before them (detections stamped on publishing?); a detector slower than a camera period pairs its boxes "
+            f"with a later image that way, so give its latency: --set doorpose.detection_time_offset_s=-LATENCY"
+            ) if moved else None
     return out, note
