@@ -925,9 +925,10 @@ class DoorPoseConfig(Section):
     # ... and a box stamped this little before an image is that image's (two clocks that jitter; a box stamped
     # 5 ms early had taken the image before it, 150 ms older). Expert choice: well under any camera's period.
     max_detection_lead_s: float = Field(0.01, ge=0.0)
-    # The fusion intersects horizontal rays (paper 003 assumes a level camera): an optical axis tilted more than
-    # this from horizontal (or a CameraInfo frame that is not the optical one, z forward) gets a warning.
-    max_camera_tilt_deg: float = Field(5.0, gt=0.0, le=90.0)
+    # The fusion levels a tilted camera's rays (pipeline/doorpose/fusion.py); an optical axis tilted more than this
+    # from horizontal is more likely a CameraInfo frame that is not the optical one (a camera_link, x forward, whose
+    # z points up) and gets a warning. Expert choice: a manipulation robot's head camera looks 15-35° down.
+    max_camera_tilt_deg: float = Field(50.0, gt=0.0, le=90.0)
     # Goal pose: this far from the door centre along its normal, facing the door (Sec. IV-C: 0.5 m).
     goal_offset_m: float = Field(0.5, gt=0.0)
     # Association with --map: the nearest mapped doorway (closed-leaf midpoint) within this distance.

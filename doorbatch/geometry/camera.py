@@ -12,11 +12,12 @@ undistorted normalized point (x, y, 1) (OpenCV's ``undistortPoints``). ``plumb_b
 The *bearing* of a ray is its angle in the optical x–z plane, β = atan2(x, z): 0 on the optical axis,
 increasing to the right (with the pixel column). For a level camera that plane is horizontal, so bearings
 of pixels and of laser points (moved into the optical frame by TF) can be compared directly (paper 003,
-Sec. III-B).
+Sec. III-B); a tilted camera's rays and points are turned into its level frame first (:func:`level_rotation`).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import cv2
@@ -141,16 +142,39 @@ def pixel_rays(camera: PinholeCamera, pixels: npt.ArrayLike) -> FloatArray:
     return np.concatenate([xy, np.ones((xy.shape[0], 1))], axis=1)
 
 
-def column_bearings(camera: PinholeCamera, columns_px: npt.ArrayLike, row_px: float | None = None) -> FloatArray:
-    """Bearings β = atan2(x, z) (rad, positive right) of the rays through pixel columns at one image row.
+def level_rotation(camera_to_base: npt.ArrayLike) -> FloatArray:
+    """R (3×3) taking optical-frame vectors into the *level* camera frame: z the optical axis projected onto
+    base_link's floor plane, y down (−z of base_link), x = y × z (right); the identity for a level camera. There
+    pixel and laser bearings are horizontal whatever the camera's pitch and roll (paper 003 assumes a level camera;
+    a manipulation robot's looks down). Raises ValueError for an optical axis within 1° of vertical."""
+    rot = np.asarray(camera_to_base, dtype=np.float64)[:3, :3]
+    forward = np.array([rot[0, 2], rot[1, 2], 0.0])
+    norm = float(np.hypot(forward[0], forward[1]))
+    if norm < math.sin(math.radians(1.0)):
+        raise ValueError("the camera's optical axis is vertical: no horizontal bearing")
+    forward /= norm
+    down = np.array([0.0, 0.0, -1.0])
+    return np.asarray(np.stack([np.cross(down, forward), down, forward]) @ rot, dtype=np.float64)
 
-    ``row_px`` defaults to c_y, the horizon row of a level camera (paper 003 takes a constant row that
-    stands for the camera's mounting height); with distortion the bearing of a column depends on the row.
+
+def box_edge_bearings(camera: PinholeCamera, left_px: float, right_px: float, top_px: float, bottom_px: float,
+                      level: npt.ArrayLike | None = None, rows: int = 33) -> tuple[float, float]:
+    """Horizontal bearings (rad, positive right) of a box's left and right edges in the level frame (``level``,
+    :func:`level_rotation`; None: the camera is level).
+
+    A door edge is a vertical line in the world: every pixel of its image has one level bearing, and the box's edge
+    column touches that image where it reaches farthest out (the top or bottom end under a tilted camera, the
+    horizon row under barrel distortion, the ends under pincushion) and lies outside it elsewhere. So the edge's
+    bearing is the innermost of the column's, over ``rows`` rows from top to bottom and the horizon row c_y: the
+    largest on the left, the smallest on the right. A level undistorted camera gives every row the same.
     """
-    u = np.asarray(columns_px, dtype=np.float64).ravel()
-    v = camera.cy if row_px is None else float(row_px)
-    rays = pixel_rays(camera, np.stack([u, np.full_like(u, v)], axis=1))
-    return np.arctan2(rays[:, 0], rays[:, 2])
+    v = np.unique(np.clip(np.append(np.linspace(top_px, bottom_px, rows), camera.cy), top_px, bottom_px))
+    px = np.concatenate([np.stack([np.full_like(v, left_px), v], 1), np.stack([np.full_like(v, right_px), v], 1)])
+    rays = pixel_rays(camera, px)
+    if level is not None:
+        rays = rays @ np.asarray(level, dtype=np.float64).T
+    beta = np.arctan2(rays[:, 0], rays[:, 2])
+    return float(beta[: v.size].max()), float(beta[v.size:].min())
 
 
 def point_bearings(points_cam: npt.ArrayLike) -> FloatArray:

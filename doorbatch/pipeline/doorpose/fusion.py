@@ -1,10 +1,13 @@
 """Door pose from one door box and one laser scan (paper 003, Sec. III-B, Fig. 3).
 
-In the camera's horizontal plane (optical x right, z forward; the paper's 2D assumption, a level camera):
+In the camera's horizontal plane (x right, z forward; the paper's 2D assumption is a level camera, and a tilted
+one is levelled: its rays and the laser's points are turned into the level frame of
+:func:`~doorbatch.geometry.camera.level_rotation`):
 
 1. the highest-scoring door box whose left and right edges keep off the image border;
-2. bearings β_l, β_r of the rays through its left and right edge columns (intrinsics and distortion, at
-   the horizon row c_y: the paper's constant row for the camera's height);
+2. bearings β_l, β_r of its left and right edges (intrinsics and distortion): the innermost bearing of each edge
+   column (:func:`~doorbatch.geometry.camera.box_edge_bearings`; a level undistorted camera gives every row the
+   horizon row c_y's, the paper's constant row);
 3. door points: laser hits, moved into the camera frame by TF, with β_l ≤ atan2(x, z) ≤ β_r and z > 0;
 4. a line z = a + b·x through them (``naive``, ``lsq`` or ``ransac``, see :mod:`.line_fit`);
 5. door edges where the rays meet the line: t = a / (cos β − b·sin β), e = t·(sin β, cos β);
@@ -23,7 +26,7 @@ import numpy as np
 import numpy.typing as npt
 
 from doorbatch.config import DoorPoseConfig
-from doorbatch.geometry.camera import PinholeCamera, column_bearings
+from doorbatch.geometry.camera import PinholeCamera, box_edge_bearings
 from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.pipeline.doorpose.line_fit import DepthLine, LineFit, fit_line
 from doorbatch.records import Detection, class_name
@@ -117,23 +120,28 @@ def ray_line_intersection(bearing: float, line: DepthLine) -> FloatArray | None:
 
 
 def estimate_door(camera: PinholeCamera, detections: Sequence[Detection], points_cam: FloatArray,
-                  config: DoorPoseConfig, rng: np.random.Generator, fit: LineFit | None = None) -> CameraDoor | None:
-    """One door estimate from one image's boxes and one scan's points in the camera frame (module docstring);
-    None when no door box is usable, too few points fall between the rays, the rays miss the line, or the
-    width is not a door's."""
+                  config: DoorPoseConfig, rng: np.random.Generator, fit: LineFit | None = None,
+                  level: FloatArray | None = None) -> CameraDoor | None:
+    """One door estimate from one image's boxes and one scan's points in the camera frame (module docstring), in
+    the level frame ``level`` turns the camera's into (:func:`~doorbatch.geometry.camera.level_rotation`; None: the
+    camera is level); None when no door box is usable, too few points fall between the rays, the rays miss the
+    line, or the width is not a door's."""
     usable = usable_detections(detections, config)
     box = door_box(usable, camera.width, config)
     if box is None:
         return None
-    beta_l, beta_r = column_bearings(camera, box_edges_px(box))
-    pts = door_points(points_cam, float(beta_l), float(beta_r))
+    u0, u1 = box_edges_px(box)
+    beta_l, beta_r = box_edge_bearings(camera, u0, u1, box.center_y - box.size_y / 2, box.center_y + box.size_y / 2,
+                                       level)
+    points = points_cam if level is None else points_cam @ np.asarray(level, dtype=np.float64).T
+    pts = door_points(points, beta_l, beta_r)
     if pts.shape[0] < config.min_door_points:
         return None
     method = LineFit(config.fit) if fit is None else fit
     line = fit_line(pts, method, config.ransac_max_trials, config.ransac_residual_m, rng)
     if line is None:
         return None
-    left, right = ray_line_intersection(float(beta_l), line), ray_line_intersection(float(beta_r), line)
+    left, right = ray_line_intersection(beta_l, line), ray_line_intersection(beta_r, line)
     if left is None or right is None:
         return None
     center = (left + right) / 2
@@ -160,16 +168,20 @@ class PlanarDoor:
     right: FloatArray  # (2,)
 
 
-def camera_plane_to_base(camera_to_base: FloatArray) -> tuple[FloatArray, FloatArray]:
+def camera_plane_to_base(camera_to_base: FloatArray, level: FloatArray | None = None
+                         ) -> tuple[FloatArray, FloatArray]:
     """(origin (2,), 2×2 matrix) taking camera-plane (x, z) to base_link (x, y): p = o + [R_x | R_z]·(x, z),
-    with R_x, R_z the optical x and z axes in base_link projected to the floor (level camera)."""
-    rot = camera_to_base[:3, :3]
+    with R_x, R_z the x and z axes of the level frame (``level`` turns optical vectors into it; None: the optical
+    frame, a level camera) in base_link, projected to the floor."""
+    rot = camera_to_base[:3, :3] if level is None else camera_to_base[:3, :3] @ np.asarray(level).T
     return camera_to_base[:2, 3].copy(), np.stack([rot[:2, 0], rot[:2, 2]], axis=1)
 
 
-def to_planar(door: CameraDoor, camera_to_base: FloatArray, robot_pose: FloatArray | None = None) -> PlanarDoor:
-    """The door in base_link (from the 4×4 optical→base_link transform), or in the robot pose's frame."""
-    origin, mat = camera_plane_to_base(camera_to_base)
+def to_planar(door: CameraDoor, camera_to_base: FloatArray, robot_pose: FloatArray | None = None,
+              level: FloatArray | None = None) -> PlanarDoor:
+    """The door in base_link (from the 4×4 optical→base_link transform and the level frame the door was estimated
+    in, as :func:`estimate_door` took it), or in the robot pose's frame."""
+    origin, mat = camera_plane_to_base(camera_to_base, level)
     pts = np.stack([door.center_xz, door.left_xz, door.right_xz, door.goal_xz]) @ mat.T + origin
     n = mat @ door.normal_xz
     yaw = float(np.arctan2(n[1], n[0]))

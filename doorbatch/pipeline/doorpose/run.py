@@ -23,7 +23,7 @@ import numpy.typing as npt
 
 from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import TransformError
-from doorbatch.geometry.camera import camera_from_info, scan_in_camera
+from doorbatch.geometry.camera import camera_from_info, level_rotation, scan_in_camera
 from doorbatch.geometry.rotations import invert_transform
 from doorbatch.geometry.se2 import interpolate_poses, relative, rotation_matrix
 from doorbatch.io.doorpose_inputs import DoorPoseInputs
@@ -165,7 +165,12 @@ def estimate_door_poses(inputs: DoorPoseInputs, config: DoorbatchConfig, doors: 
             continue
         points, seen_ns = scan_at_image(points, cam_to_base, inputs.odometry or inputs.reference, scan.stamp_ns,
                                         boxes.stamp_ns)
-        door = estimate_door(camera, boxes.detections, points, dc, rng, method)
+        try:
+            level = level_rotation(cam_to_base)
+        except ValueError:
+            warnings.append(f"image at {boxes.stamp_ns / 1e9:.3f} s skipped: the camera looks straight up or down")
+            continue
+        door = estimate_door(camera, boxes.detections, points, dc, rng, method, level)
         if door is None:
             continue
         pose = None
@@ -174,7 +179,7 @@ def estimate_door_poses(inputs: DoorPoseInputs, config: DoorbatchConfig, doors: 
             if not valid[0]:
                 continue
             pose = poses[0]
-        planar = to_planar(door, cam_to_base, pose)
+        planar = to_planar(door, cam_to_base, pose, level)
         match = associate(planar.left, planar.right, doors, dc.association_max_distance_m) if doors else None
         out.append(DoorPoseEstimate(boxes.stamp_ns, scan.stamp_ns, -1 if match is None else match.door_id,
                                     float("nan") if match is None else match.angle, planar.center, planar.yaw,
@@ -185,8 +190,8 @@ def estimate_door_poses(inputs: DoorPoseInputs, config: DoorbatchConfig, doors: 
     tilt = camera_tilt_deg(inputs, inputs.base_link, camera.frame_id)
     if tilt is not None and abs(tilt) > dc.max_camera_tilt_deg:
         warnings.append(f"the camera's optical axis (z of frame {camera.frame_id!r}) points {abs(tilt):.1f} deg "
-                        f"{'above' if tilt > 0 else 'below'} the horizontal: the fusion assumes a level camera, "
-                        f"so door poses are off; is {camera.frame_id!r} the optical frame (z forward)?")
+                        f"{'above' if tilt > 0 else 'below'} the horizontal: is {camera.frame_id!r} the optical "
+                        "frame (z forward)? A camera_link (x forward) in its place turns every ray")
     if door_scores and max(door_scores) < dc.confidence_threshold:
         warnings.append(f"all {len(door_scores)} boxes of class {door_class!r} score below "
                         f"doorpose.confidence_threshold {dc.confidence_threshold} (best {max(door_scores):.3f})")
