@@ -87,10 +87,15 @@ class OccupancyMap:
             (..., 2) int64 indices ``[i, j]`` so that ``occupancy[ij[..., 0], ij[..., 1]]`` is the cell;
             points outside the grid give indices outside it (see :meth:`contains`).
         """
+        return np.floor(self.world_to_grid(xy_m)).astype(np.int64)
+
+    def world_to_grid(self, xy_m: npt.ArrayLike, direction: bool = False) -> FloatArray:
+        """World points (or, with ``direction``, world vectors: rotated only) in fractional cell units ``[i, j]``
+        (row, column; cell (i, j) spans [i, i + 1) × [j, j + 1)), so that :meth:`world_to_cell` is their floor."""
         xy = np.asarray(xy_m, dtype=np.float64)
-        local = (xy - (self.origin_x_m, self.origin_y_m)) @ self._rotation()  # R^T · (p − o)
-        ji = np.floor(local / self.resolution_m).astype(np.int64)
-        return ji[..., ::-1]
+        offset = (0.0, 0.0) if direction else (self.origin_x_m, self.origin_y_m)
+        local = (xy - offset) @ self._rotation()  # R^T · (p − o)
+        return np.asarray(local[..., ::-1] / self.resolution_m, dtype=np.float64)
 
     def cell_to_world(self, ij: npt.ArrayLike) -> FloatArray:
         """The world point (x, y) in m of the center of each cell.

@@ -107,11 +107,13 @@ def see_through_share(occ: OccupancyMap, pose: npt.ArrayLike, origin_base: npt.A
         return 0.0
     step = occ.resolution_m / 2.0
     t = step * np.arange(int(np.ceil(float(reach.max()) / step)))
-    unit = ray / np.hypot(ray[:, 0], ray[:, 1])[:, None]
-    cells = occ.world_to_cell(origin + t[None, :, None] * unit[:, None, :])  # (B, T, 2)
-    inside = occ.contains(cells) & (t[None, :] < reach[:, None])
-    wall = np.zeros(inside.shape, dtype=bool)
-    wall[inside] = occ.occupancy[cells[inside][:, 0], cells[inside][:, 1]] >= occupied_at_least
+    start = occ.world_to_grid(origin)  # fractional [row, column]; the samples' cells are their floors
+    unit = occ.world_to_grid(ray / np.hypot(ray[:, 0], ray[:, 1])[:, None], direction=True)  # (B, 2) cells per m
+    rows = np.floor(start[0] + unit[:, :1] * t).astype(np.intp)  # (B, T)
+    cols = np.floor(start[1] + unit[:, 1:] * t).astype(np.intp)
+    inside = (rows >= 0) & (rows < occ.height) & (cols >= 0) & (cols < occ.width) & (t < reach[:, None])
+    occupied = occ.occupancy >= occupied_at_least
+    wall = occupied[np.clip(rows, 0, occ.height - 1), np.clip(cols, 0, occ.width - 1)] & inside
     return float(np.mean(wall.any(axis=1)))
 
 
