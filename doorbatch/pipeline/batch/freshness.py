@@ -101,8 +101,9 @@ def recorded_key(out_dir: Path) -> str | None:
 
 
 def stamp_manifest(out_dir: Path, key: StepKey, config: Mapping[str, Any], started_at: str,
-                   warnings: Sequence[str] = ()) -> None:
-    """Add the step record to the manifest a stage wrote in ``out_dir``, or write one if it wrote none."""
+                   warnings: Sequence[str] = (), stage_seconds: Mapping[str, float] | None = None) -> None:
+    """Add the step record to the manifest a stage wrote in ``out_dir``, or write one if it wrote none (with
+    ``stage_seconds``, the stage's wall time, as DESIGN asks of every manifest)."""
     path = out_dir / MANIFEST
     if path.is_file():
         manifest = Manifest.read(path)
@@ -113,6 +114,7 @@ def stamp_manifest(out_dir: Path, key: StepKey, config: Mapping[str, Any], start
         for w in warnings:
             manifest.warn(w)
         manifest.finish()
+        manifest.stage_seconds.update(stage_seconds or {})
     manifest.extra[STEP_RECORD] = {**key.record(), OUTPUTS: _files_of(out_dir)}
     manifest.write(path)
 

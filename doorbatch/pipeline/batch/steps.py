@@ -126,8 +126,10 @@ def _run_stage(step: Step, job: BatchJob, usable: Sequence[Step], dest: Path) ->
 def _execute(step: Step, job: BatchJob, usable: Sequence[Step], key: StepKey) -> list[str]:
     started_at = utc_now_iso()
     with staged_dir(job.out / step.out_dir) as dest:
+        start = time.perf_counter()
         warnings = _run_stage(step, job, usable, dest)
-        stamp_manifest(dest, key, job.config.as_dict(), started_at, warnings)
+        seconds = {step.kind.value: time.perf_counter() - start}  # for a stage that writes no manifest of its own
+        stamp_manifest(dest, key, job.config.as_dict(), started_at, warnings, seconds)
     return warnings
 
 

@@ -51,6 +51,8 @@ def test_run_writes_maps_runs_reports_and_hive_tables(reference_out: Path) -> No
                                                          "annotated.mcap", "manifest.json"}
     html = (out / "report" / "report.html").read_text()
     assert html.count("data:image/png;base64,") >= 2  # self-contained, with its plots
+    for folder, stage in ((out / SITE / "report", "evaluate"), (out / "report", "report")):  # DESIGN: per-stage time
+        assert json.loads((folder / "manifest.json").read_text())["stage_seconds"][stage] > 0.0
     # the dataset report's rows are per site: two sites' logs of one file name are never averaged together
     logs = set(read_table("metrics", out / "report" / "metrics.parquet").column("log").to_pylist()) - {""}
     assert logs == {f"{SITE}/{log}.mcap" for log in LOCALIZATION}
