@@ -43,7 +43,7 @@ def main() -> None:
     for name, scans in (("360 beams", hits), ("1081 beams", dense)):
         for what, fn in (("scan_fit", lambda p, h: scan_fit(field, p, h, lc.lost_fit_distance_m)),
                          ("see_through_share", lambda p, h: see_through_share(
-                             occ, p, origin, h, lc.lost_fit_distance_m, lc.map_occupied_at_least,
+                             occ, field, p, origin, h, lc.lost_fit_distance_m, lc.map_occupied_at_least,
                              lc.lost_see_through_beams))):
             best = float("inf")
             for _ in range(args.repeats):

@@ -660,12 +660,13 @@ class LocalizeConfig(Section):
     lost_fit_distance_m: float = Field(0.3, gt=0.0)
     lost_min_fit: float = Field(0.5, ge=0.0, le=1.0)
     # ... or over lost_max_see_through of the scan's beams (at most lost_see_through_beams of them, spread over
-    # the scan) pass through the map's occupied cells more than lost_fit_distance_m before their hits, for
-    # lost_after_s (a pose shifted along a corridor whose walls keep its hits fitting: pipeline/localize/
-    # convergence.py). Expert choice, measured (docs/results.md, "A localizer's own word"): at the true pose no run
-    # of scans over 0.15 lasted 0.6 s on the sample and the three CARMEN logs (single scans up to 0.36 on orebro);
-    # a pose 1.4-2 m along a doorway corridor 0.16-0.35 (median 0.25).
-    lost_max_see_through: float = Field(0.2, ge=0.0, le=1.0)
+    # the scan) pass through the map's occupied cells more than lost_fit_distance_m before their hits and end that
+    # far from any, for lost_after_s (a pose shifted along a corridor whose walls keep its hits fitting: pipeline/
+    # localize/convergence.py). Expert choice, measured (docs/results.md, "Lost when the beams pass through the map's
+    # walls"): at the true pose no scan over 0.11 on the sample, the three CARMEN logs and outside testers' worlds,
+    # maps with doors drawn closed, walls doubled or shifted by 5-15 cm included; a kidnapped robot's wrong pose
+    # stays over 0.15 for 3-8 s.
+    lost_max_see_through: float = Field(0.15, ge=0.0, le=1.0)
     lost_see_through_beams: int = Field(180, ge=1)
     lost_after_s: float = Field(2.0, ge=0.0)
     relocalize_when_lost: bool = False

@@ -27,7 +27,7 @@ from doorbatch.pipeline.localize.convergence import scan_fit, see_through_share
 from doorbatch.pipeline.localize.run import localization_field
 
 FloatArray = npt.NDArray[np.float64]
-THRESHOLDS = (0.15, 0.2, 0.25, 0.3)
+THRESHOLDS = (0.1, 0.15, 0.2, 0.25)
 
 
 def longest_run_s(stamps_s: FloatArray, mask: npt.NDArray[np.bool_]) -> float:
@@ -76,7 +76,7 @@ def main() -> None:
                 row += [np.nan, np.nan]
                 continue
             row += [scan_fit(field, pose, hits, lc.lost_fit_distance_m),
-                    see_through_share(occ, pose, origin, hits, lc.lost_fit_distance_m, lc.map_occupied_at_least,
+                    see_through_share(occ, field, pose, origin, hits, lc.lost_fit_distance_m, lc.map_occupied_at_least,
                                       lc.lost_see_through_beams)]
         rows.append(row)
     m = np.asarray(rows)

@@ -82,15 +82,18 @@ def fits(fit: float, through: float, config: LocalizeConfig) -> bool:
     return not (fit < config.lost_min_fit or through > config.lost_max_see_through)
 
 
-def see_through_share(occ: OccupancyMap, pose: npt.ArrayLike, origin_base: npt.ArrayLike, hits_base: npt.ArrayLike,
-                      margin_m: float, occupied_at_least: int, max_beams: int) -> float:
+def see_through_share(occ: OccupancyMap, field: DistanceField, pose: npt.ArrayLike, origin_base: npt.ArrayLike,
+                      hits_base: npt.ArrayLike, margin_m: float, occupied_at_least: int, max_beams: int) -> float:
     """Share of the scan's beams that pass through an occupied cell of the map more than ``margin_m`` before
-    their hit, the robot at ``pose`` (criterion 4); NaN for a scan of fewer than ``MIN_FIT_HITS`` hits.
+    their hit and end farther than ``margin_m`` from any (``field``), the robot at ``pose`` (criterion 4); NaN
+    for a scan of fewer than ``MIN_FIT_HITS`` hits.
 
     Each beam runs from the laser's origin (base_link, (2,)) to its hit (base_link, (B, 2)); it is sampled every
     half cell up to r − margin_m and passes through a wall where a sample's cell holds at least
-    ``occupied_at_least`` (unknown cells and the grid's outside hold nothing). At most ``max_beams`` beams,
-    evenly spread over the scan, are cast.
+    ``occupied_at_least`` (unknown cells and the grid's outside hold nothing). A beam that passes a wall and
+    ends on another says the crossed one is not there now (a door mapped closed and open now, a wall mapped twice
+    or a few centimetres off, which a grazing beam crosses): only a beam ending where the map has nothing
+    contradicts the pose. At most ``max_beams`` beams, evenly spread over the scan, are cast.
     """
     hits = np.asarray(hits_base, dtype=np.float64).reshape(-1, 2)
     if hits.shape[0] < MIN_FIT_HITS:
@@ -114,7 +117,8 @@ def see_through_share(occ: OccupancyMap, pose: npt.ArrayLike, origin_base: npt.A
     inside = (rows >= 0) & (rows < occ.height) & (cols >= 0) & (cols < occ.width) & (t < reach[:, None])
     occupied = occ.occupancy >= occupied_at_least
     wall = occupied[np.clip(rows, 0, occ.height - 1), np.clip(cols, 0, occ.width - 1)] & inside
-    return float(np.mean(wall.any(axis=1)))
+    off_walls = endpoint_distances(field, p.reshape(1, 3), hits)[0] > margin_m
+    return float(np.mean(wall.any(axis=1) & off_walls))
 
 
 @dataclass(frozen=True)

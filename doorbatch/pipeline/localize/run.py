@@ -179,14 +179,14 @@ def lost_note(t_s: float, recent: Sequence[tuple[int, float, float]], config: Lo
     through = np.array([r[2] for r in recent])
     if not np.all(fit < config.lost_min_fit):
         return (f"lost at {t_s:.1f} s: over {config.lost_max_see_through:.0%} of the scans' beams passed through "
-                f"the map's walls for {config.lost_after_s} s (their hits lay near walls: a pose shifted along a "
-                "corridor, or a kidnapped robot)")
+                f"the map's walls to end where it has none, for {config.lost_after_s} s (while most hits lay near "
+                "walls: a pose shifted along a corridor, or a kidnapped robot)")
     note = (f"lost at {t_s:.1f} s: under {config.lost_min_fit:.0%} of the scans' hits within "
             f"{config.lost_fit_distance_m} m of the map for {config.lost_after_s} s")
     share = float(np.nanmean(through)) if np.isfinite(through).any() else math.nan
     if share < config.lost_max_see_through / 4:
         note += (f"; only {share:.0%} of their beams passed through its walls, so the beams end short of them: the "
-                 "robot is elsewhere, or the map lacks what it sees (moved furniture, a missing wall)")
+                 "robot is elsewhere, or the map lacks what it sees (people, moved furniture, a missing wall)")
     return note
 
 
@@ -536,7 +536,7 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
         dmean, dstd = p.door_estimate()
         hits = rec.scans.hits_base(i)
         fit = scan_fit(lmap.field, mean, hits, lc.lost_fit_distance_m)
-        through = see_through_share(lmap.occupancy, mean, rec.scans.laser_to_base[i][:, 2], hits,
+        through = see_through_share(lmap.occupancy, lmap.field, mean, rec.scans.laser_to_base[i][:, 2], hits,
                                     lc.lost_fit_distance_m, lc.map_occupied_at_least, lc.lost_see_through_beams)
         recent = [*(r for r in recent if (scan.stamp_ns - r[0]) / 1e9 <= lc.lost_after_s),
                   (int(scan.stamp_ns), fit, through)]
