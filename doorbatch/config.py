@@ -930,6 +930,14 @@ class DoorPoseConfig(Section):
     # from horizontal is more likely a CameraInfo frame that is not the optical one (a camera_link, x forward, whose
     # z points up) and gets a warning. Expert choice: a manipulation robot's head camera looks 15-35° down.
     max_camera_tilt_deg: float = Field(50.0, gt=0.0, le=90.0)
+    # A door pose whose line turns more than open_leaf_warn_deg from the wall beside it (a RANSAC line, residual
+    # wall_residual_m, through at least min_wall_points laser points within wall_check_m beyond either door edge) is
+    # an open door's leaf, not its doorway: counted in a warning. Expert choice: a laser's few-cm noise and a wall's
+    # jambs turn a closed door's line by a few degrees; paper 003's doors are closed.
+    open_leaf_warn_deg: float = Field(15.0, gt=0.0, le=90.0)
+    wall_check_m: float = Field(0.4, gt=0.0)
+    wall_residual_m: float = Field(0.03, gt=0.0)
+    min_wall_points: int = Field(6, ge=2)
     # Goal pose: this far from the door centre along its normal, facing the door (Sec. IV-C: 0.5 m).
     goal_offset_m: float = Field(0.5, gt=0.0)
     # Association with --map: the nearest mapped doorway (closed-leaf midpoint) within this distance.

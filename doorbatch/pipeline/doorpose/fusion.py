@@ -18,6 +18,7 @@ one is levelled: its rays and the laser's points are turned into the level frame
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from enum import StrEnum
@@ -100,6 +101,7 @@ class CameraDoor:
     box: Detection
     door_points_xz: FloatArray  # (N, 2) points between the rays
     line: DepthLine
+    wall_turn_deg: float = float("nan")  # the door line's angle to the wall beside it (:func:`wall_turn_deg`)
 
 
 def door_points(points_cam: FloatArray, bearing_left: float, bearing_right: float) -> FloatArray:
@@ -117,6 +119,35 @@ def ray_line_intersection(bearing: float, line: DepthLine) -> FloatArray | None:
         return None
     t = line.intercept_m / denom
     return None if t <= 0.0 else np.array([t * np.sin(bearing), t * np.cos(bearing)])
+
+
+def wall_turn_deg(left: FloatArray, right: FloatArray, line: DepthLine, points_xz: FloatArray,
+                  config: DoorPoseConfig) -> float:
+    """Angle (deg, 0-90) between a door's line and the wall's beside it; NaN where under ``min_wall_points`` are
+    seen there.
+
+    The wall: a RANSAC line (residual ``wall_residual_m``) through the laser points (x, z) that lie, seen from the
+    camera, within ``wall_check_m`` beyond either door edge along the door's line. A closed door, flush with its
+    wall or recessed in it, runs along the wall (about 0°); a door standing open shows its leaf between the box's
+    rays, turned from the wall by its opening angle, and the pose is the leaf's, not the doorway's (paper 003
+    approaches closed doors). Its RANSAC draws from a generator of its own, so that the door fits' stream, and their
+    results, are those without it.
+    """
+    along = (right - left) / float(np.hypot(*(right - left)))
+    ends = np.stack([left, right, left - config.wall_check_m * along, right + config.wall_check_m * along])
+    b_l, b_r, beyond_l, beyond_r = (float(b) for b in np.arctan2(ends[:, 0], ends[:, 1]))
+    x, z = points_xz[:, 0], points_xz[:, 1]
+    beta = np.arctan2(x, z)
+    side = (z > 0.0) & np.isfinite(beta) & (
+        ((beta >= min(beyond_l, b_l)) & (beta < b_l)) | ((beta > b_r) & (beta <= max(beyond_r, b_r))))
+    if int(side.sum()) < config.min_wall_points:
+        return float("nan")
+    wall = fit_line(points_xz[side], LineFit.RANSAC, config.ransac_max_trials, config.wall_residual_m,
+                    np.random.default_rng(0))
+    if wall is None or int(wall.inliers.sum()) < config.min_wall_points:
+        return float("nan")
+    turn = abs(math.degrees(math.atan(wall.slope) - math.atan(line.slope)))
+    return min(turn, 180.0 - turn)
 
 
 def estimate_door(camera: PinholeCamera, detections: Sequence[Detection], points_cam: FloatArray,
@@ -153,7 +184,8 @@ def estimate_door(camera: PinholeCamera, detections: Sequence[Detection], points
     if normal @ center > 0.0:  # point from the door toward the camera at the origin
         normal = -normal
     return CameraDoor(left, right, center, normal, width, center + config.goal_offset_m * normal,
-                      handle_side(box, usable, class_name(config.handle_class, config.class_names)), box, pts, line)
+                      handle_side(box, usable, class_name(config.handle_class, config.class_names)), box, pts, line,
+                      wall_turn_deg(left, right, line, points[:, [0, 2]], config))
 
 
 @dataclass(frozen=True)

@@ -141,6 +141,7 @@ def estimate_door_poses(inputs: DoorPoseInputs, config: DoorbatchConfig, doors: 
     warnings: list[str] = []
     out: list[DoorPoseEstimate] = []
     paired = 0
+    open_leaves = 0  # estimates whose line turns from the wall beside it: an open door's leaf
     classes: set[str] = set()  # the box classes seen, as resolved (for the warning when none is a door)
     door_class = class_name(dc.door_class, dc.class_names)
     door_scores: list[float] = []
@@ -181,12 +182,17 @@ def estimate_door_poses(inputs: DoorPoseInputs, config: DoorbatchConfig, doors: 
             pose = poses[0]
         planar = to_planar(door, cam_to_base, pose, level)
         match = associate(planar.left, planar.right, doors, dc.association_max_distance_m) if doors else None
+        open_leaves += bool(door.wall_turn_deg > dc.open_leaf_warn_deg)
         out.append(DoorPoseEstimate(boxes.stamp_ns, scan.stamp_ns, -1 if match is None else match.door_id,
                                     float("nan") if match is None else match.angle, planar.center, planar.yaw,
                                     planar.width_m, door.handle_side.value, planar.goal, planar.left, planar.right,
                                     door.box, camera.frame_id))
     if len(warnings) > 3:
         warnings = [*warnings[:3], f"... and {len(warnings) - 3} more images skipped for missing transforms"]
+    if open_leaves:
+        warnings.append(f"{open_leaves} of {len(out)} door poses lie on a line turned over {dc.open_leaf_warn_deg:g} "
+                        "deg from the wall beside the door: a door standing open, whose pose is its leaf's, not the "
+                        "doorway's (doorpose.open_leaf_warn_deg)")
     tilt = camera_tilt_deg(inputs, inputs.base_link, camera.frame_id)
     if tilt is not None and abs(tilt) > dc.max_camera_tilt_deg:
         warnings.append(f"the camera's optical axis (z of frame {camera.frame_id!r}) points {abs(tilt):.1f} deg "

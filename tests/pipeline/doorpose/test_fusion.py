@@ -150,3 +150,22 @@ def test_door_box_border_is_half_a_pixel_beyond_the_outer_pixel_centres() -> Non
     left_in = Detection("door", 0.9, 50.15, 240.0, 99.7, 300.0)  # u ∈ [0.3, 100.0]: 0.3 > 0
     right_cut = Detection("door", 0.95, 589.2, 240.0, 100.0, 300.0)  # u ∈ [539.2, 639.2]: 639.2 > 639
     assert select_door_box([left_in, right_cut], 640, "door", 0.5) is left_in
+
+
+def test_a_door_standing_open_is_told_by_its_line_turning_from_the_wall_beside_it() -> None:
+    """An outside tester's door open 35° gave a pose 0.30 m from its doorway with nothing saying so. Closed (flush in
+    its wall) the door's line runs along the wall; open, the laser between the box's rays sees the leaf, turned
+    from the wall beside the doorway by its opening angle."""
+    edges, closed = _door((0.1, 3.0), 0.2)
+    door = estimate_door(CAMERA, [_box(edges)], closed, DoorPoseConfig(), np.random.default_rng(0))
+    assert door is not None and door.wall_turn_deg == pytest.approx(0.0, abs=0.5)
+    d = np.array([math.cos(0.2), math.sin(0.2)])
+    hinge = np.array([0.1, 3.0]) + 0.45 * d
+    leaf_dir = np.array([[math.cos(math.radians(-35.0)), -math.sin(math.radians(-35.0))],
+                         [math.sin(math.radians(-35.0)), math.cos(math.radians(-35.0))]]) @ -d  # toward the camera
+    wall = closed[np.abs((closed[:, [0, 2]] - [0.1, 3.0]) @ d) > 0.45]
+    leaf = hinge + np.linspace(0.0, 0.9, 60)[:, None] * leaf_dir
+    points = np.concatenate([wall, np.column_stack([leaf[:, 0], np.full(60, 0.8), leaf[:, 1]])])
+    door = estimate_door(CAMERA, [_box(edges)], points, DoorPoseConfig(), np.random.default_rng(0))
+    assert door is not None and door.wall_turn_deg == pytest.approx(35.0, abs=1.0)
+    assert door.wall_turn_deg > DoorPoseConfig().open_leaf_warn_deg
