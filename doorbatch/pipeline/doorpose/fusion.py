@@ -127,7 +127,8 @@ def wall_turn_deg(left: FloatArray, right: FloatArray, line: DepthLine, points_x
     seen there.
 
     The wall: a RANSAC line (residual ``wall_residual_m``) through the laser points (x, z) that lie, seen from the
-    camera, within ``wall_check_m`` beyond either door edge along the door's line. A closed door, flush with its
+    camera, within ``wall_check_m`` beyond a door edge along the door's line, on each side on its own; the smaller
+    angle of the two counts (beside a room's corner one side may show the other wall). A closed door, flush with its
     wall or recessed in it, runs along the wall (about 0°); a door standing open shows its leaf between the box's
     rays, turned from the wall by its opening angle, and the pose is the leaf's, not the doorway's (paper 003
     approaches closed doors). Its RANSAC draws from a generator of its own, so that the door fits' stream, and their
@@ -138,16 +139,19 @@ def wall_turn_deg(left: FloatArray, right: FloatArray, line: DepthLine, points_x
     b_l, b_r, beyond_l, beyond_r = (float(b) for b in np.arctan2(ends[:, 0], ends[:, 1]))
     x, z = points_xz[:, 0], points_xz[:, 1]
     beta = np.arctan2(x, z)
-    side = (z > 0.0) & np.isfinite(beta) & (
-        ((beta >= min(beyond_l, b_l)) & (beta < b_l)) | ((beta > b_r) & (beta <= max(beyond_r, b_r))))
-    if int(side.sum()) < config.min_wall_points:
-        return float("nan")
-    wall = fit_line(points_xz[side], LineFit.RANSAC, config.ransac_max_trials, config.wall_residual_m,
-                    np.random.default_rng(0))
-    if wall is None or int(wall.inliers.sum()) < config.min_wall_points:
-        return float("nan")
-    turn = abs(math.degrees(math.atan(wall.slope) - math.atan(line.slope)))
-    return min(turn, 180.0 - turn)
+    ahead = (z > 0.0) & np.isfinite(beta)
+    left_side = ahead & (beta >= min(beyond_l, b_l)) & (beta < b_l)
+    right_side = ahead & (beta > b_r) & (beta <= max(beyond_r, b_r))
+    turns = []
+    for side in (left_side, right_side):  # each on its own: beside a room's corner one side shows the other wall
+        if int(side.sum()) < config.min_wall_points:
+            continue
+        wall = fit_line(points_xz[side], LineFit.RANSAC, config.ransac_max_trials, config.wall_residual_m,
+                        np.random.default_rng(0))
+        if wall is not None and int(wall.inliers.sum()) >= config.min_wall_points:
+            turn = abs(math.degrees(math.atan(wall.slope) - math.atan(line.slope)))
+            turns.append(min(turn, 180.0 - turn))
+    return min(turns) if turns else float("nan")
 
 
 def estimate_door(camera: PinholeCamera, detections: Sequence[Detection], points_cam: FloatArray,

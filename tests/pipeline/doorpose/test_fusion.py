@@ -169,3 +169,11 @@ def test_a_door_standing_open_is_told_by_its_line_turning_from_the_wall_beside_i
     door = estimate_door(CAMERA, [_box(edges)], points, DoorPoseConfig(), np.random.default_rng(0))
     assert door is not None and door.wall_turn_deg == pytest.approx(35.0, abs=1.0)
     assert door.wall_turn_deg > DoorPoseConfig().open_leaf_warn_deg
+    # closed in a room's corner: the wall runs on at its left, and at its right the other wall turns toward the camera
+    s_left = np.linspace(0.46, 0.7, 12)  # fewer points than the other wall shows
+    corner = np.concatenate([np.array([0.1, 3.0]) - s_left[:, None] * d,
+                             np.array([0.1, 3.0]) + np.linspace(-0.45, 0.45, 60)[:, None] * d,
+                             hinge + np.linspace(0.02, 1.0, 40)[:, None] * np.array([d[1], -d[0]])])
+    in_corner = np.column_stack([corner[:, 0], np.full(len(corner), 0.8), corner[:, 1]])
+    door = estimate_door(CAMERA, [_box(edges)], in_corner, DoorPoseConfig(), np.random.default_rng(0))
+    assert door is not None and door.wall_turn_deg < 1.0  # both sides in one fit took the other wall: 90°
