@@ -88,6 +88,7 @@ import logging
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import numpy.typing as npt
@@ -168,28 +169,35 @@ class ScanMatchResult:
     loop_closure: BoolArray
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(frozen=True)
 class Keyframe:
     """A keyframe's pose, its line samples with unit normals in its own frame and placed in the map frame, its
-    downsampled scan and its beams' range profile. Made by :meth:`at`, which places the samples once per pose."""
+    downsampled scan and its beams' range profile. The samples are placed when first asked for (:attr:`in_map`):
+    a pose-graph optimization moves every keyframe, and only those near the robot are matched again."""
 
     pose: FloatArray  # (3,)
     lines: ScanLines  # line samples and normals in the scan's own frame
     scan: FloatArray  # (N, 2) the downsampled scan, its own frame (matched for loop closures)
     path_m: float  # path length travelled from the first keyframe to this one
-    in_map: ScanLines  # ``lines`` placed at ``pose``
-    reach_m: float  # how far the farthest placed sample lies from the pose on either map axis (0 without samples)
     profile: RangeProfile  # the scan's hits as beams: where it saw free space
-    revisit: bool  # an older keyframe, not itself a revisit, stood within the revisit radius and angle (at creation)
+    revisit: bool = False  # an older keyframe, not itself a revisit, stood within the revisit radius and angle
 
     @classmethod
     def at(cls, pose: npt.ArrayLike, lines: ScanLines, scan: FloatArray, path_m: float,
            profile: RangeProfile, revisit: bool = False) -> Keyframe:
-        """The keyframe at ``pose``, its samples placed in the map frame."""
-        p = np.asarray(pose, dtype=np.float64)
-        in_map = placed(lines, p)
-        reach = float(np.abs(in_map.points - p[:2]).max()) if in_map.points.shape[0] else 0.0
-        return cls(p, lines, scan, path_m, in_map, reach, profile, revisit)
+        """The keyframe at ``pose``."""
+        return cls(np.asarray(pose, dtype=np.float64), lines, scan, path_m, profile, revisit)
+
+    @cached_property
+    def in_map(self) -> ScanLines:
+        """``lines`` placed at ``pose``."""
+        return placed(self.lines, self.pose)
+
+    @cached_property
+    def reach_m(self) -> float:
+        """How far the farthest placed sample lies from the pose on either map axis (0 without samples)."""
+        points = self.in_map.points
+        return float(np.abs(points - self.pose[:2]).max()) if points.shape[0] else 0.0
 
     def moved(self, pose: npt.ArrayLike) -> Keyframe:
         """The keyframe at another pose (after a pose-graph optimization)."""
