@@ -80,6 +80,7 @@ def read_doorpose_inputs(path: Path, config: DoorbatchConfig, detector: ImageDet
         image_topic = _colour_image_topic(reader, config) if detector is not None else None
         box_topic = image_topic or reader.roles.topic(box_role)
         info_topic, note = _camera_info_of_boxes(reader, box_topic, config)
+        info_name = info_topic or reader.roles.topic(Role.CAMERA_INFO)  # named where it holds no message
         warnings_pre = [note] if note else []
         detections: list[Detections] = []  # from the detections topic, before their stamps are checked
         first_info = _first_message(reader, info_topic) if info_topic is not None else None
@@ -122,7 +123,7 @@ def read_doorpose_inputs(path: Path, config: DoorbatchConfig, detector: ImageDet
             boxes, note = _on_image_stamps(boxes, reader, config)
             warnings += [note] if note else []
     if info is None:
-        raise LogContentError("camera_info topic has no messages", path=path, topic=info_topic)
+        raise LogContentError("camera_info topic has no messages", path=path, topic=info_name)
     if not scans:
         raise LogContentError("scan topic has no messages", path=path)
     unknown = sorted({b.frame_id for b in boxes} - {info.frame_id} - tf.frames)
