@@ -17,7 +17,7 @@ from typing import Any
 
 from doorbatch.config import tree_hash
 from doorbatch.errors import InputDataError
-from doorbatch.io.manifest import Manifest, file_fingerprint
+from doorbatch.io.manifest import Manifest, StageTimer, file_fingerprint
 from doorbatch.pipeline.batch.plan import StepKind
 
 MANIFEST = "manifest.json"
@@ -101,9 +101,9 @@ def recorded_key(out_dir: Path) -> str | None:
 
 
 def stamp_manifest(out_dir: Path, key: StepKey, config: Mapping[str, Any], started_at: str,
-                   warnings: Sequence[str] = (), stage_seconds: Mapping[str, float] | None = None) -> None:
-    """Add the step record to the manifest a stage wrote in ``out_dir``, or write one if it wrote none (with
-    ``stage_seconds``, the stage's wall time, as DESIGN asks of every manifest)."""
+                   warnings: Sequence[str] = (), timer: StageTimer | None = None) -> None:
+    """Add the step record to the manifest a stage wrote in ``out_dir``, or write one if it wrote none (with the
+    stage times of ``timer``, as DESIGN asks of every manifest)."""
     path = out_dir / MANIFEST
     if path.is_file():
         manifest = Manifest.read(path)
@@ -113,8 +113,7 @@ def stamp_manifest(out_dir: Path, key: StepKey, config: Mapping[str, Any], start
         manifest.inputs = list(key.inputs)
         for w in warnings:
             manifest.warn(w)
-        manifest.finish()
-        manifest.stage_seconds.update(stage_seconds or {})
+        manifest.finish(timer)
     manifest.extra[STEP_RECORD] = {**key.record(), OUTPUTS: _files_of(out_dir)}
     manifest.write(path)
 

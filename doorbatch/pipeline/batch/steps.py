@@ -20,7 +20,7 @@ from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import DoorbatchError
 from doorbatch.io.dataset import Dataset, Site
 from doorbatch.io.fingerprint_cache import FingerprintCache
-from doorbatch.io.manifest import utc_now_iso
+from doorbatch.io.manifest import StageTimer, utc_now_iso
 from doorbatch.io.run_reader import MAP_FILES, RUN_FILES
 from doorbatch.io.sim_truth import output_paths
 from doorbatch.io.staged_dir import staged_dir
@@ -126,10 +126,10 @@ def _run_stage(step: Step, job: BatchJob, usable: Sequence[Step], dest: Path) ->
 def _execute(step: Step, job: BatchJob, usable: Sequence[Step], key: StepKey) -> list[str]:
     started_at = utc_now_iso()
     with staged_dir(job.out / step.out_dir) as dest:
-        start = time.perf_counter()
-        warnings = _run_stage(step, job, usable, dest)
-        seconds = {step.kind.value: time.perf_counter() - start}  # for a stage that writes no manifest of its own
-        stamp_manifest(dest, key, job.config.as_dict(), started_at, warnings, seconds)
+        timer = StageTimer()  # for a stage that writes no manifest of its own
+        with timer(step.kind.value):
+            warnings = _run_stage(step, job, usable, dest)
+        stamp_manifest(dest, key, job.config.as_dict(), started_at, warnings, timer)
     return warnings
 
 

@@ -40,6 +40,7 @@ import numpy.typing as npt
 
 from doorbatch.config import LocalizeConfig
 from doorbatch.geometry.rotations import wrap_angle
+from doorbatch.geometry.se2 import transform_points
 from doorbatch.maps import OccupancyMap
 from doorbatch.pipeline.localize.likelihood_field import DistanceField, cloud_converged, endpoint_distances
 from doorbatch.pipeline.localize.particles import ParticleSet
@@ -101,10 +102,8 @@ def see_through_share(occ: OccupancyMap, field: DistanceField, pose: npt.ArrayLi
     if hits.shape[0] > max_beams:
         hits = hits[np.linspace(0, hits.shape[0] - 1, max_beams).round().astype(np.intp)]
     p = np.asarray(pose, dtype=np.float64).reshape(3)
-    c, s = math.cos(p[2]), math.sin(p[2])
-    rot = np.array([[c, -s], [s, c]])
-    origin = np.asarray(origin_base, dtype=np.float64).reshape(2) @ rot.T + p[:2]
-    ray = hits @ rot.T + p[:2] - origin
+    origin = transform_points(p, origin_base)[0]
+    ray = transform_points(p, hits) - origin
     reach = np.hypot(ray[:, 0], ray[:, 1]) - margin_m  # samples up to here may not meet a wall
     if not np.any(reach > 0.0):
         return 0.0
