@@ -675,6 +675,25 @@ class LocalizeConfig(Section):
     ambiguity_radius_m: float = Field(1.0, gt=0.0)
     ambiguity_yaw_deg: float = Field(45.0, gt=0.0)
     ambiguity_min_weight: float = Field(0.1, gt=0.0, le=1.0)
+    # A global run's claim is tested against the map (pipeline/localize/rival_pose.py): the scans since the claim,
+    # placed by the estimates (one point per rival_resolution_m cell, at most rival_cloud_points), are searched for
+    # over every free pose of the map (rival_search_points of them, the field pooled to rival_resolution_m cells);
+    # poses beyond ambiguity_radius_m / ambiguity_yaw_deg of the estimate scoring at least rival_search_ratio of its
+    # mean exp(-d²/2σ²) (σ rival_sigma_m) are refined and checked on the whole cloud: one that leaves under
+    # rival_min_evidence_m of seen wall fitting (within 2σ) only at the estimate is a rival, and the run reports
+    # ambiguous instead of converged (DESIGN: a symmetric corridor). rival_max_candidates bounds the search (beyond
+    # it the test is left undecided, with a warning). Expert choice: two cells of the usual 5 cm map and a σ of the
+    # same size (map blur and a few cm of estimate error fit); a search bar of 0.8, under what a half-cell lattice
+    # offset costs a true rival (a 1 m niche's mirror scored 0.96); a metre of wall, less than a niche's or a pillar's
+    # two faces, where exactly symmetric worlds leave 0.0 m (docs/results.md, "A symmetric corridor").
+    rival_check: bool = True
+    rival_resolution_m: float = Field(0.1, gt=0.0)
+    rival_sigma_m: float = Field(0.1, gt=0.0)
+    rival_search_ratio: float = Field(0.8, gt=0.0, le=1.0)
+    rival_search_points: int = Field(600, ge=10)
+    rival_cloud_points: int = Field(5000, ge=10)
+    rival_min_evidence_m: float = Field(1.0, ge=0.0)
+    rival_max_candidates: int = Field(2_000_000, ge=1)
     # RBPF (paper 000 Sec. IV): door angles follow a random walk, var += sigma_d² · dt (so sigma_d is in
     # rad/√s); the initial door angle std, which also caps the variance of a door left unobserved. The paper gives
     # no sigma_d. A door stands still nearly all the time and is moved in a second or two when it moves; the moved-

@@ -17,8 +17,8 @@ The logs hold only the scans of the corrected trajectory (237 / 910 / 440 scans,
 scan is used; no window or decimation.
 
 Usage: ``python scripts/localize_carmen.py [--work DIR] [--seed N] [--filter-seed N] [--logs orebro intel aces]
-[--config FILE] [--set localize.KEY=VALUE ...]`` (``--config``: as ``doorbatch --config``, a Nav2 parameter file
-too).
+[--config FILE] [--set localize.KEY=VALUE ...] [--init global]`` (``--config``: as ``doorbatch --config``, a Nav2
+parameter file too; ``--init global``: a uniform start, with the convergence time, ambiguity and final error).
 """
 
 from __future__ import annotations
@@ -61,8 +61,8 @@ def with_drifting_odometry(rec: Recording, seed: int) -> tuple[Recording, np.nda
     return dataclasses.replace(rec, odometry=series), ref
 
 
-def evaluate(name: str, work: Path, seed: int, filter_seed: int, overrides: list[str], config_file: Path | None = None
-             ) -> list[dict[str, object]]:
+def evaluate(name: str, work: Path, seed: int, filter_seed: int, overrides: list[str], config_file: Path | None = None,
+             init: str = "reference") -> list[dict[str, object]]:
     """One row per method (and one for the corrupted odometry) for the log ``name``."""
     log = CARMEN / f"{name}-corrected.log.gz"
     map_dir = work / name / "map"
@@ -75,17 +75,20 @@ def evaluate(name: str, work: Path, seed: int, filter_seed: int, overrides: list
     rows: list[dict[str, object]] = [{"log": name, "method": "odom (drift)", "updates": len(ref),
                                       "ate_m": ate_rmse(rec.odometry.poses, ref),
                                       "max_m": float(position_errors(rec.odometry.poses, ref).max()),
-                                      "first_over_1m": None, "doors": len(lmap.doors), "wall_s": 0.0}]
+                                      "first_over_1m": None, "doors": len(lmap.doors), "wall_s": 0.0,
+                                      "converged_s": None, "ambiguous": None}]
     for method in ("mcl", "rbpf"):
         t0 = time.perf_counter()
-        result = localize_recording(rec, lmap, config, method, "reference")
+        result = localize_recording(rec, lmap, config, method, init)
         wall = time.perf_counter() - t0
         at = np.searchsorted(rec.scans.stamps_ns, result.stamps_ns)
         err = position_errors(result.pose, ref[at])
         over = np.flatnonzero(err > 1.0)
         rows.append({"log": name, "method": method, "updates": len(result), "ate_m": ate_rmse(result.pose, ref[at]),
                      "max_m": float(err.max()), "first_over_1m": int(over[0]) if over.size else None,
-                     "doors": len(lmap.doors), "wall_s": wall})
+                     "doors": len(lmap.doors), "wall_s": wall, "final_m": float(err[-1]), "ambiguous": result.ambiguous,
+                     "converged_s": None if result.converged_ns is None
+                     else (result.converged_ns - int(result.stamps_ns[0])) / 1e9})
     return rows
 
 
@@ -98,18 +101,25 @@ def main() -> None:
     ap.add_argument("--config", type=Path, default=None,
         help="config file (YAML, or an AMCL parameter file: Nav2, ROS 1, a ROS 1 launch file)")
     ap.add_argument("--set", dest="overrides", action="append", default=[], help="config override key=value")
+    ap.add_argument("--init", choices=["reference", "global"], default="reference",
+                    help="the filter's start: the first corrected pose, or a uniform cloud over the map's free space")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         work = args.work or Path(tmp)
         rows = [row for name in args.logs if (CARMEN / f"{name}-corrected.log.gz").exists()
-                for row in evaluate(name, work, args.seed, args.filter_seed, args.overrides, args.config)]
-    print(f"drift seed {args.seed}, filter seed {args.filter_seed}")
-    print("| log | method | updates | ATE (m) | max err (m) | first update > 1 m | map doors | wall (s) |")
-    print("| --- | --- | --- | --- | --- | --- | --- | --- |")
+                for row in evaluate(name, work, args.seed, args.filter_seed, args.overrides, args.config,
+                                    args.init)]
+    print(f"drift seed {args.seed}, filter seed {args.filter_seed}, --init {args.init}")
+    print("| log | method | updates | ATE (m) | max err (m) | first update > 1 m | map doors | wall (s) | "
+          "converged (s) | ambiguous | final err (m) |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for r in rows:
         first = "–" if r["first_over_1m"] is None else r["first_over_1m"]
+        conv = "–" if r["converged_s"] is None else f"{r['converged_s']:.1f}"
+        final = f"{r['final_m']:.3f}" if "final_m" in r else "–"
         print(f"| {r['log']} | {r['method']} | {r['updates']} | {r['ate_m']:.3f} | {r['max_m']:.3f} | {first} | "
-              f"{r['doors']} | {r['wall_s']:.1f} |")
+              f"{r['doors']} | {r['wall_s']:.1f} | {conv} | {r['ambiguous'] if r['ambiguous'] is not None else '–'} "
+              f"| {final} |")
 
 
 if __name__ == "__main__":

@@ -97,8 +97,8 @@ def _place(rec: Recording, occ: OccupancyMap, config: DoorbatchConfig) -> tuple[
     """
     result = localize_recording(rec, LocalizationMap.of(occ, DoorSet.empty(), config.localize), config, "mcl", "global")
     # lost first: without localize.relocalize_when_lost a lost run's convergence claim is withdrawn
-    why = ("got lost" if result.lost_ns else "did not converge" if result.converged_ns is None
-           else "ended with several hypotheses" if result.ambiguous else None)
+    why = ("got lost" if result.lost_ns else "ended with several hypotheses (the map fits its scans as well at a "
+           "second pose)" if result.ambiguous else "did not converge" if result.converged_ns is None else None)
     if why is not None or result.converged_ns is None:
         raise PipelineError(f"{rec.path}: passes have disjoint coordinate frames (its odometry does not continue the "
                             f"previous pass's), and global localization on the map of the passes before it {why}: "

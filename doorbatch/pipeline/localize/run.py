@@ -61,6 +61,7 @@ from doorbatch.pipeline.localize.particles import ParticleSet
 from doorbatch.pipeline.localize.rbpf import rbpf_step
 from doorbatch.pipeline.localize.resampling import RecoveryState
 from doorbatch.pipeline.localize.result import LocalizationResult
+from doorbatch.pipeline.localize.rival_pose import RivalSearch, find_rival, scan_cloud
 from doorbatch.pipeline.localize.torch_field import check_device
 from doorbatch.pipeline.mapping import pass_poses
 
@@ -504,6 +505,7 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
     recent: list[tuple[int, float, float]] = []  # the last lost_after_s of updates: stamp, fit, see-through
     last_s: float | None = None
     k_draw = max(1, lc.annotate_particles)
+    updated_scans: list[int] = []  # the scan of each update
     for i in range(len(rec.scans)):
         if progress is not None:
             progress(1)
@@ -562,6 +564,7 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
         # a fixed-size draw of the (equally weighted after resampling) particles for the annotated MCAP
         pick = np.linspace(0, len(p) - 1, k_draw).round().astype(np.intp)
         track.add(scan.stamp_ns, mean, cov, odom[i], len(p), diag.neff, dmean, dstd, observed, p.pose[pick])
+        updated_scans.append(i)
     if not track.stamps:
         raise PipelineError(f"{log_path}: no scan had an odometry pose; nothing was localized")
     if len(lost_ns) > 1:
@@ -574,8 +577,48 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
                         f"update_min_a "
                         f"{lc.update_min_a} rad (a robot that stood still, or an odometry frame that does not move: "
                         "see frames.odom)")
-    return track.result(Path(log_path).name, method, state.particles.n_doors, converged_ns,
-                        multimodal(state.particles, lc), warnings, rec.log_clock, lost_ns, rec.odometry.frame_id)
+    ambiguous = multimodal(state.particles, lc)
+    if init == "global" and converged_ns is not None and lc.rival_check:
+        note = claim_rival_note(rec, lmap, track, updated_scans, converged_ns, lc)
+        if note is not None:
+            warnings.append(note)
+            if not note.startswith("rival"):  # a rival found: the claim becomes ambiguity
+                converged_ns, ambiguous = None, True
+    return track.result(Path(log_path).name, method, state.particles.n_doors, converged_ns, ambiguous, warnings,
+                        rec.log_clock, lost_ns, rec.odometry.frame_id)
+
+
+def claim_rival_note(rec: Recording, lmap: LocalizationMap, track: _Track, updated_scans: Sequence[int],
+                     converged_ns: int, lc: LocalizeConfig) -> str | None:
+    """A global run's claim tested against the map (:mod:`.rival_pose`): the scans from the claim to the end, placed
+    by the estimates, searched for over the map's free poses. A warning when they fit as well elsewhere (the claim is
+    then withdrawn: the caller reports ambiguity), one starting with "rival" when the search was left undecided, else
+    None."""
+    since = [j for j, t in enumerate(track.stamps) if t >= converged_ns]
+    poses = np.asarray([track.pose[j] for j in since])
+    settings = RivalSearch(lc.rival_resolution_m, lc.rival_sigma_m, lc.rival_search_ratio, lc.rival_search_points,
+                           lc.rival_min_evidence_m, lc.rival_max_candidates, lc.ambiguity_radius_m,
+                           math.radians(lc.ambiguity_yaw_deg))
+    cloud = scan_cloud(poses, [rec.scans.hits_base(updated_scans[j]) for j in since], poses[-1],
+                       lc.rival_resolution_m, lc.rival_cloud_points)
+    outcome = find_rival(lmap.field, lmap.free.free_mask, poses[-1], cloud, settings)
+    t0 = track.stamps[0]
+    if outcome.undecided:
+        return (f"rival test left undecided: over {lc.rival_max_candidates} poses of the map still fit the scans since "
+                f"the claim at {(converged_ns - t0) / 1e9:.1f} s nearly as well (a very self-similar map); the claim "
+                "stands untested (localize.rival_max_candidates)")
+    if outcome.nearest is not None:
+        n = outcome.nearest
+        log.info("rival test: the nearest rival (%.2f, %.2f, %.0f°) scores %.0f%% of the estimate's, %.1f m of wall "
+                 "fits only the estimate", n.pose[0], n.pose[1], math.degrees(n.pose[2]), 100 * n.ratio, n.evidence_m)
+    if outcome.rival is None:
+        return None
+    r, end = outcome.rival, poses[-1]
+    return (f"ambiguous: the scans from the claim at {(converged_ns - t0) / 1e9:.1f} s to the end fit the map as well "
+            f"at ({r.pose[0]:.2f}, {r.pose[1]:.2f}, {math.degrees(r.pose[2]):.0f}°) as at the estimate's end pose "
+            f"({end[0]:.2f}, {end[1]:.2f}, {math.degrees(end[2]):.0f}°) (score {r.ratio:.0%} of its own; "
+            f"{r.evidence_m:.1f} m of the wall seen fits only the estimate, under localize.rival_min_evidence_m): the "
+            "map is symmetric or repeats there, and the cloud kept one of the two by chance; no convergence is claimed")
 
 
 @dataclass(frozen=True)
