@@ -13,8 +13,10 @@ detector therefore asks for more than a small covariance:
    robot ``converged_min_travel_m`` (a stationary robot keeps seeing the same scan; a hypothesis that is
    wrong has to survive new views).
 
-The claimed convergence time is the update at which 3 is met for the streak that lasts to the end of the log
-(the time a user could act on it); a streak that breaks later withdraws its claim.
+The claimed convergence time is the update at which 3 is met (the time a user could act on it). A break of 1–2
+suspends the claim: it is restored, with its time, when the cloud is tight and unimodal again where the odometry has
+carried the claimed pose (a sparse log's metre-long odometry step spreads a right cloud for an update), and
+withdrawn when it comes back elsewhere or never; the claim that stands at the end of the log is the run's.
 
 4. **fits**: a tight, unimodal cloud on the wrong pose of a symmetric corridor passes 1–3 and fits the scans
    as well as the truth would, until the robot nears something the two poses do not share (an end wall the
@@ -40,7 +42,7 @@ import numpy.typing as npt
 
 from doorbatch.config import LocalizeConfig
 from doorbatch.geometry.rotations import wrap_angle
-from doorbatch.geometry.se2 import transform_points
+from doorbatch.geometry.se2 import compose, relative, transform_points
 from doorbatch.maps import OccupancyMap
 from doorbatch.pipeline.localize.likelihood_field import DistanceField, cloud_converged, endpoint_distances
 from doorbatch.pipeline.localize.particles import ParticleSet
@@ -133,6 +135,8 @@ class ConvergenceMonitor:
         settled: the cloud has been tight and unimodal since the start or the last loss; only then is a poor fit
             counted (a uniform start's mean is no pose).
         lost: this update found the cloud lost (criterion 4): the caller may start it over.
+        suspended_ns: a claim the cloud's spreading or splitting has suspended (None: none is).
+        anchor: (mean pose, odometry pose) at the last tight update of the claimed streak.
     """
 
     since_ns: int | None = None
@@ -142,13 +146,20 @@ class ConvergenceMonitor:
     poor_fit_since_ns: int | None = None
     settled: bool = False
     lost: bool = False
+    suspended_ns: int | None = None
+    anchor: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]] | None = None
 
     def update(self, stamp_ns: int, odom: npt.ArrayLike, particles: ParticleSet, config: LocalizeConfig,
                fit: float = 1.0, through: float = 0.0) -> ConvergenceMonitor:
         """The state after one filter update, whose scan fits the map as ``fit`` and ``through`` say
-        (:func:`scan_fit` and :func:`see_through_share` at the cloud's mean; NaN: no evidence). A claim is
-        withdrawn when the cloud later spreads or splits, or is lost (a hypothesis the scans went on to contradict
-        was not a convergence); a new streak must then hold again."""
+        (:func:`scan_fit` and :func:`see_through_share` at the cloud's mean; NaN: no evidence).
+
+        A claim is suspended while the cloud is spread or split. It is restored, with its first stamp, when the cloud
+        is tight and unimodal again on the same hypothesis: within ``ambiguity_radius_m`` and ``ambiguity_yaw_deg`` of
+        where the odometry has carried the claimed pose since (a sparse log's 1 m odometry step, or a scan that sees
+        little, spreads a right cloud for an update or two). Elsewhere, a new streak must hold again. A claim is
+        withdrawn for good when the cloud is lost (a hypothesis the scans went on to contradict was not a
+        convergence)."""
         o = np.asarray(odom, dtype=np.float64).reshape(3)
         step = 0.0 if self.last_odom is None else float(np.hypot(*(o[:2] - self.last_odom[:2])))
         tight = cloud_converged(particles.weight, particles.pose, config) and not multimodal(particles, config)
@@ -160,11 +171,30 @@ class ConvergenceMonitor:
                 stamp_ns if self.poor_fit_since_ns is None else self.poor_fit_since_ns)
         if poor is not None and (stamp_ns - poor) / 1e9 >= config.lost_after_s:
             return ConvergenceMonitor(None, 0.0, o, None, None, False, lost=True)
+        claim = self.converged_ns if self.converged_ns is not None else self.suspended_ns
         if not tight:
-            return ConvergenceMonitor(None, 0.0, o, None, poor, settled)
+            return ConvergenceMonitor(None, 0.0, o, None, poor, settled, suspended_ns=claim,
+                                      anchor=self.anchor if claim is not None else None)
+        anchor = (particles.mean_and_covariance()[0], o)
         if self.converged_ns is not None:
-            return ConvergenceMonitor(self.since_ns, self.travel_m + step, o, self.converged_ns, poor, settled)
+            return ConvergenceMonitor(self.since_ns, self.travel_m + step, o, self.converged_ns, poor, settled,
+                                      anchor=anchor)
+        same = claim is not None and self.anchor is not None and same_hypothesis(self.anchor, anchor, config)
+        if same and poor is None:
+            return ConvergenceMonitor(stamp_ns, 0.0, o, claim, poor, settled, anchor=anchor)
         since = stamp_ns if self.since_ns is None else self.since_ns
         travel = 0.0 if self.since_ns is None else self.travel_m + step
         held = (stamp_ns - since) / 1e9 >= config.converged_hold_s and travel >= config.converged_min_travel_m
-        return ConvergenceMonitor(since, travel, o, stamp_ns if held and poor is None else None, poor, settled)
+        claimed = stamp_ns if held and poor is None else None
+        return ConvergenceMonitor(since, travel, o, claimed, poor, settled, suspended_ns=claim if same else None,
+                                  anchor=anchor if claimed is not None or same else None)
+
+
+def same_hypothesis(before: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]],
+                    now: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]], config: LocalizeConfig) -> bool:
+    """Whether the mean ``now`` (mean pose, odometry pose) lies within ``ambiguity_radius_m`` and
+    ``ambiguity_yaw_deg`` of the mean ``before`` carried by the odometry's motion since."""
+    predicted = compose(before[0], relative(before[1], now[1]))
+    d = now[0] - predicted
+    return bool(math.hypot(d[0], d[1]) <= config.ambiguity_radius_m
+                and abs(float(wrap_angle(d[2]))) <= math.radians(config.ambiguity_yaw_deg))

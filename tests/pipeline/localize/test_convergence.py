@@ -229,3 +229,32 @@ def test_the_lost_warning_names_the_criterion_and_what_a_poor_fit_without_beams_
     assert short.startswith("lost at 3.0 s: under 50% of the scans' hits") and "or the map lacks what it sees" in short
     both = lost_note(3.0, [(k, 0.2, 0.4) for k in range(20)], CONFIG)  # hits off walls, beams through them
     assert both.startswith("lost at 3.0 s: under 50%") and "map lacks" not in both
+
+
+def _moving(k: int, offset_m: float = 0.0, wide: bool = False) -> ParticleSet:
+    """The cloud at update k of a robot driving 0.05 m an update along x from (1, 2), ``offset_m`` further along;
+    split into two clusters 5 m apart when ``wide``."""
+    x = 1.0 + 0.05 * k + offset_m
+    return cloud([(x, 2.0, 0.0), (x + 5.0, 2.0, 0.0)], [0.5, 0.5]) if wide else cloud([(x, 2.0, 0.0)], [1.0])
+
+
+def test_a_claim_the_cloud_comes_back_to_after_a_break_keeps_its_time() -> None:
+    """A sparse log's long odometry step spreads a right cloud for an update (intel from a global start: claimed at
+    36 s, split for two updates at 2,264 s, and reported as converged at 2,272 s)."""
+    monitor = ConvergenceMonitor()
+    for k in range(61):  # claimed at 2 s; split at 3.0-3.1 s; tight again where the odometry carried it
+        monitor = monitor.update(k * 100_000_000, (0.05 * k, 0.0, 0.0), _moving(k, wide=k in (30, 31)), CONFIG)
+        if k in (30, 31):
+            assert monitor.converged_ns is None and monitor.suspended_ns == 2_000_000_000
+    assert monitor.converged_ns == 2_000_000_000
+    # back 3 m further along (another door of a corridor): a new streak, claimed 2 s after it starts
+    monitor = ConvergenceMonitor()
+    for k in range(71):
+        monitor = monitor.update(k * 100_000_000, (0.05 * k, 0.0, 0.0),
+                                 _moving(k, 3.0 if k >= 32 else 0.0, wide=k in (30, 31)), CONFIG)
+    assert monitor.converged_ns == 5_200_000_000
+    # never back: the claim is withdrawn at the end
+    monitor = ConvergenceMonitor()
+    for k in range(41):
+        monitor = monitor.update(k * 100_000_000, (0.05 * k, 0.0, 0.0), _moving(k, wide=k >= 30), CONFIG)
+    assert monitor.converged_ns is None
