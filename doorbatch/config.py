@@ -651,7 +651,8 @@ class LocalizeConfig(Section):
     # Lost: at the cloud's mean, under lost_min_fit of the scan's hits lie within lost_fit_distance_m of the map's
     # occupied cells for lost_after_s (a symmetric corridor's turned pose fits until the robot nears an end the
     # estimate drives through). A warning says when; a global run's claim stands withdrawn, and the same cloud claims
-    # nothing again; with relocalize_when_lost it is spread over the free space again instead, and may. Tracked runs
+    # nothing again until it has spread or split (then it is a new global localization and may); with
+    # relocalize_when_lost it is spread over the free space again instead, and may. Tracked runs
     # go on as they are. Expert choice: 3 sigma_hit; half the hits (at the true pose 74 % or more fit on the sample's
     # logs, people and doors included, and on an outside tester's world; 0-25 % at a pose that has driven off the
     # map); 2 s, twenty scans at 10 Hz. Off by default: on the sample's closed log (symmetric with every door

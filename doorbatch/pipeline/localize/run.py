@@ -544,7 +544,9 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
                   (int(scan.stamp_ns), fit, through)]
         monitor = monitor.update(int(scan.stamp_ns), odom[i], p, lc, fit, through)
         respread = monitor.lost and init == "global" and lc.relocalize_when_lost
-        barred = barred or (monitor.lost and not respread)  # the same cloud, once lost, claims nothing again
+        # the same cloud, once lost, claims nothing again; one that spread or split since (recovery's random
+        # particles drew it elsewhere) is a new global localization, whose streak may claim again
+        barred = (barred or (monitor.lost and not respread)) and not (monitor.since_ns is None and not monitor.lost)
         if init == "global":
             converged_ns = None if barred else monitor.converged_ns
         if monitor.lost and (respread or not lost):  # once per episode of poor fits, unless spread anew
