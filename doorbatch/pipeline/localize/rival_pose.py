@@ -26,7 +26,8 @@ d the map's distance field (the likelihood field's, Thrun et al. 2005, Sec. 6.4)
    points, yet no rotation explains it. So each candidate (the best ``max_rivals``, mutually distinct) and x are
    refined on a lattice four times finer, and the whole cloud at the two is compared point by point: the wall
    length (points × cell) that fits within 2σ at x and not at the candidate is the evidence against it. Under
-   ``rival_min_evidence_m`` the candidate is a rival: the scans cannot tell it from x.
+   ``rival_min_evidence_m`` the candidate is a rival: the scans cannot tell it from x, or, when as much wall fits
+   only at the candidate, they prefer it (x is the wrong one of two similar places).
 """
 
 from __future__ import annotations
@@ -69,13 +70,15 @@ class RivalSearch:
 
 @dataclass(frozen=True)
 class Rival:
-    """A pose away from the estimate (map frame), both refined, their scores over the whole cloud, and the length of
-    wall (m) the scans see that fits at the estimate and not at the rival."""
+    """A pose away from the estimate (map frame), both refined, their scores over the whole cloud, the length of wall
+    (m) the scans see that fits at the estimate and not at the rival (``evidence_m``), and the converse
+    (``counter_m``: a rival the scans prefer says the estimate is the wrong one of two similar places)."""
 
     pose: FloatArray
     score: float
     own_score: float
     evidence_m: float
+    counter_m: float = 0.0
 
     @property
     def ratio(self) -> float:
@@ -176,11 +179,12 @@ def _refined(field: DistanceField, pose: FloatArray, pts: FloatArray, cell_m: fl
 
 def _verified(field: DistanceField, own: FloatArray, pose: FloatArray, pts: FloatArray, settings: RivalSearch) -> Rival:
     """The candidate against the estimate over the whole cloud: the length of wall (points × cell, the cloud holding
-    one point per cell) that fits within 2σ at the estimate and not at the candidate."""
+    one point per cell) that fits within 2σ at the estimate and not at the candidate, and the converse."""
     like = _likelihood(field, np.stack([own, pose]), pts, settings.sigma_m)
     fit = like >= math.exp(-2.0)  # d ≤ 2σ
     evidence = float(np.count_nonzero(fit[0] & ~fit[1])) * settings.resolution_m
-    return Rival(pose, float(like[1].mean()), float(like[0].mean()), evidence)
+    counter = float(np.count_nonzero(fit[1] & ~fit[0])) * settings.resolution_m
+    return Rival(pose, float(like[1].mean()), float(like[0].mean()), evidence, counter)
 
 
 def _candidates(field: DistanceField, free_mask: npt.NDArray[np.bool_], estimate: FloatArray, pts: FloatArray,

@@ -61,7 +61,7 @@ from doorbatch.pipeline.localize.particles import ParticleSet
 from doorbatch.pipeline.localize.rbpf import rbpf_step
 from doorbatch.pipeline.localize.resampling import RecoveryState
 from doorbatch.pipeline.localize.result import LocalizationResult
-from doorbatch.pipeline.localize.rival_pose import RivalSearch, find_rival, scan_cloud
+from doorbatch.pipeline.localize.rival_pose import Rival, RivalOutcome, RivalSearch, find_rival, scan_cloud
 from doorbatch.pipeline.localize.torch_field import check_device
 from doorbatch.pipeline.mapping import pass_poses
 
@@ -171,24 +171,29 @@ def laser_to_base_4x4(affine: FloatArray) -> FloatArray:
     return mat
 
 
-def lost_note(t_s: float, recent: Sequence[tuple[int, float, float]], config: LocalizeConfig) -> str:
+def lost_note(t_s: float, recent: Sequence[tuple[int, float, float]], config: LocalizeConfig,
+              global_start: bool = False) -> str:
     """The warning for a run found lost at ``t_s``, naming the criterion that held over the ``recent`` updates
     (stamp, :func:`.scan_fit`, :func:`.see_through_share`). Hits off the walls while almost no beam passes through
     one (a mean share under a quarter of ``lost_max_see_through``, what a right pose shows) suggest a map lacking
-    what the robot sees rather than a wrong pose (:mod:`.convergence`, criterion 4)."""
+    what the robot sees rather than a wrong pose (:mod:`.convergence`, criterion 4). From a ``global_start`` the
+    likeliest cause is named too: a cloud that settled on the wrong one of similar places."""
     fit = np.array([r[1] for r in recent])
     through = np.array([r[2] for r in recent])
+    wrong_place = ("; from a global start, also a cloud that settled on the wrong one of similar places (rooms that "
+                   "repeat, a symmetric corridor) once the robot reaches what tells them apart: "
+                   "localize.relocalize_when_lost spreads it again" if global_start else "")
     if not np.all(fit < config.lost_min_fit):
         return (f"lost at {t_s:.1f} s: over {config.lost_max_see_through:.0%} of the scans' beams passed through "
                 f"the map's walls to end where it has none, for {config.lost_after_s} s (while most hits lay near "
-                "walls: a pose shifted along a corridor, or a kidnapped robot)")
+                f"walls: a pose shifted along a corridor, or a kidnapped robot{wrong_place})")
     note = (f"lost at {t_s:.1f} s: under {config.lost_min_fit:.0%} of the scans' hits within "
             f"{config.lost_fit_distance_m} m of the map for {config.lost_after_s} s")
     share = float(np.nanmean(through)) if np.isfinite(through).any() else math.nan
     if share < config.lost_max_see_through / 4:
         note += (f"; only {share:.0%} of their beams passed through its walls, so the beams end short of them: the "
                  "robot is elsewhere, or the map lacks what it sees (people, moved furniture, a missing wall)")
-    return note
+    return note + wrong_place
 
 
 def _initial_particles(rec: Recording, lmap: LocalizationMap, init: Init, method: str, config: LocalizeConfig,
@@ -506,6 +511,7 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
     last_s: float | None = None
     k_draw = max(1, lc.annotate_particles)
     updated_scans: list[int] = []  # the scan of each update
+    streak_of: dict[int, int] = {}  # a claim's stamp → the first update of its streak (the cloud tight since)
     for i in range(len(rec.scans)):
         if progress is not None:
             progress(1)
@@ -549,12 +555,14 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
         barred = (barred or (monitor.lost and not respread)) and not (monitor.since_ns is None and not monitor.lost)
         if init == "global":
             converged_ns = None if barred else monitor.converged_ns
+            if converged_ns is not None and monitor.since_ns is not None:
+                streak_of.setdefault(converged_ns, monitor.since_ns)
         if monitor.lost and (respread or not lost):  # once per episode of poor fits, unless spread anew
             lost_ns.append(int(scan.stamp_ns))
             t_s = (scan.stamp_ns - (track.stamps[0] if track.stamps else scan.stamp_ns)) / 1e9  # as manifest_extra
             if len(lost_ns) == 1:  # the later episodes in one line at the end
-                warnings.append(lost_note(t_s, recent, lc) + ("; the cloud was spread over the free space again"
-                                                                  if respread else ""))
+                again = "; the cloud was spread over the free space again" if respread else ""
+                warnings.append(lost_note(t_s, recent, lc, init == "global") + again)
         if not math.isnan(fit):  # NaN (no evidence) neither starts nor breaks a run of fitting scans
             fitting_since = (fitting_since or int(scan.stamp_ns)) if fits(fit, through, lc) else None
         # an episode ends once the scans fit again for lost_after_s, as it began (a noisy share dips below the bar)
@@ -581,46 +589,97 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
                         "see frames.odom)")
     ambiguous = multimodal(state.particles, lc)
     if init == "global" and converged_ns is not None and lc.rival_check:
-        note = claim_rival_note(rec, lmap, track, updated_scans, converged_ns, lc)
-        if note is not None:
-            warnings.append(note)
-            if not note.startswith("rival"):  # a rival found: the claim becomes ambiguity
-                converged_ns, ambiguous = None, True
+        tested = rival_tested_claim(rec, lmap, track, updated_scans, streak_of[converged_ns], converged_ns, lc)
+        converged_ns, ambiguous = tested.converged_ns, ambiguous or tested.ambiguous
+        warnings.extend([tested.note] if tested.note else [])
     return track.result(Path(log_path).name, method, state.particles.n_doors, converged_ns, ambiguous, warnings,
                         rec.log_clock, lost_ns, rec.odometry.frame_id)
 
 
-def claim_rival_note(rec: Recording, lmap: LocalizationMap, track: _Track, updated_scans: Sequence[int],
-                     converged_ns: int, lc: LocalizeConfig) -> str | None:
-    """A global run's claim tested against the map (:mod:`.rival_pose`): the scans from the claim to the end, placed
-    by the estimates, searched for over the map's free poses. A warning when they fit as well elsewhere (the claim is
-    then withdrawn: the caller reports ambiguity), one starting with "rival" when the search was left undecided, else
-    None."""
-    since = [j for j, t in enumerate(track.stamps) if t >= converged_ns]
-    poses = np.asarray([track.pose[j] for j in since])
+@dataclass(frozen=True)
+class ClaimTest:
+    """A global run's claim after the rival test: the claim that stands (None: none), whether the run is ambiguous,
+    and the warning that says why (None: the claim stands as made)."""
+
+    converged_ns: int | None
+    ambiguous: bool
+    note: str | None = None
+
+
+def rival_tested_claim(rec: Recording, lmap: LocalizationMap, track: _Track, updated_scans: Sequence[int],
+                       streak_ns: int, converged_ns: int, lc: LocalizeConfig) -> ClaimTest:
+    """A global run's claim tested against the map (:mod:`.rival_pose`).
+
+    The scans from the claimed streak's first update (``streak_ns``, when the cloud became tight) to the end, placed by
+    the estimates, are searched for over the map's free poses: where they fit as well elsewhere (or better) the claim
+    is withdrawn and the run is ambiguous. Else the claim moves to the first update from which the scans since the
+    streak began leave no rival (a cloud tight on a pose the scans could not yet tell from another was right by
+    chance until then): an exponential, then binary, search over the updates from the claim on, the scans only
+    adding evidence.
+    """
     settings = RivalSearch(lc.rival_resolution_m, lc.rival_sigma_m, lc.rival_search_ratio, lc.rival_search_points,
                            lc.rival_min_evidence_m, lc.rival_max_candidates, lc.ambiguity_radius_m,
                            math.radians(lc.ambiguity_yaw_deg))
-    cloud = scan_cloud(poses, [rec.scans.hits_base(updated_scans[j]) for j in since], poses[-1],
-                       lc.rival_resolution_m, lc.rival_cloud_points)
-    outcome = find_rival(lmap.field, lmap.free.free_mask, poses[-1], cloud, settings)
-    t0 = track.stamps[0]
-    if outcome.undecided:
-        return (f"rival test left undecided: over {lc.rival_max_candidates} poses of the map still fit the scans since "
-                f"the claim at {(converged_ns - t0) / 1e9:.1f} s nearly as well (a very self-similar map); the claim "
-                "stands untested (localize.rival_max_candidates)")
-    if outcome.nearest is not None:
-        n = outcome.nearest
-        log.info("rival test: the nearest rival (%.2f, %.2f, %.0f°) scores %.0f%% of the estimate's, %.1f m of wall "
-                 "fits only the estimate", n.pose[0], n.pose[1], math.degrees(n.pose[2]), 100 * n.ratio, n.evidence_m)
-    if outcome.rival is None:
-        return None
-    r, end = outcome.rival, poses[-1]
-    return (f"ambiguous: the scans from the claim at {(converged_ns - t0) / 1e9:.1f} s to the end fit the map as well "
-            f"at ({r.pose[0]:.2f}, {r.pose[1]:.2f}, {math.degrees(r.pose[2]):.0f}°) as at the estimate's end pose "
-            f"({end[0]:.2f}, {end[1]:.2f}, {math.degrees(end[2]):.0f}°) (score {r.ratio:.0%} of its own; "
-            f"{r.evidence_m:.1f} m of the wall seen fits only the estimate, under localize.rival_min_evidence_m): the "
-            "map is symmetric or repeats there, and the cloud kept one of the two by chance; no convergence is claimed")
+    stamps = np.asarray(track.stamps, dtype=np.int64)
+    first, claim_i = int(np.searchsorted(stamps, streak_ns)), int(np.searchsorted(stamps, converged_ns))
+    end = len(stamps) - 1
+
+    def test(last: int) -> RivalOutcome:
+        span = range(first, last + 1)
+        poses = np.asarray([track.pose[j] for j in span])
+        cloud = scan_cloud(poses, [rec.scans.hits_base(updated_scans[j]) for j in span], poses[-1],
+                           lc.rival_resolution_m, lc.rival_cloud_points)
+        return find_rival(lmap.field, lmap.free.free_mask, poses[-1], cloud, settings)
+
+    def told(o: RivalOutcome) -> bool:
+        return o.rival is None and not o.undecided
+
+    t0, whole = int(stamps[0]), test(end)
+    claim_s = (converged_ns - t0) / 1e9
+    if whole.undecided:
+        return ClaimTest(converged_ns, False, (
+            f"rival test left undecided: over {lc.rival_max_candidates} poses of the map still fit the scans since the "
+            f"claim at {claim_s:.1f} s nearly as well (a very self-similar map); the claim stands untested "
+            "(localize.rival_max_candidates)"))
+    if whole.rival is not None:
+        return ClaimTest(None, True, _rival_note(whole.rival, track.pose[end], claim_s, lc))
+    lo, hi, k, last_rival = claim_i - 1, claim_i, 0, None
+    while hi < end:
+        o = test(hi)
+        if told(o):
+            break
+        lo, last_rival, k = hi, o.rival, k + 1
+        hi = min(claim_i + (1 << k) - 1, end)
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        o = test(mid)
+        if told(o):
+            hi = mid
+        else:
+            lo, last_rival = mid, o.rival
+    if hi == claim_i:
+        return ClaimTest(converged_ns, False)
+    where = "" if last_rival is None else (
+        f" as well at ({last_rival.pose[0]:.2f}, {last_rival.pose[1]:.2f}, {math.degrees(last_rival.pose[2]):.0f}°)")
+    return ClaimTest(int(stamps[hi]), False, (
+        f"convergence claimed at {(stamps[hi] - t0) / 1e9:.1f} s, not {claim_s:.1f} s: until then the scans since the "
+        f"cloud became tight ({(streak_ns - t0) / 1e9:.1f} s) fit the map{where} (localize.rival_*); the cloud's pose "
+        "was a pick the scans could not yet tell"))
+
+
+def _rival_note(r: Rival, end: FloatArray, claim_s: float, lc: LocalizeConfig) -> str:
+    """The warning for a claim withdrawn for a rival pose (:func:`rival_tested_claim`)."""
+    span = f"the scans from the claim at {claim_s:.1f} s to the end"
+    where = (f"({r.pose[0]:.2f}, {r.pose[1]:.2f}, {math.degrees(r.pose[2]):.0f}°)", f"({end[0]:.2f}, {end[1]:.2f}, "
+             f"{math.degrees(end[2]):.0f}°)")
+    if r.counter_m >= lc.rival_min_evidence_m:
+        return (f"ambiguous: {span} fit the map better at {where[0]} than at the estimate's end pose {where[1]} "
+                f"({r.counter_m:.1f} m of the wall seen fits only there, {r.evidence_m:.1f} m only at the estimate): "
+                "the cloud settled on the wrong one of two similar places; no convergence is claimed")
+    return (f"ambiguous: {span} fit the map as well at {where[0]} as at the estimate's end pose {where[1]} (score "
+            f"{r.ratio:.0%} of its own; {r.evidence_m:.1f} m of the wall seen fits only the estimate, under "
+            "localize.rival_min_evidence_m): the map is symmetric or repeats there, and the cloud kept one of the two "
+            "by chance; no convergence is claimed")
 
 
 @dataclass(frozen=True)

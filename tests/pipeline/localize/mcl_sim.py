@@ -105,11 +105,13 @@ def axis_scaled_odometry(truth: FloatArray, rng: np.random.Generator) -> FloatAr
 
 def room_recording(truth: FloatArray, odom: FloatArray, rng: np.random.Generator,
                    reference: FloatArray | None = None, period_ns: int = 100_000_000,
-                   segments: FloatArray | None = None) -> Recording:
-    """A log in the room (or among ``segments``) as a recording: 360° scans ray cast from ``truth`` (1 cm noise)
-    every ``period_ns``, the ``odom`` poses as odometry and, if given, ``reference`` as its reference pose topic."""
+                   segments: FloatArray | None = None, max_range: float = 12.0) -> Recording:
+    """A log in the room (or among ``segments``) as a recording: 360° scans (up to ``max_range``) ray cast from
+    ``truth`` (1 cm noise) every ``period_ns``, the ``odom`` poses as odometry and, if given, ``reference`` as its
+    reference pose topic."""
     walls = asymmetric_room() if segments is None else segments
-    ranges, angles = zip(*(scan_ranges(walls, pose, noise_m=0.01, rng=rng) for pose in truth), strict=True)
+    ranges, angles = zip(*(scan_ranges(walls, pose, max_range=max_range, noise_m=0.01, rng=rng) for pose in truth),
+                         strict=True)
     n = len(truth)
     stamps = np.arange(n, dtype=np.int64) * period_ns
     scans = ScanSet(stamps, [r.astype(np.float32) for r in ranges], np.full(n, angles[0][0]),

@@ -229,6 +229,9 @@ def test_the_lost_warning_names_the_criterion_and_what_a_poor_fit_without_beams_
     assert short.startswith("lost at 3.0 s: under 50% of the scans' hits") and "or the map lacks what it sees" in short
     both = lost_note(3.0, [(k, 0.2, 0.4) for k in range(20)], CONFIG)  # hits off walls, beams through them
     assert both.startswith("lost at 3.0 s: under 50%") and "map lacks" not in both
+    assert not any("similar places" in note for note in (through, short, both))  # a tracked run's
+    for recent in ([(k, 0.9, 0.3) for k in range(20)], [(k, 0.2, 0.01) for k in range(20)]):  # a global start's
+        assert "the wrong one of similar places" in lost_note(3.0, recent, CONFIG, global_start=True)
 
 
 def _moving(k: int, offset_m: float = 0.0, wide: bool = False) -> ParticleSet:

@@ -15,7 +15,7 @@ from doorbatch.geometry.se2 import compose, transform_points
 from doorbatch.maps import DoorSet
 from doorbatch.pipeline.localize.likelihood_field import DistanceField
 from doorbatch.pipeline.localize.rival_pose import RivalSearch, find_rival, scan_cloud
-from doorbatch.pipeline.localize.run import LocalizationMap, localize_recording
+from doorbatch.pipeline.localize.run import LocalizationMap, _Track, localize_recording, rival_tested_claim
 
 SETTINGS = RivalSearch(resolution_m=0.1, sigma_m=0.1, search_ratio=0.8, search_points=600, min_evidence_m=1.0,
                        max_candidates=2_000_000, radius_m=1.0, yaw_rad=math.radians(45.0))
@@ -85,10 +85,15 @@ def test_one_niche_breaks_the_symmetry() -> None:
     niche = polyline((3, 0), (8, 0), (8, -0.5), (9, -0.5), (9, 0), (10, 0))
     segments = np.concatenate([segments[:4], niche, segments[5:]])
     field, free = field_and_free(segments)
-    found = find_rival(field, free, PATH[-1], path_cloud(segments, PATH, np.random.default_rng(5)), SETTINGS)
+    cloud = path_cloud(segments, PATH, np.random.default_rng(5))
+    found = find_rival(field, free, PATH[-1], cloud, SETTINGS)
     assert found.rival is None and found.nearest is not None
     assert np.hypot(*(found.nearest.pose[:2] - mirrored(PATH[-1])[:2])) < 0.2
     assert found.nearest.ratio > 0.9 and found.nearest.evidence_m >= SETTINGS.min_evidence_m
+    # from the turned pose (a cloud that settled on the wrong one of the two) the truth is a rival the scans prefer
+    wrong = find_rival(field, free, mirrored(PATH[-1]), cloud, SETTINGS).rival
+    assert wrong is not None and np.hypot(*(wrong.pose[:2] - PATH[-1][:2])) < 0.2
+    assert wrong.evidence_m < SETTINGS.min_evidence_m <= wrong.counter_m and wrong.ratio > 1.0
 
 
 def test_an_asymmetric_room_has_no_rival() -> None:
@@ -144,3 +149,38 @@ def test_the_cloud_keeps_one_point_per_cell_in_the_last_pose_frame() -> None:
     # cell, the first kept, and (1, 0)
     assert sorted(map(tuple, np.round(cloud, 6))) == [(-0.05, -0.05), (1.0, 0.0)]
     assert len(scan_cloud(poses, hits, poses[-1], 0.1, 1)) == 1
+
+
+def _niche_room() -> FloatArray:
+    """The symmetric room with a 1 m × 0.5 m niche in the south wall at x = 8–9 (turned: the north wall at x = 1–2)."""
+    segments = symmetric_room()
+    niche = polyline((3, 0), (8, 0), (8, -0.5), (9, -0.5), (9, 0), (10, 0))
+    return np.concatenate([segments[:4], niche, segments[5:]])
+
+
+@pytest.mark.parametrize(("niche", "claim_i", "expected"), [(True, 20, (55, 70)), (True, 68, (68, 68)),
+                                                             (False, 20, None)])
+def test_a_claim_moves_to_when_the_scans_first_tell_the_pose(niche: bool, claim_i: int,
+                                                            expected: tuple[int, int] | None) -> None:
+    """A 2.5 m laser driven east from x = 4 to 8.5 m, 0.064 m an update: the niche comes into view near its corner
+    (8, 0) (2.5 m from x ≈ 6.5 m; enough of it for a metre of evidence at x = 7.5 m, update 55, or a little later). A
+    claim before that moves there; one after stays; without the niche the turned pose stays a rival, and the run is
+    ambiguous."""
+    segments = _niche_room() if niche else symmetric_room()
+    truth = np.stack([np.linspace(4.0, 8.5, 71), np.full(71, 2.0), np.zeros(71)], axis=1)
+    rec = room_recording(truth, truth, np.random.default_rng(6), segments=segments, max_range=2.5)
+    config = load_config(None, [])
+    lmap = LocalizationMap.of(rasterize(segments, (0.0, 10.0), (-0.8, 4.8)), DoorSet.empty(), config.localize)
+    track = _Track()
+    track.stamps.extend(int(t) for t in rec.scans.stamps_ns)
+    track.pose.extend(truth)
+    stamps = rec.scans.stamps_ns
+    tested = rival_tested_claim(rec, lmap, track, list(range(71)), int(stamps[0]), int(stamps[claim_i]),
+                                config.localize)
+    if expected is None:
+        assert tested.converged_ns is None and tested.ambiguous and tested.note is not None
+        return
+    assert tested.converged_ns is not None and not tested.ambiguous
+    moved_to = int(np.searchsorted(stamps, tested.converged_ns))
+    assert expected[0] <= moved_to <= expected[1]
+    assert (tested.note is None) == (moved_to == claim_i)
