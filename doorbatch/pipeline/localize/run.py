@@ -589,7 +589,8 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
                         "see frames.odom)")
     ambiguous = multimodal(state.particles, lc)
     if init == "global" and converged_ns is not None and lc.rival_check:
-        tested = rival_tested_claim(rec, lmap, track, updated_scans, streak_of[converged_ns], converged_ns, lc)
+        streak_ns = streak_of.get(converged_ns, converged_ns)
+        tested = rival_tested_claim(rec, lmap, track, updated_scans, streak_ns, converged_ns, lc)
         converged_ns, ambiguous = tested.converged_ns, ambiguous or tested.ambiguous
         warnings.extend([tested.note] if tested.note else [])
     return track.result(Path(log_path).name, method, state.particles.n_doors, converged_ns, ambiguous, warnings,
@@ -642,7 +643,7 @@ def rival_tested_claim(rec: Recording, lmap: LocalizationMap, track: _Track, upd
             f"claim at {claim_s:.1f} s nearly as well (a very self-similar map); the claim stands untested "
             "(localize.rival_max_candidates)"))
     if whole.rival is not None:
-        return ClaimTest(None, True, _rival_note(whole.rival, track.pose[end], claim_s, lc))
+        return ClaimTest(None, True, _rival_note(whole.rival, track.pose[end], (streak_ns - t0) / 1e9, lc))
     lo, hi, k, last_rival = claim_i - 1, claim_i, 0, None
     while hi < end:
         o = test(hi)
@@ -667,9 +668,9 @@ def rival_tested_claim(rec: Recording, lmap: LocalizationMap, track: _Track, upd
         "was a pick the scans could not yet tell"))
 
 
-def _rival_note(r: Rival, end: FloatArray, claim_s: float, lc: LocalizeConfig) -> str:
+def _rival_note(r: Rival, end: FloatArray, streak_s: float, lc: LocalizeConfig) -> str:
     """The warning for a claim withdrawn for a rival pose (:func:`rival_tested_claim`)."""
-    span = f"the scans from the claim at {claim_s:.1f} s to the end"
+    span = f"the scans from when the cloud became tight ({streak_s:.1f} s) to the end"
     where = (f"({r.pose[0]:.2f}, {r.pose[1]:.2f}, {math.degrees(r.pose[2]):.0f}°)", f"({end[0]:.2f}, {end[1]:.2f}, "
              f"{math.degrees(end[2]):.0f}°)")
     if r.counter_m >= lc.rival_min_evidence_m:
