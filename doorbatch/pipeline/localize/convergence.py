@@ -137,6 +137,7 @@ class ConvergenceMonitor:
         lost: this update found the cloud lost (criterion 4): the caller may start it over.
         suspended_ns: a claim the cloud's spreading or splitting has suspended (None: none is).
         anchor: (mean pose, odometry pose) at the last tight update of the claimed streak.
+        claim_since_ns: the first update of the claimed (or suspended) claim's streak: the cloud tight since.
     """
 
     since_ns: int | None = None
@@ -148,11 +149,13 @@ class ConvergenceMonitor:
     lost: bool = False
     suspended_ns: int | None = None
     anchor: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]] | None = None
+    claim_since_ns: int | None = None
 
     def update(self, stamp_ns: int, odom: npt.ArrayLike, particles: ParticleSet, config: LocalizeConfig,
-               fit: float = 1.0, through: float = 0.0) -> ConvergenceMonitor:
+               fit: float = 1.0, through: float = 0.0, mean: npt.ArrayLike | None = None) -> ConvergenceMonitor:
         """The state after one filter update, whose scan fits the map as ``fit`` and ``through`` say
-        (:func:`scan_fit` and :func:`see_through_share` at the cloud's mean; NaN: no evidence).
+        (:func:`scan_fit` and :func:`see_through_share` at the cloud's mean; NaN: no evidence); ``mean``: the
+        cloud's weighted mean pose when the caller has it (else computed).
 
         A claim is suspended while the cloud is spread or split. It is restored, with its first stamp, when the cloud
         is tight and unimodal again on the same hypothesis: within ``ambiguity_radius_m`` and ``ambiguity_yaw_deg`` of
@@ -172,22 +175,24 @@ class ConvergenceMonitor:
         if poor is not None and (stamp_ns - poor) / 1e9 >= config.lost_after_s:
             return ConvergenceMonitor(None, 0.0, o, None, None, False, lost=True)
         claim = self.converged_ns if self.converged_ns is not None else self.suspended_ns
+        kept = self.claim_since_ns if claim is not None else None
         if not tight:
             return ConvergenceMonitor(None, 0.0, o, None, poor, settled, suspended_ns=claim,
-                                      anchor=self.anchor if claim is not None else None)
-        anchor = (particles.mean_and_covariance()[0], o)
+                                      anchor=self.anchor if claim is not None else None, claim_since_ns=kept)
+        anchor = (particles.mean_and_covariance()[0] if mean is None else np.asarray(mean, dtype=np.float64), o)
         if self.converged_ns is not None:
             return ConvergenceMonitor(self.since_ns, self.travel_m + step, o, self.converged_ns, poor, settled,
-                                      anchor=anchor)
+                                      anchor=anchor, claim_since_ns=kept)
         same = claim is not None and self.anchor is not None and same_hypothesis(self.anchor, anchor, config)
         if same and poor is None:
-            return ConvergenceMonitor(stamp_ns, 0.0, o, claim, poor, settled, anchor=anchor)
+            return ConvergenceMonitor(stamp_ns, 0.0, o, claim, poor, settled, anchor=anchor, claim_since_ns=kept)
         since = stamp_ns if self.since_ns is None else self.since_ns
         travel = 0.0 if self.since_ns is None else self.travel_m + step
         held = (stamp_ns - since) / 1e9 >= config.converged_hold_s and travel >= config.converged_min_travel_m
         claimed = stamp_ns if held and poor is None else None
         return ConvergenceMonitor(since, travel, o, claimed, poor, settled, suspended_ns=claim if same else None,
-                                  anchor=anchor if claimed is not None or same else None)
+                                  anchor=anchor if claimed is not None or same else None,
+                                  claim_since_ns=since if claimed is not None else kept if same else None)
 
 
 def same_hypothesis(before: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]],

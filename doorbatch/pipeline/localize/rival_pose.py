@@ -41,6 +41,7 @@ import numpy.typing as npt
 from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.geometry.se2 import compose, inverse, transform_points
 from doorbatch.pipeline.localize.likelihood_field import DistanceField, endpoint_distances
+from doorbatch.pipeline.poses.correlative import thinned
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -110,8 +111,7 @@ def scan_cloud(poses: npt.ArrayLike, hits_base: list[FloatArray], frame: npt.Arr
     pts = pts[np.all(np.isfinite(pts), axis=1)]
     _, first = np.unique(np.floor(pts / cell_m).astype(np.int64), axis=0, return_index=True)
     pts = pts[np.sort(first)]
-    out: FloatArray = pts[:: -(-pts.shape[0] // max_points)] if pts.shape[0] > max_points else pts
-    return out
+    return thinned(pts, max_points)
 
 
 def _pooled(values: npt.NDArray[np.float32], f: int) -> npt.NDArray[np.float32]:
@@ -145,7 +145,7 @@ def find_rival(field: DistanceField, free_mask: npt.NDArray[np.bool_], estimate:
     if pts.shape[0] == 0:
         return RivalOutcome(None)
     est = np.asarray(estimate, dtype=np.float64).reshape(3)
-    found = _candidates(field, free_mask, est, pts[:: -(-pts.shape[0] // settings.search_points)], settings)
+    found = _candidates(field, free_mask, est, thinned(pts, settings.search_points), settings)
     if found is None:
         return RivalOutcome(None, undecided=True, points=pts.shape[0])
     candidates, step = found

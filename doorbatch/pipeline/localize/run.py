@@ -511,7 +511,6 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
     last_s: float | None = None
     k_draw = max(1, lc.annotate_particles)
     updated_scans: list[int] = []  # the scan of each update
-    streak_of: dict[int, int] = {}  # a claim's stamp → the first update of its streak (the cloud tight since)
     for i in range(len(rec.scans)):
         if progress is not None:
             progress(1)
@@ -538,7 +537,8 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
             continue
         last_s = stamp_s
         p = state.particles
-        mean, cov = p.mean_and_covariance()
+        cloud_mean, cov = p.mean_and_covariance()
+        mean = cloud_mean
         if lc.pose_estimate == "heaviest_cluster":
             mean = heaviest_cluster_mean(p, lc.kld_bin_xy_m, math.radians(lc.kld_bin_yaw_deg))
         dmean, dstd = p.door_estimate()
@@ -548,15 +548,13 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
                                     lc.lost_fit_distance_m, lc.map_occupied_at_least, lc.lost_see_through_beams)
         recent = [*(r for r in recent if (scan.stamp_ns - r[0]) / 1e9 <= lc.lost_after_s),
                   (int(scan.stamp_ns), fit, through)]
-        monitor = monitor.update(int(scan.stamp_ns), odom[i], p, lc, fit, through)
+        monitor = monitor.update(int(scan.stamp_ns), odom[i], p, lc, fit, through, cloud_mean)
         respread = monitor.lost and init == "global" and lc.relocalize_when_lost
         # the same cloud, once lost, claims nothing again; one that spread or split since (recovery's random
         # particles drew it elsewhere) is a new global localization, whose streak may claim again
         barred = (barred or (monitor.lost and not respread)) and not (monitor.since_ns is None and not monitor.lost)
         if init == "global":
             converged_ns = None if barred else monitor.converged_ns
-            if converged_ns is not None and monitor.since_ns is not None:
-                streak_of.setdefault(converged_ns, monitor.since_ns)
         if monitor.lost and (respread or not lost):  # once per episode of poor fits, unless spread anew
             lost_ns.append(int(scan.stamp_ns))
             t_s = (scan.stamp_ns - (track.stamps[0] if track.stamps else scan.stamp_ns)) / 1e9  # as manifest_extra
@@ -589,7 +587,7 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
                         "see frames.odom)")
     ambiguous = multimodal(state.particles, lc)
     if init == "global" and converged_ns is not None and lc.rival_check:
-        streak_ns = streak_of.get(converged_ns, converged_ns)
+        streak_ns = monitor.claim_since_ns if monitor.claim_since_ns is not None else converged_ns
         tested = rival_tested_claim(rec, lmap, track, updated_scans, streak_ns, converged_ns, lc)
         converged_ns, ambiguous = tested.converged_ns, ambiguous or tested.ambiguous
         warnings.extend([tested.note] if tested.note else [])
@@ -624,13 +622,13 @@ def rival_tested_claim(rec: Recording, lmap: LocalizationMap, track: _Track, upd
     stamps = np.asarray(track.stamps, dtype=np.int64)
     first, claim_i = int(np.searchsorted(stamps, streak_ns)), int(np.searchsorted(stamps, converged_ns))
     end = len(stamps) - 1
+    poses = np.asarray(track.pose[first:])
+    hits = [rec.scans.hits_base(updated_scans[j]) for j in range(first, end + 1)]  # read once for every test
 
     def test(last: int) -> RivalOutcome:
-        span = range(first, last + 1)
-        poses = np.asarray([track.pose[j] for j in span])
-        cloud = scan_cloud(poses, [rec.scans.hits_base(updated_scans[j]) for j in span], poses[-1],
-                           lc.rival_resolution_m, lc.rival_cloud_points)
-        return find_rival(lmap.field, lmap.free.free_mask, poses[-1], cloud, settings)
+        n = last - first + 1
+        cloud = scan_cloud(poses[:n], hits[:n], poses[n - 1], lc.rival_resolution_m, lc.rival_cloud_points)
+        return find_rival(lmap.field, lmap.free.free_mask, poses[n - 1], cloud, settings)
 
     def told(o: RivalOutcome) -> bool:
         return o.rival is None and not o.undecided
