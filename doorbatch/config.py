@@ -428,6 +428,9 @@ class DoorDetectionConfig(Section):
     lone_min_scans: int = Field(3, ge=1)
     partner_min_fraction: float = Field(0.85, gt=0.0, le=1.0)
     partner_end_clear_m: float = Field(0.2, ge=0.0)
+    # ... searched again from hinge guesses moved back along the lone leaf, a cell at a time, up to this far (its
+    # near end is cut short where it meets static cells: transient_neighborhood_cells 2 at 0.05 m plus a cell).
+    partner_hinge_back_m: float = Field(0.15, ge=0.0)
     # The partner's free end: the last occupied cell along it before a gap longer than this (a slanted
     # leaf's cells are hit from grazing angles and some stay below p_occupied).
     partner_gap_m: float = Field(0.2, ge=0.0)
