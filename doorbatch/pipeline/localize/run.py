@@ -692,6 +692,8 @@ class LocalizeRunSummary:
     converged: bool
     converged_after_s: float | None
     ambiguous: bool
+    lost_after_s: list[float]  # when each episode of scans that do not fit the estimate began (empty: never lost)
+    warnings: int
     files: list[str]
 
 
@@ -730,5 +732,6 @@ def run_localize(log_path: Path, map_path: Path, out: Path, config: DoorbatchCon
     manifest.write(out / "manifest.json")
     summary = LocalizeRunSummary(str(out), method, len(result), float(result.n_particles.mean()),
                                  result.converged_ns is not None, converged_s, result.ambiguous,
+                                 list(manifest.extra["lost_after_s"]), len(result.warnings),
                                  [str(f) for f in [*files, out / "annotated.mcap", out / "manifest.json"]])
     return result, summary

@@ -115,6 +115,27 @@ def test_a_global_claim_lost_once_is_not_made_again_by_the_same_cloud(sample_map
     assert lost["extra"]["converged_after_s"] is None
 
 
+def test_the_summary_of_a_lost_run_says_when_it_was_lost(sample_map: Path, tmp_path: Path,
+                                                        monkeypatch: pytest.MonkeyPatch,
+                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """A tracked run is converged from its start, so ``--json`` said ``converged: true`` and nothing else of a run
+    that was lost (an outside tester's cron job counted it good): the summary carries the lost episodes."""
+    from doorbatch.pipeline.localize import run as run_module
+
+    fits = iter([0.9] * 50 + [0.1] * 60 + [0.9] * 10_000)  # 5 s fitting, 6 s not, then fitting again
+    monkeypatch.setattr(run_module, "scan_fit", lambda *_: next(fits))
+    args = ["localize", str(SAMPLE_LOGS / "loc_open.mcap"), "--map", str(sample_map), "--method", "mcl"]
+    assert main([*args, "-o", str(tmp_path / "json"), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    manifest = json.loads((tmp_path / "json" / "manifest.json").read_text())
+    assert summary["converged"] and len(summary["lost_after_s"]) == 1
+    assert summary["lost_after_s"] == manifest["extra"]["lost_after_s"]
+    assert summary["warnings"] == len(manifest["warnings"]) >= 1
+    fits = iter([0.9] * 50 + [0.1] * 60 + [0.9] * 10_000)
+    assert main([*args, "-o", str(tmp_path / "line")]) == 0
+    assert f", lost at {summary['lost_after_s'][0]:.1f} s →" in capsys.readouterr().out
+
+
 def test_a_tracked_run_that_is_lost_says_so_once_and_goes_on(sample_map: Path, tmp_path: Path,
                                                               monkeypatch: pytest.MonkeyPatch) -> None:
     from doorbatch.pipeline.localize import run as run_module
