@@ -541,8 +541,11 @@ def _door_from_group(g: _Hinged, gap: float, config: DoorDetectionConfig, grid: 
         return None
     if use_grid and grid is not None and occupied is not None:
         length = _leaf_length(dist, obs.yaw, closed, config)
-        for end, when in _static_states(grid, occupied, hinge, obs.modes, closed, length, obs.passes(), config):
+        for end, when in _static_states(grid, occupied, hinge, obs.modes, length, obs.passes(), config):
             obs.add(hinge, end, when)
+        start, span = _range_about(obs.modes)
+        if np.min(np.abs(wrap_angle(closed - np.array([start, start + span])))) > gap:  # now inside the range
+            closed = closed_direction(grid, occupied, hinge, obs.modes, config)
         if np.min(np.abs(wrap_angle(obs.modes - closed))) > gap:
             state = _closed_state(grid, hinge, closed, length, obs.passes(), config)
             if state is not None:
@@ -637,16 +640,16 @@ def _closed_state(grid: LogOddsGrid, hinge: FloatArray, closed: float, length: f
     return hinge + length * u, float(passes.max())
 
 
-def _static_states(grid: LogOddsGrid, occupied: BoolArray, hinge: FloatArray, modes: FloatArray, closed: float,
-                   length: float, seen_in: set[int], config: DoorDetectionConfig) -> list[tuple[FloatArray, float]]:
+def _static_states(grid: LogOddsGrid, occupied: BoolArray, hinge: FloatArray, modes: FloatArray, length: float,
+                   seen_in: set[int], config: DoorDetectionConfig) -> list[tuple[FloatArray, float]]:
     """Extension: further observed angles of a door as leaf-shaped occupied segments in the static grid.
 
     A leaf seen in cells that were never seen free before, and never seen free afterwards (the leaf's
     later states hide them: a leaf opened 100° into a room, then 50°, leaves the 100° cells behind the
     50° leaf), is integrated as static and never joins either set of dynamic points; it is still an
-    observed angle of the door, and a part of the opening range. Directions φ at 1° steps on the side of
-    the closed direction where the observed angles lie (a door opens to one side), within the rotation
-    limit (:func:`_max_span`, which also keeps off the wall behind the hinge) and farther than
+    observed angle of the door, and a part of the opening range. Directions φ at 1° steps on either side of
+    the observed arc, within the rotation limit (:func:`_max_span`, which also keeps off the wall behind the
+    hinge) and farther than
     ``angle_cluster_gap_deg`` from the observed angles score the fraction of occupied cells (grown by a
     cell) along [2 cells, L − 1 cell]. Each run of directions scoring ≥ ``partner_min_fraction`` gives one
     candidate, its best φ, checked by :func:`_leaf_end` (a line along φ that ends) and :func:`_stood_when`
@@ -656,18 +659,13 @@ def _static_states(grid: LogOddsGrid, occupied: BoolArray, hinge: FloatArray, mo
     res = grid.resolution_m
     gap = math.radians(config.angle_cluster_gap_deg)
     start, span = _range_about(modes)
-    rel = wrap_angle(modes - closed)
     limit = _max_span(config)
-    steps = np.radians(np.arange(0.0, math.degrees(limit) + 1e-9, 1.0))
-    if np.all(np.abs(rel) <= gap):  # seen closed only: either side
-        yaws = closed + np.concatenate([-steps[::-1], steps[1:]])
-    elif np.all(rel >= -gap):  # opens counter-clockwise
-        yaws = closed + steps
-    elif np.all(rel <= gap):  # clockwise
-        yaws = closed - steps[::-1]
-    else:  # observed on both sides of the closed direction (a swinging door): around the observed arc
-        room = limit - span
-        yaws = start - room + np.radians(np.arange(0.0, math.degrees(span + 2 * room) + 1e-9, 1.0))
+    # Around the observed arc, on both sides: the closed direction may be wrong (a door at the back of a recess, whose
+    # wall behind the hinge is hidden, took the recess corner's diagonal for it), and a state found beyond it says so
+    # (the caller then chooses the closed direction again); a static line there that is not the leaf was hit in a
+    # pass in which the leaf stood elsewhere (_stood_when).
+    room = limit - span
+    yaws = start - room + np.radians(np.arange(0.0, math.degrees(span + 2 * room) + 1e-9, 1.0))
     free_of_modes = np.min(np.abs(wrap_angle(yaws[:, None] - modes[None, :])), axis=1) > gap
     frac = _ray_fraction(grid, occupied, hinge, yaws, 2 * res, length - res)
     ok = (frac >= config.partner_min_fraction) & free_of_modes
@@ -1007,6 +1005,8 @@ def _wall_behind(grid: LogOddsGrid, occupied: BoolArray, hinge: FloatArray, mode
         if fit is not None:
             phi = math.atan2(-fit[2][1], -fit[2][0])
             point = fit[1]
+        if np.min(np.abs(wrap_angle(phi + math.pi - modes))) <= gap:
+            continue  # the cells behind are the leaf itself, at one of its angles (a recess hides the wall there)
         beyond_end = float(np.mod(phi - (start + span) + gap, 2 * np.pi)) - gap  # CCW past the range end
         before_start = 2 * np.pi - span - beyond_end  # CW before its start
         if before_start < -gap or min(beyond_end, before_start) > limit:

@@ -17,24 +17,29 @@ from doorbatch.cli import main
 HINGE_X, WALL_Y = 5.0, 1.5
 
 
-def _world(length_m: float, hinge: str) -> dict[str, object]:
+def _world(length_m: float, hinge: str, recess_m: float = 0.0) -> dict[str, object]:
     """A 12 × 3 m corridor, an 8 × 3.5 m room north of it, one door in the wall between (hinged at its west end,
-    opening north; or at its east end, the mirror image)."""
+    opening north; or at its east end, the mirror image). With ``recess_m`` the door stands at the back of a recess
+    that deep, 0.1 m wider than the leaf on each side (a thick wall, the door flush with its room side)."""
     left = hinge == "left"
-    door = {"name": "d01", "hinge_m": [HINGE_X if left else HINGE_X + length_m, WALL_Y], "length_m": length_m,
+    door_y = WALL_Y + recess_m
+    door = {"name": "d01", "hinge_m": [HINGE_X if left else HINGE_X + length_m, door_y], "length_m": length_m,
             "closed_yaw_deg": 0 if left else 180, "opening_sign": 1 if left else -1, "max_angle_deg": 140.0,
             "material": "door"}
     grey = {"mean_rgb": [200, 200, 195], "std_rgb": [5, 5, 5]}
+    a, b = HINGE_X - 0.1, HINGE_X + length_m + 0.1
+    north = ([[0.0, WALL_Y], [a, WALL_Y], [a, door_y], [b, door_y], [b, WALL_Y], [12.0, WALL_Y]] if recess_m > 0
+             else [[0.0, WALL_Y], [12.0, WALL_Y]])
     return {
         "name": "room_door", "description": "a door into an otherwise unseen room", "wall_height_m": 2.6,
         "floor_rgb": [118, 112, 104], "ceiling_rgb": [236, 236, 230],
         "materials": {"wall": grey, "door": {"mean_rgb": [150, 104, 64], "std_rgb": [10, 8, 6]},
                       "handle": {"mean_rgb": [48, 48, 52], "std_rgb": [3, 3, 3]}},
-        "walls": [{"name": "north", "points_m": [[0.0, WALL_Y], [12.0, WALL_Y]]},
+        "walls": [{"name": "north", "points_m": north},
                   {"name": "south", "points_m": [[0.0, -1.5], [12.0, -1.5]]},
                   {"name": "west", "points_m": [[0.0, -1.5], [0.0, WALL_Y]]},
                   {"name": "east", "points_m": [[12.0, -1.5], [12.0, WALL_Y]]}],
-        "rooms": [{"name": "room", "points_m": [[2.0, WALL_Y], [2.0, 5.0], [10.0, 5.0], [10.0, WALL_Y]]}],
+        "rooms": [{"name": "room", "points_m": [[2.0, door_y], [2.0, 5.0], [10.0, 5.0], [10.0, door_y]]}],
         "pillars": [], "niches": [], "doors": [door],
         "routes": {"main": {"points_m": [[1.0, -0.7], [11.0, -0.7]]}},
     }
@@ -51,6 +56,23 @@ def _scenario(angles_deg: tuple[float, ...]) -> dict[str, object]:
                         "colors": {"enabled": False}}}
 
 
+def _mapped_doors(tmp_path: Path, world: dict[str, object], angles_deg: tuple[float, ...], seed: int
+                  ) -> list[dict[str, float]]:
+    (tmp_path / "world.yaml").write_text(yaml.safe_dump(world))
+    (tmp_path / "scenario.yaml").write_text(yaml.safe_dump(_scenario(angles_deg)))
+    assert main(["simulate", str(tmp_path / "world.yaml"), "-o", str(tmp_path / "sim" / "run.mcap"), "--scenario",
+                 str(tmp_path / "scenario.yaml"), "--seed", str(seed), "--split-passes", "-q"]) == 0
+    passes = [str(tmp_path / "sim" / f"run_pass{k + 1}.mcap") for k in range(len(angles_deg))]
+    assert main(["map", *passes, "-o", str(tmp_path / "map"), "--stages", "grid", "-q"]) == 0
+    return list(pq.read_table(tmp_path / "map" / "doors.parquet").to_pylist())
+
+
+def _open_range_deg(door: dict[str, float]) -> tuple[float, float]:
+    """The door's range as leaf directions in the world (degrees, sorted)."""
+    ends = (math.degrees(door["closed_yaw"] + door[k]) for k in ("angle_min", "angle_max"))
+    return tuple(sorted((e + 180.0) % 360.0 - 180.0 for e in ends))  # type: ignore[return-value]
+
+
 @pytest.mark.parametrize(("length_m", "hinge", "angles_deg", "seed"), [
     (0.9, "left", (0.0, 90.0, 0.0), 2),  # the tester's cases that were missed
     (0.8, "left", (0.0, 90.0, 0.0), 1),
@@ -58,13 +80,7 @@ def _scenario(angles_deg: tuple[float, ...]) -> dict[str, object]:
 ])
 def test_a_door_opened_into_an_unseen_room_is_found(tmp_path: Path, length_m: float, hinge: str,
                                                     angles_deg: tuple[float, ...], seed: int) -> None:
-    (tmp_path / "world.yaml").write_text(yaml.safe_dump(_world(length_m, hinge)))
-    (tmp_path / "scenario.yaml").write_text(yaml.safe_dump(_scenario(angles_deg)))
-    assert main(["simulate", str(tmp_path / "world.yaml"), "-o", str(tmp_path / "sim" / "run.mcap"), "--scenario",
-                 str(tmp_path / "scenario.yaml"), "--seed", str(seed), "--split-passes", "-q"]) == 0
-    passes = [str(tmp_path / "sim" / f"run_pass{k + 1}.mcap") for k in range(len(angles_deg))]
-    assert main(["map", *passes, "-o", str(tmp_path / "map"), "--stages", "grid", "-q"]) == 0
-    doors = pq.read_table(tmp_path / "map" / "doors.parquet").to_pylist()
+    doors = _mapped_doors(tmp_path, _world(length_m, hinge), angles_deg, seed)
     assert len(doors) == 1
     door = doors[0]
     hinge_x = HINGE_X if hinge == "left" else HINGE_X + length_m
@@ -78,3 +94,21 @@ def test_a_door_opened_into_an_unseen_room_is_found(tmp_path: Path, length_m: fl
     open_yaw = door["closed_yaw"] + (door["angle_max"] if abs(door["angle_max"]) > abs(door["angle_min"])
                                      else door["angle_min"])
     assert math.sin(open_yaw) > 0.99  # into the room
+
+
+@pytest.mark.parametrize(("recess_m", "angles_deg"), [(0.25, (0.0, 45.0, 90.0)), (0.15, (0.0, 45.0, 90.0))])
+def test_a_door_at_the_back_of_a_recess_keeps_its_whole_range(tmp_path: Path, recess_m: float,
+                                                             angles_deg: tuple[float, ...]) -> None:
+    """Closed, 45° and 90° into the room, the 90° state static (the 45° leaf hides it in the last pass). The wall
+    behind the hinge is hidden from the corridor, so the recess corner's diagonal passed for it: the door was read
+    as closed at 45° and its static state searched on the other side only (range 0-45°, an outside tester's
+    world, three seeds)."""
+    doors = _mapped_doors(tmp_path, _world(0.9, "left", recess_m), angles_deg, seed=1)
+    assert len(doors) == 1
+    door = doors[0]
+    assert math.hypot(door["hinge_x"] - HINGE_X, door["hinge_y"] - (WALL_Y + recess_m)) <= 0.10
+    assert abs(door["length"] - 0.9) <= 0.10
+    lo, hi = _open_range_deg(door)
+    assert abs(lo - 0.0) <= 10.0 and abs(hi - 90.0) <= 10.0
+    # and closed is closed: the 90° leaf's own cells, behind the hinge seen from -90°, are not a wall to close against
+    assert abs(math.degrees(math.remainder(door["closed_yaw"], 2 * math.pi))) <= 10.0
