@@ -172,28 +172,31 @@ def laser_to_base_4x4(affine: FloatArray) -> FloatArray:
 
 
 def lost_note(t_s: float, recent: Sequence[tuple[int, float, float]], config: LocalizeConfig,
-              global_start: bool = False) -> str:
+              global_start: bool = False, off_map_at: FloatArray | None = None) -> str:
     """The warning for a run found lost at ``t_s``, naming the criterion that held over the ``recent`` updates
     (stamp, :func:`.scan_fit`, :func:`.see_through_share`). Hits off the walls while almost no beam passes through
     one (a mean share under a quarter of ``lost_max_see_through``, what a right pose shows) suggest a map lacking
     what the robot sees rather than a wrong pose (:mod:`.convergence`, criterion 4). From a ``global_start`` the
-    likeliest cause is named too: a cloud that settled on the wrong one of similar places."""
+    likeliest cause is named too: a cloud that settled on the wrong one of similar places. ``off_map_at``: the
+    estimate then, where it lies off the map's free cells (a cloud driven through a wall, or off the map)."""
     fit = np.array([r[1] for r in recent])
     through = np.array([r[2] for r in recent])
     wrong_place = ("; from a global start, also a cloud that settled on the wrong one of similar places (rooms that "
                    "repeat, a symmetric corridor) once the robot reaches what tells them apart: "
                    "localize.relocalize_when_lost spreads it again" if global_start else "")
+    off = ("" if off_map_at is None else
+           f"; the estimate, ({off_map_at[0]:.2f}, {off_map_at[1]:.2f}), lies off the map's free space")
     if not np.all(fit < config.lost_min_fit):
         return (f"lost at {t_s:.1f} s: over {config.lost_max_see_through:.0%} of the scans' beams passed through "
                 f"the map's walls to end where it has none, for {config.lost_after_s} s (while most hits lay near "
-                f"walls: a pose shifted along a corridor, or a kidnapped robot{wrong_place})")
+                f"walls: a pose shifted along a corridor, or a kidnapped robot{wrong_place}){off}")
     note = (f"lost at {t_s:.1f} s: under {config.lost_min_fit:.0%} of the scans' hits within "
             f"{config.lost_fit_distance_m} m of the map for {config.lost_after_s} s")
     share = float(np.nanmean(through)) if np.isfinite(through).any() else math.nan
     if share < config.lost_max_see_through / 4:
         note += (f"; only {share:.0%} of their beams passed through its walls, so the beams end short of them: the "
                  "robot is elsewhere, or the map lacks what it sees (people, moved furniture, a missing wall)")
-    return note + wrong_place
+    return note + wrong_place + off
 
 
 def _initial_particles(rec: Recording, lmap: LocalizationMap, init: Init, method: str, config: LocalizeConfig,
@@ -560,7 +563,8 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
             t_s = (scan.stamp_ns - (track.stamps[0] if track.stamps else scan.stamp_ns)) / 1e9  # as manifest_extra
             if len(lost_ns) == 1:  # the later episodes in one line at the end
                 again = "; the cloud was spread over the free space again" if respread else ""
-                warnings.append(lost_note(t_s, recent, lc, init == "global") + again)
+                off_map = None if lmap.free.holds(mean[None, :2])[0] else mean[:2]
+                warnings.append(lost_note(t_s, recent, lc, init == "global", off_map) + again)
         if not math.isnan(fit):  # NaN (no evidence) neither starts nor breaks a run of fitting scans
             fitting_since = (fitting_since or int(scan.stamp_ns)) if fits(fit, through, lc) else None
         # an episode ends once the scans fit again for lost_after_s, as it began (a noisy share dips below the bar)

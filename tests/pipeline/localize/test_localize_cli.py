@@ -115,6 +115,17 @@ def test_a_global_claim_lost_once_is_not_made_again_by_the_same_cloud(sample_map
     assert lost["extra"]["converged_after_s"] is None
 
 
+def test_a_lost_run_whose_estimate_is_off_the_map_says_where_it_is(sample_map: Path, tmp_path: Path) -> None:
+    """An outside tester's estimates drove 21 m off their map and the lost warning did not say so: a start 7 m south
+    of the corridor, beyond its wall, is lost there, and the warning names the estimate off the free space."""
+    run = tmp_path / "off"
+    assert main(["localize", str(SAMPLE_LOGS / "loc_open.mcap"), "--map", str(sample_map), "-o", str(run),
+                 "--method", "mcl", "--init", "20,-7,0", "-q"]) == 0
+    manifest = json.loads((run / "manifest.json").read_text())
+    lost = [w for w in manifest["warnings"] if w.startswith("lost at ")]
+    assert len(lost) == 1 and "lies off the map's free space" in lost[0], manifest["warnings"]
+
+
 def test_the_summary_of_a_lost_run_says_when_it_was_lost(sample_map: Path, tmp_path: Path,
                                                         monkeypatch: pytest.MonkeyPatch,
                                                         capsys: pytest.CaptureFixture[str]) -> None:
@@ -149,6 +160,7 @@ def test_a_tracked_run_that_is_lost_says_so_once_and_goes_on(sample_map: Path, t
     lost = [w for w in manifest["warnings"] if w.startswith("lost at ")]
     assert len(lost) == 1 and "spread" not in lost[0]
     assert "beams end short of them" in lost[0]  # only the (patched) hits fit poorly: no beam passes a wall
+    assert "off the map's free space" not in lost[0]  # the estimate is in the corridor
     assert any(w.startswith("localize.relocalize_when_lost spreads a lost cloud again only with --init global")
                for w in manifest["warnings"])  # set, and a tracked run cannot use it
     assert manifest["extra"]["converged_after_s"] == 0.0
