@@ -649,12 +649,11 @@ def _static_states(grid: LogOddsGrid, occupied: BoolArray, hinge: FloatArray, mo
     50° leaf), is integrated as static and never joins either set of dynamic points; it is still an
     observed angle of the door, and a part of the opening range. Directions φ at 1° steps on either side of
     the observed arc, within the rotation limit (:func:`_max_span`, which also keeps off the wall behind the
-    hinge) and farther than
-    ``angle_cluster_gap_deg`` from the observed angles score the fraction of occupied cells (grown by a
-    cell) along [2 cells, L − 1 cell]. Each run of directions scoring ≥ ``partner_min_fraction`` gives one
-    candidate, its best φ, checked by :func:`_leaf_end` (a line along φ that ends) and :func:`_stood_when`
-    (not hit while the leaf stood at another angle), and kept if the arc of all angles stays within the
-    limit. Returns the free end of each angle found, with the last pass its cells were hit.
+    hinge) and farther than ``angle_cluster_gap_deg`` from the observed angles score the fraction of occupied
+    cells (grown by a cell) along [2 cells, L − 1 cell]. Each run of directions scoring ≥ ``partner_min_fraction``
+    gives one candidate, its best φ, checked by :func:`_leaf_end` (a line along φ that ends) and
+    :func:`_stood_when` (not hit while the leaf stood at another angle), and kept if the arc of all angles stays
+    within the limit. Returns the free end of each angle found, with the last pass its cells were hit.
     """
     res = grid.resolution_m
     gap = math.radians(config.angle_cluster_gap_deg)
