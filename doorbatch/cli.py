@@ -271,7 +271,7 @@ def localize_cmd(ctx: Context, log_path: Path, map_path: Path, output: Path, met
                                    "min_particles": min(lc.min_particles, particles)})
     config = ctx.config.model_copy(update={"localize": lc})
     with progress_bar(None, "localize", unit="scan") as bar:
-        _, summary = run_localize(log_path, map_path, output, config, method or lc.method, init, bar.update)
+        _, summary = run_localize(log_path, map_path, output, config, method or lc.method, init, bar)
     lost = ", ".join(f"{t:.1f}" for t in summary.lost_after_s)
     ctx.summary(f"{summary.method}: {summary.updates} updates, {summary.mean_particles:.0f} particles on average"
                 f"{', ambiguous' if summary.ambiguous else ''}{f', lost at {lost} s' if lost else ''}"

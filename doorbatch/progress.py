@@ -6,18 +6,37 @@ import os
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
-from typing import Protocol
+from typing import Any, Protocol
 
 
 class Progress(Protocol):
-    """What stages may call: advance by n."""
+    """What stages may call: advance by n; set the total once it is known (a log's scan count, once it is read)."""
 
     def update(self, n: int = 1) -> object: ...
+
+    def set_total(self, total: int) -> None: ...
 
 
 class _Silent:
     def update(self, n: int = 1) -> None:
         return None
+
+    def set_total(self, total: int) -> None:
+        return None
+
+
+class _Bar:
+    """A tqdm bar whose total may be set after it started (then it shows the fraction done and the time left)."""
+
+    def __init__(self, bar: Any) -> None:
+        self._bar = bar
+
+    def update(self, n: int = 1) -> object:
+        return self._bar.update(n)
+
+    def set_total(self, total: int) -> None:
+        self._bar.total = total
+        self._bar.refresh()
 
 
 _ENABLED = True
@@ -38,7 +57,7 @@ def progress_bar(total: int | None, description: str, unit: str = "msg") -> Iter
     from tqdm import tqdm
 
     with tqdm(total=total, desc=description, unit=unit, leave=False, **_width()) as bar:
-        yield bar
+        yield _Bar(bar)
 
 
 def _width() -> dict[str, object]:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 import os
+import re
 from collections.abc import Callable
 from pathlib import Path
 
@@ -59,3 +60,24 @@ def test_mapping_shows_scan_matching_and_the_grid_scan_by_scan(monkeypatch: pyte
                  "grid"]) == 0
     assert "map: scan matching" in term.getvalue() and "/19" in term.getvalue()
     assert "map: grid" in term.getvalue()
+
+
+def test_localize_and_the_grid_show_how_many_scans_there_are(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """An outside tester's 50,000-particle run sat at "660scan [00:30" with no total and no time left: the bars of
+    localize and of the grid stage learn the scan count once the log is read."""
+    from doorbatch.cli import main
+    from tests.conftest import REPO
+
+    sample_logs = REPO / "datasets" / "sample" / "logs"
+    term = _Terminal()
+    monkeypatch.setattr("sys.stderr", term)
+    monkeypatch.setattr(os, "get_terminal_size", lambda fd=0: os.terminal_size((100, 40)))
+    log = sample_logs / "map_pass1.mcap"
+    assert main(["map", str(log), "-o", str(tmp_path / "map"), "--stages", "grid"]) == 0
+    assert main(["localize", str(sample_logs / "loc_open.mcap"), "--map", str(tmp_path / "map"), "-o",
+                 str(tmp_path / "run"), "--method", "mcl"]) == 0
+    shown = term.getvalue()
+    assert "map: grid" in shown and "localize" in shown
+    for name in ("map: grid", "localize"):
+        bars = [chunk for chunk in shown.split("\r") if chunk.lstrip().startswith(name)]
+        assert bars and all(re.search(r"\d+/\d+ \[", b) for b in bars[1:]), bars[:3]  # "done/total [time<left"

@@ -348,6 +348,7 @@ def grid_of(recordings: Sequence[Recording], passes: Sequence[PassPoses], config
     """The grid stage over passes at their poses, one after the other (``progress``: called once per pass)."""
     mapper = GridMapper(config.grid, config.doors)
     with progress_bar(None, "map: grid", unit="scan") as bar:  # a long log's pass takes minutes
+        bar.set_total(sum(int(np.count_nonzero(p.valid[::config.mapping.scan_stride])) for p in passes))
         for rec, poses in zip(recordings, passes, strict=True):
             integrate_pass(mapper, rec, poses, config.mapping.scan_stride, config.grid.dropout_max_beams, bar)
             if progress is not None:

@@ -14,7 +14,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -64,6 +64,7 @@ from doorbatch.pipeline.localize.result import LocalizationResult
 from doorbatch.pipeline.localize.rival_pose import Rival, RivalOutcome, RivalSearch, find_rival, scan_cloud
 from doorbatch.pipeline.localize.torch_field import check_device
 from doorbatch.pipeline.mapping import pass_poses
+from doorbatch.progress import Progress
 
 log = logging.getLogger(__name__)
 FloatArray = npt.NDArray[np.float64]
@@ -331,7 +332,7 @@ def _reset_indices(rec: Recording, resets: Sequence[StartPose], first_i: int) ->
 
 def localize(log_path: Path, lmap: LocalizationMap, config: DoorbatchConfig, method: str = "rbpf",
              init: str | tuple[float, float, float] = "reference",
-             progress: Callable[[int], object] | None = None) -> LocalizationResult:
+             progress: Progress | None = None) -> LocalizationResult:
     """Run MCL or the RBPF over a log (:func:`localize_recording` of the log's recording). ``init`` may also
     name a pose topic of the log (``/initialpose``): its first message is the start (:mod:`doorbatch.io.pose_topic`).
 
@@ -469,7 +470,7 @@ def motion_model_for(odometry: PoseSeries, lc: LocalizeConfig) -> tuple[Localize
 
 
 def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchConfig, method: str = "rbpf",
-                       init: Init = "reference", progress: Callable[[int], object] | None = None,
+                       init: Init = "reference", progress: Progress | None = None,
                        resets: Sequence[StartPose] = ()) -> LocalizationResult:
     """Run MCL or the RBPF over a recording (e.g. one whose odometry a script has replaced). A
     :class:`StartPose` start localizes only the scans from its stamp on (AMCL does nothing before its initial
@@ -514,9 +515,11 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
     last_s: float | None = None
     k_draw = max(1, lc.annotate_particles)
     updated_scans: list[int] = []  # the scan of each update
+    if progress is not None:
+        progress.set_total(len(rec.scans))
     for i in range(len(rec.scans)):
         if progress is not None:
-            progress(1)
+            progress.update(1)
         if i in reset_at:  # an operator's pose again: a fresh cloud there, updated on this scan (pf_init_ false)
             state = MclState(_initial_particles(rec, lmap, reset_at[i], method, lc, rng))
             monitor, lost, barred, fitting_since = ConvergenceMonitor(), False, False, None
@@ -702,7 +705,7 @@ class LocalizeRunSummary:
 
 
 def run_localize(log_path: Path, map_path: Path, out: Path, config: DoorbatchConfig, method: str,
-                 init: str, progress: Callable[[int], object] | None = None
+                 init: str, progress: Progress | None = None
                  ) -> tuple[LocalizationResult, LocalizeRunSummary]:
     """Localize a log on a map and write the run directory: trajectory.parquet, door_states.parquet,
     trajectory.tum, annotated.mcap, manifest.json."""
