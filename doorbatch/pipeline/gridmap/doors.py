@@ -541,10 +541,11 @@ def _door_from_group(g: _Hinged, gap: float, config: DoorDetectionConfig, grid: 
         return None
     if use_grid and grid is not None and occupied is not None:
         length = _leaf_length(dist, obs.yaw, closed, config)
-        for end, when in _static_states(grid, occupied, hinge, obs.modes, length, obs.passes(), config):
+        states = _static_states(grid, occupied, hinge, obs.modes, length, obs.passes(), config)
+        for end, when in states:
             obs.add(hinge, end, when)
         start, span = _range_about(obs.modes)
-        if np.min(np.abs(wrap_angle(closed - np.array([start, start + span])))) > gap:  # now inside the range
+        if states and np.min(np.abs(wrap_angle(closed - np.array([start, start + span])))) > gap:  # now inside
             closed = closed_direction(grid, occupied, hinge, obs.modes, config)
         if np.min(np.abs(wrap_angle(obs.modes - closed))) > gap:
             state = _closed_state(grid, hinge, closed, length, obs.passes(), config)
@@ -659,6 +660,8 @@ def _static_states(grid: LogOddsGrid, occupied: BoolArray, hinge: FloatArray, mo
     gap = math.radians(config.angle_cluster_gap_deg)
     start, span = _range_about(modes)
     limit = _max_span(config)
+    if span > limit:
+        return []  # beyond the rotation limit already: no door (group_doors' span test)
     # Around the observed arc, on both sides: the closed direction may be wrong (a door at the back of a recess, whose
     # wall behind the hinge is hidden, took the recess corner's diagonal for it), and a state found beyond it says so
     # (the caller then chooses the closed direction again); a static line there that is not the leaf was hit in a
@@ -870,10 +873,17 @@ def _partner_from(grid: LogOddsGrid, occupied: BoolArray, g: _Hinged, mode_yaw: 
                                         config)
                 hinge, found = found[0], again if again is not None else found
             if found is not None:
-                when = _stood_when(grid, *found, seen_in)
+                d = found[1] - found[0]
+                # occupied cells not grown: a wall through the hinge, not one beside it (a recess's side wall)
+                raw = grid.log_odds > np.float32(_logit(config.p_occupied))
+                behind = _ray_fraction(grid, raw, found[0], np.array([math.atan2(-d[1], -d[0])]), 2 * res,
+                                       config.wall_probe_m)[0]
+                when = None if behind >= config.wall_min_fraction else _stood_when(grid, *found, seen_in)
                 if when is not None:
                     return found[0], found[1], when
-                break  # a line that was hit while the leaf stood at its one angle: not this run
+                # hit while the leaf stood at its one angle, or going on through the hinge (a wall that ends at a
+                # doorway, reached from a hinge guess stepped back onto it): not this run
+                break
     return None
 
 

@@ -195,3 +195,33 @@ def test_a_door_opened_from_closed_is_found_when_its_closed_cells_never_fall() -
     result = build_grid_map(passes)
     assert len(result.doors) == 1
     _check_door(result.doors[0], world.door_a, -22.0 * DEG, 0.0)
+
+
+@pytest.mark.parametrize("walker_x", [6.95, 7.05, 7.10])
+def test_a_person_walking_away_from_a_wall_beside_a_doorway_is_no_door(walker_x: float) -> None:
+    """A walker's trail from the north wall across the corridor falls as one leaf-long line (set 2) whose end touches
+    the wall 1 m east of door A's doorway; a hinge guess stepped back onto the wall found the wall piece between the
+    trail and the doorway as its 'other state' (it ends at the doorway, and was last hit in the other pass), and its
+    sweep erased that wall (a reviewer's case). A partner that goes on through its hinge is a wall."""
+    world = Corridor(door_a=Door((5.0, 3.0), 0.9, 0.0, -1))
+    walker = ((walker_x, 2.8), (walker_x, 0.2))
+    passes = [scan_pass(world, 0.0, B_OPEN, reverse=False, seed=1, person=walker),
+              scan_pass(world, OPEN, B_OPEN, reverse=True, seed=2)]
+    result = build_grid_map(passes)
+    assert len(result.doors) == 1
+    _check_door(result.doors[0], world.door_a, -OPEN, 0.0)
+    m = result.static_map  # the wall between the doorway and the trail stays
+    cells = m.world_to_cell(np.stack([np.linspace(6.1, 6.7, 7), np.full(7, 3.0)], axis=1))
+    assert np.all(m.occupancy[cells[:, 0], cells[:, 1]] >= 65)
+
+
+def test_static_states_of_an_arc_beyond_the_rotation_limit_are_none() -> None:
+    """An observed arc wider than twice the rotation limit left the static-state search no directions (an IndexError
+    that would stop the grid stage); such a door is rejected by the limit anyway."""
+    from doorbatch.pipeline.gridmap.doors import _occupied_dilated, _static_states
+
+    _, result = _run(+1, 0.0, OPEN)
+    config = DoorDetectionConfig(max_rotation_deg=90.0)
+    occupied = _occupied_dilated(result.grid, config)
+    modes = np.radians([0.0, 155.0])
+    assert _static_states(result.grid, occupied, np.array([5.0, 3.0]), modes, 0.9, {0, 1}, config) == []
