@@ -471,7 +471,7 @@ def group_doors(leaves: Leaves, config: DoorDetectionConfig, grid: LogOddsGrid |
     """
     if len(leaves) == 0:
         return []
-    occupied = None if grid is None else _occupied_dilated(grid, config, leaves)
+    occupied, raw = (None, None) if grid is None else _occupied_masks(grid, config, leaves)
     gap = math.radians(config.angle_cluster_gap_deg)
     used = np.zeros(len(leaves), dtype=bool)
     doors: list[DetectedDoor] = []
@@ -479,7 +479,8 @@ def group_doors(leaves: Leaves, config: DoorDetectionConfig, grid: LogOddsGrid |
         free = ~used[g.leaf]
         if free.sum() < 1:
             continue
-        door = _door_from_group(g.subset(free), gap, config, grid, occupied, _scans_seen(leaves, g.leaf[free], config))
+        door = _door_from_group(g.subset(free), gap, config, grid, occupied, raw,
+                                _scans_seen(leaves, g.leaf[free], config))
         if door is not None:
             used[g.leaf] = True
             doors.append(door)
@@ -521,14 +522,15 @@ def _scans_seen(leaves: Leaves, leaf: IntArray, config: DoorDetectionConfig) -> 
 
 
 def _door_from_group(g: _Hinged, gap: float, config: DoorDetectionConfig, grid: LogOddsGrid | None,
-                     occupied: BoolArray | None, scans_seen: int) -> DetectedDoor | None:
+                     occupied: BoolArray | None, raw: BoolArray | None, scans_seen: int) -> DetectedDoor | None:
+    """One hinge group as a door, or None (:func:`group_doors`); ``occupied``/``raw``: :func:`_occupied_masks`."""
     labels = angle_modes(g.yaw, gap)
     obs = _Observed(g.near, g.far, g.yaw, g.when, labels, _mode_yaws(g.yaw, labels))
     use_grid = grid is not None and occupied is not None and config.static_partner_search
     if obs.modes.size == 1:
-        if not use_grid or grid is None or occupied is None or scans_seen < config.lone_min_scans:
+        if not use_grid or grid is None or occupied is None or raw is None or scans_seen < config.lone_min_scans:
             return None
-        if not _lone_partner(grid, occupied, g, obs, config):
+        if not _lone_partner(grid, occupied, raw, g, obs, config):
             return None
     hinge = _hinge_estimate(obs.near, obs.far, obs.labels, obs.modes, config)
     if hinge is None:
@@ -587,12 +589,12 @@ def _rigid(dist: FloatArray, obs: _Observed, closed: float, config: DoorDetectio
     return bool(med.min() >= config.min_length_ratio * med.max())
 
 
-def _lone_partner(grid: LogOddsGrid, occupied: BoolArray, g: _Hinged, obs: _Observed,
+def _lone_partner(grid: LogOddsGrid, occupied: BoolArray, raw: BoolArray, g: _Hinged, obs: _Observed,
                   config: DoorDetectionConfig) -> bool:
     """Extension for leaves seen at one angle only: their other state from the static grid, as a leaf-shaped
     occupied segment hinged at their common end (:func:`_static_partner`), or else as the closed leaf
     (:func:`_closed_state`, along the wall behind the hinge). Adds it to ``obs``; whether one was found."""
-    partner = _static_partner(grid, occupied, g, float(obs.modes[0]), obs.passes(), config)
+    partner = _static_partner(grid, occupied, raw, g, float(obs.modes[0]), obs.passes(), config)
     if partner is not None:
         obs.add(*partner)
         return True
@@ -783,9 +785,11 @@ def _logit(p: float) -> float:
     return math.log(p / (1.0 - p))
 
 
-def _occupied_dilated(grid: LogOddsGrid, config: DoorDetectionConfig, leaves: Leaves | None = None) -> BoolArray:
-    """Occupied cells (p > p_occupied) grown by one cell, so probes tolerate a cell of misregistration.
-    With ``leaves``, only within 2 λmax of them (where the probes from their hinges reach; zeros beyond)."""
+def _occupied_masks(grid: LogOddsGrid, config: DoorDetectionConfig, leaves: Leaves | None = None
+                    ) -> tuple[BoolArray, BoolArray]:
+    """Occupied cells (p > p_occupied) grown by one cell, so probes tolerate a cell of misregistration, and as they
+    are (a wall through a hinge, not beside it). With ``leaves``, only within 2 λmax of them (where the probes from
+    their hinges reach; zeros beyond)."""
     h, w = grid.shape
     i0, i1, j0, j1 = 0, h, 0, w
     if leaves is not None and len(leaves):
@@ -794,11 +798,13 @@ def _occupied_dilated(grid: LogOddsGrid, config: DoorDetectionConfig, leaves: Le
         hi = np.floor(grid.world_to_cell_float(ends.max(axis=0) + 2 * config.door_length_max_m)).astype(np.int64)
         j0, i0 = (int(v) for v in np.maximum(lo, 0))
         j1, i1 = (int(v) for v in np.minimum(hi + 1, [w, h]))
-    out = np.zeros((h, w), dtype=bool)
+    grown = np.zeros((h, w), dtype=bool)
+    raw = np.zeros((h, w), dtype=bool)
     if i1 > i0 and j1 > j0:
-        occ = (grid.log_odds[i0:i1, j0:j1] > np.float32(_logit(config.p_occupied))).view(np.uint8)
-        out[i0:i1, j0:j1] = ndimage.maximum_filter(occ, size=3, mode="constant", cval=0).view(bool)
-    return out
+        raw[i0:i1, j0:j1] = grid.log_odds[i0:i1, j0:j1] > np.float32(_logit(config.p_occupied))
+        grown[i0:i1, j0:j1] = ndimage.maximum_filter(raw[i0:i1, j0:j1].view(np.uint8), size=3, mode="constant",
+                                                     cval=0).view(bool)
+    return grown, raw
 
 
 def _ray_fraction(grid: LogOddsGrid, mask: BoolArray, start: FloatArray, yaws: FloatArray,
@@ -814,8 +820,8 @@ def _ray_fraction(grid: LogOddsGrid, mask: BoolArray, start: FloatArray, yaws: F
     return out
 
 
-def _static_partner(grid: LogOddsGrid, occupied: BoolArray, g: _Hinged, mode_yaw: float, seen_in: set[int],
-                    config: DoorDetectionConfig) -> tuple[FloatArray, FloatArray, float] | None:
+def _static_partner(grid: LogOddsGrid, occupied: BoolArray, raw: BoolArray, g: _Hinged, mode_yaw: float,
+                    seen_in: set[int], config: DoorDetectionConfig) -> tuple[FloatArray, FloatArray, float] | None:
     """Extension: the leaf's other observed angle as an occupied segment in the static grid.
 
     For leaves seen at one angle only, with their shared end as the hinge: directions φ at 1° steps,
@@ -840,13 +846,14 @@ def _static_partner(grid: LogOddsGrid, occupied: BoolArray, g: _Hinged, mode_yaw
     near = g.near.mean(axis=0)
     back = np.array([-math.cos(mode_yaw), -math.sin(mode_yaw)])  # from the near end away from the free end
     for step in np.arange(0.0, config.partner_hinge_back_m + 1e-9, res):
-        found = _partner_from(grid, occupied, g, mode_yaw, near + step * back, yaws, length, seen_in, config)
+        found = _partner_from(grid, occupied, raw, g, mode_yaw, near + step * back, yaws, length, seen_in, config)
         if found is not None:
             return found
     return None
 
 
-def _partner_from(grid: LogOddsGrid, occupied: BoolArray, g: _Hinged, mode_yaw: float, hinge: FloatArray,
+def _partner_from(grid: LogOddsGrid, occupied: BoolArray, raw: BoolArray, g: _Hinged, mode_yaw: float,
+                  hinge: FloatArray,
                   yaws: FloatArray, length: float, seen_in: set[int], config: DoorDetectionConfig
                   ) -> tuple[FloatArray, FloatArray, float] | None:
     """:func:`_static_partner`'s search from one hinge guess."""
@@ -875,7 +882,6 @@ def _partner_from(grid: LogOddsGrid, occupied: BoolArray, g: _Hinged, mode_yaw: 
             if found is not None:
                 d = found[1] - found[0]
                 # occupied cells not grown: a wall through the hinge, not one beside it (a recess's side wall)
-                raw = grid.log_odds > np.float32(_logit(config.p_occupied))
                 behind = _ray_fraction(grid, raw, found[0], np.array([math.atan2(-d[1], -d[0])]), 2 * res,
                                        config.wall_probe_m)[0]
                 when = None if behind >= config.wall_min_fraction else _stood_when(grid, *found, seen_in)

@@ -641,14 +641,14 @@ def rival_tested_claim(rec: Recording, lmap: LocalizationMap, track: _Track, upd
         return o.rival is None and not o.undecided
 
     t0, whole = int(stamps[0]), test(end)
-    claim_s = (converged_ns - t0) / 1e9
+    claim_s, streak_s = (converged_ns - t0) / 1e9, (streak_ns - t0) / 1e9
     if whole.undecided:
         return ClaimTest(converged_ns, False, (
             f"rival test left undecided: over {lc.rival_max_candidates} poses of the map still fit the scans since the "
             f"claim at {claim_s:.1f} s nearly as well (a very self-similar map); the claim stands untested "
             "(localize.rival_max_candidates)"))
     if whole.rival is not None:
-        return ClaimTest(None, True, _rival_note(whole.rival, track.pose[end], (streak_ns - t0) / 1e9, lc))
+        return ClaimTest(None, True, _rival_note(whole.rival, track.pose[end], streak_s, lc))
     lo, hi, k, last_rival = claim_i - 1, claim_i, 0, None
     while hi < end:
         o = test(hi)
@@ -669,7 +669,7 @@ def rival_tested_claim(rec: Recording, lmap: LocalizationMap, track: _Track, upd
         f" as well at ({last_rival.pose[0]:.2f}, {last_rival.pose[1]:.2f}, {math.degrees(last_rival.pose[2]):.0f}°)")
     return ClaimTest(int(stamps[hi]), False, (
         f"convergence claimed at {(stamps[hi] - t0) / 1e9:.1f} s, not {claim_s:.1f} s: until then the scans since the "
-        f"cloud became tight ({(streak_ns - t0) / 1e9:.1f} s) fit the map{where} (localize.rival_*); the cloud's pose "
+        f"cloud became tight ({streak_s:.1f} s) fit the map{where} (localize.rival_*); the cloud's pose "
         "was a pick the scans could not yet tell"))
 
 

@@ -218,10 +218,10 @@ def test_a_person_walking_away_from_a_wall_beside_a_doorway_is_no_door(walker_x:
 def test_static_states_of_an_arc_beyond_the_rotation_limit_are_none() -> None:
     """An observed arc wider than twice the rotation limit left the static-state search no directions (an IndexError
     that would stop the grid stage); such a door is rejected by the limit anyway."""
-    from doorbatch.pipeline.gridmap.doors import _occupied_dilated, _static_states
+    from doorbatch.pipeline.gridmap.doors import _occupied_masks, _static_states
 
     _, result = _run(+1, 0.0, OPEN)
     config = DoorDetectionConfig(max_rotation_deg=90.0)
-    occupied = _occupied_dilated(result.grid, config)
+    occupied = _occupied_masks(result.grid, config)[0]
     modes = np.radians([0.0, 155.0])
     assert _static_states(result.grid, occupied, np.array([5.0, 3.0]), modes, 0.9, {0, 1}, config) == []
