@@ -352,10 +352,29 @@ class _Hinged:
     far: FloatArray
     yaw: FloatArray
     when: FloatArray
+    chained: bool = False  # both ends of some leaf in the group: which end is the hinge was chosen by density
+    scan: IntArray | None = None  # the scan each leaf was seen in (set 1), −1 set 2, −2 static; None: all set 1
 
     def subset(self, keep: BoolArray) -> _Hinged:
         """The leaves where ``keep`` is True."""
-        return _Hinged(self.leaf[keep], self.near[keep], self.far[keep], self.yaw[keep], self.when[keep])
+        return _Hinged(self.leaf[keep], self.near[keep], self.far[keep], self.yaw[keep], self.when[keep], self.chained,
+                       None if self.scan is None else self.scan[keep])
+
+    def reversed(self) -> _Hinged:
+        """The same leaves with the other end as the hinge-side one."""
+        return _Hinged(self.leaf, self.far, self.near, np.asarray(wrap_angle(self.yaw + math.pi), dtype=np.float64),
+                       self.when, self.chained, self.scan)
+
+    def scans_of(self, keep: BoolArray) -> int:
+        """In how many scans the leaves where ``keep`` is True were seen as dynamic points (set 1)."""
+        if self.scan is None:
+            return int(keep.sum())
+        return int(np.unique(self.scan[keep & (self.scan >= 0)]).size)
+
+    def scans_seen(self, config: DoorDetectionConfig) -> int:
+        """:func:`_scans_seen` of these leaves: distinct scans of set 1, and ``lone_min_scans`` for any set-2 one."""
+        fallen = self.scan is not None and bool((self.scan == -1).any())
+        return self.scans_of(np.ones(self.leaf.size, dtype=bool)) + (config.lone_min_scans if fallen else 0)
 
 
 def _when(leaves: Leaves) -> FloatArray:
@@ -390,13 +409,16 @@ def _hinge_groups(leaves: Leaves, config: DoorDetectionConfig) -> list[_Hinged]:
         leaf, first, count = np.unique(owner[members], return_index=True, return_counts=True)
         end = members[first]
         other = np.where(end < n, end + n, end - n)
-        if (count > 1).any():
+        chained = bool((count > 1).any())
+        if chained:
             hinge = _densest_end(ends[members], config.hinge_distance_m)
             swap = (count > 1) & (np.hypot(*(ends[other] - hinge).T) < np.hypot(*(ends[end] - hinge).T))
             end, other = np.where(swap, other, end), np.where(swap, end, other)
         near, far = ends[end], ends[other]
         yaw = np.arctan2(far[:, 1] - near[:, 1], far[:, 0] - near[:, 0])
-        groups.append(_Hinged(leaf, near, far, yaw, when[leaf]))
+        source = leaves.source[leaf]
+        scan = np.where(source == SOURCE_TRANSIENT, leaves.instance[leaf], np.where(source == SOURCE_FALLEN, -1, -2))
+        groups.append(_Hinged(leaf, near, far, yaw, when[leaf], chained, scan))
     return groups
 
 
@@ -527,11 +549,33 @@ def _door_from_group(g: _Hinged, gap: float, config: DoorDetectionConfig, grid: 
     labels = angle_modes(g.yaw, gap)
     obs = _Observed(g.near, g.far, g.yaw, g.when, labels, _mode_yaws(g.yaw, labels))
     use_grid = grid is not None and occupied is not None and config.static_partner_search
+    if use_grid and grid is not None and occupied is not None and obs.modes.size >= 2:
+        hinge = _hinge_estimate(obs.near, obs.far, obs.labels, obs.modes, config)
+        on_wall = np.zeros(0, dtype=bool) if hinge is None else _on_walls(grid, occupied, hinge, obs, g, config)
+        keep = ~on_wall[obs.labels] if on_wall.any() else np.ones(0, dtype=bool)
+        if keep.any():
+            # Without the angle along the wall the door has a state the static grid holds, hit in the pass that line
+            # claims (its presence made that state "hit while the leaf stood elsewhere"): one door, two angles, one
+            # pass, so the line is the wall. Else (a leaf opened against a wall, 0.1 m from a corner) it stays.
+            rest = g.subset(keep)  # counted again: a fallen line counts lone_min_scans, and may be the one dropped
+            door = _door_from_group(rest, gap, config, grid, occupied, raw,
+                                    rest.scans_seen(config) if g.scan is not None else scans_seen)
+            if door is not None and np.min(np.abs(wrap_angle(np.asarray(door.observed_yaws)[:, None]
+                                                             - obs.modes[None, :])), axis=1).max() > gap:
+                return door
     if obs.modes.size == 1:
         if not use_grid or grid is None or occupied is None or raw is None or scans_seen < config.lone_min_scans:
             return None
         if not _lone_partner(grid, occupied, raw, g, obs, config):
-            return None
+            if not g.chained:
+                return None
+            # Which end is the hinge was a guess by density (_hinge_groups): the other end's turn. A closed leaf's
+            # lines, cut short here and there, chain its hinge and its door stop into one group, and the door stop's
+            # ends were the densest (an outside user's 1.2 m leaf whose open state is static: the door was missed).
+            g = g.reversed()
+            obs = _Observed(g.near, g.far, g.yaw, g.when, labels, _mode_yaws(g.yaw, labels))
+            if not _lone_partner(grid, occupied, raw, g, obs, config):
+                return None
     hinge = _hinge_estimate(obs.near, obs.far, obs.labels, obs.modes, config)
     if hinge is None:
         return None
@@ -568,6 +612,27 @@ def _door_from_group(g: _Hinged, gap: float, config: DoorDetectionConfig, grid: 
     return DetectedDoor(float(hinge[0]), float(hinge[1]), length, float(wrap_angle(closed)),
                         float(rel.min()), float(rel.max()), int(obs.yaw.size), True,
                         tuple(float(v) for v in wrap_angle(obs.modes)))
+
+
+def _on_walls(grid: LogOddsGrid, occupied: BoolArray, hinge: FloatArray, obs: _Observed, g: _Hinged,
+              config: DoorDetectionConfig) -> BoolArray:
+    """Extension: which observed angles are a wall seen out of place, not the leaf: seen as dynamic points in fewer
+    than ``lone_min_scans`` scans (set 2 alone, a pass's cells that fell), with occupied cells (grown by a cell) in
+    the static grid along ``partner_min_fraction`` of [L/3, 0.95 L] of the angle's line from the hinge and beyond its
+    end (not :func:`_clear_beyond`). A pass registered a cell off (scan matching 0.1 m off where a pass ends) hits a
+    wall beside its place, and those cells fall in the next pass: a fallen line along the wall. Taken for a state of
+    the door beside it, the wall behind the hinge became the door's closed direction: the door was mirrored and its
+    sweep erased the wall (an outside user's skid-steer base). A leaf standing open in front of a wall (a door at a
+    corner, 0.1 m from the end wall) is seen scan after scan."""
+    length = float(np.quantile(np.hypot(*(obs.far - obs.near).T), config.length_quantile))
+    along = _ray_fraction(grid, occupied, hinge, obs.modes, length / 3, 0.95 * length) >= config.partner_min_fraction
+    for k in np.flatnonzero(along):
+        if g.scans_of(obs.labels[: g.leaf.size] == k) >= config.lone_min_scans:
+            along[k] = False
+            continue
+        end = hinge + length * np.array([math.cos(obs.modes[k]), math.sin(obs.modes[k])])
+        along[k] = not _clear_beyond(grid, occupied, hinge, end, config)
+    return np.asarray(along, dtype=bool)
 
 
 def _leaf_length(dist: FloatArray, yaw: FloatArray, closed: float, config: DoorDetectionConfig) -> float:
@@ -638,6 +703,7 @@ def _closed_state(grid: LogOddsGrid, hinge: FloatArray, closed: float, length: f
     if hit.any(axis=1).mean() < config.partner_min_fraction:
         return None
     passes = grid.pass_of_scan(grid.last_hit_scan[rows, cols][hit])
+    # any, not half (_stood_when): a closed state seen as dynamic points in a pass is hit near its ends in that pass
     if seen_in & set(passes.tolist()):
         return None
     return hinge + length * u, float(passes.max())
@@ -698,18 +764,30 @@ def _static_states(grid: LogOddsGrid, occupied: BoolArray, hinge: FloatArray, mo
 
 def _stood_when(grid: LogOddsGrid, hinge: FloatArray, end: FloatArray, seen_in: set[int]) -> float | None:
     """The last pass in which the cells of a static leaf state were hit (those beyond a third of its length:
-    near the hinge all states share cells), or None if that is a pass in which the leaf stood at another
-    angle (doors are stationary within a pass: a line hit then is something else)."""
+    near the hinge all states share cells; the pass most of them were last hit in), or None if they were hit while
+    the leaf stood at another angle (:func:`_hit_while_standing`; doors are stationary within a pass: a line hit then
+    is something else)."""
     t = np.linspace(1 / 3, 1.0, 12)
     cells = grid.flat_index(hinge + t[:, None] * (end - hinge))
     last = grid.last_hit_scan.reshape(-1)[cells]
     last = last[last >= 0]
     if last.size == 0:
         return None
-    passes = grid.pass_of_scan(last)
-    if seen_in & set(passes.tolist()):
+    passes = _hit_while_standing(grid.pass_of_scan(last), seen_in)
+    if passes is None:
         return None
     return float(np.bincount(passes - passes.min()).argmax() + passes.min())
+
+
+def _hit_while_standing(passes: IntArray, seen_in: set[int]) -> IntArray | None:
+    """The passes in which a leaf state's cells were last hit, less those in which the leaf stood at another angle
+    (``seen_in``); None when those are half of them or more: then the cells are something else, a wall (hit in every
+    pass that sees it) or a person. Half, not any: a laser's stray returns (1.5 % random short ranges, sunlight) land
+    on a few of a leaf state's cells through its doorway in a later pass, and that pass had made the state a wall."""
+    elsewhere = np.isin(passes, np.fromiter(seen_in, dtype=np.int64, count=len(seen_in)))
+    if elsewhere.mean() >= 0.5:
+        return None
+    return np.asarray(passes[~elsewhere], dtype=np.int64)
 
 
 def _run_directions(run: IntArray, score: FloatArray, first: float, step: float, spacing: float
@@ -787,9 +865,9 @@ def _logit(p: float) -> float:
 
 def _occupied_masks(grid: LogOddsGrid, config: DoorDetectionConfig, leaves: Leaves | None = None
                     ) -> tuple[BoolArray, BoolArray]:
-    """Occupied cells (p > p_occupied) grown by one cell, so probes tolerate a cell of misregistration, and as they
-    are (a wall through a hinge, not beside it). With ``leaves``, only within 2 λmax of them (where the probes from
-    their hinges reach; zeros beyond)."""
+    """Occupied cells (p > p_occupied, hit in ``occupied_min_hits`` scans) grown by one cell, so probes tolerate a
+    cell of misregistration, and as they are (a wall through a hinge, not beside it). With ``leaves``, only within
+    2 λmax of them (where the probes from their hinges reach; zeros beyond)."""
     h, w = grid.shape
     i0, i1, j0, j1 = 0, h, 0, w
     if leaves is not None and len(leaves):
@@ -801,7 +879,8 @@ def _occupied_masks(grid: LogOddsGrid, config: DoorDetectionConfig, leaves: Leav
     grown = np.zeros((h, w), dtype=bool)
     raw = np.zeros((h, w), dtype=bool)
     if i1 > i0 and j1 > j0:
-        raw[i0:i1, j0:j1] = grid.log_odds[i0:i1, j0:j1] > np.float32(_logit(config.p_occupied))
+        raw[i0:i1, j0:j1] = (grid.log_odds[i0:i1, j0:j1] > np.float32(_logit(config.p_occupied))) & (
+            grid.hits[i0:i1, j0:j1] >= config.occupied_min_hits)
         grown[i0:i1, j0:j1] = ndimage.maximum_filter(raw[i0:i1, j0:j1].view(np.uint8), size=3, mode="constant",
                                                      cval=0).view(bool)
     return grown, raw
@@ -942,6 +1021,7 @@ def _band_line(grid: LogOddsGrid, hinge: FloatArray, phi: float, reach: float, c
     out = np.empty((side * side, 2))
     lo, hi = within if within is not None else (0.0, 0.0)
     n, mx, my, dx, dy = band_line_kernel(grid.log_odds, grid.hits, grid.hit_sum, _logit(config.p_occupied),
+                                         config.occupied_min_hits,
                                          float(hinge[0]), float(hinge[1]), grid.origin_x_m, grid.origin_y_m, res,
                                          phi, reach, math.radians(config.angle_cluster_gap_deg), within is not None,
                                          lo, hi, out)

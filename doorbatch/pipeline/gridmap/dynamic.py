@@ -122,10 +122,15 @@ def classify_endpoints(grid: LogOddsGrid, points_xy: npt.ArrayLike, config: Grid
 
 def completes_lines(grid: LogOddsGrid, points_xy: npt.ArrayLike, config: GridConfig) -> BoolArray:
     """Whether each end point may complete a line of dynamic points (doors.extract_leaves' ``support``): its
-    cell was seen free and was not seen occupied before the pass — free space that the neighbourhood rule
-    kept static, never a wall or a leaf state known before the pass."""
+    cell was not seen occupied before the pass, and was seen free (free space that the neighbourhood rule kept
+    static) or, after the first pass, never seen before the pass (log-odds 0 when it began) — never a wall or a
+    leaf state known before the pass. The second kind: a leaf whose near part stands where no beam reached before
+    (twin doors 0.3 m apart, the second seen through the first doorway only) had that part integrated as static
+    and its dynamic rest alone was too short for a leaf. In the first pass every cell was unseen before it."""
     idx = point_cells(grid, points_xy)
     out = seen_free(grid, idx, config)
+    if len(grid.pass_starts) > 1:
+        out |= grid.pass_start_log_odds.reshape(-1)[idx] == 0.0
     out &= ~grid.occupied_before_pass.reshape(-1)[idx]
     return out
 
@@ -151,6 +156,7 @@ def classify_scan(grid: LogOddsGrid, points_xy: npt.ArrayLike, config: GridConfi
     dynamic = np.empty(pts.shape[0], dtype=bool)
     support = np.empty(pts.shape[0], dtype=bool)
     n_dyn, n_sup, span2 = classify_kernel(grid.log_odds, grid.free_latch, grid.transient, grid.occupied_before_pass,
+                                          grid.pass_start_log_odds, len(grid.pass_starts) > 1,
                                           grid.origin_x_m, grid.origin_y_m,
                                           1.0 / grid.resolution_m, pts, config.transient_neighborhood_cells,
                                           float(levels(config)[4]), reach_m, dynamic, support)
@@ -176,9 +182,10 @@ def classify_and_integrate(grid: LogOddsGrid, origin_xy: npt.ArrayLike, points_x
     support = np.empty(n, dtype=bool)
     n_dyn, n_sup, span2 = classify_integrate_kernel(
         grid.log_odds, grid.hits, grid.hit_sum, grid.free_latch, grid.seen_occupied, grid.last_hit_scan, grid.stamp,
-        grid.transient, grid.occupied_before_pass, grid.origin_x_m, grid.origin_y_m, grid.resolution_m, prep.ox,
-        prep.oy, prep.points, prep.dirs, prep.clear, config.surface_band_m, prep.cut, config.max_range_m,
-        grid.scan_count, levels(config), config.transient_neighborhood_cells, reach_m, dynamic, support)
+        grid.transient, grid.occupied_before_pass, grid.pass_start_log_odds, len(grid.pass_starts) > 1, grid.origin_x_m,
+        grid.origin_y_m, grid.resolution_m, prep.ox, prep.oy, prep.points, prep.dirs, prep.clear, config.surface_band_m,
+        prep.cut, config.max_range_m, grid.scan_count, levels(config), config.transient_neighborhood_cells, reach_m,
+        dynamic, support)
     grid.scan_count += 1
     return grid, ScanClasses(dynamic, support, int(n_dyn), int(n_sup), math.sqrt(span2))
 

@@ -183,14 +183,15 @@ def integrate_kernel(log_odds2: npt.NDArray[np.float32], hits2: npt.NDArray[np.i
 @numba.njit(cache=True)  # type: ignore[misc]
 def classify_kernel(log_odds2: npt.NDArray[np.float32], free_latch2: npt.NDArray[np.bool_],
                     transient2: npt.NDArray[np.bool_], occupied_before2: npt.NDArray[np.bool_],
-                    gx: float, gy: float, inv: float,
+                    pass_start2: npt.NDArray[np.float32], later_pass: bool, gx: float, gy: float, inv: float,
                     pts: FloatArray, r: int, l_low: float, reach: float, dynamic: npt.NDArray[np.bool_],
                     support: npt.NDArray[np.bool_]) -> tuple[int, int, float]:  # pragma: no cover - compiled
     """:func:`doorbatch.pipeline.gridmap.dynamic.classify_scan_numpy` on the (H, W) arrays: for each end
     point (map frame; its cell clamped onto the grid, whose outer corner is (gx, gy) and cell 1 / inv)
     whether it is a dynamic measurement (transient, no cell seen occupied before the pass within r cells),
-    setting the transient flag where it newly holds, and whether it may complete a line (seen free, not
-    occupied before the pass). Returns the number of dynamic points,
+    setting the transient flag where it newly holds, and whether it may complete a line (seen free, or in a
+    ``later_pass`` unseen when the pass began, its ``pass_start`` log-odds 0; not occupied before the pass). Returns
+    the number of dynamic points,
     of non-dynamic support points within ``reach`` of the dynamic points' bounding box, and the squared
     diagonal of that box."""
     height, width = log_odds2.shape
@@ -198,6 +199,7 @@ def classify_kernel(log_odds2: npt.NDArray[np.float32], free_latch2: npt.NDArray
     free_latch = free_latch2.reshape(free_latch2.size)
     transient = transient2.reshape(transient2.size)
     occupied_before = occupied_before2.reshape(occupied_before2.size)
+    pass_start = pass_start2.reshape(pass_start2.size)
     low = np.float32(l_low)
     n_dynamic = 0
     n_support = 0
@@ -226,7 +228,8 @@ def classify_kernel(log_odds2: npt.NDArray[np.float32], free_latch2: npt.NDArray
                     if occupied_before[c + di * width + dj]:
                         is_transient = False
         dynamic[i] = is_transient
-        support[i] = (log_odds[c] < low or free_latch[c]) and not occupied_before[c]
+        support[i] = (log_odds[c] < low or free_latch[c] or (later_pass and pass_start[c] == 0.0)) and (
+            not occupied_before[c])
         if dynamic[i]:
             n_dynamic += 1
             lox, hix = min(lox, pts[i, 0]), max(hix, pts[i, 0])
@@ -475,14 +478,16 @@ def classify_integrate_kernel(log_odds2: npt.NDArray[np.float32], hits2: npt.NDA
                               hit_sum2: npt.NDArray[np.complex64], free_latch2: npt.NDArray[np.bool_],
                               seen_occupied2: npt.NDArray[np.bool_], last_hit_scan2: npt.NDArray[np.int32],
                               stamp2: npt.NDArray[np.int32], transient2: npt.NDArray[np.bool_],
-                              occupied_before2: npt.NDArray[np.bool_], gx: float, gy: float, res: float, ox: float,
+                              occupied_before2: npt.NDArray[np.bool_], pass_start2: npt.NDArray[np.float32],
+                              later_pass: bool, gx: float, gy: float, res: float, ox: float,
                               oy: float, pts: FloatArray, dirs: FloatArray, clear: float, band_m: float, cut: bool,
                               max_range_m: float, scan: int, levels: FloatArray, r: int, reach: float,
                               dynamic: npt.NDArray[np.bool_], support: npt.NDArray[np.bool_]
                               ) -> tuple[int, int, float]:  # pragma: no cover - compiled
     """:func:`classify_kernel` of the scan's end points, then :func:`integrate_kernel` without the dynamic
     ones: one call per scan."""
-    counts = classify_kernel(log_odds2, free_latch2, transient2, occupied_before2, gx, gy, 1.0 / res, pts, r,
+    counts = classify_kernel(log_odds2, free_latch2, transient2, occupied_before2, pass_start2, later_pass, gx, gy,
+                             1.0 / res, pts, r,
                              levels[4], reach, dynamic, support)
     integrate_kernel(log_odds2, hits2, hit_sum2, free_latch2, seen_occupied2, last_hit_scan2, stamp2, gx, gy, res,
                      ox, oy, pts, dirs, dynamic, clear, band_m, cut, max_range_m, scan, levels)
@@ -509,11 +514,13 @@ def ray_fraction_kernel(mask2: npt.NDArray[np.bool_], gx: float, gy: float, inv:
 
 @numba.njit(cache=True)  # type: ignore[misc]
 def band_line_kernel(log_odds2: npt.NDArray[np.float32], hits2: npt.NDArray[np.int32],
-                     hit_sum2: npt.NDArray[np.complex64], threshold: float, hinge_x: float, hinge_y: float,
-                     gx: float, gy: float, res: float, phi: float, reach: float, gap: float, within: bool,
+                     hit_sum2: npt.NDArray[np.complex64], threshold: float, min_hits: int, hinge_x: float,
+                     hinge_y: float, gx: float, gy: float, res: float, phi: float, reach: float, gap: float,
+                     within: bool,
                      lo: float, hi: float, out: FloatArray
                      ) -> tuple[int, float, float, float, float]:  # pragma: no cover - compiled
-    """:func:`doorbatch.pipeline.gridmap.doors._band_line`: the mean end points of the occupied cells within
+    """:func:`doorbatch.pipeline.gridmap.doors._band_line`: the mean end points of the occupied cells (log-odds above
+    ``threshold``, hit in at least ``min_hits`` scans) within
     two cells of the ray from the hinge along φ (s ∈ [2 cells, reach]), refitted to those within a cell of
     their principal axis, re-centred on the fitted direction (at most twice) while it lies in [lo, hi]
     (``within``). Writes the inliers (relative to the hinge) into ``out`` and returns (their number, mean x,
@@ -533,7 +540,7 @@ def band_line_kernel(log_odds2: npt.NDArray[np.float32], hits2: npt.NDArray[np.i
     ry = np.empty_like(rx)
     for i in range(i0, i1 + 1):
         for j in range(j0, j1 + 1):
-            if log_odds2[i, j] > thr:
+            if log_odds2[i, j] > thr and hits2[i, j] >= min_hits:
                 n = hits2[i, j]
                 if n > 0:
                     fx = hit_sum2[i, j].real / n

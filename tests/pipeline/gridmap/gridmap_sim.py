@@ -5,6 +5,7 @@ Scans are cast exactly against segments (vectorized over beams × segments), wit
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field
 
@@ -147,4 +148,28 @@ def scan_world(world: World, angles: tuple[float, ...], *, reverse: bool, seed: 
         r = cast(origin, dirs, segs) + rng.normal(0.0, sigma, beams)
         hit = r < max_range
         scans.append(MapScan(origin, origin + r[hit, None] * dirs[hit], dirs[~hit]))
+    return scans
+
+
+def scan_path(world: World, path: list[tuple[float, float]], angles: tuple[float, ...], *, seed: int,
+              step_m: float = 0.05, beams: int = 540, fov_rad: float = math.radians(270.0), max_range: float = 15.0,
+              sigma: float = 0.01, stray_prob: float = 0.0) -> list[MapScan]:
+    """Scans every ``step_m`` along a polyline, the laser facing along it, door k held at ``angles[k]`` (rad): a robot
+    that turns into rooms (:func:`scan_world` drives one straight line). ``stray_prob``: that share of the beams
+    returns a uniform 0.1-2 m whatever lies there (sunlight, another laser's crosstalk), behind walls too."""
+    rng = np.random.default_rng(seed)
+    segs = np.concatenate([world.static, *(d.leaf(a) for d, a in zip(world.doors, angles, strict=True))])
+    fan = np.linspace(-fov_rad / 2, fov_rad / 2, beams)
+    scans = []
+    for (x0, y0), (x1, y1) in itertools.pairwise(path):
+        n = max(2, int(math.hypot(x1 - x0, y1 - y0) / step_m))
+        yaw = math.atan2(y1 - y0, x1 - x0)
+        for t in np.linspace(0.0, 1.0, n, endpoint=False):
+            origin = np.array([x0 + t * (x1 - x0), y0 + t * (y1 - y0)])
+            dirs = np.stack([np.cos(fan + yaw), np.sin(fan + yaw)], axis=1)
+            r = cast(origin, dirs, segs) + rng.normal(0.0, sigma, beams)
+            stray = rng.random(beams) < stray_prob
+            r[stray] = rng.uniform(0.1, 2.0, int(stray.sum()))
+            hit = r < max_range
+            scans.append(MapScan(origin, origin + r[hit, None] * dirs[hit], dirs[~hit]))
     return scans

@@ -17,11 +17,13 @@ from doorbatch.cli import main
 HINGE_X, WALL_Y = 5.0, 1.5
 
 
-def _world(length_m: float, hinge: str, recess_m: float = 0.0, into_room: bool = True) -> dict[str, object]:
+def _world(length_m: float, hinge: str, recess_m: float = 0.0, into_room: bool = True,
+           twin_gap_m: float | None = None) -> dict[str, object]:
     """A 12 × 3 m corridor, an 8 × 3.5 m room north of it, one door in the wall between (hinged at its west end,
     opening north; or at its east end, the mirror image). With ``recess_m`` the door stands at the back of a recess
     that deep, 0.1 m wider than the leaf on each side (a thick wall, the door flush with its room side). Not
-    ``into_room``: the door opens into the corridor instead."""
+    ``into_room``: the door opens into the corridor instead. With ``twin_gap_m`` a second door, d02, the same, stands
+    that far east of the first (no recess)."""
     left = hinge == "left"
     door_y = WALL_Y + recess_m
     door = {"name": "d01", "hinge_m": [HINGE_X if left else HINGE_X + length_m, door_y], "length_m": length_m,
@@ -42,14 +44,16 @@ def _world(length_m: float, hinge: str, recess_m: float = 0.0, into_room: bool =
                   {"name": "west", "points_m": [[0.0, -1.5], [0.0, WALL_Y]]},
                   {"name": "east", "points_m": [[12.0, -1.5], [12.0, WALL_Y]]}],
         "rooms": [{"name": "room", "points_m": [[2.0, door_y], [2.0, 5.0], [10.0, 5.0], [10.0, door_y]]}],
-        "pillars": [], "niches": [], "doors": [door],
+        "pillars": [], "niches": [],
+        "doors": [door] if twin_gap_m is None else [door, {**door, "name": "d02", "hinge_m": [
+            door["hinge_m"][0] + length_m + twin_gap_m, door_y]}],
         "routes": {"main": {"points_m": [[1.0, -0.7], [11.0, -0.7]]}},
     }
 
 
-def _scenario(angles_deg: tuple[float, ...]) -> dict[str, object]:
+def _scenario(angles_deg: tuple[float, ...], names: tuple[str, ...] = ("d01",)) -> dict[str, object]:
     passes = [{"name": f"pass{k + 1}", "route": "main", "reverse": k % 2 == 1, "dwell_s": 1.0, "doors": "closed",
-               "door_angles_deg": {"d01": a}} for k, a in enumerate(angles_deg)]
+               "door_angles_deg": dict.fromkeys(names, a)} for k, a in enumerate(angles_deg)]
     laser = {"rate_hz": 15.0, "fov_deg": 270.0, "beams": 720, "max_range_m": 20.0, "sigma_m": 0.01,
              "dropout_prob": 0.01}
     return {"name": "room_door", "description": "closed, open, closed", "start_time_s": 1700000000,
@@ -61,7 +65,8 @@ def _scenario(angles_deg: tuple[float, ...]) -> dict[str, object]:
 def _mapped_doors(tmp_path: Path, world: dict[str, object], angles_deg: tuple[float, ...], seed: int
                   ) -> list[dict[str, float]]:
     (tmp_path / "world.yaml").write_text(yaml.safe_dump(world))
-    (tmp_path / "scenario.yaml").write_text(yaml.safe_dump(_scenario(angles_deg)))
+    names = tuple(str(d["name"]) for d in world["doors"])  # type: ignore[attr-defined]
+    (tmp_path / "scenario.yaml").write_text(yaml.safe_dump(_scenario(angles_deg, names)))
     assert main(["simulate", str(tmp_path / "world.yaml"), "-o", str(tmp_path / "sim" / "run.mcap"), "--scenario",
                  str(tmp_path / "scenario.yaml"), "--seed", str(seed), "--split-passes", "-q"]) == 0
     passes = [str(tmp_path / "sim" / f"run_pass{k + 1}.mcap") for k in range(len(angles_deg))]
@@ -79,6 +84,7 @@ def _open_range_deg(door: dict[str, float]) -> tuple[float, float]:
     (0.9, "left", (0.0, 90.0, 0.0), 2),  # the tester's cases that were missed
     (0.8, "left", (0.0, 90.0, 0.0), 1),
     (0.9, "right", (0.0, 0.0, 90.0), 2),
+    (1.2, "left", (0.0, 90.0, 0.0), 1),  # a 1.2 m leaf (hospital rooms): λmax was 1.2, its lines measure a cell more
 ])
 def test_a_door_opened_into_an_unseen_room_is_found(tmp_path: Path, length_m: float, hinge: str,
                                                     angles_deg: tuple[float, ...], seed: int) -> None:
@@ -130,3 +136,18 @@ def test_a_narrow_door_is_found(tmp_path: Path, into_room: bool, angles_deg: tup
     lo, hi = _open_range_deg(door)
     expected = (0.0, 90.0) if into_room else (-90.0, 0.0)
     assert abs(lo - expected[0]) <= 10.0 and abs(hi - expected[1]) <= 10.0
+
+
+def test_twin_doors_into_one_room_keep_their_whole_ranges(tmp_path: Path) -> None:
+    """Two doors 0.3 m apart into one room, closed, 45° and 90° (an outside tester's world, session 33). The second
+    door's 90° leaf stands where, before that pass, only its far part was seen free (through the first doorway): its
+    near 0.55 m was integrated as static, its far 0.35 m were dynamic points, too short for a leaf, so its range was
+    0-45°. Points in cells never seen before the pass now complete a line of dynamic points as points seen free do."""
+    doors = _mapped_doors(tmp_path, _world(0.9, "left", twin_gap_m=0.3), (0.0, 45.0, 90.0), seed=1)
+    assert len(doors) == 2
+    for hinge_x in (HINGE_X, HINGE_X + 1.2):
+        door = min(doors, key=lambda d: abs(d["hinge_x"] - hinge_x))
+        assert math.hypot(door["hinge_x"] - hinge_x, door["hinge_y"] - WALL_Y) <= 0.10
+        assert abs(door["length"] - 0.9) <= 0.10
+        lo, hi = _open_range_deg(door)
+        assert abs(lo - 0.0) <= 10.0 and abs(hi - 90.0) <= 10.0
