@@ -75,6 +75,10 @@ class IoConfig(Section):
     # (the first beam's time, as sensor_msgs/LaserScan defines it), with the odometry interpolated at each beam's
     # time (geometry/deskew). Off: every beam is placed at the stamp.
     deskew: bool = True
+    # Veiling (mixed pixels, geometry/veiling): end points whose surface incidence against a neighbour within
+    # veiling_window beams is under this angle are dropped (ROS laser_filters' ScanShadowsFilter, min_angle). 0: off.
+    veiling_min_angle_deg: float = Field(0.0, ge=0.0, lt=90.0)
+    veiling_window: int = Field(1, ge=1)
     # A laser whose sweep (time_increment · beams) lets the robot move a beam end point at sweep_check_range_m by
     # more than this during one scan gets a warning when the scans are not deskewed (deskew off, or odometry that
     # does not span the sweeps). Expert choice: two cells at 5 m.

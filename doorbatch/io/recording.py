@@ -23,6 +23,7 @@ from doorbatch.geometry.odometry import bridged_jumps, odometry_jumps, sweep_sme
 from doorbatch.geometry.rotations import yaw_of_matrix
 from doorbatch.geometry.se2 import compose, interpolate_poses
 from doorbatch.geometry.tf_buffer import TfBuffer
+from doorbatch.geometry.veiling import veiling_mask
 from doorbatch.io.decode import MODEL_STATES
 from doorbatch.io.log_clock import LogClock
 from doorbatch.io.reader import LogReader, open_log
@@ -581,6 +582,11 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
         range_max, code_note = with_no_return_code([s.ranges for s in scans], range_max, config)
     warnings += [n for n in (note, code_note) if n]
     ranges = [s.ranges for s in scans]
+    if config.io.veiling_min_angle_deg > 0.0:  # before deskewing: the test reads the fan as the laser measured it
+        ranges = [np.where(veiling_mask(r, s.angle_increment, math.radians(config.io.veiling_min_angle_deg),
+                                        config.io.veiling_window, float(lo), float(hi)), np.float32(np.nan),
+                           r).astype(np.float32)
+                  for r, s, lo, hi in zip(ranges, scans, range_min, range_max, strict=True)]
     stamps_ns = np.array([s.stamp_ns for s in scans], dtype=np.int64)
     sources: list[npt.NDArray[np.intp] | None] = []
     sweep = float(np.median([s.sweep_s for s in scans]))
