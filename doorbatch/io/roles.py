@@ -191,8 +191,12 @@ def assign_roles(topics: Mapping[str, TopicInfo], overrides: TopicsConfig | None
             chosen[role] = (pick[0].name,)
             reasons[pick[0].name] = pick[1]
             taken.add(pick[0].name)
-            if role is Role.SCAN and len(candidates) > 1:
-                others = sorted(c.name for c in candidates if c is not pick[0])
+            others = sorted(c.name for c in candidates if c is not pick[0])
+            if role is Role.SCAN and others:
                 notes.append(f"{len(candidates)} laser scan topics: {pick[0].name} is read ({pick[1]}), "
                              f"{', '.join(others)} not (one laser per run; topics.scan chooses)")
+            elif role is Role.ODOMETRY and others:  # wheel odometry beside a fused one (an EKF's, with an IMU heading)
+                notes.append(f"{len(candidates)} odometry topics: {pick[0].name} is read ({pick[1]}), "
+                             f"{', '.join(others)} not; topics.odometry chooses (a fused odometry, e.g. "
+                             "robot_localization's /odometry/filtered, is often the better motion input)")
     return RoleAssignment(topics=chosen, reasons=reasons, notes=notes)

@@ -443,6 +443,19 @@ def _convergence_rows(run: RunTables, reference: ReferenceTrajectory | None, cfg
     return rows
 
 
+def _other_log_note(run: RunTables, truth: SimTruth) -> str | None:
+    """A warning when the run's updates lie outside the time span of the truth's log (``start_ns`` … ``end_ns``): its
+    door angles are another log's (``--world`` given the mapping log's truth for a localization run scored the doors
+    against the mapping passes' angles, without a word); None when they overlap."""
+    first, last = int(run.stamps_ns[0]), int(run.stamps_ns[-1])
+    if truth.end_ns <= truth.start_ns or (first <= truth.end_ns and last >= truth.start_ns):
+        return None
+    log = truth.files.get("log", "another log")
+    return (f"run {run.name}: door states not scored: the truth's log ({log}) spans {truth.start_ns / 1e9:.1f}-"
+            f"{truth.end_ns / 1e9:.1f} s and the run's updates {first / 1e9:.1f}-{last / 1e9:.1f} s, so its door "
+            f"angles are another log's (give --world the truth of the log {run.log} was localized in)")
+
+
 def _door_state_part(run: RunTables, truth: SimTruth | None, cfg: EvaluateConfig
                      ) -> tuple[list[MetricRow], list[DoorStateSeries]]:
     """Door-state rows (over the recently observed doors, and over all matched doors) and the plotted series."""
@@ -614,7 +627,11 @@ def evaluate_runs(runs: Sequence[RunTables], config: DoorbatchConfig, *,
                                       (errs.stamps_ns - int(run.stamps_ns[0])) / 1e9, errs.reference[:, 0],
                                       errs.ape_m, errs.ape_rad))
         rows += _convergence_rows(run, ref, cfg, alignment)
-        state_rows, state_series = _door_state_part(run, truth if truth is not None else run.truth, cfg)
+        run_truth = truth if truth is not None else run.truth
+        if run_truth is not None and run.door_states is not None and (note := _other_log_note(run, run_truth)):
+            warnings.append(note)
+            run_truth = None
+        state_rows, state_series = _door_state_part(run, run_truth, cfg)
         rows += state_rows
         door_series += state_series
     for door_map in maps:

@@ -48,14 +48,19 @@ from doorbatch.pipeline.localize.likelihood_field import DistanceField, cloud_co
 from doorbatch.pipeline.localize.particles import ParticleSet
 
 
+def _near(pose: npt.NDArray[np.float64], centre: npt.NDArray[np.float64], radius_m: float, yaw_rad: float
+          ) -> npt.NDArray[np.bool_]:
+    """Which poses lie within ``radius_m`` and ``yaw_rad`` of ``centre``."""
+    dyaw = np.abs(wrap_angle(pose[:, 2] - centre[2]))
+    return np.asarray((np.hypot(pose[:, 0] - centre[0], pose[:, 1] - centre[1]) <= radius_m) & (dyaw <= yaw_rad))
+
+
 def is_multimodal(particles: ParticleSet, radius_m: float, yaw_rad: float, min_weight: float) -> bool:
     """Whether at least ``min_weight`` of the weight lies away from the strongest hypothesis: outside
     ``radius_m`` (position) or ``yaw_rad`` (heading) of the heaviest particle, e.g. a symmetric corridor's
     pose turned by 180° or shifted by a door spacing."""
     w, pose = particles.weight, particles.pose
-    best = pose[int(np.argmax(w))]
-    dyaw = np.abs(wrap_angle(pose[:, 2] - best[2]))
-    near = (np.hypot(pose[:, 0] - best[0], pose[:, 1] - best[1]) <= radius_m) & (dyaw <= yaw_rad)
+    near = _near(pose, pose[int(np.argmax(w))], radius_m, yaw_rad)
     return float(w[~near].sum()) >= min_weight
 
 
@@ -63,6 +68,29 @@ def multimodal(particles: ParticleSet, config: LocalizeConfig) -> bool:
     """:func:`is_multimodal` with the ``localize.ambiguity_*`` settings."""
     return is_multimodal(particles, config.ambiguity_radius_m, math.radians(config.ambiguity_yaw_deg),
                          config.ambiguity_min_weight)
+
+
+def multimodal_note(particles: ParticleSet, config: LocalizeConfig, tracked: bool = True) -> str:
+    """A warning for a cloud that :func:`multimodal` calls multimodal: the strongest hypothesis and the next one (the
+    heaviest particle away from it), each with the weight within ``ambiguity_radius_m`` / ``ambiguity_yaw_deg`` of
+    it, and the weight away from the strongest; for a ``tracked`` run (not a global start, where a symmetric map is
+    the usual cause), the motion noise as the likely cause."""
+    w, pose = particles.weight, particles.pose
+    radius, yaw = config.ambiguity_radius_m, math.radians(config.ambiguity_yaw_deg)
+    best = pose[int(np.argmax(w))]
+    near = _near(pose, best, radius, yaw)
+    away = np.flatnonzero(~near)
+    other = pose[away[int(np.argmax(w[away]))]] if away.size else best
+    share = float(w[_near(pose, other, radius, yaw) & ~near].sum())
+
+    def at(p: npt.NDArray[np.float64]) -> str:
+        return f"({p[0]:.2f}, {p[1]:.2f}, {math.degrees(p[2]):.0f}°)"
+
+    cause = ("; a tracked cloud spreads so under motion noise too large for the odometry (localize.alpha1 … alpha4)"
+             if tracked else "")
+    return (f"ambiguous: the cloud ends multimodal, {float(w[~near].sum()):.0%} of its weight away from its strongest "
+            f"hypothesis {at(best)} ({float(w[near].sum()):.0%}); the next is {at(other)} ({share:.0%}). Its mean "
+            f"(the trajectory's last pose) may lie between them{cause}")
 
 
 # Below this many hits a scan's share is too coarse to judge a pose by (0, ½, 1 of two hits): no evidence.

@@ -38,6 +38,7 @@ from doorbatch.pipeline.localize.convergence import (
     ConvergenceMonitor,
     fits,
     multimodal,
+    multimodal_note,
     scan_fit,
     see_through_share,
 )
@@ -593,6 +594,7 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
                         f"{lc.update_min_a} rad (a robot that stood still, or an odometry frame that does not move: "
                         "see frames.odom)")
     ambiguous = multimodal(state.particles, lc)
+    warnings.extend([multimodal_note(state.particles, lc, tracked=init != "global")] if ambiguous else [])
     if init == "global" and converged_ns is not None and lc.rival_check:
         streak_ns = monitor.claim_since_ns if monitor.claim_since_ns is not None else converged_ns
         tested = rival_tested_claim(rec, lmap, track, updated_scans, streak_ns, converged_ns, lc)

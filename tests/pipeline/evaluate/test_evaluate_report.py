@@ -232,6 +232,12 @@ def test_door_state_error_over_all_matched_doors_shows_doors_never_observed() ->
     ev = evaluate_runs([unseen], DoorbatchConfig())
     assert math.isnan(ev.value("r", "door_state_error_mean"))
     assert ev.value("r", "door_state_error_all_mean") == pytest.approx(np.mean(off))
+    # The truth of another log (the mapping log's, given to --world for a localization run; an outside user's): its
+    # door angles were scored against the run's without a word. Its time span says so.
+    mapping_log = replace(truth, start_ns=T0 - 3600 * 10**9, end_ns=T0 - 3000 * 10**9, files={"log": "map.mcap"})
+    ev = evaluate_runs([run], DoorbatchConfig(), truth=mapping_log)
+    assert math.isnan(ev.value("r", "door_state_error_mean")) and math.isnan(ev.value("r", "door_state_error_all_mean"))
+    assert len(ev.warnings) == 1 and "door states not scored" in ev.warnings[0] and "map.mcap" in ev.warnings[0]
 
 
 def test_error_along_the_corridor_averages_runs_per_bin() -> None:

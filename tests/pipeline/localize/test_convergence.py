@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from doorbatch.config import LocalizeConfig
-from doorbatch.pipeline.localize.convergence import ConvergenceMonitor, multimodal
+from doorbatch.pipeline.localize.convergence import ConvergenceMonitor, multimodal, multimodal_note
 from doorbatch.pipeline.localize.particles import ParticleSet
 
 CONFIG = LocalizeConfig(converged_hold_s=2.0, converged_min_travel_m=1.0)
@@ -51,6 +51,19 @@ def test_two_clusters_with_substantial_weight_are_ambiguous_not_converged() -> N
     # apart in position alone (a door spacing along a corridor), or in heading alone (turned in place)
     assert multimodal(cloud([(1.0, 2.0, 0.3), (6.0, 2.0, 0.3)], [0.6, 0.4]), CONFIG)
     assert multimodal(cloud([(1.0, 2.0, 0.0), (1.0, 2.0, np.pi)], [0.5, 0.5]), CONFIG)
+
+
+def test_a_multimodal_cloud_is_reported_with_both_hypotheses() -> None:
+    """A tracked run's `ambiguous` came with no word (an outside user's skid-steer base under Nav2's α = 0.2): the
+    warning names where the strongest hypothesis and the next lie, and the weight each holds."""
+    note = multimodal_note(cloud([(1.0, 2.0, 0.0), (9.0, 2.0, np.pi), (1.2, 2.1, 0.0)], [0.5, 0.3, 0.2], n=600),
+                           CONFIG)
+    assert "70% of its weight" not in note and "30% of its weight away" in note
+    assert "hypothesis (1.0" in note and "(70%)" in note  # the two clusters within 1 m of each other are one
+    assert "the next is (9.0" in note or "the next is (8.9" in note
+    assert "180°" in note and note.endswith("(localize.alpha1 … alpha4)")
+    assert "alpha" not in multimodal_note(cloud([(1.0, 2.0, 0.0), (9.0, 2.0, np.pi)], [0.6, 0.4]), CONFIG,
+                                          tracked=False)  # a global start: the map's symmetry, not the odometry
 
 
 def test_a_streak_broken_by_a_wide_cloud_starts_over() -> None:
