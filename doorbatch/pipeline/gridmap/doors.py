@@ -616,14 +616,16 @@ def _door_from_group(g: _Hinged, gap: float, config: DoorDetectionConfig, grid: 
 
 def _on_walls(grid: LogOddsGrid, occupied: BoolArray, hinge: FloatArray, obs: _Observed, g: _Hinged,
               config: DoorDetectionConfig) -> BoolArray:
-    """Extension: which observed angles are a wall seen out of place, not the leaf: seen as dynamic points in fewer
+    """Extension: which observed angles may be a wall seen out of place, not the leaf: seen as dynamic points in fewer
     than ``lone_min_scans`` scans (set 2 alone, a pass's cells that fell), with occupied cells (grown by a cell) in
     the static grid along ``partner_min_fraction`` of [L/3, 0.95 L] of the angle's line from the hinge and beyond its
-    end (not :func:`_clear_beyond`). A pass registered a cell off (scan matching 0.1 m off where a pass ends) hits a
-    wall beside its place, and those cells fall in the next pass: a fallen line along the wall. Taken for a state of
-    the door beside it, the wall behind the hinge became the door's closed direction: the door was mirrored and its
-    sweep erased the wall (an outside user's skid-steer base). A leaf standing open in front of a wall (a door at a
-    corner, 0.1 m from the end wall) is seen scan after scan."""
+    end (not :func:`_clear_beyond`); L is the group's leaf length (``length_quantile`` of its segments). A pass
+    registered a cell off (scan matching 0.1 m off where a pass ends) hits a wall beside its place, and those cells
+    fall in the next pass: a fallen line along the wall. Taken for a state of the door beside it, the wall behind the
+    hinge became the door's closed direction: the door was mirrored and its sweep erased the wall (an outside user's
+    skid-steer base). These are candidates: :func:`_door_from_group` drops them only when the door without them gains
+    a state the grid holds; a leaf opened against a wall (a door 0.1 m from a corner, seen as fallen cells) keeps its
+    angle."""
     length = float(np.quantile(np.hypot(*(obs.far - obs.near).T), config.length_quantile))
     along = _ray_fraction(grid, occupied, hinge, obs.modes, length / 3, 0.95 * length) >= config.partner_min_fraction
     for k in np.flatnonzero(along):
