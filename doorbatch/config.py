@@ -492,6 +492,16 @@ class MappingConfig(Section):
     # matching. Measured (session 30): good poses 3-6 % of end points (the sample), 10-25 % in a crowd of 12 people;
     # odometry poses 64-81 % (every 10th scan read). Expert choice: a third, above what people and doors take.
     pass_disagreement_warn_share: float = Field(1.0 / 3.0, gt=0.0, le=1.0)
+    # Mapping from a reference: is the laser's mount yaw in the TF the scans'? Scan pairs mount_check_step_m of travel
+    # apart that turned under mount_check_max_turn_deg are matched (pipeline/poses/mount_check); a median angle between
+    # matched and reference motion over mount_yaw_warn_deg (and 3 standard errors) is warned of. Measured: exact poses
+    # and mount 0.00-0.01 deg; the CARMEN logs -0.40 to 0.01 deg; a 2 deg error -1.91 to -1.96 deg. At most
+    # mount_check_pairs pairs per pass, and mount_check_min_pairs over all passes to say anything.
+    mount_check_step_m: float = Field(1.0, gt=0.0)
+    mount_check_max_turn_deg: float = Field(5.0, gt=0.0)
+    mount_check_pairs: int = Field(60, ge=0)
+    mount_check_min_pairs: int = Field(10, ge=1)
+    mount_yaw_warn_deg: float = Field(1.0, gt=0.0)
     # Passes after the first must start within this distance of where the previous one's odometry ended
     # when poses come from odometry or scan matching (one odometry frame), else the frames are disjoint.
     odometry_continuity_m: float = Field(1.0, gt=0.0)

@@ -37,6 +37,7 @@ from doorbatch.pipeline.gridmap.doors import DetectedDoor, remove_leaves
 from doorbatch.pipeline.gridmap.occupancy import LogOddsGrid, to_occupancy_map
 from doorbatch.pipeline.localize.likelihood_field import FreeCells, free_cells
 from doorbatch.pipeline.poses import scan_match_trajectory
+from doorbatch.pipeline.poses.mount_check import mount_yaw_offsets
 from doorbatch.pipeline.poses.pose_jitter import pose_jitter
 from doorbatch.pipeline.time_passes import split_into_passes
 from doorbatch.progress import Progress, progress_bar
@@ -439,6 +440,7 @@ def build_map(logs: Sequence[Path], config: DoorbatchConfig | None = None,
     result = grid_of(recordings, passes, config, progress)
     seconds["grid"] = time.perf_counter() - t0
     warnings += disagreement_notes(recordings, passes, result.static_map, source, config)
+    warnings += mount_notes(recordings, passes, source, config)
     return DoorMap(result.static_map, result.doors, passes, source, result.n_dynamic_points, warnings, seconds,
                    result.grid)
 
@@ -475,6 +477,32 @@ def disagreement_notes(recordings: Sequence[Recording], passes: Sequence[PassPos
     return [f"the {source} poses disagree with the map: {listed} scan end points fall in cells the map holds free "
             f"(people and doors take a few, up to a quarter in a crowd): walls are smeared and doors found may be "
             f"false{hint}"]
+
+
+def mount_notes(recordings: Sequence[Recording], passes: Sequence[PassPoses], source: str, config: DoorbatchConfig
+                ) -> list[str]:
+    """A warning when the scans say the laser's mount yaw differs from the TF's: the median angle between matched and
+    reference motion of straight scan pairs (:func:`~doorbatch.pipeline.poses.mount_check.mount_yaw_offsets`) over
+    ``mapping.mount_yaw_warn_deg`` and three standard errors. Reference poses only: scan-matched ones agree with the
+    scans by construction."""
+    m = config.mapping
+    if source != "reference" or m.mount_check_pairs == 0:
+        return []
+    offsets = np.concatenate([mount_yaw_offsets(rec, p.poses, p.valid, m.mount_check_step_m,
+                                                math.radians(m.mount_check_max_turn_deg), m.mount_check_pairs)
+                              for rec, p in zip(recordings, passes, strict=True)])
+    if offsets.size < m.mount_check_min_pairs:
+        return []
+    median = float(np.median(offsets))
+    q75, q25 = np.percentile(offsets, [75, 25])
+    standard_error = float(q75 - q25) / 1.349 / math.sqrt(offsets.size)
+    if abs(median) < math.radians(m.mount_yaw_warn_deg) or abs(median) < 3.0 * standard_error:
+        return []
+    turned, moved = math.degrees(-median), math.degrees(median)
+    return [f"the laser's mount yaw in the TF disagrees with the scans by about {turned:+.1f}° (the laser turned that "
+            f"way against base_link): matched scan pairs moved at {moved:+.1f}° to the reference's motion (median of "
+            f"{offsets.size} straight pairs). Walls seen from opposite directions stand apart in the map and doors "
+            "found may be false; check the base_link → laser transform"]
 
 
 def without_leaves(door_map: DoorMap, doors: Sequence[PreviewDoor], config: DoorbatchConfig) -> DoorMap:
