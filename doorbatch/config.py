@@ -99,6 +99,9 @@ class IoConfig(Section):
     # fixed-axis RPY, as a static_transform_publisher takes them; an upside-down laser has roll π): for a log
     # recorded after /tf_static was latched. Used only where the log's TF does not take the laser to the base.
     laser_mount: tuple[float, float, float, float, float, float] | None = None
+    # ... and where the log's TF states a wrong mount (doorbatch map's mount check warns of its yaw), this makes
+    # io.laser_mount replace the log's transform into the laser frame.
+    laser_mount_replaces_tf: bool = False
     # Added to every scan's stamp once the scans are on one clock with the odometry: a driver that stamps its scans
     # when they arrive, late by its latency, takes minus that latency (−0.08 for 80 ms), as urg_node's time_offset.
     scan_time_offset_s: float = 0.0

@@ -543,7 +543,11 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
         borrowed = (borrow_mounts(tf, borrowed_mounts) if scans and borrowed_mounts
                     and not tf.can_transform(config.frames.base_link, scans[0].frame_id) else None)
         mounted = None
-        if (scans and config.io.laser_mount is not None
+        if scans and config.io.laser_mount is not None and config.io.laser_mount_replaces_tf:
+            tf.add(configured_mount(config, scans[0].frame_id))  # a static edge into the laser replaces the log's
+            mounted = (f"io.laser_mount {list(config.io.laser_mount)} replaces the log's transform into the laser "
+                       f"frame {scans[0].frame_id!r} (io.laser_mount_replaces_tf)")
+        elif (scans and config.io.laser_mount is not None
                 and not tf.can_transform(config.frames.base_link, scans[0].frame_id)):
             tf.add(configured_mount(config, scans[0].frame_id))
             mounted = (f"no transform in the log takes the laser frame {scans[0].frame_id!r} to "

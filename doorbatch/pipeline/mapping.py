@@ -502,7 +502,8 @@ def mount_notes(recordings: Sequence[Recording], passes: Sequence[PassPoses], so
     return [f"the laser's mount yaw in the TF disagrees with the scans by about {turned:+.1f}° (the laser turned that "
             f"way against base_link): matched scan pairs moved at {moved:+.1f}° to the reference's motion (median of "
             f"{offsets.size} straight pairs). Walls seen from opposite directions stand apart in the map and doors "
-            "found may be false; check the base_link → laser transform"]
+            "found may be false; check the base_link → laser transform (--set io.laser_mount=[x,y,z,roll,pitch,yaw] "
+            "--set io.laser_mount_replaces_tf=true gives another)"]
 
 
 def without_leaves(door_map: DoorMap, doors: Sequence[PreviewDoor], config: DoorbatchConfig) -> DoorMap:
