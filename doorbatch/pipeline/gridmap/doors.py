@@ -372,7 +372,8 @@ class _Hinged:
         return int(np.unique(self.scan[keep & (self.scan >= 0)]).size)
 
     def scans_seen(self, config: DoorDetectionConfig) -> int:
-        """:func:`_scans_seen` of these leaves: distinct scans of set 1, and ``lone_min_scans`` for any set-2 one."""
+        """In how many scans these leaves were seen: distinct scans of set 1, and ``lone_min_scans`` for any set-2 one
+        (cells that held the leaf through a pass)."""
         fallen = self.scan is not None and bool((self.scan == -1).any())
         return self.scans_of(np.ones(self.leaf.size, dtype=bool)) + (config.lone_min_scans if fallen else 0)
 
@@ -501,8 +502,7 @@ def group_doors(leaves: Leaves, config: DoorDetectionConfig, grid: LogOddsGrid |
         free = ~used[g.leaf]
         if free.sum() < 1:
             continue
-        door = _door_from_group(g.subset(free), gap, config, grid, occupied, raw,
-                                _scans_seen(leaves, g.leaf[free], config))
+        door = _door_from_group(g.subset(free), gap, config, grid, occupied, raw)
         if door is not None:
             used[g.leaf] = True
             doors.append(door)
@@ -535,36 +535,19 @@ class _Observed:
         return {int(t) for t in self.when if not math.isnan(t)}
 
 
-def _scans_seen(leaves: Leaves, leaf: IntArray, config: DoorDetectionConfig) -> int:
-    """In how many scans the leaves ``leaf`` were seen: distinct scans of the transient ones, and
-    ``lone_min_scans`` for any fallen one (cells that held the leaf through a pass)."""
-    source, instance = leaves.source[leaf], leaves.instance[leaf]
-    fallen = config.lone_min_scans if (source == SOURCE_FALLEN).any() else 0
-    return len(np.unique(instance[source == SOURCE_TRANSIENT])) + fallen
-
-
 def _door_from_group(g: _Hinged, gap: float, config: DoorDetectionConfig, grid: LogOddsGrid | None,
-                     occupied: BoolArray | None, raw: BoolArray | None, scans_seen: int) -> DetectedDoor | None:
+                     occupied: BoolArray | None, raw: BoolArray | None) -> DetectedDoor | None:
     """One hinge group as a door, or None (:func:`group_doors`); ``occupied``/``raw``: :func:`_occupied_masks`."""
     labels = angle_modes(g.yaw, gap)
     obs = _Observed(g.near, g.far, g.yaw, g.when, labels, _mode_yaws(g.yaw, labels))
     use_grid = grid is not None and occupied is not None and config.static_partner_search
-    if use_grid and grid is not None and occupied is not None and obs.modes.size >= 2:
-        hinge = _hinge_estimate(obs.near, obs.far, obs.labels, obs.modes, config)
-        on_wall = np.zeros(0, dtype=bool) if hinge is None else _on_walls(grid, occupied, hinge, obs, g, config)
-        keep = ~on_wall[obs.labels] if on_wall.any() else np.ones(0, dtype=bool)
-        if keep.any():
-            # Without the angle along the wall the door has a state the static grid holds, hit in the pass that line
-            # claims (its presence made that state "hit while the leaf stood elsewhere"): one door, two angles, one
-            # pass, so the line is the wall. Else (a leaf opened against a wall, 0.1 m from a corner) it stays.
-            rest = g.subset(keep)  # counted again: a fallen line counts lone_min_scans, and may be the one dropped
-            door = _door_from_group(rest, gap, config, grid, occupied, raw,
-                                    rest.scans_seen(config) if g.scan is not None else scans_seen)
-            if door is not None and np.min(np.abs(wrap_angle(np.asarray(door.observed_yaws)[:, None]
-                                                             - obs.modes[None, :])), axis=1).max() > gap:
-                return door
+    if use_grid and grid is not None and occupied is not None and raw is not None and obs.modes.size >= 2:
+        door = _without_wall_angles(g, obs, gap, config, grid, occupied, raw)
+        if door is not None:
+            return door
     if obs.modes.size == 1:
-        if not use_grid or grid is None or occupied is None or raw is None or scans_seen < config.lone_min_scans:
+        if (not use_grid or grid is None or occupied is None or raw is None
+                or g.scans_seen(config) < config.lone_min_scans):
             return None
         if not _lone_partner(grid, occupied, raw, g, obs, config):
             if not g.chained:
@@ -614,6 +597,25 @@ def _door_from_group(g: _Hinged, gap: float, config: DoorDetectionConfig, grid: 
                         tuple(float(v) for v in wrap_angle(obs.modes)))
 
 
+def _without_wall_angles(g: _Hinged, obs: _Observed, gap: float, config: DoorDetectionConfig, grid: LogOddsGrid,
+                         occupied: BoolArray, raw: BoolArray) -> DetectedDoor | None:
+    """The door of ``g`` without its angles along a wall (:func:`_on_walls`), when that door has an angle ``obs`` had
+    not: a state the static grid holds, hit in the pass the wall line claims (its presence made that state "hit while
+    the leaf stood elsewhere"): one door, two angles, one pass, so the line is the wall. Else None, and the angles
+    stay (a leaf opened against a wall, 0.1 m from a corner)."""
+    hinge = _hinge_estimate(obs.near, obs.far, obs.labels, obs.modes, config)
+    if hinge is None:
+        return None
+    keep = ~_on_walls(grid, occupied, hinge, obs, g, config)[obs.labels]
+    if keep.all() or not keep.any():
+        return None
+    door = _door_from_group(g.subset(keep), gap, config, grid, occupied, raw)
+    if door is None:
+        return None
+    off = np.min(np.abs(wrap_angle(np.asarray(door.observed_yaws)[:, None] - obs.modes[None, :])), axis=1)
+    return door if off.max() > gap else None
+
+
 def _on_walls(grid: LogOddsGrid, occupied: BoolArray, hinge: FloatArray, obs: _Observed, g: _Hinged,
               config: DoorDetectionConfig) -> BoolArray:
     """Extension: which observed angles may be a wall seen out of place, not the leaf: seen as dynamic points in fewer
@@ -623,13 +625,11 @@ def _on_walls(grid: LogOddsGrid, occupied: BoolArray, hinge: FloatArray, obs: _O
     registered a cell off (scan matching 0.1 m off where a pass ends) hits a wall beside its place, and those cells
     fall in the next pass: a fallen line along the wall. Taken for a state of the door beside it, the wall behind the
     hinge became the door's closed direction: the door was mirrored and its sweep erased the wall (an outside user's
-    skid-steer base). These are candidates: :func:`_door_from_group` drops them only when the door without them gains
-    a state the grid holds; a leaf opened against a wall (a door 0.1 m from a corner, seen as fallen cells) keeps its
-    angle."""
+    skid-steer base). These are candidates (:func:`_without_wall_angles`)."""
     length = float(np.quantile(np.hypot(*(obs.far - obs.near).T), config.length_quantile))
     along = _ray_fraction(grid, occupied, hinge, obs.modes, length / 3, 0.95 * length) >= config.partner_min_fraction
     for k in np.flatnonzero(along):
-        if g.scans_of(obs.labels[: g.leaf.size] == k) >= config.lone_min_scans:
+        if g.scans_of(obs.labels == k) >= config.lone_min_scans:
             along[k] = False
             continue
         end = hinge + length * np.array([math.cos(obs.modes[k]), math.sin(obs.modes[k])])

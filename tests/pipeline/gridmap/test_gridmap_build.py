@@ -269,7 +269,7 @@ def test_a_lone_leaf_whose_hinge_end_was_guessed_wrong_gets_its_other_end_tried(
     hinge_end = np.column_stack([5.0 + rng.uniform(0.02, 0.06, n), np.full(n, 3.0)])
     stop_end = np.column_stack([6.2 - rng.uniform(0.0, 0.01, n), np.full(n, 3.0)])
     wrong = _Hinged(np.arange(n), stop_end, hinge_end, np.full(n, math.pi), np.full(n, 2.0), chained=True)
-    door = _door_from_group(wrong, math.radians(config.angle_cluster_gap_deg), config, grid, occupied, raw, n)
+    door = _door_from_group(wrong, math.radians(config.angle_cluster_gap_deg), config, grid, occupied, raw)
     assert door is not None
     assert math.hypot(door.hinge_x - 5.0, door.hinge_y - 3.0) <= 0.1 and abs(door.length - 1.2) <= 0.1
     assert abs(math.remainder(door.closed_yaw, 2 * math.pi)) <= math.radians(10.0)
@@ -295,7 +295,7 @@ def test_a_wall_seen_a_cell_off_is_no_state_of_the_door_beside_it() -> None:
     near[-1] = (4.9, 2.95)
     yaw = np.arctan2(far[:, 1] - near[:, 1], far[:, 0] - near[:, 0])
     g = _Hinged(np.arange(n + 1), near, far, yaw, np.append(np.full(n, 2.0), 1.0), scan=np.append(np.arange(n), -1))
-    door = _door_from_group(g, math.radians(config.angle_cluster_gap_deg), config, grid, occupied, raw, n)
+    door = _door_from_group(g, math.radians(config.angle_cluster_gap_deg), config, grid, occupied, raw)
     assert door is not None
     assert abs(math.remainder(door.closed_yaw, 2 * math.pi)) <= math.radians(10.0)  # closed along the doorway
     assert all(abs(math.remainder(y - math.pi, 2 * math.pi)) > math.radians(20.0) for y in door.observed_yaws)
