@@ -108,6 +108,11 @@ class IoConfig(Section):
     # inspect warns of a laser narrower than this (a depth camera as a laser, 58-90°): door leaves are seen in part
     # and briefly. Expert choice: a third of a turn, wider than any depth camera, narrower than any 2D lidar.
     narrow_fov_warn_deg: float = Field(120.0, gt=0.0)
+    # inspect warns of beams that return nearer than self_hit_max_range_m in at least self_hit_min_share of the scans
+    # (the robot's own posts or bumper in the laser's view). Expert choice: a robot's body lies within 0.3 m of its
+    # laser; a wall that near in nine scans of ten is a robot parked against it, which a log of driving is not.
+    self_hit_max_range_m: float = Field(0.3, gt=0.0)
+    self_hit_min_share: float = Field(0.9, gt=0.0, le=1.0)
     # Pair images/detections/colors with scans by nearest stamp within this tolerance.
     stamp_tolerance_s: float = Field(0.05, ge=0.0)
     # Scans and odometry whose header stamps sit apart from their log times by medians that differ more than

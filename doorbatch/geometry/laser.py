@@ -44,6 +44,12 @@ def wraps_around(angle_increment_rad: float, beams: int) -> bool:
     return beams * step >= 2.0 * np.pi - 0.5 * step
 
 
+def beam_runs(mask: npt.ArrayLike) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]:
+    """Start and stop (exclusive) indices of each run of consecutive true beams of ``mask``, in beam order."""
+    edges = np.diff(np.concatenate([[0], np.asarray(mask, dtype=bool).reshape(-1).astype(np.int8), [0]]))
+    return np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+
+
 def dropouts(no_return: npt.ArrayLike, hit: npt.ArrayLike, max_beams: int, wraps: bool = False
              ) -> npt.NDArray[np.bool_]:
     """The no-return beams that are dropouts: those in runs of at most ``max_beams`` beams without a hit (no
@@ -60,8 +66,7 @@ def dropouts(no_return: npt.ArrayLike, hit: npt.ArrayLike, max_beams: int, wraps
         return out
     shift = int(np.argmax(h)) if wraps else 0  # start a full circle at a hit: a run across beam 0 is then one run
     nr, h = np.roll(nr, -shift), np.roll(h, -shift)
-    edges = np.diff(np.concatenate([[0], (~h).astype(np.int8), [0]]))
-    starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    starts, stops = beam_runs(~h)
     flanked = (starts > 0) & ((stops < n) | wraps)  # wrapping, a run that reaches the end ends at beam 0, a hit
     for a, b in zip(starts[flanked], stops[flanked], strict=True):
         if b - a <= max_beams:

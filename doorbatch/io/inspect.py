@@ -20,6 +20,7 @@ import numpy.typing as npt
 
 from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import LogContentError
+from doorbatch.geometry.laser import beam_runs
 from doorbatch.geometry.tf_buffer import TfBuffer
 from doorbatch.io.decode import ODOMETRY, decode_scan, decode_transforms, stamp_to_ns
 from doorbatch.io.log_clock import LogClock, long_gaps
@@ -170,6 +171,7 @@ def inspect_log(path: Path, config: DoorbatchConfig | None = None,
         bad_scans: list[str] = []  # reasons, one per scan that cannot be decoded
         first_scan: Scan | None = None
         beams_seen = beams_hit = 0
+        near = _NearBeams(config.io.self_hit_max_range_m)
         for raw in reader.raw_messages():
             st = stats.setdefault(raw.topic, _TopicStats())
             st.count += 1
@@ -205,6 +207,7 @@ def inspect_log(path: Path, config: DoorbatchConfig | None = None,
                     r = scan.ranges
                     beams_seen += r.shape[0]
                     beams_hit += int(np.count_nonzero((r >= scan.range_min) & (r < scan.range_max)))
+                    near.add(scan)
             if progress is not None:
                 progress(1)
         if bad_scans and scan_topic is not None:  # as LogReader.messages: skipped unless most are bad
@@ -232,6 +235,7 @@ def inspect_log(path: Path, config: DoorbatchConfig | None = None,
     if first_scan is not None and scan_topic is not None:
         _describe_laser(report, scan_topic, first_scan, beams_hit / max(beams_seen, 1), config.io.narrow_fov_warn_deg)
         _describe_sweep(report, scan_topic, first_scan.sweep_s, _rate(stats.get(scan_topic)), config.io.deskew)
+        _describe_self_hits(report, scan_topic, first_scan, near, config.io.self_hit_min_share)
     _check_roles(report, roles.topics, scan_frames, tf, config, stats)
     _check_stamps(report, stats, role_of, config.io.gap_factor)
     _check_clocks(report, stats, role_of, tf, config)
@@ -251,6 +255,47 @@ def _describe_laser(report: LogReport, topic: str, scan: Scan, returned: float, 
             f"a field of view of {fov_deg:.0f}° (a depth camera's?): door leaves are seen in part and briefly, so "
             "doors can be missed, scan matching falls back to odometry more often, and global localization has "
             "little to go on; tracking from a known start works (docs/results.md, round four)"))
+
+
+@dataclass
+class _NearBeams:
+    """Per beam index, how many scans return nearer than ``max_range_m`` (at or beyond their range_min), over
+    the scans with the first scan's beam count."""
+
+    max_range_m: float
+    counts: npt.NDArray[np.int64] | None = None
+    scans: int = 0
+
+    def add(self, scan: Scan) -> None:
+        r = scan.ranges
+        if self.counts is None:
+            self.counts = np.zeros(r.shape[0], np.int64)
+        if r.shape[0] != self.counts.shape[0]:
+            return
+        self.counts += (r >= scan.range_min) & (r < self.max_range_m)
+        self.scans += 1
+
+
+def _describe_self_hits(report: LogReport, topic: str, scan: Scan, near: _NearBeams, min_share: float) -> None:
+    """A warning for beams that return within ``near.max_range_m`` in at least ``min_share`` of the scans: the
+    robot's own body in the laser's view, no surface of any map. Localization weighs them against the map's walls
+    (a bias towards poses near a wall) unless ``localize.laser_min_range`` leaves them out."""
+    if near.counts is None or near.scans < 10:  # too few scans to tell a body from a wall passed by
+        return
+    starts, stops = beam_runs(near.counts >= min_share * near.scans)
+    if not starts.size:
+        return
+    runs = list(zip(starts.tolist(), (stops - 1).tolist(), strict=True))
+    n_near = sum(b - a + 1 for a, b in runs)
+    where = ", ".join(
+        f"{a}–{b} ({math.degrees(scan.angle_min + a * scan.angle_increment):.0f}° to "
+        f"{math.degrees(scan.angle_min + b * scan.angle_increment):.0f}°)" if b > a else
+        f"{a} ({math.degrees(scan.angle_min + a * scan.angle_increment):.0f}°)" for a, b in runs)
+    report.problems.append(Problem(
+        Severity.WARNING, topic,
+        f"beams {where}, {n_near} of {near.counts.shape[0]}, return within {near.max_range_m:g} m in at least "
+        f"{min_share:.0%} of the scans: the robot's own body (posts, a bumper)? They are no surface of the map; "
+        f"--set localize.laser_min_range={near.max_range_m:g} leaves them out of localization"))
 
 
 def _describe_sweep(report: LogReport, topic: str, sweep_s: float, rate_hz: float, deskew: bool) -> None:
