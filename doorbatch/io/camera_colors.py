@@ -5,6 +5,7 @@ image nearest in time. Images stream one at a time: a log of images is never hel
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -12,7 +13,7 @@ import numpy as np
 import numpy.typing as npt
 
 from doorbatch.config import DoorbatchConfig
-from doorbatch.errors import TransformError
+from doorbatch.errors import LogContentError, TransformError
 from doorbatch.geometry.camera import PinholeCamera, camera_from_info, in_image, project_points, scan_in_camera
 from doorbatch.geometry.tf_buffer import TfBuffer
 from doorbatch.io.reader import open_log
@@ -39,21 +40,34 @@ def _nearest_images(scan_stamps: npt.NDArray[np.int64], image_stamps: npt.NDArra
 
 
 def camera_beam_colors(path: Path, scans: Sequence[Scan], tf: TfBuffer, config: DoorbatchConfig,
-                       max_offset_s: float = 0.1) -> tuple[list[UInt8Array], list[BoolArray]]:
+                       max_offset_s: float = 0.1
+                       ) -> tuple[list[UInt8Array] | None, list[BoolArray] | None, list[str]]:
     """(B_i, 3) uint8 colours aligned with each scan and (B_i,) masks of the beams that have one: those
-    whose end point projects into the image nearest in time (within ``max_offset_s``).
+    whose end point projects into the image nearest in time (within ``max_offset_s``); None and None when no
+    beam has one. Then notes on why the camera colours no beam or colours them doubtfully (a camera on its own
+    clock, a CameraInfo that cannot be used or describes another image size, a frame whose z axis is not the
+    optical axis), for the log's warnings: colour is an optional input, so none of these is an error.
 
     Two passes over the image topic: stamps first, then each image colours the scans that chose it.
     """
     with open_log(path, config) as reader:
+        topic = reader.roles.topic(Role.IMAGE) or "the image topic"
         stamps = np.array([item.record.stamp_ns for item in reader.messages([Role.IMAGE])
                            if isinstance(item.record, Image)], dtype=np.int64)
     scan_stamps = np.array([s.stamp_ns for s in scans], dtype=np.int64)
     choice = _nearest_images(scan_stamps, stamps, int(max_offset_s * 1e9))
+    if stamps.size and not (choice >= 0).any():
+        away_s = float(np.median(np.abs(stamps[_nearest_images(scan_stamps, stamps, np.iinfo(np.int64).max)]
+                                        - scan_stamps))) / 1e9
+        return None, None, [f"no image on {topic} lies within {max_offset_s:g} s of a scan (the median scan is "
+                            f"{away_s:.3g} s from its nearest: a camera stamping with a clock of its own?); "
+                            f"{COLORLESS}"]
     colors = [np.zeros((s.ranges.shape[0], 3), dtype=np.uint8) for s in scans]
     valid = [np.zeros(s.ranges.shape[0], dtype=bool) for s in scans]
+    notes: list[str] = []
     info: CameraInfo | None = None
     camera: PinholeCamera | None = None  # built once, from the first CameraInfo (the one used throughout)
+    frame = ""
     k = -1
     with open_log(path, config) as reader:
         for item in reader.messages([Role.CAMERA_INFO, Role.IMAGE]):
@@ -67,11 +81,46 @@ def camera_beam_colors(path: Path, scans: Sequence[Scan], tf: TfBuffer, config: 
             users = np.flatnonzero(choice == k)
             if users.size == 0 or info is None:
                 continue
-            camera = camera or camera_from_info(info)
             pixels = rec.pixels if rec.pixels.ndim == 3 else np.repeat(rec.pixels[:, :, None], 3, axis=2)
+            if camera is None:
+                try:
+                    camera = camera_from_info(info)
+                except LogContentError as err:
+                    return None, None, [f"{err.reason}; {COLORLESS}"]
+                if (pixels.shape[1], pixels.shape[0]) != (camera.width, camera.height):
+                    return None, None, [f"the images on {topic} are {pixels.shape[1]}×{pixels.shape[0]} but their "
+                                        f"CameraInfo describes {camera.width}×{camera.height} (a calibration of "
+                                        f"another resolution): their pixels would colour the wrong beams; "
+                                        f"{COLORLESS}"]
+                frame = rec.frame_id or info.frame_id
+                notes += [n for n in [_optical_axis_note(tf, frame, scans[int(users[0])])] if n]
             for i in users.tolist():
                 _scan_colors(scans[i], tf, camera, pixels, rec.frame_id or info.frame_id, colors[i], valid[i])
-    return colors, valid
+    if not any(v.any() for v in valid):
+        why = ("no CameraInfo arrives before an image" if info is None else
+               f"none of the laser's end points lies in front of the camera frame {frame!r} and inside its image"
+               + ("" if notes else " (is its z axis the optical axis, with x right and y down?)"))
+        return None, None, [*notes, f"{why}; {COLORLESS}"]
+    return colors, valid, notes
+
+
+COLORLESS = ("the scans get no colours from the camera, so doorbatch map's default stages leave out the em stage "
+             "(--stages grid,em runs it on shape and motion alone)")
+VERTICAL_AXIS_COS = math.cos(math.radians(30.0))  # an optical axis within 30° of the vertical sees floor or ceiling
+
+
+def _optical_axis_note(tf: TfBuffer, camera_frame: str, scan: Scan) -> str | None:
+    """A note when the camera frame's z axis (the optical axis of a CameraInfo's frame) stands within 30° of the
+    laser's vertical: a camera_link-style frame (x forward, z up) given where the optical frame belongs."""
+    try:
+        rotation = tf.lookup(scan.frame_id, camera_frame, scan.stamp_ns, hold_constant=True)[:3, :3]
+    except TransformError:
+        return None
+    if abs(rotation[2, 2]) < VERTICAL_AXIS_COS:
+        return None
+    return (f"the camera frame {camera_frame!r} has its z axis {'up' if rotation[2, 2] > 0 else 'down'}: a "
+            "CameraInfo's frame is the optical frame (z forward along the optical axis, x right, y down), which a "
+            "camera_link-style frame (x forward, z up) is not")
 
 
 def _scan_colors(scan: Scan, tf: TfBuffer, camera: PinholeCamera, pixels: UInt8Array, frame: str,

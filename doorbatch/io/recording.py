@@ -567,7 +567,8 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
         notes += [f"{path}: {jump_note}"] if jump_note else []
         warnings = [*reader.warnings, *(f"{path}: {n}" for n in timed.notes), *([base_note] if base_note else []),
                     *notes]
-        camera = reader.roles.topic(Role.IMAGE) is not None and reader.roles.topic(Role.CAMERA_INFO) is not None
+        image_topic = reader.roles.topic(Role.IMAGE)
+        camera = image_topic is not None and reader.roles.topic(Role.CAMERA_INFO) is not None
     if not scans:
         raise LogContentError("scan topic has no messages", path=path, topic=scan_topic)
     if lost := lost_times_note([s.stamp_ns for s in scans]):
@@ -621,9 +622,13 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
     elif with_colors and camera:  # no /scan_colors: project the scan into the camera images
         from doorbatch.io.camera_colors import camera_beam_colors
 
-        aligned, valid = camera_beam_colors(path, scans, tf, config)
-        if not any(v.any() for v in valid):
-            aligned, valid = None, None
+        aligned, valid, camera_notes = camera_beam_colors(path, scans, tf, config)
+        warnings += [f"{path}: {n}" for n in camera_notes]
+    elif with_colors and image_topic is not None:
+        from doorbatch.io.camera_colors import COLORLESS
+
+        warnings.append(f"{path}: images on {image_topic} but no CameraInfo to project the scans into them; "
+                        f"{COLORLESS}")
     if aligned is not None and any(src is not None for src in sources):  # colours follow their beams
         aligned, valid = moved_beam_colors(aligned, valid, sources)
     deskewed = sum(src is not None for src in sources)

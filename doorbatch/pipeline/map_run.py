@@ -142,6 +142,10 @@ def run_map(logs: Sequence[Path], out: Path, config: DoorbatchConfig, stages: Se
                                 "scan_stride": em.strides[0], "beam_stride": em.strides[1],
                                 "final_beams": em.final_beams, "final_scan_thinning": em.final_scan_thinning,
                                 "final_scan_stride": em.final_strides[0], "final_beam_stride": em.final_strides[1]}
+        if classes is not None and classes.has_color and not em.object_map.classes.has_color:
+            manifest.warn(f"em: {classes_file} has colour classes, but "
+                          f"{'em.use_color is off' if not config.em.use_color else 'the logs have no beam colours'}: "
+                          "its widths only were applied")
         if em.final_scan_thinning > 1:
             manifest.warn(f"em: the final wall step kept 1 scan in {em.final_scan_thinning} ({em.final_beams} beams; "
                           f"em.final_max_beams {config.em.final_max_beams})")

@@ -3,17 +3,21 @@ TF into the image nearest in time, on a simulated log with a camera and known wa
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from doorbatch.config import DoorbatchConfig
+from doorbatch.io import ros_messages as m
 from doorbatch.io.camera_colors import _nearest_images
 from doorbatch.io.recording import load_recording
 from doorbatch.pipeline.mapping import pass_poses
 from doorbatch.pipeline.objectmap.beams import beams_from_scans
 from doorbatch.pipeline.objectmap.stage import pass_scans
 from doorbatch.sim.simulate import run_simulation
+from tests.conftest import Message, sample_messages
 
 WORLD = """
 name: tiny_cam
@@ -71,3 +75,47 @@ def test_beams_take_the_colour_of_what_the_camera_sees_there(tmp_path: Path) -> 
     # shading scales both; the door is the brown one: red well above blue, the wall nearly grey
     assert door[0] - door[2] > 0.5 * (door[0] + door[2]) * (150 - 60) / (150 + 60)
     assert abs(wall[0] - wall[2]) < 0.1 * wall[0]
+
+
+def _camera_variant(name: str) -> list[Message]:
+    """The conftest log without /scan_colors (its beams are coloured from the camera), changed as ``name`` says."""
+    out: list[Message] = []
+    for topic, msgtype, t, msg in sample_messages(12):
+        if topic == "/scan_colors" or (name == "no camera info" and topic == "/camera/camera_info"):
+            continue
+        if topic == "/camera/camera_info":
+            if name == "zero K":
+                msg = m.camera_info(t, "camera_optical", 64, 48, np.zeros((3, 3)))
+            elif name == "other size":
+                msg = m.camera_info(t, "camera_optical", 32, 24, [[25.0, 0, 16], [0, 25.0, 12], [0, 0, 1]])
+            elif name == "camera_link":
+                msg.header.frame_id = "camera_link"
+        if name == "camera_link" and topic == "/tf_static":  # x forward, z up: no optical rotation
+            msg = m.tf_message([*msg.transforms, m.planar_transform(t, "base_link", "camera_link", 0.1, 0.0, 0.0,
+                                                                    z=1.0)])
+        if name == "camera_link" and topic == "/camera/image_raw":
+            msg.header.frame_id = "camera_link"
+        if name == "own clock" and topic == "/camera/image_raw":
+            msg.header.stamp.sec += 1000
+        out.append((topic, msgtype, t, msg))
+    return out
+
+
+@pytest.mark.parametrize(("name", "says"), [
+    ("no camera info", "images on /camera/image_raw but no CameraInfo"),
+    ("zero K", "camera_info K has non-positive focal lengths"),
+    ("other size", "are 64×48 but their CameraInfo describes 32×24"),
+    ("camera_link", "the camera frame 'camera_link' has its z axis up"),
+    ("own clock", "a camera stamping with a clock of its own?"),
+])
+def test_a_camera_whose_images_colour_no_beam_says_why(write_log: Callable[..., Path], name: str, says: str) -> None:
+    """A helper's camera colours were lost without a word (em stage left out, a never-moved door with it) when the
+    CameraInfo was missing or in camera_link, or the images on their own clock; an all-zero K failed the whole map.
+    Each now loads without colours and with a warning that names the cause; the plain camera colours beams."""
+    config = DoorbatchConfig()
+    plain = load_recording(write_log("plain.mcap", _camera_variant("")), config, with_colors=True)
+    assert plain.colors is not None and not any("colour" in w for w in plain.warnings)
+    rec = load_recording(write_log(f"{name}.mcap", _camera_variant(name)), config, with_colors=True)
+    assert rec.colors is None
+    notes = [w for w in rec.warnings if "the scans get no colours from the camera" in w or says in w]
+    assert any(says in w for w in notes) and any("leave out the em stage" in w for w in notes)

@@ -183,6 +183,12 @@ def test_map_cli_writes_the_em_outputs_and_applies_classes(tiny_site: list[Path]
     thinned = json.loads((out4 / "manifest.json").read_text())
     assert thinned["extra"]["em"]["final_scan_thinning"] > 1 and thinned["extra"]["em"]["final_beams"] <= 20000
     assert any("final wall step kept 1 scan in" in w for w in thinned["warnings"])
+    assert not any("has colour classes" in w for w in thinned["warnings"])
+    out5 = tmp_path / "map5"  # colour classes on a log read without colours: said, not dropped in silence
+    assert main(["map", logs[1], "-o", str(out5), "--classes", str(out / "classes.json"), *sets,
+                 "--set", "em.use_color=false", "-q"]) == 0
+    colourless = json.loads((out5 / "manifest.json").read_text())["warnings"]
+    assert any("has colour classes, but em.use_color is off: its widths only were applied" in w for w in colourless)
     bad = tmp_path / "bad.json"
     bad.write_text("{}")
     assert main(["map", logs[1], "-o", str(tmp_path / "m3"), "--classes", str(bad)]) == 3
