@@ -385,20 +385,38 @@ def _when(leaves: Leaves) -> FloatArray:
     return np.asarray(np.where(leaves.source == SOURCE_STATIC, np.nan, t), dtype=np.float64)
 
 
-def _densest_end(ends: FloatArray, radius: float) -> FloatArray:
-    """The end point with the most others within ``radius``: where leaves share an end (the hinge), not
-    where their free ends spread along an arc."""
+def _hinge_end(ends: FloatArray, others: FloatArray, radius: float, gap: float) -> tuple[FloatArray, int]:
+    """The end point (of ``ends``; ``others`` the same leaves' other ends) where the most lines meet: the
+    directions of the leaves with an end within ``radius`` of it, away from that end, folded onto lines (a
+    direction and its opposite are one line: pieces of one straight leaf or wall continue each other through a
+    door stop, which single linkage chains to the hinge), counted as :func:`angle_modes` with ``gap``; ties go
+    to the end with the most others within ``radius``, where leaves share an end (the hinge), not where their
+    free ends spread along an arc. A closed leaf chained to a wall seen moving beyond its door stop has its
+    densest end there, and only its hinge meets another of its angles. Also how many lines meet there."""
     if ends.shape[0] <= 2:
-        return np.asarray(ends[0], dtype=np.float64)
-    counts = cKDTree(ends).query_ball_point(ends, radius, return_length=True)
-    return np.asarray(ends[int(np.argmax(counts))], dtype=np.float64)
+        return np.asarray(ends[0], dtype=np.float64), 1
+    tree = cKDTree(ends)
+    counts = tree.query_ball_point(ends, radius, return_length=True)
+    doubled = 2.0 * np.arctan2(others[:, 1] - ends[:, 1], others[:, 0] - ends[:, 0])  # lines: angles mod π
+
+    def lines_at(i: int) -> int:
+        return int(angle_modes(doubled[tree.query_ball_point(ends[i], radius)], 2.0 * gap).max()) + 1
+
+    best = int(np.argmax(counts))
+    best_score = (lines_at(best), int(counts[best]))
+    _, first = np.unique(np.floor(ends / (radius / 4)).astype(np.int64), axis=0, return_index=True)
+    for i in first.tolist():  # one candidate per quarter-radius cell: the ends of one hinge are all alike
+        score = (lines_at(i), int(counts[i]))
+        if score > best_score:
+            best, best_score = i, score
+    return np.asarray(ends[best], dtype=np.float64), best_score[0]
 
 
 def _hinge_groups(leaves: Leaves, config: DoorDetectionConfig) -> list[_Hinged]:
     """Connected components of leaf end points closer than ``hinge_distance_m`` (each leaf counted once per
     component, by its end in the component). Where both ends of a leaf are in one component (single linkage
     chains a door's hinge to its free ends once many passes and partial leaves fill the sector between), the
-    end nearer the component's densest end point (:func:`_densest_end`) is the hinge-side one."""
+    end nearer the component's hinge end (:func:`_hinge_end`) is the hinge-side one."""
     n = len(leaves)
     ends = np.concatenate([leaves.p0, leaves.p1])
     labels = cluster_points(ends, config.hinge_distance_m)
@@ -412,9 +430,13 @@ def _hinge_groups(leaves: Leaves, config: DoorDetectionConfig) -> list[_Hinged]:
         other = np.where(end < n, end + n, end - n)
         chained = bool((count > 1).any())
         if chained:
-            hinge = _densest_end(ends[members], config.hinge_distance_m)
+            hinge, lines = _hinge_end(ends[members], ends[np.where(members < n, members + n, members - n)],
+                                      config.hinge_distance_m, math.radians(config.angle_cluster_gap_deg))
             swap = (count > 1) & (np.hypot(*(ends[other] - hinge).T) < np.hypot(*(ends[end] - hinge).T))
             end, other = np.where(swap, other, end), np.where(swap, end, other)
+            if lines > 1:  # a hinge where angles meet: leaves chained on beyond a leaf's length from it are not its
+                keep = np.hypot(*(ends[end] - hinge).T) <= 2.0 * config.hinge_distance_m
+                leaf, end, other = leaf[keep], end[keep], other[keep]
         near, far = ends[end], ends[other]
         yaw = np.arctan2(far[:, 1] - near[:, 1], far[:, 0] - near[:, 0])
         source = leaves.source[leaf]
@@ -552,7 +574,7 @@ def _door_from_group(g: _Hinged, gap: float, config: DoorDetectionConfig, grid: 
         if not _lone_partner(grid, occupied, raw, g, obs, config):
             if not g.chained:
                 return None
-            # Which end is the hinge was a guess by density (_hinge_groups): the other end's turn. A closed leaf's
+            # Which end is the hinge was a guess (_hinge_groups, _hinge_end): the other end's turn. A closed leaf's
             # lines, cut short here and there, chain its hinge and its door stop into one group, and the door stop's
             # ends were the densest (an outside user's 1.2 m leaf whose open state is static: the door was missed).
             g = g.reversed()

@@ -119,6 +119,24 @@ def test_leaves_rotating_about_a_common_hinge_make_a_door() -> None:
     assert door.n_observations == 8 and door.moved
 
 
+def test_a_closed_leaf_chained_to_a_wall_seen_moving_beyond_its_door_stop_keeps_its_hinge() -> None:
+    """A helper's door (20°, 0°, 40° into a room; 40° static) was missed: in the first pass the wall beyond its door
+    stop was seen moving (grazing beams through the doorway clear a wall on a cell border), and single linkage
+    chained those lines to the closed leaf. The densest end, the door stop, was taken for the hinge. The hinge is
+    now where the leaf's angles meet; the wall lines, which start a leaf's length from it, leave the group."""
+    hinge = (2.0, 3.0)
+    stop = (2.9, 3.0)
+    pieces = [(0.04, 0.9), (0.25, 0.9), (0.04, 0.6), (0.4, 0.9), (0.04, 0.75)]  # ends every ≤ 0.21 m: one chain
+    closed = [(np.asarray(hinge) + (a, 0.0), np.asarray(hinge) + (b, 0.0)) for a, b in pieces] * 6
+    wall = [(np.asarray(stop) + (0.02, 0.0), np.asarray(stop) + (0.7, 0.0))] * 40
+    open_20 = [_leaf(hinge, 0.9, math.radians(20), cut=0.1)]
+    (door,) = group_doors(_leaves(closed + wall + open_20, [1] * 30 + [0] * 40 + [0]), CFG)
+    assert math.hypot(door.hinge_x - 2.0, door.hinge_y - 3.0) < 0.02
+    assert door.length == pytest.approx(0.9, abs=0.03)
+    assert sorted(round(math.degrees(a)) for a in (door.angle_min, door.angle_max)) == [0, 20]
+    assert door.n_observations == 31
+
+
 def test_leaves_seen_at_one_angle_or_indistinguishable_angles_make_no_door() -> None:
     hinge = (2.0, 3.0)
     assert group_doors(_leaves([_leaf(hinge, 0.9, 0.3)] * 4), CFG) == []
