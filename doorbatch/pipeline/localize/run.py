@@ -600,6 +600,8 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
         tested = rival_tested_claim(rec, lmap, track, updated_scans, streak_ns, converged_ns, lc)
         converged_ns, ambiguous = tested.converged_ns, ambiguous or tested.ambiguous
         warnings.extend([tested.note] if tested.note else [])
+    if init != "global" and converged_ns is not None and track.stamps:  # a tracked start: its first update, which
+        converged_ns = max(converged_ns, track.stamps[0])  # odometry that begins after the first scan puts later
     return track.result(Path(log_path).name, method, state.particles.n_doors, converged_ns, ambiguous, warnings,
                         rec.log_clock, lost_ns, rec.odometry.frame_id)
 

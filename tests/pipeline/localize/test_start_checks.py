@@ -92,3 +92,23 @@ def test_a_gap_in_the_scans_is_told_in_the_run(write_log: Callable[..., Path]) -
     assert gap_notes(load_recording(write_log("whole.mcap", messages), DoorbatchConfig()), 5.0) == []
     notes = gap_notes(load_recording(write_log("holed.mcap", holed), DoorbatchConfig()), 5.0)
     assert len(notes) == 1 and notes[0].startswith("1 gap(s) in the scans (") and "no poses there" in notes[0]
+
+
+def test_a_tracked_start_converges_at_its_first_update_when_odometry_begins_after_the_first_scan() -> None:
+    """A 100 Hz odometry whose first pose comes after the first scan: the run's first update is the second scan,
+    yet its convergence was dated at the first scan, and evaluate reported time_to_converge_s = -0.100."""
+    from dataclasses import replace
+
+    from doorbatch.io.recording import PoseSeries
+
+    truth = loop_trajectory(40)
+    rng = np.random.default_rng(2)
+    rec = room_recording(truth, axis_scaled_odometry(truth, rng), rng, reference=truth)
+    assert rec.odometry is not None
+    late = rec.odometry.stamps_ns > rec.scans.stamps_ns[0] + 50_000_000  # no odometry at the first scan
+    rec = replace(rec, odometry=PoseSeries(rec.odometry.stamps_ns[late], rec.odometry.poses[late], "odom"))
+    config = DoorbatchConfig()
+    lmap = LocalizationMap.of(room_map(), DoorSet.empty(), config.localize)
+    result = localize_recording(rec, lmap, config, "mcl", "reference")
+    assert result.stamps_ns[0] == rec.scans.stamps_ns[1]
+    assert result.manifest_extra()["converged_after_s"] == 0.0
