@@ -119,6 +119,15 @@ class IoConfig(Section):
     # this are on different clocks (a laser driver stamping with its device clock): both are timed by their
     # log times instead (one recorder clock), with a warning.
     clock_mismatch_s: float = Field(1.0, gt=0.0)
+    # A topic's header stamps that step by more than this between two messages logged the usual interval apart,
+    # and stay stepped, follow a clock that was set (an NTP step): every scan and pose is then timed by its log
+    # time, with a warning. Expert choice: ntpd steps a clock that is 128 ms off; drivers jitter by milliseconds.
+    clock_step_s: float = Field(0.1, gt=0.0)
+    # Scans whose median (stamp − log time) exceeds the odometry's by more than this (and by at most
+    # clock_mismatch_s) were stamped by a clock ahead of the odometry's: latency only ever makes a stamp earlier
+    # than its log time, so a warning names io.scan_time_offset_s. Expert choice: bag recorders and drivers
+    # jitter by a few ms, and odometry's own latency is under this.
+    clock_ahead_warn_s: float = Field(0.05, gt=0.0)
     # A reference that is the odometry moved rigidly within these is no reference (a raw CARMEN log's laser poses
     # are its odometry): a warning, and map's auto pose source matches scans instead. Expert choice: a millimetre
     # and 0.05°, above the logs' printed precision, far below what a real reference parts from odometry by.

@@ -16,7 +16,7 @@ from typing import Any, TypeVar
 import numpy as np
 import numpy.typing as npt
 
-from doorbatch.config import DoorbatchConfig, FramesConfig
+from doorbatch.config import DoorbatchConfig, FramesConfig, IoConfig
 from doorbatch.errors import LaserMountError, LogContentError, TransformError
 from doorbatch.geometry.deskew import deskewed_scans
 from doorbatch.geometry.odometry import bridged_jumps, odometry_jumps, sweep_smear_m
@@ -420,6 +420,41 @@ def clock_lags_s(scan_stamps_ns: Sequence[int], scan_log_ns: Sequence[int], odom
     return (a, b) if a is not None and b is not None and abs(a - b) > mismatch_s else None
 
 
+def clock_steps(stamps_ns: Sequence[int], log_ns: Sequence[int], step_s: float) -> list[tuple[int, float]]:
+    """Steps of a topic's header stamps against the recorder's clock (message index, step in s): consecutive
+    messages whose stamps lie more than ``step_s`` further apart (or nearer, or backwards) than their median
+    interval while their log times lie the usual interval apart, and whose stamps then keep to the stepped
+    time (a clock that was set, as NTP sets one). A message that arrived late (its log time out of step), a
+    dropout (both out of step) or a paused simulator (its log times out of step) is none. Unset stamps (0)
+    are left out."""
+    t = np.asarray(stamps_ns, dtype=np.int64)
+    g = np.asarray(log_ns, dtype=np.int64)
+    keep = np.flatnonzero((t != 0) & (g != 0))
+    if keep.size < 4:
+        return []
+    ds, dl = np.diff(t[keep]) / 1e9, np.diff(g[keep]) / 1e9
+    med_ds, med_dl = float(np.median(ds)), float(np.median(dl))
+    pace = med_ds / med_dl if med_dl > 0 else 1.0  # a simulator's sim time runs at its real-time factor
+    jump = ds - pace * dl
+    out = []
+    for i in np.flatnonzero((np.abs(ds - med_ds) > step_s) & (np.abs(dl - med_dl) <= step_s / 2)).tolist():
+        around = jump[max(i - 5, 0):i + 6]  # the stamps keep to the stepped time: the intervals about it do not undo
+        if abs(float(around.sum())) > step_s / 2:  # it (scans that arrived in another order than their stamps do)
+            out.append((int(keep[i + 1]), float(jump[i])))
+    return out
+
+
+def clock_ahead_s(scan_stamps_ns: Sequence[int], scan_log_ns: Sequence[int], odom_stamps_ns: Sequence[int],
+                  odom_log_ns: Sequence[int], warn_s: float, mismatch_s: float) -> float | None:
+    """How far the scans' median (stamp − log time) exceeds the odometry's, in s, when by more than ``warn_s``
+    and at most ``mismatch_s`` (beyond it, :func:`clock_lags_s`: two clocks); else None. Latency only makes a
+    stamp earlier than its log time, so scans stamped later than their odometry were stamped by a clock ahead."""
+    lags = clock_lags_s(scan_stamps_ns, scan_log_ns, odom_stamps_ns, odom_log_ns, 0.0)
+    if lags is None or not warn_s < lags[0] - lags[1] <= mismatch_s:
+        return None
+    return lags[0] - lags[1]
+
+
 def unset_stamps(stamps_ns: Sequence[int]) -> npt.NDArray[np.bool_]:
     """Which header stamps (one topic, in log order) are unset: 0, unless the clock starts there. Gazebo's sim
     time starts at 0 s, so the last 0 before any set stamp, when the first set stamp after it lies within
@@ -455,18 +490,22 @@ def scans_clock(scans: Sequence[Scan], mismatch_s: float) -> LogClock:
     return LogClock.of_pairs([g for g, _ in pairs], [t for _, t in pairs], mismatch_s)
 
 
-def on_one_clock(scans: list[Scan], odom: list[Pose2D], ref: list[Pose2D], mismatch_s: float) -> OneClock:
+def on_one_clock(scans: list[Scan], odom: list[Pose2D], ref: list[Pose2D], io: IoConfig) -> OneClock:
     """Scans and poses whose header stamps can be put on one time line, in stamp order, and notes saying what
     was done. A header stamp of 0 is unset (:func:`unset_stamps`: not where a clock starts at 0): the message's
     log time stands in, on the scans' clock (:func:`scans_clock`). Scans and odometry whose median
-    (stamp − log time) differ by more than ``mismatch_s`` are on two clocks (a driver stamping with its
-    device's clock): every scan and pose is timed by its log time, the recorder's one clock. Scans that
-    arrived out of stamp order are sorted (bags record arrival order; the stamp is the measurement's time).
+    (stamp − log time) differ by more than ``io.clock_mismatch_s`` are on two clocks (a driver stamping with its
+    device's clock), and scan or odometry stamps that step (:func:`clock_steps`) follow a clock that was set:
+    either way every scan and pose is timed by its log time, the recorder's one clock. Scans stamped ahead of
+    their odometry (:func:`clock_ahead_s`) are told of. Scans that arrived out of stamp order are sorted (bags
+    record arrival order; the stamp is the measurement's time).
     """
     notes: list[str] = []
     header = [s.stamp_ns for s in scans]
-    lags = clock_lags_s([s.stamp_ns for s in scans], [s.log_time_ns for s in scans],
-                        [p.stamp_ns for p in odom], [p.log_time_ns for p in odom], mismatch_s)
+    mismatch_s = io.clock_mismatch_s
+    timing = ([s.stamp_ns for s in scans], [s.log_time_ns for s in scans],
+              [p.stamp_ns for p in odom], [p.log_time_ns for p in odom])
+    lags = clock_lags_s(*timing, mismatch_s)
     for name, records in (("scans", scans), ("odometry poses", odom), ("reference poses", ref)):
         unset = int(unset_stamps([r.stamp_ns for r in records]).sum())
         if unset:
@@ -475,7 +514,14 @@ def on_one_clock(scans: list[Scan], odom: list[Pose2D], ref: list[Pose2D], misma
     if lags is not None:
         notes.append(f"scan and odometry header stamps are on different clocks (median stamp − log time "
                      f"{lags[0]:+.3f} s and {lags[1]:+.3f} s): every scan and pose is timed by its log time")
-    every = lags is not None
+    steps = {name: found for name, found in (("scan", clock_steps(*timing[:2], io.clock_step_s)),
+                                             ("odometry", clock_steps(*timing[2:], io.clock_step_s))) if found}
+    if lags is None and steps:
+        notes.append(clock_steps_note(steps, timing[1][0] if timing[1] else 0, timing))
+    if (lags is None and not steps and not io.scan_time_offset_s
+            and (ahead := clock_ahead_s(*timing, io.clock_ahead_warn_s, mismatch_s))):
+        notes.append(clock_ahead_note(ahead))
+    every = lags is not None or bool(steps)
     clock = scans_clock(scans, mismatch_s)
     scans, odom, ref = _log_timed(scans, every, clock), _log_timed(odom, every, clock), _log_timed(ref, every, clock)
     stamps = np.array([s.stamp_ns for s in scans], dtype=np.int64)
@@ -487,21 +533,61 @@ def on_one_clock(scans: list[Scan], odom: list[Pose2D], ref: list[Pose2D], misma
     return OneClock(scans, odom, ref, header, notes, LogClock() if every else clock)
 
 
+def clock_steps_note(steps: dict[str, list[tuple[int, float]]], first_log_ns: int,
+                     timing: tuple[Sequence[int], Sequence[int], Sequence[int], Sequence[int]]) -> str:
+    """The warning for header stamps that step (:func:`clock_steps`), by topic: the first step's size and when."""
+    parts = []
+    for name, found in steps.items():
+        index, step = found[0]
+        logged = (timing[1] if name == "scan" else timing[3])[index]
+        parts.append(f"{name} header stamps step by {step:+.2f} s against the recorder's clock "
+                     f"{(logged - first_log_ns) / 1e9:.1f} s into the log"
+                     + (f" ({len(found)} steps)" if len(found) > 1 else ""))
+    return (f"{'; '.join(parts)}: a clock that was set (an NTP step?); every scan and pose is timed by its log time "
+            "instead")
+
+
+def clock_ahead_note(ahead_s: float) -> str:
+    """The warning for scans stamped ahead of their odometry (:func:`clock_ahead_s`), with the setting that
+    takes it out."""
+    return (f"scan header stamps lie {ahead_s:.3f} s later against their log times than the odometry's (medians): "
+            f"latency only makes a stamp earlier, so the laser's clock runs ahead of the odometry's and each scan "
+            f"would be placed where the robot was {ahead_s:.3f} s later; if so, --set "
+            f"io.scan_time_offset_s={-ahead_s:.3f}")
+
+
 def scan_colors(colors: Sequence[BeamColors], header_stamps_ns: Sequence[int], log_times_ns: Sequence[int],
                 tolerance_ns: int) -> list[BeamColors | None]:
-    """Each scan's colours: the message with the scan's header stamp; for a scan with header stamp 0 (unset),
-    the unstamped colour message logged nearest to it within ``tolerance_ns``."""
+    """Each scan's colours: the message with the scan's header stamp; for a scan with none (its stamp unset, or
+    on another clock than the colours': a laser driver's own), the colour message logged nearest to it within
+    ``tolerance_ns``."""
     by_stamp = {c.stamp_ns: c for c in colors if c.stamp_ns != 0}
-    unset = sorted((c for c in colors if c.stamp_ns == 0), key=lambda c: c.log_time_ns)
-    times = np.array([c.log_time_ns for c in unset], dtype=np.int64)
+    by_log = sorted(colors, key=lambda c: c.log_time_ns)
+    times = np.array([c.log_time_ns for c in by_log], dtype=np.int64)
     out: list[BeamColors | None] = []
     for stamp, logged in zip(header_stamps_ns, log_times_ns, strict=True):
-        if stamp != 0 or not unset:
-            out.append(by_stamp.get(stamp) if stamp != 0 else None)
+        if stamp != 0 and stamp in by_stamp:
+            out.append(by_stamp[stamp])
             continue
-        k = int(np.argmin(np.abs(times - logged)))
-        out.append(unset[k] if abs(int(times[k]) - logged) <= tolerance_ns else None)
+        k = int(np.argmin(np.abs(times - logged))) if times.size else -1
+        out.append(by_log[k] if k >= 0 and abs(int(times[k]) - logged) <= tolerance_ns else None)
     return out
+
+
+def colors_note(found: Sequence[BeamColors | None], beams: Sequence[int], topic: str) -> str | None:
+    """A warning when under half the scans have a colour message with one point per beam: how many have none
+    and how many one of another length (the em stage's colour then rests on the rest, or on nothing)."""
+    missing = sum(c is None for c in found)
+    other = [(c.rgb.shape[0], n) for c, n in zip(found, beams, strict=True) if c is not None and c.rgb.shape[0] != n]
+    if 2 * (missing + len(other)) <= len(found):
+        return None
+    parts = [f"{missing} have no colour message on {topic} (none with their header stamp, none logged within "
+             "io.stamp_tolerance_s)"] if missing else []
+    parts += [f"{len(other)} have one of another length (first: {other[0][0]} points for {other[0][1]} beams)"]\
+        if other else []
+    return (f"of {len(found)} scans, {' and '.join(parts)}: their beams have no colour"
+            + (", so doorbatch map's default stages leave out the em stage" if missing + len(other) == len(found)
+               else ""))
 
 
 def load_recording(path: Path, config: DoorbatchConfig | None = None, with_colors: bool = False,
@@ -559,7 +645,7 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
         if reader.roles.topic(Role.REFERENCE) is None:
             ref, note = tf_reference(tf, frames)
             notes += [note] if note else []
-        timed = without_repeated_scans(on_one_clock(scans, odom, ref, config.io.clock_mismatch_s))
+        timed = without_repeated_scans(on_one_clock(scans, odom, ref, config.io))
         offset_ns = round(config.io.scan_time_offset_s * 1e9)
         scans = [replace(s, stamp_ns=s.stamp_ns + offset_ns) for s in timed.scans] if offset_ns else timed.scans
         odometry, reference = robot_pose_series(timed.odom, timed.ref, tf, frames)
@@ -567,7 +653,7 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
         notes += [f"{path}: {jump_note}"] if jump_note else []
         warnings = [*reader.warnings, *(f"{path}: {n}" for n in timed.notes), *([base_note] if base_note else []),
                     *notes]
-        image_topic = reader.roles.topic(Role.IMAGE)
+        image_topic, colors_topic = reader.roles.topic(Role.IMAGE), reader.roles.topic(Role.COLORS)
         camera = image_topic is not None and reader.roles.topic(Role.CAMERA_INFO) is not None
     if not scans:
         raise LogContentError("scan topic has no messages", path=path, topic=scan_topic)
@@ -619,6 +705,10 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
         found = scan_colors(colors, timed.header_stamps_ns, [s.log_time_ns for s in scans],
                             int(config.io.stamp_tolerance_s * 1e9))
         aligned = [_aligned_colors(c, s.ranges.shape[0]) for s, c in zip(scans, found, strict=True)]
+        if note := colors_note(found, [s.ranges.shape[0] for s in scans], colors_topic or "the colour topic"):
+            warnings.append(f"{path}: {note}")
+        if not any(a.shape[0] for a in aligned):
+            aligned = None
     elif with_colors and camera:  # no /scan_colors: project the scan into the camera images
         from doorbatch.io.camera_colors import camera_beam_colors
 

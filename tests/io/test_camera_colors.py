@@ -119,3 +119,26 @@ def test_a_camera_whose_images_colour_no_beam_says_why(write_log: Callable[..., 
     assert rec.colors is None
     notes = [w for w in rec.warnings if "the scans get no colours from the camera" in w or says in w]
     assert any(says in w for w in notes) and any("leave out the em stage" in w for w in notes)
+
+
+def test_scan_colors_pair_by_log_time_when_the_scans_have_no_stamp_and_a_misfit_cloud_is_told(
+        write_log: Callable[..., Path]) -> None:
+    """A helper's laser driver left its header stamps 0 (or stamped by its own clock) while /scan_colors was
+    stamped: no scan found its colours, the em stage ran without colour and lost the never-moved doors, without a
+    word. Colours now pair by log time where no stamp matches. Clouds with a point fewer than the beams are told."""
+    config = DoorbatchConfig()
+    unstamped = sample_messages(12)
+    for topic, _, _, msg in unstamped:
+        if topic == "/scan":
+            msg.header = m.header(0, msg.header.frame_id)
+    rec = load_recording(write_log("unstamped.mcap", unstamped), config, with_colors=True)
+    assert rec.colors is not None and all(c.shape == (181, 3) for c in rec.colors)
+    short = sample_messages(12)
+    rng = np.random.default_rng(1)
+    for k, (topic, msgtype, t, msg) in enumerate(short):
+        if topic == "/scan_colors":
+            short[k] = (topic, msgtype, t, m.pointcloud_xyzrgb(t, "laser", rng.normal(size=(180, 3)),
+                                                               rng.integers(0, 256, (180, 3))))
+    rec = load_recording(write_log("short.mcap", short), config, with_colors=True)
+    assert rec.colors is None
+    assert any("12 have one of another length (first: 180 points for 181 beams)" in w for w in rec.warnings)
