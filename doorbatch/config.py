@@ -766,6 +766,12 @@ class LocalizeConfig(Section):
     door_length_gate_ratio: float = Field(0.3, gt=0.0)  # |segment length - leaf| / leaf below this
     door_flush_line_gate_m: float = Field(0.1, gt=0.0)  # longer segment passing this close to the hinge
     door_angle_sigma_deg: float = Field(3.0, gt=0.0)  # measured leaf angle noise for the Kalman update
+    # RBPF: a door whose leaf is seen, from the cloud's mean, outside its opening range (± the margin) in at least
+    # this many updates is warned of (the door map is older than the log: the door's state there is not
+    # estimated, its leaf is clutter). Directions within door_behind_hinge_deg of the closed one's opposite are the
+    # wall beyond the hinge. Expert choice: a second of scans at 10 Hz; 20°, the width of a jamb's shadow.
+    door_outside_range_min_updates: int = Field(10, ge=1)
+    door_behind_hinge_deg: float = Field(20.0, ge=0.0, lt=180.0)
     # Particles drawn into the annotated MCAP per update.
     annotate_particles: int = Field(200, ge=0)
     seed: int | None = Field(None, ge=0)  # None: the top-level seed

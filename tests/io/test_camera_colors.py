@@ -135,7 +135,7 @@ def test_scan_colors_pair_by_log_time_when_the_scans_have_no_stamp_and_a_misfit_
     assert rec.colors is not None and all(c.shape == (181, 3) for c in rec.colors)
     short = sample_messages(12)
     rng = np.random.default_rng(1)
-    for k, (topic, msgtype, t, msg) in enumerate(short):
+    for k, (topic, msgtype, t, _msg) in enumerate(short):
         if topic == "/scan_colors":
             short[k] = (topic, msgtype, t, m.pointcloud_xyzrgb(t, "laser", rng.normal(size=(180, 3)),
                                                                rng.integers(0, 256, (180, 3))))

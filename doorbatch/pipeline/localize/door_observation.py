@@ -288,6 +288,29 @@ def associate_segments(segments_base: npt.ArrayLike, pose: npt.ArrayLike, doors:
     return angle, kind > 0
 
 
+def leaves_outside_range(points_base: npt.ArrayLike, pose: npt.ArrayLike, doors: DoorSet, config: LocalizeConfig,
+                         behind_hinge_rad: float) -> FloatArray:
+    """(D,) the angle (rad, relative to closed_yaw, in (−π, π]) at which each door's leaf is seen from ``pose``
+    outside its opening range widened by ``door_angle_margin_deg``, NaN where it is not: the scan's polygon
+    (:func:`douglas_peucker`) associated as for the door update, but with every direction allowed and leaf
+    segments only (an end at the hinge, the leaf's length). Directions within ``behind_hinge_rad`` of the
+    closed direction's opposite are left out: the wall beyond the hinge. A door map older than the log (a door
+    opened further than while mapping, a double-acting door swung the other way) shows so."""
+    segments = douglas_peucker(points_base, config.dp_epsilon_m, max_gap_m=config.dp_max_gap_m)
+    n = len(doors)
+    out = np.full(n, np.nan)
+    if not n or not len(segments):
+        return out
+    around = DoorSet(doors.hinge, doors.length, doors.closed_yaw, np.full(n, -math.pi), np.full(n, math.pi))
+    angle, kind = _associate(segments, pose, around, np.zeros((1, n)), config, 0.0, "auto")
+    a = wrap_angle(angle[0])
+    margin = math.radians(config.door_angle_margin_deg)
+    outside = ((kind[0] == 1) & ((a < doors.angle_min - margin) | (a > doors.angle_max + margin))
+               & (np.abs(a) < math.pi - behind_hinge_rad))
+    out[outside] = a[outside]
+    return out
+
+
 def _associate(segments_base: npt.ArrayLike, pose: npt.ArrayLike, doors: DoorSet, door_mean: npt.ArrayLike,
                config: LocalizeConfig, margin: float, backend: Backend) -> tuple[FloatArray, npt.NDArray[np.int8]]:
     """:func:`associate_segments` with the kind of match: 0 none, 1 leaf segment, 2 flush segment."""

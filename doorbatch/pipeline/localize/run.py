@@ -43,6 +43,7 @@ from doorbatch.pipeline.localize.convergence import (
     see_through_share,
 )
 from doorbatch.pipeline.localize.door_geometry import subset_doors, with_closed_in_range
+from doorbatch.pipeline.localize.door_observation import leaves_outside_range
 from doorbatch.pipeline.localize.likelihood_field import (
     OCCUPIED_AT_LEAST,
     BeamCombination,
@@ -247,6 +248,22 @@ def initial_door_states(doors: DoorSet, n: int, global_start: bool, config: Loca
         return mean, np.full((n, d), math.radians(config.door_global_init_sigma_deg) ** 2)
     mid = (doors.angle_min + doors.angle_max) / 2
     return np.broadcast_to(mid, (n, d)).copy(), np.full((n, d), math.radians(config.door_init_sigma_deg) ** 2)
+
+
+def outside_range_notes(seen: npt.NDArray[np.float64], doors: DoorSet, min_updates: int) -> list[str]:
+    """Warnings for doors whose leaf was seen outside its opening range (``seen``: (updates, D) angles from
+    :func:`leaves_outside_range`, NaN where not) in at least ``min_updates`` updates: the median angle seen, the
+    mapped range and what it costs."""
+    notes = []
+    for d in np.flatnonzero(np.sum(np.isfinite(seen), axis=0) >= min_updates).tolist():
+        angles = seen[np.isfinite(seen[:, d]), d]
+        notes.append(f"door {d} (hinge {doors.hinge[d, 0]:.2f}, {doors.hinge[d, 1]:.2f}): its leaf was seen at "
+                     f"{math.degrees(float(np.median(angles))):.0f}° in {angles.size} updates, outside its mapped "
+                     f"range {math.degrees(float(doors.angle_min[d])):.0f}° to "
+                     f"{math.degrees(float(doors.angle_max[d])):.0f}° (no mapping pass showed it there): its angle "
+                     "there is not estimated and its leaf counts as clutter; a map from passes that show the door "
+                     "there knows it")
+    return notes
 
 
 @dataclass
@@ -516,6 +533,7 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
     last_s: float | None = None
     k_draw = max(1, lc.annotate_particles)
     updated_scans: list[int] = []  # the scan of each update
+    outside: list[FloatArray] = []  # per RBPF update, each door's leaf angle where seen outside its range (NaN: not)
     if progress is not None:
         progress.set_total(len(rec.scans))
     for i in range(len(rec.scans)):
@@ -578,6 +596,8 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
             state = dataclasses.replace(state, particles=_initial_particles(rec, lmap, "global", method, lc, rng),
                                         recovery=RecoveryState())  # a fresh start, as AMCL's pf_init
         # a fixed-size draw of the (equally weighted after resampling) particles for the annotated MCAP
+        if method == "rbpf" and len(lmap.doors):
+            outside.append(leaves_outside_range(hits, mean, lmap.doors, lc, math.radians(lc.door_behind_hinge_deg)))
         pick = np.linspace(0, len(p) - 1, k_draw).round().astype(np.intp)
         track.add(scan.stamp_ns, mean, cov, odom[i], len(p), diag.neff, dmean, dstd, observed, p.pose[pick])
         updated_scans.append(i)
@@ -593,6 +613,8 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
                         f"update_min_a "
                         f"{lc.update_min_a} rad (a robot that stood still, or an odometry frame that does not move: "
                         "see frames.odom)")
+    warnings += outside_range_notes(np.array(outside).reshape(-1, len(lmap.doors)), lmap.doors,
+                                    lc.door_outside_range_min_updates)
     ambiguous = multimodal(state.particles, lc)
     warnings.extend([multimodal_note(state.particles, lc, tracked=init != "global")] if ambiguous else [])
     if init == "global" and converged_ns is not None and lc.rival_check:

@@ -125,10 +125,9 @@ def test_a_closed_leaf_chained_to_a_wall_seen_moving_beyond_its_door_stop_keeps_
     chained those lines to the closed leaf. The densest end, the door stop, was taken for the hinge. The hinge is
     now where the leaf's angles meet; the wall lines, which start a leaf's length from it, leave the group."""
     hinge = (2.0, 3.0)
-    stop = (2.9, 3.0)
     pieces = [(0.04, 0.9), (0.25, 0.9), (0.04, 0.6), (0.4, 0.9), (0.04, 0.75)]  # ends every ≤ 0.21 m: one chain
-    closed = [(np.asarray(hinge) + (a, 0.0), np.asarray(hinge) + (b, 0.0)) for a, b in pieces] * 6
-    wall = [(np.asarray(stop) + (0.02, 0.0), np.asarray(stop) + (0.7, 0.0))] * 40
+    closed = [(np.array([2.0 + a, 3.0]), np.array([2.0 + b, 3.0])) for a, b in pieces] * 6
+    wall = [(np.array([2.92, 3.0]), np.array([3.6, 3.0]))] * 40  # from the door stop at x = 2.9 on
     open_20 = [_leaf(hinge, 0.9, math.radians(20), cut=0.1)]
     (door,) = group_doors(_leaves(closed + wall + open_20, [1] * 30 + [0] * 40 + [0]), CFG)
     assert math.hypot(door.hinge_x - 2.0, door.hinge_y - 3.0) < 0.02

@@ -254,3 +254,37 @@ def test_update_doors_pulls_each_particle_towards_the_observed_angle() -> None:
     assert abs(math.degrees(out.mean[0, 0]) - (20.0 + gain[0, 0] * 20.0)) < 1.0
     np.testing.assert_allclose(out.var, (1 - gain) * particles.door_var)
     assert np.all(np.abs(out.mean[:, 0] - math.radians(40.0)) < math.radians(2.0))
+
+
+@pytest.mark.parametrize(("leaf_deg", "seen"), [(-45.0, True), (30.0, False), (60.0, True), (178.0, False)])
+def test_a_leaf_outside_its_mapped_range_is_seen_where_it_stands(leaf_deg: float, seen: bool) -> None:
+    """A helper's building changed after mapping (a double-acting door swung the other way, a door opened further
+    than in any pass): the RBPF said nothing while its leaf counted as clutter. The leaf's angle is now found
+    wherever it stands outside the range ± the margin; inside it (30°) or along the wall behind the hinge (178°),
+    nothing."""
+    from doorbatch.pipeline.localize.door_observation import leaves_outside_range
+
+    config = LocalizeConfig()
+    doors = DoorSet(np.array([[2.0, 1.0]]), np.array([0.9]), np.array([0.0]), np.array([0.0]),
+                    np.array([np.radians(46.0)]))
+    u = np.array([np.cos(np.radians(leaf_deg)), np.sin(np.radians(leaf_deg))])
+    leaf = np.array([2.0, 1.0]) + np.linspace(0.02, 0.9, 40)[:, None] * u
+    wall = np.stack([np.linspace(2.95, 5.0, 60), np.full(60, 1.0)], 1)  # the wall beyond the doorway
+    angle = leaves_outside_range(np.concatenate([leaf, wall]), np.zeros(3), doors, config, np.radians(20.0))
+    if seen:
+        assert np.degrees(angle[0]) == pytest.approx(leaf_deg, abs=2.0)
+    else:
+        assert np.isnan(angle[0])
+
+
+def test_only_doors_seen_outside_their_range_in_enough_updates_are_warned_of() -> None:
+    from doorbatch.pipeline.localize.run import outside_range_notes
+
+    doors = DoorSet(np.array([[2.0, 1.0], [5.0, -1.0]]), np.full(2, 0.9), np.zeros(2), np.zeros(2),
+                    np.radians([46.0, 90.0]))
+    seen = np.full((30, 2), np.nan)
+    seen[:12, 0] = np.radians(-44.0 + np.arange(12) % 3)  # 12 updates at -44..-42°
+    seen[:9, 1] = np.radians(120.0)  # 9: under the 10 asked
+    (note,) = outside_range_notes(seen, doors, 10)
+    assert note.startswith("door 0 (hinge 2.00, 1.00): its leaf was seen at -43° in 12 updates, outside its mapped "
+                           "range 0° to 46°")
