@@ -214,6 +214,16 @@ def test_inspect_warns_of_beams_that_hit_the_robots_own_body(
     assert len(problems) == 1
     assert "beams 30–33 (" in problems[0] and "4 of 181" in problems[0] and "100–102" not in problems[0]
     assert "localize.laser_min_range=0.3" in problems[0]
+    for _, _, _, msg in (m_ for m_ in messages if m_[0] == "/scan"):  # a full turn, a mast behind it across beam 0
+        msg.angle_min, msg.angle_increment = -math.pi, 2 * math.pi / 181
+        msg.angle_max = msg.angle_min + msg.angle_increment * 180
+        ranges = np.asarray(msg.ranges, np.float32)
+        ranges[30:34] = 5.0
+        ranges[[179, 180, 0, 1]] = 0.15
+        msg.ranges = ranges
+    assert main(["inspect", str(write_log("mast.mcap", messages))]) == 0
+    (mast,) = [line for line in capsys.readouterr().out.splitlines() if "own body" in line]
+    assert "beams 179–1 (" in mast and "4 of 181" in mast
 
 
 def test_unknown_config_key_names_the_closest(write_log: Callable[..., Path],

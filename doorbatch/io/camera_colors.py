@@ -40,34 +40,51 @@ def _nearest_images(scan_stamps: npt.NDArray[np.int64], image_stamps: npt.NDArra
 
 
 def camera_beam_colors(path: Path, scans: Sequence[Scan], tf: TfBuffer, config: DoorbatchConfig,
-                       max_offset_s: float = 0.1
+                       header_stamps_ns: Sequence[int] | None = None, max_offset_s: float = 0.1
                        ) -> tuple[list[UInt8Array] | None, list[BoolArray] | None, list[str]]:
     """(B_i, 3) uint8 colours aligned with each scan and (B_i,) masks of the beams that have one: those
     whose end point projects into the image nearest in time (within ``max_offset_s``); None and None when no
     beam has one. Then notes on why the camera colours no beam or colours them doubtfully (a camera on its own
     clock, a CameraInfo that cannot be used or describes another image size, a frame whose z axis is not the
-    optical axis), for the log's warnings: colour is an optional input, so none of these is an error.
+    optical axis, no transform to the camera), for the log's warnings: colour is an optional input, so none of
+    these is an error.
 
-    Two passes over the image topic: stamps first, then each image colours the scans that chose it.
+    A scan takes the image nearest its header stamp (``header_stamps_ns``, the scans' own before they were
+    retimed; default their stamps); where no image's header stamp is that near (a stamp unset, a camera on a
+    clock of its own), the image logged nearest it. Two passes over the image topic: stamps first, then each
+    image colours the scans that chose it.
     """
     with open_log(path, config) as reader:
         topic = reader.roles.topic(Role.IMAGE) or "the image topic"
-        stamps = np.array([item.record.stamp_ns for item in reader.messages([Role.IMAGE])
-                           if isinstance(item.record, Image)], dtype=np.int64)
-    scan_stamps = np.array([s.stamp_ns for s in scans], dtype=np.int64)
-    choice = _nearest_images(scan_stamps, stamps, int(max_offset_s * 1e9))
-    if stamps.size and not (choice >= 0).any():
-        away_s = float(np.median(np.abs(stamps[_nearest_images(scan_stamps, stamps, np.iinfo(np.int64).max)]
-                                        - scan_stamps))) / 1e9
-        return None, None, [f"no image on {topic} lies within {max_offset_s:g} s of a scan (the median scan is "
-                            f"{away_s:.3g} s from its nearest: a camera stamping with a clock of its own?); "
-                            f"{COLORLESS}"]
+        images = [(item.record.stamp_ns, item.record.log_time_ns) for item in reader.messages([Role.IMAGE])
+                  if isinstance(item.record, Image)]
+    never = np.iinfo(np.int64).min // 4  # an unset stamp (0) is near nothing
+    stamps = np.array([t or never for t, _ in images], dtype=np.int64).reshape(-1)
+    logged = np.array([g for _, g in images], dtype=np.int64).reshape(-1)
+    header = [s.stamp_ns for s in scans] if header_stamps_ns is None else list(header_stamps_ns)
+    scan_stamps = np.array([t or never // 2 for t in header], dtype=np.int64)
+    tolerance = int(max_offset_s * 1e9)
+    by_stamp = _nearest_images(scan_stamps, stamps, tolerance)
+    by_log = _nearest_images(np.array([s.log_time_ns for s in scans], dtype=np.int64), logged, tolerance)
+    choice = np.where(by_stamp >= 0, by_stamp, by_log)
+    notes: list[str] = []
+    if stamps.size and not (by_stamp >= 0).any():
+        set_scans, set_images = scan_stamps[scan_stamps != never // 2], stamps[stamps != never]
+        away = " (their stamps are unset)"
+        if set_scans.size and set_images.size:
+            nearest = set_images[_nearest_images(set_scans, set_images, 2**62)]
+            away = (f" (the median scan is {float(np.median(np.abs(nearest - set_scans))) / 1e9:.3g} s from its "
+                    "nearest: a camera stamping with a clock of its own?)")
+        if not (choice >= 0).any():
+            return None, None, [f"no image on {topic} lies within {max_offset_s:g} s of a scan{away}; {COLORLESS}"]
+        notes.append(f"no image on {topic} is stamped within {max_offset_s:g} s of a scan{away}: each scan takes "
+                     "the image logged nearest it")
     colors = [np.zeros((s.ranges.shape[0], 3), dtype=np.uint8) for s in scans]
     valid = [np.zeros(s.ranges.shape[0], dtype=bool) for s in scans]
-    notes: list[str] = []
     info: CameraInfo | None = None
     camera: PinholeCamera | None = None  # built once, from the first CameraInfo (the one used throughout)
     frame = ""
+    reached = False  # a transform from the laser to the camera was found for some scan
     k = -1
     with open_log(path, config) as reader:
         for item in reader.messages([Role.CAMERA_INFO, Role.IMAGE]):
@@ -95,9 +112,12 @@ def camera_beam_colors(path: Path, scans: Sequence[Scan], tf: TfBuffer, config: 
                 frame = rec.frame_id or info.frame_id
                 notes += [n for n in [_optical_axis_note(tf, frame, scans[int(users[0])])] if n]
             for i in users.tolist():
-                _scan_colors(scans[i], tf, camera, pixels, rec.frame_id or info.frame_id, colors[i], valid[i])
+                reached |= _scan_colors(scans[i], tf, camera, pixels, rec.frame_id or info.frame_id, colors[i],
+                                        valid[i])
     if not any(v.any() for v in valid):
         why = ("no CameraInfo arrives before an image" if info is None else
+               f"no transform from the laser frame {scans[0].frame_id!r} to the camera frame {frame!r}"
+               if camera is not None and not reached else
                f"none of the laser's end points lies in front of the camera frame {frame!r} and inside its image"
                + ("" if notes else " (is its z axis the optical axis, with x right and y down?)"))
         return None, None, [*notes, f"{why}; {COLORLESS}"]
@@ -124,12 +144,13 @@ def _optical_axis_note(tf: TfBuffer, camera_frame: str, scan: Scan) -> str | Non
 
 
 def _scan_colors(scan: Scan, tf: TfBuffer, camera: PinholeCamera, pixels: UInt8Array, frame: str,
-                 out: UInt8Array, valid: BoolArray) -> None:
-    """Fill one scan's beam colours (and their mask) from one image."""
+                 out: UInt8Array, valid: BoolArray) -> bool:
+    """Fill one scan's beam colours (and their mask) from one image; False when TF does not take the laser to
+    the camera at the scan's stamp."""
     try:
         pts, idx = scan_in_camera(scan, tf, frame)
     except TransformError:
-        return
+        return False
     front = pts[:, 2] > 0.05
     uv = project_points(camera, pts[front])
     inside = in_image(camera, uv)
@@ -138,3 +159,4 @@ def _scan_colors(scan: Scan, tf: TfBuffer, camera: PinholeCamera, pixels: UInt8A
     beams = idx[front][inside]
     out[beams] = pixels[rows, cols, :3]
     valid[beams] = True
+    return True

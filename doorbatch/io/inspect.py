@@ -20,7 +20,7 @@ import numpy.typing as npt
 
 from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import LogContentError
-from doorbatch.geometry.laser import beam_runs
+from doorbatch.geometry.laser import beam_runs, wraps_around
 from doorbatch.geometry.tf_buffer import TfBuffer
 from doorbatch.io.decode import ODOMETRY, decode_scan, decode_transforms, stamp_to_ns
 from doorbatch.io.log_clock import LogClock, long_gaps
@@ -290,10 +290,13 @@ def _describe_self_hits(report: LogReport, topic: str, scan: Scan, near: _NearBe
     if not starts.size:
         return
     runs = list(zip(starts.tolist(), (stops - 1).tolist(), strict=True))
-    n_near = sum(b - a + 1 for a, b in runs)
+    n = near.counts.shape[0]
+    if len(runs) > 1 and runs[0][0] == 0 and runs[-1][1] == n - 1 and wraps_around(scan.angle_increment, n):
+        runs = [(runs[-1][0], runs[0][1]), *runs[1:-1]]  # one run across the first beam of a full turn
+    n_near = sum((b - a) % n + 1 for a, b in runs)
     where = ", ".join(
         f"{a}–{b} ({math.degrees(scan.angle_min + a * scan.angle_increment):.0f}° to "
-        f"{math.degrees(scan.angle_min + b * scan.angle_increment):.0f}°)" if b > a else
+        f"{math.degrees(scan.angle_min + b * scan.angle_increment):.0f}°)" if b != a else
         f"{a} ({math.degrees(scan.angle_min + a * scan.angle_increment):.0f}°)" for a, b in runs)
     report.problems.append(Problem(
         Severity.WARNING, topic,

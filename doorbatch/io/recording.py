@@ -423,36 +423,56 @@ def clock_lags_s(scan_stamps_ns: Sequence[int], scan_log_ns: Sequence[int], odom
 def clock_steps(stamps_ns: Sequence[int], log_ns: Sequence[int], step_s: float) -> list[tuple[int, float]]:
     """Steps of a topic's header stamps against the recorder's clock (message index, step in s): consecutive
     messages whose stamps lie more than ``step_s`` further apart (or nearer, or backwards) than their median
-    interval while their log times lie the usual interval apart, and whose stamps then keep to the stepped
-    time (a clock that was set, as NTP sets one). A message that arrived late (its log time out of step), a
-    dropout (both out of step) or a paused simulator (its log times out of step) is none. Unset stamps (0)
-    are left out."""
+    interval while their log times lie the usual interval apart, and whose stamps keep to the stepped time over
+    the five intervals on either side (a clock that was set, as NTP sets one). A message that arrived late (its
+    log time out of step), a dropout (both out of step), a paused simulator (its log times out of step) or
+    messages logged in another order than their stamps is none. Log times that do not keep a rate themselves
+    (a recorder that received in bursts, or logged whole seconds) cannot tell a step: none is found. Unset
+    stamps (0) are left out."""
     t = np.asarray(stamps_ns, dtype=np.int64)
     g = np.asarray(log_ns, dtype=np.int64)
     keep = np.flatnonzero((t != 0) & (g != 0))
-    if keep.size < 4:
+    if keep.size < 12:
         return []
     ds, dl = np.diff(t[keep]) / 1e9, np.diff(g[keep]) / 1e9
     med_ds, med_dl = float(np.median(ds)), float(np.median(dl))
-    pace = med_ds / med_dl if med_dl > 0 else 1.0  # a simulator's sim time runs at its real-time factor
+    regular = np.abs(dl - med_dl) <= step_s / 2
+    if med_dl <= 0.0 or regular.mean() < 0.9:
+        return []
+    pace = med_ds / med_dl  # a simulator's sim time runs at its real-time factor
     jump = ds - pace * dl
     out = []
-    for i in np.flatnonzero((np.abs(ds - med_ds) > step_s) & (np.abs(dl - med_dl) <= step_s / 2)).tolist():
-        around = jump[max(i - 5, 0):i + 6]  # the stamps keep to the stepped time: the intervals about it do not undo
-        if abs(float(around.sum())) > step_s / 2:  # it (scans that arrived in another order than their stamps do)
+    for i in np.flatnonzero((np.abs(ds - med_ds) > step_s) & regular).tolist():
+        if i < 5 or i + 6 > jump.size:  # too near an end to see the stamps keep to it
+            continue
+        if abs(float(jump[i - 5:i + 6].sum())) > step_s / 2:  # not undone by the intervals about it
             out.append((int(keep[i + 1]), float(jump[i])))
     return out
 
 
 def clock_ahead_s(scan_stamps_ns: Sequence[int], scan_log_ns: Sequence[int], odom_stamps_ns: Sequence[int],
                   odom_log_ns: Sequence[int], warn_s: float, mismatch_s: float) -> float | None:
-    """How far the scans' median (stamp − log time) exceeds the odometry's, in s, when by more than ``warn_s``
-    and at most ``mismatch_s`` (beyond it, :func:`clock_lags_s`: two clocks); else None. Latency only makes a
-    stamp earlier than its log time, so scans stamped later than their odometry were stamped by a clock ahead."""
-    lags = clock_lags_s(scan_stamps_ns, scan_log_ns, odom_stamps_ns, odom_log_ns, 0.0)
-    if lags is None or not warn_s < lags[0] - lags[1] <= mismatch_s:
+    """How far the scans' median (stamp − log time) exceeds the odometry's, in s, over the log time both span,
+    when by more than ``warn_s`` and at most ``mismatch_s`` (beyond it, :func:`clock_lags_s`: two clocks); else
+    None, and None when the scans' stamps do not keep the recorder's pace within 1 % (a simulator's sim time,
+    whose gap to the log time drifts). Latency only makes a stamp earlier than its log time, so scans stamped
+    later than their odometry were stamped by a clock ahead."""
+    def set_pairs(stamps: Sequence[int], logged: Sequence[int]) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+        a, b = np.asarray(stamps, dtype=np.int64), np.asarray(logged, dtype=np.int64)
+        ok = (a != 0) & (b != 0)
+        return a[ok], b[ok]
+
+    (ts, gs), (to, go) = set_pairs(scan_stamps_ns, scan_log_ns), set_pairs(odom_stamps_ns, odom_log_ns)
+    if ts.size < 2 or to.size < 2 or gs[-1] == gs[0]:
         return None
-    return lags[0] - lags[1]
+    if abs((ts[-1] - ts[0]) / (gs[-1] - gs[0]) - 1.0) > 0.01:
+        return None
+    lo, hi = max(gs.min(), go.min()), min(gs.max(), go.max())
+    in_s, in_o = (gs >= lo) & (gs <= hi), (go >= lo) & (go <= hi)
+    if not in_s.any() or not in_o.any():
+        return None
+    ahead = float(np.median(ts[in_s] - gs[in_s]) - np.median(to[in_o] - go[in_o])) / 1e9
+    return ahead if warn_s < ahead <= mismatch_s else None
 
 
 def unset_stamps(stamps_ns: Sequence[int]) -> npt.NDArray[np.bool_]:
@@ -560,9 +580,10 @@ def scan_colors(colors: Sequence[BeamColors], header_stamps_ns: Sequence[int], l
                 tolerance_ns: int) -> list[BeamColors | None]:
     """Each scan's colours: the message with the scan's header stamp; for a scan with none (its stamp unset, or
     on another clock than the colours': a laser driver's own), the colour message logged nearest to it within
-    ``tolerance_ns``."""
+    ``tolerance_ns`` that is no other scan's by stamp (a scan whose own colour message was dropped takes none)."""
     by_stamp = {c.stamp_ns: c for c in colors if c.stamp_ns != 0}
-    by_log = sorted(colors, key=lambda c: c.log_time_ns)
+    claimed = set(header_stamps_ns) - {0}
+    by_log = sorted((c for c in colors if c.stamp_ns == 0 or c.stamp_ns not in claimed), key=lambda c: c.log_time_ns)
     times = np.array([c.log_time_ns for c in by_log], dtype=np.int64)
     out: list[BeamColors | None] = []
     for stamp, logged in zip(header_stamps_ns, log_times_ns, strict=True):
@@ -712,7 +733,7 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
     elif with_colors and camera:  # no /scan_colors: project the scan into the camera images
         from doorbatch.io.camera_colors import camera_beam_colors
 
-        aligned, valid, camera_notes = camera_beam_colors(path, scans, tf, config)
+        aligned, valid, camera_notes = camera_beam_colors(path, scans, tf, config, timed.header_stamps_ns)
         warnings += [f"{path}: {n}" for n in camera_notes]
     elif with_colors and image_topic is not None:
         from doorbatch.io.camera_colors import COLORLESS

@@ -47,6 +47,28 @@ def test_late_arrivals_dropouts_a_paused_or_slow_simulator_and_jitter_are_no_ste
         assert clock_steps(*series, 0.1) == []
 
 
+def test_log_times_that_keep_no_rate_and_a_late_last_message_tell_no_step() -> None:
+    """A reviewer's cases: a recorder that received in bursts every 0.4 s, one that logged whole seconds (each with
+    a dropout), and a scan logged 0.35 s late at the very end: each had been taken for a step, and the first two
+    retimed good scans onto their log times (the second then refused as 'only 7 distinct stamps')."""
+    stamps, log = _series()
+    bursty = T0 + (np.arange(100) // 4 + 1) * 400_000_000 + np.arange(100) % 4 * 1_000_000  # 1 ms apart in a burst
+    coarse = T0 + (np.arange(100) // 10) * S
+    drop = np.r_[0:43, 45:100]  # two scans lost within one second
+    late = log.copy()
+    late[-1] += 350_000_000
+    for series in ((stamps[drop], bursty[drop]), (stamps[drop], coarse[drop]), (stamps, late)):
+        assert clock_steps(*series, 0.1) == []
+
+
+def test_sim_time_that_drifts_against_the_log_tells_no_clock_ahead() -> None:
+    """A simulator at real-time factor 0.5, its odometry starting 1 s after the first scan: one clock whose gap
+    to the log time drifts, so medians over different spans differ (a reviewer's false 0.5 s warning)."""
+    sim = T0 + np.round(np.arange(200) * 0.05 * S).astype(np.int64)
+    log = T0 + np.round(np.arange(200) * 0.1 * S).astype(np.int64)
+    assert clock_ahead_s(sim, log, sim[20:], log[20:], 0.05, 1.0) is None
+
+
 def test_scans_stamped_ahead_of_their_odometry_are_told_by_how_much() -> None:
     stamps, log = _series()
     assert clock_ahead_s(stamps + 300_000_000, log, stamps, log, 0.05, 1.0) == pytest.approx(0.3)

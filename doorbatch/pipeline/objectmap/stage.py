@@ -331,9 +331,9 @@ def leaf_wall_contrast(beams: BeamSet, state: MapState, i: int, door: PreviewDoo
     collinear with the closed direction's line through the hinge (within ``collinear_angle_deg`` of it and the
     pseudo-E-step band, from a door width behind the hinge to two ahead: the wall on both sides of the
     doorway; a wall across the line, as at a corner, is not the wall the door is in). 0 when either has too
-    few beams. Where both sides of the doorway have beams, the lower of the two sides' contrasts: a door's colour
-    changes where it begins and where it ends, and a door-wide piece at the end of a wall painted another colour
-    (an accent wall) contrasts with the wall on one side only."""
+    few beams. Where half a door width of wall is seen on both sides of the doorway, the lower of the two sides'
+    contrasts: a door's colour changes where it begins and where it ends, and a door-wide piece at the end of a
+    wall painted another colour (an accent wall) contrasts with the wall on one side only."""
     hinge = np.array([door.hinge_x, door.hinge_y])
     tangent = np.array([math.cos(door.closed_yaw), math.sin(door.closed_yaw)])
     first, width = state.first, door.length
@@ -348,8 +348,12 @@ def leaf_wall_contrast(beams: BeamSet, state: MapState, i: int, door: PreviewDoo
     if idx.size:
         normals = np.array([w.normal for w in state.obj_map.walls])[first.obj[idx]]
         beside[idx[np.abs(normals @ tangent) >= math.sin(math.radians(config.collinear_angle_deg))]] = False
-    sides = [beside & (along < 0.0), beside & (along > 0.5 * width)]  # behind the hinge; beyond the free end
-    if all(int(side.sum()) >= config.min_crossing_rays for side in sides):
+    sides = [beside & (along < 0.0), beside & (along > width)]  # behind the hinge; beyond the free end
+
+    def wall_seen(side: npt.NDArray[np.bool_]) -> bool:  # half a door width of wall at least: a casing is not one
+        return int(side.sum()) >= config.min_crossing_rays and float(np.ptp(along[side])) >= 0.5 * width
+
+    if all(wall_seen(side) for side in sides):
         return min(color_contrast(beams.color[leaf], beams.color[side], config) for side in sides)
     return color_contrast(beams.color[leaf], beams.color[beside], config)
 

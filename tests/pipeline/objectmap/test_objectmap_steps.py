@@ -478,17 +478,18 @@ def test_a_leaf_left_almost_flat_against_a_wall_is_hinged_where_it_meets_the_wal
 WALL_RGB, WOOD_RGB, WARM_RGB = (204.0, 203.0, 195.0), (150.0, 104.0, 64.0), (214.0, 186.0, 140.0)
 
 
-@pytest.mark.parametrize(("leaf_rgb", "open_deg", "corner_wall", "beyond_rgb", "kept"), [
+@pytest.mark.parametrize(("leaf_rgb", "open_deg", "corner_wall", "beyond", "kept"), [
     (WOOD_RGB, 0.0, False, None, True),  # closed all along, painted unlike its wall: a door by its colour
     (WALL_RGB, 0.0, False, None, False),  # closed all along, painted like its wall: nothing tells it from the wall
     (WALL_RGB, 60.0, False, None, True),  # stood open at 60° all along: its shape, a leaf out of the wall, tells it
     (WALL_RGB, 0.0, True, None, False),  # a warm wall across the line at its free end is not the wall it is hung in
-    (WOOD_RGB, 0.0, False, WALL_RGB, True),  # the wall on both sides of it white
-    (WOOD_RGB, 0.0, False, WOOD_RGB, False),  # the first door width of a wall painted like it: an accent wall's end
+    (WOOD_RGB, 0.0, False, (WALL_RGB, 0.65), True),  # the wall on both sides of it white
+    (WOOD_RGB, 0.0, False, (WOOD_RGB, 0.65), False),  # the first door width of a wall painted like it: an accent wall
+    (WOOD_RGB, 0.0, False, (WOOD_RGB, 0.1), True),  # a casing painted like it, then a corner: no wall seen there
 ])
 def test_a_closed_door_that_never_moved_is_kept_only_if_its_colour_stands_out_from_its_wall(
-        leaf_rgb: tuple[float, ...], open_deg: float, corner_wall: bool, beyond_rgb: tuple[float, ...] | None,
-        kept: bool) -> None:
+        leaf_rgb: tuple[float, ...], open_deg: float, corner_wall: bool,
+        beyond: tuple[tuple[float, ...], float] | None, kept: bool) -> None:
     """Wall y = 0 with a doorway x ∈ (0, 0.9), a door hinged at (0, 0) at one angle in both passes, the door
     class's colour that of its leaf (as a class fitted to it would be). The door stays a door, or its leaf
     becomes a static wall segment (the niche-side false doors of double_door:5 and l_corridor:5; a helper's red
@@ -504,9 +505,9 @@ def test_a_closed_door_that_never_moved_is_kept_only_if_its_colour_stands_out_fr
     leaf = np.linspace(0.05, 0.85, 80)[:, None] * np.array([np.cos(yaw), np.sin(yaw)])
     on_wall = np.stack([np.linspace(-2.0, -1.05 if corner_wall else -0.05, 195), np.zeros(195)], 1)
     ends, rgb = [leaf, on_wall], [np.tile(leaf_rgb, (80, 1)), np.tile(WALL_RGB, (195, 1))]
-    if beyond_rgb is not None:  # the wall beyond the free end, x ∈ [0.95, 1.6], seen by fewer beams than behind
-        ends.append(np.stack([np.linspace(0.95, 1.6, 40), np.zeros(40)], 1))
-        rgb.append(np.tile(beyond_rgb, (40, 1)))
+    if beyond is not None:  # the wall beyond the free end from x = 0.95 on, seen by fewer beams than behind
+        ends.append(np.stack([np.linspace(0.95, 0.95 + beyond[1], 40), np.zeros(40)], 1))
+        rgb.append(np.tile(beyond[0], (40, 1)))
     if corner_wall:  # x = 0.95, y ∈ [−2, 0.05]: its hits near y = 0 lie within the band of the door's line
         walls.append(Wall(np.array([1.0, 0.0]), 0.95, np.array([[-2.0, 0.05]])))
         ends.append(np.stack([np.full(100, 0.95), np.linspace(-0.8, 0.04, 100)], 1))
