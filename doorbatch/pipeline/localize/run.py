@@ -613,8 +613,8 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
                         f"update_min_a "
                         f"{lc.update_min_a} rad (a robot that stood still, or an odometry frame that does not move: "
                         "see frames.odom)")
-    warnings += outside_range_notes(np.array(outside).reshape(-1, len(lmap.doors)), lmap.doors,
-                                    lc.door_outside_range_min_updates)
+    if outside:
+        warnings += outside_range_notes(np.array(outside), lmap.doors, lc.door_outside_range_min_updates)
     ambiguous = multimodal(state.particles, lc)
     warnings.extend([multimodal_note(state.particles, lc, tracked=init != "global")] if ambiguous else [])
     if init == "global" and converged_ns is not None and lc.rival_check:
