@@ -98,6 +98,14 @@ def _hits_variant(rec: Recording, i: int, scale: float, shift_deg: float, forwar
     return pts @ s.laser_to_base[i][:, :2].T + s.laser_to_base[i][:, 2] + np.array([forward_m, 0.0])
 
 
+def occupied_cells(poses: np.ndarray, scans: list[np.ndarray], resolution_m: float = 0.05) -> int:
+    """How many cells of ``resolution_m`` the scans' hits fill at ``poses`` (fewer: a sharper map; a reference-free
+    measure of how well poses fit the scans)."""
+    world = np.concatenate([compose(np.broadcast_to(p, (len(h), 3)), np.column_stack([h, np.zeros(len(h))]))[:, :2]
+                            for p, h in zip(poses, scans, strict=True)])
+    return int(np.unique(np.floor(world / resolution_m).astype(np.int64), axis=0).shape[0])
+
+
 def geometry_check(name: str, rec: Recording) -> list[dict[str, object]]:
     """Per beam geometry: occupied 5 cm cells of all hits at the corrected poses (fewer: sharper), and the
     pairwise PLICP turns (scan k against k−1, both at their corrected poses): mean, std, median |turn| (deg),
@@ -109,9 +117,7 @@ def geometry_check(name: str, rec: Recording) -> list[dict[str, object]]:
     rows = []
     for label, scale, shift, forward in GEOMETRIES:
         scans = [_hits_variant(rec, int(i), scale, shift, forward) for i in idx]
-        world = np.concatenate([compose(np.broadcast_to(ref[i], (len(h), 3)), np.column_stack(
-            [h, np.zeros(len(h))]))[:, :2] for i, h in zip(idx, scans, strict=True)])
-        cells = np.unique(np.floor(world / 0.05).astype(np.int64), axis=0).shape[0]
+        cells = occupied_cells(ref[idx], scans)
         turned = reference_consistency(scans, ref[idx])[2]
         turns = np.diff(turned)
         x = turns - turns.mean()
@@ -172,16 +178,21 @@ def _inputs(recs: list[Recording], drift_seed: int | None) -> tuple[np.ndarray, 
 
 def ate_over_seeds(name: str, recs: list[Recording], seeds: list[int], config: DoorbatchConfig) -> dict[str, object]:
     """Scan-matching ATE for each drift seed, with the median and the worst (how robust, not one draw)."""
-    ates, ates_se2 = [], []
+    ates, ates_se2, cells = [], [], []
+    ref = np.zeros((0, 3))
+    scans: list[np.ndarray] = []
     for seed in seeds:
         ref, odom, scans = _inputs(recs, seed)
         est = align_first_pose(scan_match_trajectory(scans, odom, config.scanmatch).poses, ref)
         ates.append(ate_rmse(est, ref))
         ates_se2.append(ate_se2_m(est, ref))
+        cells.append(occupied_cells(est, scans))
     return {"log": name, "seeds": seeds, "ate_scanmatch_m": [round(a, 3) for a in ates],
             "median_m": round(float(np.median(ates)), 3), "worst_m": round(max(ates), 3),
             "ate_se2_m": [round(a, 3) for a in ates_se2], "median_se2_m": round(float(np.median(ates_se2)), 3),
-            "worst_se2_m": round(max(ates_se2), 3)}
+            "worst_se2_m": round(max(ates_se2), 3),
+            # the map's sharpness at the matched poses against the reference's (5 cm cells of all hits)
+            "cells_5cm_scanmatch": cells, "cells_5cm_reference": occupied_cells(ref, scans) if scans else None}
 
 
 def evaluate(name: str, recs: list[Recording], drift_seed: int | None, config: DoorbatchConfig, every: int = 0
