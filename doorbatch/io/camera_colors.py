@@ -39,6 +39,28 @@ def _nearest_images(scan_stamps: npt.NDArray[np.int64], image_stamps: npt.NDArra
     return np.where(near, order[pick], -1).astype(np.int64)
 
 
+def _image_per_scan(scan_ns: Sequence[int], scan_log_ns: Sequence[int], image_ns: Sequence[int],
+                    image_log_ns: Sequence[int], tolerance_ns: int) -> tuple[npt.NDArray[np.int64], str | None]:
+    """For each scan the image whose header stamp is nearest its own within ``tolerance_ns``, else the image
+    logged nearest it within that (−1: none); an unset stamp (0) is near nothing. Then, when no scan found an
+    image by stamp, why (for a warning), else None."""
+    never = np.iinfo(np.int64).min // 4  # far from every stamp, and from the scans' own stand-in below
+    stamps = np.array([t or never for t in image_ns], dtype=np.int64).reshape(-1)
+    scans = np.array([t or never // 2 for t in scan_ns], dtype=np.int64).reshape(-1)
+    by_stamp = _nearest_images(scans, stamps, tolerance_ns)
+    by_log = _nearest_images(np.asarray(scan_log_ns, dtype=np.int64), np.asarray(image_log_ns, dtype=np.int64),
+                             tolerance_ns)
+    choice = np.where(by_stamp >= 0, by_stamp, by_log)
+    if not stamps.size or (by_stamp >= 0).any():
+        return choice, None
+    set_scans, set_images = scans[scans != never // 2], stamps[stamps != never]
+    if not (set_scans.size and set_images.size):
+        return choice, " (their stamps are unset)"
+    nearest = set_images[_nearest_images(set_scans, set_images, 2**62)]
+    return choice, (f" (the median scan is {float(np.median(np.abs(nearest - set_scans))) / 1e9:.3g} s from its "
+                    "nearest: a camera stamping with a clock of its own?)")
+
+
 def camera_beam_colors(path: Path, scans: Sequence[Scan], tf: TfBuffer, config: DoorbatchConfig,
                        header_stamps_ns: Sequence[int] | None = None, max_offset_s: float = 0.1
                        ) -> tuple[list[UInt8Array] | None, list[BoolArray] | None, list[str]]:
@@ -58,23 +80,11 @@ def camera_beam_colors(path: Path, scans: Sequence[Scan], tf: TfBuffer, config: 
         topic = reader.roles.topic(Role.IMAGE) or "the image topic"
         images = [(item.record.stamp_ns, item.record.log_time_ns) for item in reader.messages([Role.IMAGE])
                   if isinstance(item.record, Image)]
-    never = np.iinfo(np.int64).min // 4  # an unset stamp (0) is near nothing
-    stamps = np.array([t or never for t, _ in images], dtype=np.int64).reshape(-1)
-    logged = np.array([g for _, g in images], dtype=np.int64).reshape(-1)
     header = [s.stamp_ns for s in scans] if header_stamps_ns is None else list(header_stamps_ns)
-    scan_stamps = np.array([t or never // 2 for t in header], dtype=np.int64)
-    tolerance = int(max_offset_s * 1e9)
-    by_stamp = _nearest_images(scan_stamps, stamps, tolerance)
-    by_log = _nearest_images(np.array([s.log_time_ns for s in scans], dtype=np.int64), logged, tolerance)
-    choice = np.where(by_stamp >= 0, by_stamp, by_log)
+    choice, away = _image_per_scan(header, [s.log_time_ns for s in scans], [t for t, _ in images],
+                                   [g for _, g in images], int(max_offset_s * 1e9))
     notes: list[str] = []
-    if stamps.size and not (by_stamp >= 0).any():
-        set_scans, set_images = scan_stamps[scan_stamps != never // 2], stamps[stamps != never]
-        away = " (their stamps are unset)"
-        if set_scans.size and set_images.size:
-            nearest = set_images[_nearest_images(set_scans, set_images, 2**62)]
-            away = (f" (the median scan is {float(np.median(np.abs(nearest - set_scans))) / 1e9:.3g} s from its "
-                    "nearest: a camera stamping with a clock of its own?)")
+    if away is not None:
         if not (choice >= 0).any():
             return None, None, [f"no image on {topic} lies within {max_offset_s:g} s of a scan{away}; {COLORLESS}"]
         notes.append(f"no image on {topic} is stamped within {max_offset_s:g} s of a scan{away}: each scan takes "

@@ -29,11 +29,8 @@ from doorbatch.io.pose_topic import POSE_TYPES
 from doorbatch.io.reader import most_are_bad, open_log
 from doorbatch.io.recording import (
     buffered_transforms,
-    clock_ahead_note,
-    clock_ahead_s,
+    clock_fault,
     clock_lags_s,
-    clock_steps,
-    clock_steps_note,
     lost_times_note,
     missing_laser_tf_hint,
     no_sweep_note,
@@ -420,17 +417,13 @@ def _check_clocks(report: LogReport, stats: dict[str, _TopicStats], role_of: dic
             if poses else None
     lags = None if scan is None or odom is None else clock_lags_s(scan.stamps, scan.log_times, odom.stamps,
                                                                   odom.log_times, config.io.clock_mismatch_s)
-    timing = (scan.stamps, scan.log_times, *((odom.stamps, odom.log_times) if odom is not None else ([], [])))\
-        if scan is not None else None
-    steps = {} if timing is None or lags is not None else {
-        name: found for name, found in (("scan", clock_steps(*timing[:2], config.io.clock_step_s)),
-                                        ("odometry", clock_steps(*timing[2:], config.io.clock_step_s))) if found}
-    if timing is not None and steps:
-        report.clock = "log times: the header stamps step (Problems)"
-        report.problems.append(Problem(Severity.WARNING, None, clock_steps_note(steps, timing[1][0], timing)))
-    elif (timing is not None and lags is None and not config.io.scan_time_offset_s
-          and (ahead := clock_ahead_s(*timing, config.io.clock_ahead_warn_s, config.io.clock_mismatch_s))):
-        report.problems.append(Problem(Severity.WARNING, None, clock_ahead_note(ahead)))
+    if scan is not None and lags is None:
+        stepped, note = clock_fault((scan.stamps, scan.log_times, odom.stamps if odom is not None else [],
+                                     odom.log_times if odom is not None else []), config.io)
+        if stepped:
+            report.clock = "log times: the header stamps step (Problems)"
+        if note:
+            report.problems.append(Problem(Severity.WARNING, None, note))
     if lags is not None:
         report.clock = "log times: the scan and odometry header stamps are on different clocks (Problems)"
         report.problems.append(Problem(

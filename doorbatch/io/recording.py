@@ -523,8 +523,8 @@ def on_one_clock(scans: list[Scan], odom: list[Pose2D], ref: list[Pose2D], io: I
     notes: list[str] = []
     header = [s.stamp_ns for s in scans]
     mismatch_s = io.clock_mismatch_s
-    timing = ([s.stamp_ns for s in scans], [s.log_time_ns for s in scans],
-              [p.stamp_ns for p in odom], [p.log_time_ns for p in odom])
+    timing: Timing = ([s.stamp_ns for s in scans], [s.log_time_ns for s in scans],
+                      [p.stamp_ns for p in odom], [p.log_time_ns for p in odom])
     lags = clock_lags_s(*timing, mismatch_s)
     for name, records in (("scans", scans), ("odometry poses", odom), ("reference poses", ref)):
         unset = int(unset_stamps([r.stamp_ns for r in records]).sum())
@@ -534,14 +534,9 @@ def on_one_clock(scans: list[Scan], odom: list[Pose2D], ref: list[Pose2D], io: I
     if lags is not None:
         notes.append(f"scan and odometry header stamps are on different clocks (median stamp − log time "
                      f"{lags[0]:+.3f} s and {lags[1]:+.3f} s): every scan and pose is timed by its log time")
-    steps = {name: found for name, found in (("scan", clock_steps(*timing[:2], io.clock_step_s)),
-                                             ("odometry", clock_steps(*timing[2:], io.clock_step_s))) if found}
-    if lags is None and steps:
-        notes.append(clock_steps_note(steps, timing[1][0] if timing[1] else 0, timing))
-    if (lags is None and not steps and not io.scan_time_offset_s
-            and (ahead := clock_ahead_s(*timing, io.clock_ahead_warn_s, mismatch_s))):
-        notes.append(clock_ahead_note(ahead))
-    every = lags is not None or bool(steps)
+    stepped, note = clock_fault(timing, io) if lags is None else (False, None)
+    notes += [note] if note else []
+    every = lags is not None or stepped
     clock = scans_clock(scans, mismatch_s)
     scans, odom, ref = _log_timed(scans, every, clock), _log_timed(odom, every, clock), _log_timed(ref, every, clock)
     stamps = np.array([s.stamp_ns for s in scans], dtype=np.int64)
@@ -553,8 +548,24 @@ def on_one_clock(scans: list[Scan], odom: list[Pose2D], ref: list[Pose2D], io: I
     return OneClock(scans, odom, ref, header, notes, LogClock() if every else clock)
 
 
-def clock_steps_note(steps: dict[str, list[tuple[int, float]]], first_log_ns: int,
-                     timing: tuple[Sequence[int], Sequence[int], Sequence[int], Sequence[int]]) -> str:
+Timing = tuple[Sequence[int], Sequence[int], Sequence[int], Sequence[int]]  # scan stamps, log times; odometry's
+
+
+def clock_fault(timing: Timing, io: IoConfig) -> tuple[bool, str | None]:
+    """For scans and odometry on one clock (:func:`clock_lags_s` found two none): whether their header stamps step
+    (:func:`clock_steps`; every scan and pose is then timed by its log time), with its warning; else the warning
+    for scans stamped ahead of their odometry (:func:`clock_ahead_s`, unless ``io.scan_time_offset_s`` is set);
+    (False, None) when neither."""
+    steps = {name: found for name, found in (("scan", clock_steps(*timing[:2], io.clock_step_s)),
+                                             ("odometry", clock_steps(*timing[2:], io.clock_step_s))) if found}
+    if steps:
+        return True, _clock_steps_note(steps, timing[1][0] if timing[1] else 0, timing)
+    if not io.scan_time_offset_s and (ahead := clock_ahead_s(*timing, io.clock_ahead_warn_s, io.clock_mismatch_s)):
+        return False, _clock_ahead_note(ahead)
+    return False, None
+
+
+def _clock_steps_note(steps: dict[str, list[tuple[int, float]]], first_log_ns: int, timing: Timing) -> str:
     """The warning for header stamps that step (:func:`clock_steps`), by topic: the first step's size and when."""
     parts = []
     for name, found in steps.items():
@@ -567,7 +578,7 @@ def clock_steps_note(steps: dict[str, list[tuple[int, float]]], first_log_ns: in
             "instead")
 
 
-def clock_ahead_note(ahead_s: float) -> str:
+def _clock_ahead_note(ahead_s: float) -> str:
     """The warning for scans stamped ahead of their odometry (:func:`clock_ahead_s`), with the setting that
     takes it out."""
     return (f"scan header stamps lie {ahead_s:.3f} s later against their log times than the odometry's (medians): "
