@@ -42,23 +42,27 @@ def _nearest_images(scan_stamps: npt.NDArray[np.int64], image_stamps: npt.NDArra
 def _image_per_scan(scan_ns: Sequence[int], scan_log_ns: Sequence[int], image_ns: Sequence[int],
                     image_log_ns: Sequence[int], tolerance_ns: int) -> tuple[npt.NDArray[np.int64], str | None]:
     """For each scan the image whose header stamp is nearest its own within ``tolerance_ns``, else the image
-    logged nearest it within that (−1: none); an unset stamp (0) is near nothing. Then, when no scan found an
+    logged nearest it within that (−1: none). Header stamps pair only where the images' stamps keep the scans'
+    clock (their medians of stamp − log time within ``tolerance_ns``: a laser stamping with its own clock, a
+    camera with another, pair by log time); an unset stamp (0) pairs by log time. Then, when no scan found its
     image by stamp, why (for a warning), else None."""
+    scans, scan_log = np.asarray(scan_ns, dtype=np.int64), np.asarray(scan_log_ns, dtype=np.int64)
+    images, image_log = np.asarray(image_ns, dtype=np.int64), np.asarray(image_log_ns, dtype=np.int64)
+    by_log = _nearest_images(scan_log, image_log, tolerance_ns)
+    set_scans, set_images = scans != 0, images != 0
+    if not images.size:
+        return by_log, None
+    if not (set_scans.any() and set_images.any()):
+        return by_log, " (their stamps are unset)"
+    lag_scans = float(np.median(scans[set_scans] - scan_log[set_scans]))
+    lag_images = float(np.median(images[set_images] - image_log[set_images]))
+    if abs(lag_scans - lag_images) > tolerance_ns:
+        return by_log, (f" (stamp − log time {lag_scans / 1e9:+.3f} s for the scans, {lag_images / 1e9:+.3f} s for "
+                        "the images: a camera or a laser stamping with a clock of its own?)")
     never = np.iinfo(np.int64).min // 4  # far from every stamp, and from the scans' own stand-in below
-    stamps = np.array([t or never for t in image_ns], dtype=np.int64).reshape(-1)
-    scans = np.array([t or never // 2 for t in scan_ns], dtype=np.int64).reshape(-1)
-    by_stamp = _nearest_images(scans, stamps, tolerance_ns)
-    by_log = _nearest_images(np.asarray(scan_log_ns, dtype=np.int64), np.asarray(image_log_ns, dtype=np.int64),
-                             tolerance_ns)
-    choice = np.where(by_stamp >= 0, by_stamp, by_log)
-    if not stamps.size or (by_stamp >= 0).any():
-        return choice, None
-    set_scans, set_images = scans[scans != never // 2], stamps[stamps != never]
-    if not (set_scans.size and set_images.size):
-        return choice, " (their stamps are unset)"
-    nearest = set_images[_nearest_images(set_scans, set_images, 2**62)]
-    return choice, (f" (the median scan is {float(np.median(np.abs(nearest - set_scans))) / 1e9:.3g} s from its "
-                    "nearest: a camera stamping with a clock of its own?)")
+    by_stamp = _nearest_images(np.where(set_scans, scans, never // 2), np.where(set_images, images, never),
+                               tolerance_ns)
+    return np.where(by_stamp >= 0, by_stamp, by_log), None if (by_stamp >= 0).any() else ""
 
 
 def camera_beam_colors(path: Path, scans: Sequence[Scan], tf: TfBuffer, config: DoorbatchConfig,
@@ -87,8 +91,8 @@ def camera_beam_colors(path: Path, scans: Sequence[Scan], tf: TfBuffer, config: 
     if away is not None:
         if not (choice >= 0).any():
             return None, None, [f"no image on {topic} lies within {max_offset_s:g} s of a scan{away}; {COLORLESS}"]
-        notes.append(f"no image on {topic} is stamped within {max_offset_s:g} s of a scan{away}: each scan takes "
-                     "the image logged nearest it")
+        notes.append(f"no image on {topic} pairs with a scan by header stamp{away}: each scan takes the image "
+                     "logged nearest it")
     colors = [np.zeros((s.ranges.shape[0], 3), dtype=np.uint8) for s in scans]
     valid = [np.zeros(s.ranges.shape[0], dtype=bool) for s in scans]
     info: CameraInfo | None = None

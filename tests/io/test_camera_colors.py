@@ -106,7 +106,8 @@ def _camera_variant(name: str) -> list[Message]:
     ("zero K", "camera_info K has non-positive focal lengths"),
     ("other size", "are 64×48 but their CameraInfo describes 32×24"),
     ("camera_link", "the camera frame 'camera_link' has its z axis up"),
-    ("own clock", "a camera stamping with a clock of its own?): each scan takes the image logged nearest it"),
+    ("own clock", "for the images: a camera or a laser stamping with a clock of its own?): each scan takes the "
+                  "image logged nearest it"),
 ])
 def test_a_camera_whose_images_colour_no_beam_says_why(write_log: Callable[..., Path], name: str, says: str) -> None:
     """A helper's camera colours were lost without a word (em stage left out, a never-moved door with it) when the
@@ -164,3 +165,21 @@ def test_a_scan_whose_colour_message_was_dropped_takes_no_other_scans_colours() 
     assert found[4] is None and all(found[k] is colours[k if k < 4 else k - 1] for k in (0, 1, 2, 3, 5))
     stray = [*colours, cloud(stamps[4] + 7_000_000_000, stamps[4] + 1_000_000)]  # its own, on another clock
     assert scan_colors(stray, stamps, [t + 2_000_000 for t in stamps], 50_000_000)[4] is stray[-1]
+
+
+def test_a_laser_on_its_own_clock_takes_the_image_logged_with_it(write_log: Callable[..., Path]) -> None:
+    """A second reviewer's case: scan headers 1.5 s behind the host clock that stamps the camera. Paired by header
+    stamp, each scan took the image 1.5 s older; the images' stamps keep another clock than the scans', so they
+    pair by log time. Each image here is one flat colour, its index."""
+    messages = [x for x in sample_messages(30, beams=91) if x[0] != "/scan_colors"]
+    k = 0
+    for j, (topic, msgtype, t, msg) in enumerate(messages):
+        if topic == "/scan":
+            msg.header = m.header(t - 1_500_000_000, msg.header.frame_id)
+        if topic == "/camera/image_raw":
+            k += 1
+            messages[j] = (topic, msgtype, t, m.image_rgb8(t, "camera_optical", np.full((48, 64, 3), k, np.uint8)))
+    rec = load_recording(write_log("lag.mcap", messages), DoorbatchConfig(), with_colors=True)
+    assert rec.colors is not None and rec.color_valid is not None
+    seen = [int(c[v][:, 0].max()) for c, v in zip(rec.colors, rec.color_valid, strict=True) if v.any()]
+    assert seen == list(range(31 - len(seen), 31)) and len(seen) >= 25

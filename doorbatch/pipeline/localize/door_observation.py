@@ -301,12 +301,12 @@ def leaves_outside_range(points_base: npt.ArrayLike, pose: npt.ArrayLike, doors:
     out = np.full(n, np.nan)
     if not n or not len(segments):
         return out
-    around = DoorSet(doors.hinge, doors.length, doors.closed_yaw, np.full(n, -math.pi), np.full(n, math.pi))
+    reach = math.pi - behind_hinge_rad  # the wall beyond the hinge is no candidate: it would win over the leaf
+    around = DoorSet(doors.hinge, doors.length, doors.closed_yaw, np.full(n, -reach), np.full(n, reach))
     angle, kind = _associate(segments, pose, around, np.zeros((1, n)), config, 0.0, "auto")
     a = wrap_angle(angle[0])
     margin = math.radians(config.door_angle_margin_deg)
-    outside = ((kind[0] == 1) & ((a < doors.angle_min - margin) | (a > doors.angle_max + margin))
-               & (np.abs(a) < math.pi - behind_hinge_rad))
+    outside = (kind[0] == 1) & ((a < doors.angle_min - margin) | (a > doors.angle_max + margin))
     out[outside] = a[outside]
     return out
 
