@@ -297,6 +297,10 @@ def test_a_second_laser_and_an_ekfs_odometry_are_named_not_dropped_silently(
     chosen = load_recording(log_path, DoorbatchConfig.model_validate(
         {"topics": {"scan": "/scan_rear", "odometry": "/odometry/filtered"}}))
     assert not any("laser scan topics" in w or "odometry topics" in w for w in chosen.warnings)  # the user's choice
+    # a second truth topic of Odometry type (a log recorded twice, once under /robot) is no odometry to offer
+    twice = [*messages, *(("/robot" + t, kind, at, msg) for t, kind, at, msg in messages if t == "/ground_truth")]
+    truth = load_recording(write_log("twice.mcap", sorted(twice, key=lambda m: m[2])), DoorbatchConfig())
+    assert not any("odometry topics" in w for w in truth.warnings)
 
 
 def test_inspect_says_which_clock_the_scans_are_timed_by(write_log: Callable[..., Path],
@@ -314,6 +318,11 @@ def test_inspect_says_which_clock_the_scans_are_timed_by(write_log: Callable[...
     wall = np.int64(1_700_000_000_000_000_000) + np.arange(50, dtype=np.int64) * 100_000_000
     line = clock_line(sim, wall, 0.5)
     assert "another clock" in line and "from 300.000 s" in line and "advancing 0.80 s per recorded second" in line
+    # a driver that never fills its stamps: not "another clock from 0.000 s, advancing 0.00 s" (a helper's log)
+    unset = clock_line(np.zeros(50, dtype=np.int64), wall, 0.5)
+    assert unset == "log times: every scan header stamp is unset (Problems)"
+    sim[:10] = 0  # some unset: the rest tell the clock
+    assert "from 300.800 s" in clock_line(sim, wall, 0.5)
 
 
 def test_a_bag_folder_without_metadata_names_its_mcap(write_log: Callable[..., Path], tmp_path: Path,

@@ -391,7 +391,11 @@ def _check_stamps(report: LogReport, stats: dict[str, _TopicStats], role_of: dic
 def clock_line(stamps_ns: npt.NDArray[np.int64], log_ns: npt.NDArray[np.int64], mismatch_s: float) -> str:
     """What clock the scans' header stamps are on: the recorder's (one clock for :meth:`LogClock.of_pairs`), or
     another (a simulator's sim time recorded on wall-clock time), with where the stamps start and how fast they
-    run against the recording."""
+    run against the recording. Unset stamps (0) are left out: where every one is unset, the log times stand in."""
+    unset = unset_stamps(stamps_ns.tolist())
+    if unset.all():
+        return "log times: every scan header stamp is unset (Problems)"
+    stamps_ns, log_ns = stamps_ns[~unset], log_ns[~unset]
     if not LogClock.of_pairs(log_ns, stamps_ns, mismatch_s).offset_ns:
         return "scan header stamps, on the recorder's clock"
     span_log = float(log_ns[-1] - log_ns[0])

@@ -195,8 +195,9 @@ def assign_roles(topics: Mapping[str, TopicInfo], overrides: TopicsConfig | None
             if role is Role.SCAN and others:
                 notes.append(f"{len(candidates)} laser scan topics: {pick[0].name} is read ({pick[1]}), "
                              f"{', '.join(others)} not (one laser per run; topics.scan chooses)")
-            elif role is Role.ODOMETRY and others:  # wheel odometry beside a fused one (an EKF's, with an IMU heading)
-                notes.append(f"{len(candidates)} odometry topics: {pick[0].name} is read ({pick[1]}), "
+            elif role is Role.ODOMETRY and (others := [o for o in others if not _looks_like_reference(o)]):
+                # wheel odometry beside a fused one (an EKF's, with an IMU heading); a second truth topic is none
+                notes.append(f"{len(others) + 1} odometry topics: {pick[0].name} is read ({pick[1]}), "
                              f"{', '.join(others)} not; topics.odometry chooses (a fused odometry, e.g. "
                              "robot_localization's /odometry/filtered, is often the better motion input)")
     return RoleAssignment(topics=chosen, reasons=reasons, notes=notes)
