@@ -434,7 +434,8 @@ def _hinge_groups(leaves: Leaves, config: DoorDetectionConfig) -> list[_Hinged]:
                                       config.hinge_distance_m, math.radians(config.angle_cluster_gap_deg))
             swap = (count > 1) & (np.hypot(*(ends[other] - hinge).T) < np.hypot(*(ends[end] - hinge).T))
             end, other = np.where(swap, other, end), np.where(swap, end, other)
-            if lines > 1:  # a hinge where angles meet: leaves chained on beyond a leaf's length from it are not its
+            if lines > 1:  # a hinge where angles meet: a leaf whose near end lies over 2 hinge distances from it
+                # (more than λmin / 2, config check) is chained on, no leaf of this hinge
                 keep = np.hypot(*(ends[end] - hinge).T) <= 2.0 * config.hinge_distance_m
                 leaf, end, other = leaf[keep], end[keep], other[keep]
         near, far = ends[end], ends[other]

@@ -290,12 +290,13 @@ def associate_segments(segments_base: npt.ArrayLike, pose: npt.ArrayLike, doors:
 
 def leaves_outside_range(points_base: npt.ArrayLike, pose: npt.ArrayLike, doors: DoorSet, config: LocalizeConfig,
                          behind_hinge_rad: float) -> FloatArray:
-    """(D,) the angle (rad, relative to closed_yaw, in (−π, π]) at which each door's leaf is seen from ``pose``
-    outside its opening range widened by ``door_angle_margin_deg``, NaN where it is not: the scan's polygon
-    (:func:`douglas_peucker`) associated as for the door update, but with every direction allowed and leaf
-    segments only (an end at the hinge, the leaf's length). Directions within ``behind_hinge_rad`` of the
-    closed direction's opposite are left out: the wall beyond the hinge. A door map older than the log (a door
-    opened further than while mapping, a double-acting door swung the other way) shows so."""
+    """(D,) the angle (rad, relative to closed_yaw, within ±(π − ``behind_hinge_rad``)) at which each door's leaf
+    is seen from ``pose`` outside its opening range widened by ``door_angle_margin_deg``, NaN where it is not: the
+    scan's polygon (:func:`douglas_peucker`) associated as for the door update, but with every direction allowed
+    but those within ``behind_hinge_rad`` of the closed direction's opposite (the wall beyond the hinge, which
+    would otherwise win the match over the leaf), and leaf segments only (an end at the hinge, the leaf's
+    length). A door map older than the log (a door opened further than while mapping, a double-acting door swung
+    the other way) shows so."""
     segments = douglas_peucker(points_base, config.dp_epsilon_m, max_gap_m=config.dp_max_gap_m)
     n = len(doors)
     out = np.full(n, np.nan)

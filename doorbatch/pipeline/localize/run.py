@@ -595,9 +595,9 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
         if respread:
             state = dataclasses.replace(state, particles=_initial_particles(rec, lmap, "global", method, lc, rng),
                                         recovery=RecoveryState())  # a fresh start, as AMCL's pf_init
-        # a fixed-size draw of the (equally weighted after resampling) particles for the annotated MCAP
         if method == "rbpf" and len(lmap.doors):
             outside.append(leaves_outside_range(hits, mean, lmap.doors, lc, math.radians(lc.door_behind_hinge_deg)))
+        # a fixed-size draw of the (equally weighted after resampling) particles for the annotated MCAP
         pick = np.linspace(0, len(p) - 1, k_draw).round().astype(np.intp)
         track.add(scan.stamp_ns, mean, cov, odom[i], len(p), diag.neff, dmean, dstd, observed, p.pose[pick])
         updated_scans.append(i)
