@@ -352,7 +352,7 @@ class _Hinged:
     far: FloatArray
     yaw: FloatArray
     when: FloatArray
-    chained: bool = False  # both ends of some leaf in the group: which end is the hinge was chosen by density
+    chained: bool = False  # both ends of some leaf in the group: which end is the hinge was a guess (_hinge_end)
     scan: IntArray | None = None  # the scan each leaf was seen in (set 1), −1 set 2, −2 static; None: all set 1
 
     def subset(self, keep: BoolArray) -> _Hinged:
@@ -421,17 +421,18 @@ def _hinge_groups(leaves: Leaves, config: DoorDetectionConfig) -> list[_Hinged]:
     ends = np.concatenate([leaves.p0, leaves.p1])
     labels = cluster_points(ends, config.hinge_distance_m)
     owner = np.tile(np.arange(n), 2)
+    twin = np.concatenate([np.arange(n, 2 * n), np.arange(n)])  # the index of each end's other end
     when = _when(leaves)
     groups = []
     for label in np.unique(labels):
         members = np.flatnonzero(labels == label)
         leaf, first, count = np.unique(owner[members], return_index=True, return_counts=True)
         end = members[first]
-        other = np.where(end < n, end + n, end - n)
+        other = twin[end]
         chained = bool((count > 1).any())
         if chained:
-            hinge, lines = _hinge_end(ends[members], ends[np.where(members < n, members + n, members - n)],
-                                      config.hinge_distance_m, math.radians(config.angle_cluster_gap_deg))
+            hinge, lines = _hinge_end(ends[members], ends[twin[members]], config.hinge_distance_m,
+                                      math.radians(config.angle_cluster_gap_deg))
             swap = (count > 1) & (np.hypot(*(ends[other] - hinge).T) < np.hypot(*(ends[end] - hinge).T))
             end, other = np.where(swap, other, end), np.where(swap, end, other)
             if lines > 1:  # a hinge where angles meet: a leaf whose near end lies over 2 hinge distances from it
@@ -563,15 +564,16 @@ def _door_from_group(g: _Hinged, gap: float, config: DoorDetectionConfig, grid: 
     """One hinge group as a door, or None (:func:`group_doors`); ``occupied``/``raw``: :func:`_occupied_masks`."""
     labels = angle_modes(g.yaw, gap)
     obs = _Observed(g.near, g.far, g.yaw, g.when, labels, _mode_yaws(g.yaw, labels))
-    use_grid = grid is not None and occupied is not None and config.static_partner_search
-    if use_grid and grid is not None and occupied is not None and raw is not None and obs.modes.size >= 2:
-        door = _without_wall_angles(g, obs, gap, config, grid, occupied, raw)
+    probes = (grid, occupied, raw) if (grid is not None and occupied is not None and raw is not None
+                                       and config.static_partner_search) else None  # the static grid's evidence
+    if probes is not None and obs.modes.size >= 2:
+        door = _without_wall_angles(g, obs, gap, config, *probes)
         if door is not None:
             return door
     if obs.modes.size == 1:
-        if (not use_grid or grid is None or occupied is None or raw is None
-                or g.scans_seen(config) < config.lone_min_scans):
+        if probes is None or g.scans_seen(config) < config.lone_min_scans:
             return None
+        grid, occupied, raw = probes
         if not _lone_partner(grid, occupied, raw, g, obs, config):
             if not g.chained:
                 return None
@@ -585,13 +587,12 @@ def _door_from_group(g: _Hinged, gap: float, config: DoorDetectionConfig, grid: 
     hinge = _hinge_estimate(obs.near, obs.far, obs.labels, obs.modes, config)
     if hinge is None:
         return None
-    closed = _range_about(obs.modes)[0]
-    if use_grid and grid is not None and occupied is not None:
-        closed = closed_direction(grid, occupied, hinge, obs.modes, config)
+    closed = _range_about(obs.modes)[0] if probes is None else closed_direction(*probes[:2], hinge, obs.modes, config)
     dist = np.hypot(obs.far[:, 0] - hinge[0], obs.far[:, 1] - hinge[1])
     if not _rigid(dist, obs, closed, config):
         return None
-    if use_grid and grid is not None and occupied is not None:
+    if probes is not None:
+        grid, occupied, _ = probes
         length = _leaf_length(dist, obs.yaw, closed, config)
         states = _static_states(grid, occupied, hinge, obs.modes, length, obs.passes(), config)
         for end, when in states:

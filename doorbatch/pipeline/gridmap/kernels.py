@@ -487,8 +487,7 @@ def classify_integrate_kernel(log_odds2: npt.NDArray[np.float32], hits2: npt.NDA
     """:func:`classify_kernel` of the scan's end points, then :func:`integrate_kernel` without the dynamic
     ones: one call per scan."""
     counts = classify_kernel(log_odds2, free_latch2, transient2, occupied_before2, pass_start2, later_pass, gx, gy,
-                             1.0 / res, pts, r,
-                             levels[4], reach, dynamic, support)
+                             1.0 / res, pts, r, levels[4], reach, dynamic, support)
     integrate_kernel(log_odds2, hits2, hit_sum2, free_latch2, seen_occupied2, last_hit_scan2, stamp2, gx, gy, res,
                      ox, oy, pts, dirs, dynamic, clear, band_m, cut, max_range_m, scan, levels)
     return counts
