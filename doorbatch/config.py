@@ -771,6 +771,11 @@ class LocalizeConfig(Section):
     # estimated, its leaf is clutter). Directions within door_behind_hinge_deg of the closed one's opposite are the
     # wall beyond the hinge. Expert choice: a second of scans at 10 Hz; 20°, the width of a jamb's shadow.
     door_outside_range_min_updates: int = Field(10, ge=1)
+    # A door that never moved while mapping (doors.parquet moved false) opens this far from closed, to the side
+    # it was seen open, or to both sides if seen only within door_angle_margin_deg of closed (door_geometry.
+    # with_unmoved_swing). Expert choice: an office door's swing, short of the wall beyond its hinge; 0 keeps the
+    # one angle mapping saw (such a door's open leaf is then clutter).
+    door_unmoved_swing_deg: float = Field(90.0, ge=0.0, lt=180.0)
     door_behind_hinge_deg: float = Field(20.0, ge=0.0, lt=180.0)
     # Particles drawn into the annotated MCAP per update.
     annotate_particles: int = Field(200, ge=0)

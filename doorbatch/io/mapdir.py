@@ -84,6 +84,15 @@ def read_door_set(map_dir: Path) -> DoorSet:
     return door_set_of(read_table("doors", path).to_pydict())
 
 
+def read_door_moved(map_dir: Path) -> npt.NDArray[np.bool_]:
+    """doors.parquet's ``moved`` column (seen at two or more distinguishable angles), in the rows' order of
+    :func:`read_door_set`; none without the file."""
+    path = map_dir / "doors.parquet"
+    if not path.exists():
+        return np.zeros(0, dtype=np.bool_)
+    return np.asarray(read_table("doors", path).column("moved").to_pylist(), dtype=np.bool_)
+
+
 def door_set_of_previews(doors: Sequence[PreviewDoor]) -> DoorSet:
     """The doors a map directory writes (:class:`PreviewDoor`) as a DoorSet, through their doors.parquet columns."""
     return door_set_of(doors_columns(doors, [0] * len(doors), ""))

@@ -170,3 +170,29 @@ def with_closed_in_range(doors: DoorSet) -> DoorSet:
     rejected by the RBPF's orientation gate (range ± door_angle_margin_deg) and never be tracked closed."""
     return DoorSet(doors.hinge, doors.length, doors.closed_yaw, np.minimum(doors.angle_min, 0.0),
                    np.maximum(doors.angle_max, 0.0))
+
+
+def with_unmoved_swing(doors: DoorSet, unmoved: npt.ArrayLike, swing_rad: float, side_known_rad: float) -> DoorSet:
+    """The doors with each never-moved door's range widened to the swing a hinged door has.
+
+    A door that never moved while mapping (the em stage's: doors.parquet ``moved`` false) has a zero-width
+    range, the one angle the passes saw, which says nothing of how far it opens; the RBPF would take its open
+    leaf for clutter on a day someone opens it. Seen open at a (|a| > ``side_known_rad``), it opens to that
+    side: [lo, hi] ∪ [0, sign(a)·swing]. Seen closed, the side is unknown: [−swing, swing]. Moved doors keep
+    their observed range (paper 000 Sec. III); swing 0 leaves every range as it is.
+
+    Expert choice (the papers give never-moved doors no range): the swing of an office door, 90° by default,
+    short of the wall beyond the hinge at 180°, whose segment would otherwise pass the association's gates.
+    """
+    lo = np.asarray(doors.angle_min, dtype=np.float64).copy()
+    hi = np.asarray(doors.angle_max, dtype=np.float64).copy()
+    unmoved = np.asarray(unmoved, dtype=np.bool_)
+    if swing_rad <= 0.0 or not unmoved.any():
+        return doors
+    seen = (lo + hi) / 2
+    opens_pos = unmoved & (seen > side_known_rad)
+    opens_neg = unmoved & (seen < -side_known_rad)
+    unknown = unmoved & ~opens_pos & ~opens_neg
+    hi = np.where(opens_pos | unknown, np.maximum(hi, swing_rad), hi)
+    lo = np.where(opens_neg | unknown, np.minimum(lo, -swing_rad), lo)
+    return DoorSet(doors.hinge, doors.length, doors.closed_yaw, np.minimum(lo, 0.0), np.maximum(hi, 0.0))

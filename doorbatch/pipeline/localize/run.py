@@ -28,7 +28,7 @@ from doorbatch.geometry.se2 import interpolate_poses
 from doorbatch.io.log_clock import LogClock, long_gaps
 from doorbatch.io.map_server import read_map
 from doorbatch.io.map_topic import read_map_topic
-from doorbatch.io.mapdir import ODOMETRY_FRAME_SOURCES, map_pose_source, read_door_set
+from doorbatch.io.mapdir import ODOMETRY_FRAME_SOURCES, map_pose_source, read_door_moved, read_door_set
 from doorbatch.io.pose_topic import StartPose, read_start_poses
 from doorbatch.io.recording import PoseSeries, Recording, load_recording
 from doorbatch.io.roles import is_initial_pose_topic
@@ -42,7 +42,7 @@ from doorbatch.pipeline.localize.convergence import (
     scan_fit,
     see_through_share,
 )
-from doorbatch.pipeline.localize.door_geometry import subset_doors, with_closed_in_range
+from doorbatch.pipeline.localize.door_geometry import subset_doors, with_closed_in_range, with_unmoved_swing
 from doorbatch.pipeline.localize.door_observation import leaves_outside_range
 from doorbatch.pipeline.localize.likelihood_field import (
     OCCUPIED_AT_LEAST,
@@ -127,7 +127,11 @@ def load_localization_map(map_path: Path, config: LocalizeConfig) -> Localizatio
         yaml_path = map_path / "map.yaml" if map_path.is_dir() else map_path
         occ = read_map(yaml_path)
         doors_path = map_doors_file(map_path)
-        doors = read_door_set(doors_path.parent) if doors_path is not None else DoorSet.empty()
+        doors = DoorSet.empty()
+        if doors_path is not None:
+            doors = with_unmoved_swing(read_door_set(doors_path.parent), ~read_door_moved(doors_path.parent),
+                                       math.radians(config.door_unmoved_swing_deg),
+                                       math.radians(config.door_angle_margin_deg))
     doors = with_closed_in_range(doors)
     return LocalizationMap.of(occ, doors, config, map_pose_source(map_path))
 

@@ -16,6 +16,7 @@ from doorbatch.pipeline.localize.door_geometry import (
     point_to_leaf_distance,
     subset_doors,
     with_closed_in_range,
+    with_unmoved_swing,
 )
 
 FloatArray = npt.NDArray[np.float64]
@@ -138,3 +139,16 @@ def test_every_door_range_includes_closed() -> None:
     np.testing.assert_allclose(np.degrees(out.angle_min), [-90.0, 0.0, -10.0])
     np.testing.assert_allclose(np.degrees(out.angle_max), [0.0, 80.0, 70.0])
     np.testing.assert_array_equal(out.hinge, doors.hinge)
+
+
+def test_a_never_moved_door_opens_by_the_swing_to_the_side_it_was_seen_open_or_to_both() -> None:
+    """Never moved: seen at −90° (opens to −), at 30° (opens to +, and further), closed (either side); a moved
+    door keeps its observed range; a swing of 0 leaves every range as it was."""
+    doors = DoorSet(np.zeros((4, 2)), np.ones(4), np.zeros(4), np.radians([-90.0, 30.0, -2.8, 0.0]),
+                    np.radians([-90.0, 30.0, 0.0, 40.0]))
+    unmoved = np.array([True, True, True, False])
+    out = with_unmoved_swing(doors, unmoved, math.radians(90.0), math.radians(10.0))
+    np.testing.assert_allclose(np.degrees(out.angle_min), [-90.0, 0.0, -90.0, 0.0])
+    np.testing.assert_allclose(np.degrees(out.angle_max), [0.0, 90.0, 90.0, 40.0])
+    assert with_unmoved_swing(doors, unmoved, 0.0, math.radians(10.0)) is doors
+

@@ -4,6 +4,7 @@ walls, so that along its axis only the door leaves (absent from the static map) 
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
@@ -46,9 +47,11 @@ def corridor() -> tuple[FloatArray, FloatArray, DoorSet]:
     return np.concatenate([walls, leaves]), walls, doors
 
 
-def track(method: str, seed: int) -> float:
-    """Mean position error of one run along the corridor."""
+def track(method: str, seed: int, map_doors: DoorSet | None = None) -> tuple[float, FloatArray]:
+    """Mean position error of one run along the corridor, and the RBPF's door angles at its end (rad, weighted
+    mean over particles). ``map_doors``: the doors the filter is given (default: the world's, range 0–90°)."""
     world, static, doors = corridor()
+    doors = doors if map_doors is None else map_doors
     field = build_distance_field(rasterize(static, (-1.0, 16.0), (0.0, 2.4), margin=RES * 4), 2.0)
     n = 240
     truth = np.stack([np.linspace(1.0, 13.0, n), np.full(n, 1.5), np.zeros(n)], axis=1)
@@ -57,8 +60,11 @@ def track(method: str, seed: int) -> float:
     config = LocalizeConfig(max_particles=1000, min_particles=300)
     particles = initial_particles(truth[0], config, rng)
     d = len(doors) if method == "rbpf" else 0
-    particles.door_mean = np.full((len(particles), d), math.radians(45.0))
-    particles.door_var = np.full((len(particles), d), math.radians(config.door_init_sigma_deg) ** 2)
+    if map_doors is None:
+        particles.door_mean = np.full((len(particles), d), math.radians(45.0))
+        particles.door_var = np.full((len(particles), d), math.radians(config.door_init_sigma_deg) ** 2)
+    else:  # as a run starts them: mid-range
+        particles.door_mean, particles.door_var = initial_door_states(doors, len(particles), False, config, rng)
     state = MclState(particles)
     errors: list[float] = []
     last: float | None = None
@@ -77,15 +83,41 @@ def track(method: str, seed: int) -> float:
             last = 0.1 * k
             mean, _ = state.particles.mean_and_covariance()
             errors.append(float(np.hypot(*(mean[:2] - truth[k, :2]))))
-    return float(np.mean(errors))
+    door_angles = state.particles.door_estimate()[0] if d else np.zeros(0)
+    return float(np.mean(errors)), door_angles
 
 
 @pytest.mark.parametrize("seed", [3])
 def test_rbpf_beats_mcl_with_partially_open_doors(seed: int) -> None:
-    mcl = track("mcl", seed)
-    rbpf = track("rbpf", seed)
+    mcl, _ = track("mcl", seed)
+    rbpf, _ = track("rbpf", seed)
     assert rbpf < 0.08
     assert rbpf < 0.5 * mcl, (rbpf, mcl)
+
+
+def test_doors_that_never_moved_while_mapping_are_tracked_when_opened(tmp_path: Path) -> None:
+    """A map whose doors never moved while mapping (doors.parquet ``moved`` false, the one angle the passes saw:
+    closed) and a day on which they stand 50° open. Their range had been that one angle, so the RBPF kept them
+    closed and took their leaves for clutter; they now open by ``door_unmoved_swing_deg`` to either side, and
+    the filter finds them open."""
+    from doorbatch.io.map_server import write_map
+    from doorbatch.io.parquet import write_table
+    from doorbatch.pipeline.localize.run import load_localization_map
+
+    _, static, doors = corridor()
+    n = len(doors)
+    write_map(rasterize(static, (-1.0, 16.0), (0.0, 2.4), margin=RES * 4), tmp_path / "map.yaml")
+    write_table("doors", {"door_id": np.arange(n, dtype=np.int32), "hinge_x": doors.hinge[:, 0],
+                          "hinge_y": doors.hinge[:, 1], "length": doors.length, "closed_yaw": doors.closed_yaw,
+                          "angle_min": np.zeros(n), "angle_max": np.zeros(n), "n_observations": np.full(n, 9, np.int32),
+                          "source": ["em"] * n, "moved": [False] * n}, tmp_path / "doors.parquet")
+    mapped = load_localization_map(tmp_path, LocalizeConfig()).doors
+    np.testing.assert_allclose(np.degrees(mapped.angle_min), -90.0)
+    np.testing.assert_allclose(np.degrees(mapped.angle_max), 90.0)
+    error, door_angles = track("rbpf", 3, mapped)
+    assert error < 0.05  # 0.097 m with the leaves as clutter
+    # the last door's leaf is seen edge-on from behind as the run ends 1 m past its hinge (19° with a 0–90° range)
+    np.testing.assert_allclose(np.degrees(door_angles[:3]), np.degrees(OPEN), atol=5.0)
 
 
 def test_beam_skipping_leaves_out_beams_most_weight_cannot_explain() -> None:
