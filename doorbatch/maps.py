@@ -124,9 +124,17 @@ class DoorSet:
     closed_yaw: FloatArray
     angle_min: FloatArray
     angle_max: FloatArray
+    door_id: npt.NDArray[np.int32] | None = None  # doors.parquet's door_id per row; None: the row numbers
 
     def __len__(self) -> int:
         return int(self.hinge.shape[0])
+
+    @property
+    def ids(self) -> npt.NDArray[np.int32]:
+        """Each door's id (doors.parquet's door_id, which outputs name it by), the row number where not given."""
+        if self.door_id is None:
+            return np.arange(len(self), dtype=np.int32)
+        return np.asarray(self.door_id, dtype=np.int32)
 
     @classmethod
     def empty(cls) -> DoorSet:

@@ -102,7 +102,8 @@ def door_set_of(t: Mapping[str, Any]) -> DoorSet:
     """doors.parquet columns (``to_pydict``) as a DoorSet."""
     return DoorSet(np.array([t["hinge_x"], t["hinge_y"]], dtype=np.float64).T.reshape(-1, 2),
                    np.asarray(t["length"], dtype=np.float64), np.asarray(t["closed_yaw"], dtype=np.float64),
-                   np.asarray(t["angle_min"], dtype=np.float64), np.asarray(t["angle_max"], dtype=np.float64))
+                   np.asarray(t["angle_min"], dtype=np.float64), np.asarray(t["angle_max"], dtype=np.float64),
+                   np.asarray(t["door_id"], dtype=np.int32))
 
 
 @dataclass(frozen=True)

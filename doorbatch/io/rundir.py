@@ -37,7 +37,7 @@ def door_state_columns(result: LocalizationResult) -> dict[str, object]:
     u, d = result.door_mean.shape
     return {
         "log": [result.log] * (u * d), "method": [result.method] * (u * d),
-        "stamp_ns": np.repeat(result.stamps_ns, d), "door_id": np.tile(np.arange(d, dtype=np.int32), u),
+        "stamp_ns": np.repeat(result.stamps_ns, d), "door_id": np.tile(result.door_id, u),
         "angle": wrap_angle(result.door_mean.ravel()), "angle_std": result.door_std.ravel(),
         "observed": result.door_observed.ravel(),
     }

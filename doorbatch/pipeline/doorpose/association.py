@@ -5,7 +5,7 @@ the estimated edge nearer the hinge is e_n and the farther e_f. Its current angl
 a = wrap(atan2(e_f − h) − ψ) (CCW positive, doors.parquet's convention), and the cost is
 |e_n − h| + |c − (h + L/2·(cos(ψ + a), sin(ψ + a)))|, the hinge gap plus the centre's distance from that
 leaf's centre (a leaf of another length or elsewhere costs more). The cheapest door within
-``max_distance_m`` is the match (door_id = its row in doors.parquet); else −1.
+``max_distance_m`` is the match (its doors.parquet door_id); else −1.
 """
 
 from __future__ import annotations
@@ -46,4 +46,4 @@ def associate(left: FloatArray, right: FloatArray, doors: DoorSet, max_distance_
     k = int(np.argmin(cost))
     if cost[k] > max_distance_m:
         return DoorMatch(-1, float("nan"), float(cost[k]))
-    return DoorMatch(k, float(angle[k]), float(cost[k]))
+    return DoorMatch(int(doors.ids[k]), float(angle[k]), float(cost[k]))

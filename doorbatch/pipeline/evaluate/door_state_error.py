@@ -38,12 +38,14 @@ def door_state_errors(stamps_ns: npt.ArrayLike, door_id: npt.ArrayLike, angle: n
     """Door-state error per update from door_states.parquet's rows (see the module docstring): over the doors
     observed within ``window_ns``, or (``observed_only=False``) over all matched doors."""
     t_rows = np.asarray(stamps_ns, dtype=np.int64)
-    d_rows = np.asarray(door_id, dtype=np.int64)
     updates, u_idx = np.unique(t_rows, return_inverse=True)
     n_doors = len(map_doors)
+    row_of = {int(i): k for k, i in enumerate(map_doors.ids.tolist())}  # door_id → the map's row
+    named, d_idx = np.unique(np.asarray(door_id, dtype=np.int64), return_inverse=True)
+    d_rows = np.array([row_of.get(int(i), -1) for i in named], dtype=np.int64)[d_idx.ravel()]
+    valid = d_rows >= 0
     est = np.full((updates.size, n_doors), np.nan)
     seen = np.zeros((updates.size, n_doors), dtype=bool)
-    valid = (d_rows >= 0) & (d_rows < n_doors)
     est[u_idx[valid], d_rows[valid]] = np.asarray(angle, dtype=np.float64)[valid]
     seen[u_idx[valid], d_rows[valid]] = np.asarray(observed, dtype=bool)[valid]
     truth_hinge = np.array([[d.hinge_x, d.hinge_y] for d in truth.doors]).reshape(-1, 2)

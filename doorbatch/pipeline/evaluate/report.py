@@ -226,7 +226,7 @@ def run_tables_from_result(result: LocalizationResult, *, name: str | None = Non
     """A run in memory (``localize``'s result) as :class:`RunTables`, without writing a run directory."""
     u, d = result.door_mean.shape
     states = None if d == 0 else DoorStateTable(
-        np.repeat(result.stamps_ns, d), np.tile(np.arange(d, dtype=np.int32), u), result.door_mean.ravel(),
+        np.repeat(result.stamps_ns, d), np.tile(result.door_id, u), result.door_mean.ravel(),
         result.door_observed.ravel())
     return RunTables(name or f"{result.log}/{result.method}", result.log, result.method, result.stamps_ns,
                      result.pose, init, result.converged_ns, result.ambiguous, states, map_doors, reference, truth,

@@ -140,7 +140,7 @@ def subset_doors(doors: DoorSet, index: npt.ArrayLike) -> DoorSet:
         idx = np.flatnonzero(idx)
     return DoorSet(hinge=np.asarray(doors.hinge)[idx], length=np.asarray(doors.length)[idx],
                    closed_yaw=np.asarray(doors.closed_yaw)[idx], angle_min=np.asarray(doors.angle_min)[idx],
-                   angle_max=np.asarray(doors.angle_max)[idx])
+                   angle_max=np.asarray(doors.angle_max)[idx], door_id=doors.ids[idx])
 
 
 _COMPILED: dict[str, Any] = {}
@@ -169,7 +169,7 @@ def with_closed_in_range(doors: DoorSet) -> DoorSet:
     carry a zero-width range at the angle mapping saw, e.g. [−90°, −90°]) would otherwise have its closed leaf
     rejected by the RBPF's orientation gate (range ± door_angle_margin_deg) and never be tracked closed."""
     return DoorSet(doors.hinge, doors.length, doors.closed_yaw, np.minimum(doors.angle_min, 0.0),
-                   np.maximum(doors.angle_max, 0.0))
+                   np.maximum(doors.angle_max, 0.0), doors.door_id)
 
 
 def with_unmoved_swing(doors: DoorSet, unmoved: npt.ArrayLike, swing_rad: float, side_known_rad: float) -> DoorSet:
@@ -195,4 +195,5 @@ def with_unmoved_swing(doors: DoorSet, unmoved: npt.ArrayLike, swing_rad: float,
     unknown = unmoved & ~opens_pos & ~opens_neg
     hi = np.where(opens_pos | unknown, np.maximum(hi, swing_rad), hi)
     lo = np.where(opens_neg | unknown, np.minimum(lo, -swing_rad), lo)
-    return DoorSet(doors.hinge, doors.length, doors.closed_yaw, np.minimum(lo, 0.0), np.maximum(hi, 0.0))
+    return DoorSet(doors.hinge, doors.length, doors.closed_yaw, np.minimum(lo, 0.0), np.maximum(hi, 0.0),
+                   doors.door_id)

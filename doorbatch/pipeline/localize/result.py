@@ -46,6 +46,13 @@ class LocalizationResult:
     log_clock: LogClock | None = None  # the log's recorder clock against its scan stamps (Recording.log_clock)
     lost_ns: list[int] = field(default_factory=list)  # stamps at which an episode of being lost began
     odom_frame_id: str = ""  # the frame of the odometry the run moved by ("": not known)
+    door_ids: npt.NDArray[np.int32] | None = None  # (D,) the map's door_id of each door column; None: 0 … D − 1
+
+    @property
+    def door_id(self) -> npt.NDArray[np.int32]:
+        """(D,) the map's door_id (doors.parquet) of each column of door_mean."""
+        d = self.door_mean.shape[1]
+        return np.arange(d, dtype=np.int32) if self.door_ids is None else np.asarray(self.door_ids, dtype=np.int32)
 
     def manifest_extra(self) -> dict[str, object]:
         """What a run directory's manifest keeps of the run beyond its tables: seconds from the first update to

@@ -100,9 +100,9 @@ def is_map_log(map_path: Path) -> bool:
 
 
 def map_doors_file(map_path: Path) -> Path | None:
-    """The doors.parquet of ``--map``: in a map directory, or beside its ``map.yaml`` named directly (a
-    doorbatch map directory's; another tool's YAML has no doors)."""
-    folder = map_path if map_path.is_dir() else map_path.parent if map_path.name == "map.yaml" else None
+    """The doors.parquet of ``--map``: in a map directory, or beside the map YAML named directly (a doorbatch
+    map directory's map.yaml, or one renamed: office.yaml beside its doors.parquet)."""
+    folder = map_path if map_path.is_dir() else map_path.parent if map_path.suffix in (".yaml", ".yml") else None
     doors = folder / "doors.parquet" if folder is not None else None
     return doors if doors is not None and doors.is_file() else None
 
@@ -261,9 +261,9 @@ def outside_range_notes(seen: npt.NDArray[np.float64], doors: DoorSet, min_updat
     notes = []
     for d in np.flatnonzero(np.sum(np.isfinite(seen), axis=0) >= min_updates).tolist():
         angles = seen[np.isfinite(seen[:, d]), d]
-        notes.append(f"door {d} (hinge {doors.hinge[d, 0]:.2f}, {doors.hinge[d, 1]:.2f}): its leaf was seen at "
-                     f"{math.degrees(float(np.median(angles))):.0f}° in {angles.size} updates, outside its mapped "
-                     f"range {math.degrees(float(doors.angle_min[d])):.0f}° to "
+        notes.append(f"door {doors.ids[d]} (hinge {doors.hinge[d, 0]:.2f}, {doors.hinge[d, 1]:.2f}): its leaf was "
+                     f"seen at {math.degrees(float(np.median(angles))):.0f}° in {angles.size} updates, outside its "
+                     f"mapped range {math.degrees(float(doors.angle_min[d])):.0f}° to "
                      f"{math.degrees(float(doors.angle_max[d])):.0f}° (no mapping pass showed it there): its angle "
                      "there is not estimated and its leaf counts as clutter; a map from passes that show the door "
                      "there knows it")
@@ -300,7 +300,7 @@ class _Track:
 
     def result(self, log_name: str, method: str, n_doors: int, converged_ns: int | None, is_ambiguous: bool,
                warnings: list[str], log_clock: LogClock | None = None, lost_ns: list[int] | None = None,
-               odom_frame_id: str = "") -> LocalizationResult:
+               odom_frame_id: str = "", door_ids: npt.NDArray[np.int32] | None = None) -> LocalizationResult:
         u = len(self.stamps)
         return LocalizationResult(
             log=log_name, method=method, stamps_ns=np.asarray(self.stamps, dtype=np.int64),
@@ -309,7 +309,8 @@ class _Track:
             door_mean=np.asarray(self.dmean).reshape(u, n_doors), door_std=np.asarray(self.dstd).reshape(u, n_doors),
             door_observed=np.asarray(self.observed, dtype=bool).reshape(u, n_doors),
             particles=np.asarray(self.particles), converged_ns=converged_ns, ambiguous=is_ambiguous,
-            warnings=warnings, log_clock=log_clock, lost_ns=list(lost_ns or []), odom_frame_id=odom_frame_id)
+            warnings=warnings, log_clock=log_clock, lost_ns=list(lost_ns or []), odom_frame_id=odom_frame_id,
+            door_ids=door_ids)
 
 
 def start_scan_index(rec: Recording, start: StartPose) -> int:
@@ -628,8 +629,9 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
         warnings.extend([tested.note] if tested.note else [])
     if init != "global" and converged_ns is not None and track.stamps:  # a tracked start: its first update, which
         converged_ns = max(converged_ns, track.stamps[0])  # odometry that begins after the first scan puts later
-    return track.result(Path(log_path).name, method, state.particles.n_doors, converged_ns, ambiguous, warnings,
-                        rec.log_clock, lost_ns, rec.odometry.frame_id)
+    n_doors = state.particles.n_doors
+    return track.result(Path(log_path).name, method, n_doors, converged_ns, ambiguous, warnings,
+                        rec.log_clock, lost_ns, rec.odometry.frame_id, lmap.doors.ids[:n_doors])
 
 
 @dataclass(frozen=True)

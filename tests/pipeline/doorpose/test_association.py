@@ -31,3 +31,7 @@ def test_estimate_at_a_shared_hinge_goes_to_the_door_of_its_length() -> None:
     assert narrow.door_id == 0
     assert narrow.angle == pytest.approx(math.radians(60.0), abs=1e-12)
     assert narrow.cost_m == pytest.approx(0.0, abs=1e-12)
+    # a map whose doors.parquet numbers them otherwise: the match is named by its door_id, not its row
+    numbered = DoorSet(*(getattr(CORNER_DOORS, f) for f in ("hinge", "length", "closed_yaw", "angle_min",
+                                                              "angle_max")), door_id=np.array([17, 4], np.int32))
+    assert associate(HINGE + 0.9 * unit, HINGE.copy(), numbered, max_distance_m=0.5).door_id == 4

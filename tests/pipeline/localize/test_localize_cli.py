@@ -409,15 +409,21 @@ def test_a_particle_count_below_one_is_a_usage_error(sample_map: Path, tmp_path:
     assert code == 2 and "--particles" in capsys.readouterr().err
 
 
-def test_the_map_yaml_of_a_map_directory_keeps_its_doors(sample_map: Path, tmp_path: Path) -> None:
+@pytest.mark.parametrize("yaml_name", ["map.yaml", "office.yaml"])
+def test_the_map_yaml_of_a_map_directory_keeps_its_doors(sample_map: Path, tmp_path: Path, yaml_name: str) -> None:
+    """The map YAML named directly keeps the doors.parquet beside it, also renamed (a user's office.yaml, whose
+    doors had been dropped with a warning that there were none)."""
+    folder = tmp_path / "map"
+    shutil.copytree(sample_map, folder)
+    (folder / "map.yaml").rename(folder / yaml_name)
     run = tmp_path / "run"
-    assert main(["localize", str(SAMPLE_LOGS / "loc_open.mcap"), "--map", str(sample_map / "map.yaml"), "-o",
+    assert main(["localize", str(SAMPLE_LOGS / "loc_open.mcap"), "--map", str(folder / yaml_name), "-o",
                  str(run), "--method", "rbpf", "-q"]) == 0
     states = read_table("door_states", run / "door_states.parquet")
     assert len(states) > 0 and set(states.column("door_id").to_pylist()) == set(
         read_table("doors", sample_map / "doors.parquet").column("door_id").to_pylist())
     inputs = [Path(i["path"]).name for i in json.loads((run / "manifest.json").read_text())["inputs"]]
-    assert inputs == ["loc_open.mcap", "map.yaml", "doors.parquet"]  # every file the run used
+    assert inputs == ["loc_open.mcap", yaml_name, "doors.parquet"]  # every file the run used
 
 
 def test_a_folder_without_map_yaml_is_named_as_such(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -566,3 +572,33 @@ def test_a_run_with_one_update_over_many_scans_says_why(sample_map: Path, tmp_pa
     assert len(read_table("trajectory", run / "trajectory.parquet")) == 1
     warnings = json.loads((run / "manifest.json").read_text())["warnings"]
     assert any("1 filter update over" in w and "frames.odom" in w for w in warnings)
+
+
+def test_door_states_name_each_door_by_its_door_id_in_the_map(sample_map: Path, tmp_path: Path) -> None:
+    """A doors.parquet whose door_id are not the row numbers (a map edited or written by another tool): the
+    door states and warnings had named the doors by their rows, so a join on door_id matched nothing or the
+    wrong door, and the scoring read them as rows. Now they carry the map's door_id: the same run with the ids
+    renumbered 100, 101, … is the same run, renamed, and scores the same."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    renamed = tmp_path / "map"
+    shutil.copytree(sample_map, renamed)
+    doors = pq.read_table(sample_map / "doors.parquet")
+    ids = pa.array([100 + 7 * k for k in range(len(doors))], pa.int32())
+    pq.write_table(doors.set_column(0, "door_id", ids), renamed / "doors.parquet")
+    log, truth = SAMPLE_LOGS / "loc_partial.mcap", SAMPLE_LOGS / "loc_partial.truth.yaml"
+    scores = []
+    for name, map_dir in (("plain", sample_map), ("renamed", renamed)):
+        run = tmp_path / name
+        assert main(["localize", str(log), "--map", str(map_dir), "-o", str(run), "--method", "rbpf",
+                     "--set", "seed=5", "-q"]) == 0
+        assert main(["evaluate", str(run), "--reference", str(log), "--world", str(truth), "-o",
+                     str(tmp_path / f"{name}_eval"), "-q"]) == 0
+        table = read_table("metrics", tmp_path / f"{name}_eval" / "metrics.parquet").to_pydict()
+        scores.append({m: v for m, v in zip(table["metric"], table["value"], strict=True) if m.startswith("door")})
+    plain = read_table("door_states", tmp_path / "plain" / "door_states.parquet").to_pydict()
+    named = read_table("door_states", tmp_path / "renamed" / "door_states.parquet").to_pydict()
+    assert named["door_id"] == [100 + 7 * k for k in plain["door_id"]]
+    assert named["angle"] == plain["angle"]
+    assert scores[0] == scores[1] and scores[0]["door_state_error_mean"] < math.radians(5.0)
