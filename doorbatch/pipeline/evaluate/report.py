@@ -494,23 +494,22 @@ def _map_rows(door_map: MapTables, truth: SimTruth | None, cfg: DoorbatchConfig)
     truth_set, moved = truth_doors(truth, math.radians(cfg.doors.min_opening_deg))
     max_m = cfg.evaluate.door_match_max_hinge_m
     warnings = []
+    every_door = truth.leaf_observations is None or door_map.source == "em"
     if truth.leaf_observations is None:
         warnings.append(f"map {door_map.name}: the truth has no leaf_observations (which doors the laser saw at two "
                         f"angles): its doors are scored by position, all {len(moved)} counted as doors the map should "
                         "have; recall over moved and never-moved doors cannot be told")
-        moved = np.ones(len(moved), dtype=bool)
-        score = score_doors(door_map.doors, truth_set, moved, max_m)
-        extra = []
-    elif door_map.source == "em":  # EM also finds doors that never moved (paper 001): every truth door counts
-        score = score_doors(door_map.doors, truth_set, np.ones(len(moved), dtype=bool), max_m)
+    # the truth doors recall counts (doors_truth): those the laser saw at two angles; every door for a truth that
+    # does not say, and for EM, which also finds doors that never moved (paper 001)
+    counted = np.ones(len(moved), dtype=bool) if every_door else moved
+    score = score_doors(door_map.doors, truth_set, counted, max_m)
+    extra = []
+    if truth.leaf_observations is not None and door_map.source == "em":
         found = np.zeros(len(moved), dtype=bool)
         found[[j for _, j in score.matches]] = True
         extra = [("door_recall_moved", _fraction(found[moved]), "ratio"),
                  ("door_recall_never_moved", _fraction(found[~moved]), "ratio"),
                  ("doors_truth_never_moved", float((~moved).sum()), "count")]
-    else:
-        score = score_doors(door_map.doors, truth_set, moved, max_m)
-        extra = []
 
     def mean(a: FloatArray) -> float:
         return float(np.mean(np.abs(a))) if a.size else math.nan
@@ -524,7 +523,7 @@ def _map_rows(door_map: MapTables, truth: SimTruth | None, cfg: DoorbatchConfig)
               ("door_hinge_error_mean", mean(score.hinge_error_m), "m"),
               ("door_length_error_mean", mean(score.length_error_m), "m"),
               ("door_range_error_mean", mean(score.range_error_rad), "rad"),
-              ("doors_detected", float(len(door_map.doors)), "count"), ("doors_truth", float(moved.sum()), "count"),
+              ("doors_detected", float(len(door_map.doors)), "count"), ("doors_truth", float(counted.sum()), "count"),
               *extra]
     return [MetricRow(door_map.name, "", "map", k, float(v), u, door_map.params) for k, v, u in values], warnings
 

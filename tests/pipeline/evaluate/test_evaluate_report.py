@@ -654,6 +654,8 @@ def test_em_door_maps_count_the_doors_that_never_moved(tmp_path: Path) -> None:
     assert got[("em", "door_recall_moved")] == 1.0
     assert got[("em", "door_recall_never_moved")] == pytest.approx((len(never) - 1) / len(never))
     assert got[("em", "door_recall")] == pytest.approx((len(keep)) / len(moved))
+    assert got[("em", "doors_truth")] == len(moved)  # what recall counts: every door (it had said the moved ones)
+    assert got[("grid", "doors_truth")] == moved.sum()
     # the same doors as a grid map: the never-moved ones are not what the grid stage may report
     assert got[("grid", "door_precision")] == pytest.approx(moved.sum() / len(keep))
     assert ("grid", "door_recall_never_moved") not in got
