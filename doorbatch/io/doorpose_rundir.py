@@ -13,8 +13,9 @@ from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.io import ros_messages as rm
 from doorbatch.io.annotated_mcap import Annotation
 from doorbatch.io.parquet import write_table
+from doorbatch.io.rundir import map_to_odom_tf
 from doorbatch.pipeline.doorpose.fusion import box_edges_px
-from doorbatch.pipeline.doorpose.run import DoorPoses
+from doorbatch.pipeline.doorpose.run import DoorPoses, FrameLink
 
 _SPHERE_LIST, _LINE_LIST, _TEXT = 7, 5, 9
 
@@ -43,11 +44,16 @@ def write_door_poses(path: Path, result: DoorPoses) -> None:
     write_table("door_poses", door_pose_columns(result), path)
 
 
-def doorpose_annotations(result: DoorPoses) -> Iterator[Annotation]:
+def doorpose_annotations(result: DoorPoses, link: FrameLink | None = None) -> Iterator[Annotation]:
     """Per estimate, in time order: /doorbatch/door_boxes (the chosen door box on the image),
-    /doorbatch/door_pose (door line, edges, handle side as text), /doorbatch/door_goal (the goal pose)."""
+    /doorbatch/door_pose (door line, edges, handle side as text), /doorbatch/door_goal (the goal pose); with
+    ``link``, also the output frame → odometry frame transform on /tf at the estimate's stamp."""
+    links = {} if link is None else {int(t): i for i, t in enumerate(link.stamps_ns.tolist())}
     for k, e in enumerate(sorted(result.estimates, key=lambda x: x.stamp_ns)):
         t = e.stamp_ns
+        if link is not None and t in links:
+            i = links.pop(t)
+            yield map_to_odom_tf(t, link.pose[i], link.odom[i], result.frame, link.odom_frame)
         u0, u1 = box_edges_px(e.box)
         v0, v1 = e.box.center_y - e.box.size_y / 2, e.box.center_y + e.box.size_y / 2
         yield Annotation("/doorbatch/door_boxes", "visualization_msgs/msg/ImageMarker", t,

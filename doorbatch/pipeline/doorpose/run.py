@@ -87,6 +87,31 @@ def output_frame(inputs: DoorPoseInputs, config: DoorbatchConfig) -> tuple[str, 
     return series.frame_id or want, series
 
 
+@dataclass(frozen=True)
+class FrameLink:
+    """Where the output frame (a reference's map) meets the odometry's tree: both robot poses at stamps, so that
+    the annotations can give map→odom and a viewer can draw the door poses over the robot and its scans."""
+
+    odom_frame: str
+    stamps_ns: npt.NDArray[np.int64]
+    pose: npt.NDArray[np.float64]  # (K, 3) in the output frame
+    odom: npt.NDArray[np.float64]  # (K, 3) in the odometry frame
+
+
+def frame_link(inputs: DoorPoseInputs, config: DoorbatchConfig, stamps_ns: npt.ArrayLike) -> FrameLink | None:
+    """The output frame's link to the odometry's at ``stamps_ns`` (where both poses interpolate), or None where
+    the poses are in the odometry frame or base_link already, or the log has no odometry."""
+    frame, series = output_frame(inputs, config)
+    odometry = inputs.odometry
+    if series is None or odometry is None or series is odometry or odometry.frame_id in ("", frame):
+        return None
+    stamps = np.asarray(stamps_ns, dtype=np.int64)
+    pose, ok = interpolate_poses(series.stamps_ns, series.poses, stamps)
+    odom, ok_odom = interpolate_poses(odometry.stamps_ns, odometry.poses, stamps)
+    keep = ok & ok_odom
+    return FrameLink(odometry.frame_id, stamps[keep], pose[keep], odom[keep])
+
+
 def nearest_scan(scan_stamps_ns: npt.NDArray[np.int64], stamp_ns: int, tolerance_ns: int) -> int | None:
     """Index of the scan nearest in time to ``stamp_ns``, if within the tolerance."""
     if scan_stamps_ns.size == 0:
@@ -267,7 +292,8 @@ def run_doorpose(log_path: Path, out: Path, config: DoorbatchConfig, map_path: P
         out.mkdir(parents=True, exist_ok=True)
         write_door_poses(out / "door_poses.parquet", result)
         write_annotated_mcap(log_path, out / "annotated.mcap",  # sim-time stamps: beside the input's messages
-                             on_log_clock(doorpose_annotations(result), inputs.log_clock), config)
+                             on_log_clock(doorpose_annotations(result, frame_link(
+                                 inputs, config, [e.stamp_ns for e in result.estimates])), inputs.log_clock), config)
     for w in result.warnings:
         manifest.warn(w)
     matched = [e for e in result.estimates if e.door_id >= 0]

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from doorbatch.geometry.se2 import compose, inverse
 from doorbatch.io import ros_messages as m
 from doorbatch.sim.door_scene import CAMERA_FRAME, LASER_FRAME, DoorScene, observe
 from doorbatch.sim.sensors import camera_rotation_xyzw
@@ -18,7 +19,8 @@ def door_log(path: Path, scene: DoorScene, poses: np.ndarray, rng: np.random.Gen
              other_cameras: tuple[tuple[str, str, float], ...] = (), info_topic: str = "/camera/camera_info",
              camera_xyzw: tuple[float, float, float, float] | None = None, unset_box_stamps: bool = False,
              image_topic: str = "/camera/image_raw", depth_topic: str | None = None, box_delay_ns: int = 0,
-             image_every: int = 1, box_frame: str = CAMERA_FRAME, boxes_seen_late: bool = False) -> Path:
+             image_every: int = 1, box_frame: str = CAMERA_FRAME, boxes_seen_late: bool = False,
+             map_to_odom: tuple[float, float, float] | None = None) -> Path:
     """A log of the robot at ``poses`` in a door scene: static TF, camera_info, and per pose ground truth, a
     scan, the detector's boxes (5 ms later) and, with ``images``, the rendered image. ``other_cameras``: more
     CameraInfo topics (topic, frame, focal length in px), as a RealSense publishes for depth and infrared;
@@ -27,7 +29,8 @@ def door_log(path: Path, scene: DoorScene, poses: np.ndarray, rng: np.random.Gen
     much after their image, as a detector that stamps on publishing (negative: before it, a jittering clock);
     ``image_every``: the recording kept only every n-th image; ``box_frame``: the boxes' header frame (a detector
     that names the camera's body frame, not its optical frame); ``boxes_seen_late``: the boxes (and image) seen
-    from where the robot is at their stamp (the poses interpolated), not from the scan's pose."""
+    from where the robot is at their stamp (the poses interpolated), not from the scan's pose; ``map_to_odom``:
+    also wheel odometry on /odom, in an odom frame placed there on the map (x, y, yaw)."""
     cam = scene.camera_model
     lm = scene.laser
     msgs: list[tuple[str, str, int, object]] = [
@@ -57,6 +60,9 @@ def door_log(path: Path, scene: DoorScene, poses: np.ndarray, rng: np.random.Gen
             ("/detections", "vision_msgs/msg/Detection2DArray", t + 5_000_000 + box_delay_ns,
              m.detection_array(0 if unset_box_stamps else t + 5_000_000 + box_delay_ns, box_frame, boxes)),
         ]
+        if map_to_odom is not None:
+            ox, oy, oyaw = compose(inverse(np.asarray(map_to_odom, dtype=np.float64)), pose)
+            msgs.append(("/odom", "nav_msgs/msg/Odometry", t, m.odometry(t, "odom", "base_link", ox, oy, oyaw)))
         if images and i % image_every == 0:
             msgs.append((image_topic, "sensor_msgs/msg/Image", t + 5_000_000,
                          m.image_rgb8(t + 5_000_000, CAMERA_FRAME, obs.image)))

@@ -77,6 +77,32 @@ def test_doorpose_writes_door_poses_matched_to_the_map(tmp_path: Path, capsys: p
     assert not any("--map" in w for w in json.loads((out / "manifest.json").read_text())["warnings"])
 
 
+def test_door_poses_on_the_map_hang_from_the_odometry_tree_in_the_annotations(tmp_path: Path) -> None:
+    """Door poses in a reference's map frame, in a log with wheel odometry: the annotated MCAP gave them in map
+    with a TF tree of odom → base_link only, so no viewer could draw them over the robot and its scans. It now
+    gives map → odom at each estimate, which is where the odometry's frame lies on the map."""
+    from doorbatch.io.reader import open_log
+
+    rng = np.random.default_rng(11)
+    scene = make_door_scene(rng, DoorSceneSpec(obstacles_per_scene=(1, 1)))
+    poses = np.array([[0.1 * k - 0.3, -2.6 + 0.15 * k, math.pi / 2 + 0.03 * k] for k in range(8)])
+    offset = (1.5, -0.4, 0.3)
+    log = door_log(tmp_path / "door.mcap", scene, poses, rng, map_to_odom=offset)
+    out = tmp_path / "run"
+    assert main(["doorpose", str(log), "-o", str(out), "-q"]) == 0
+    links = []
+    with open_log(out / "annotated.mcap") as reader:
+        for raw in reader.raw_messages():
+            if raw.topic == "/tf":
+                links += [t for t in raw.msg.transforms if (t.header.frame_id, t.child_frame_id) == ("map", "odom")]
+    n = len(read_table("door_poses", out / "door_poses.parquet"))
+    assert n >= 6 and n - 1 <= len(links) <= n  # the last boxes come 5 ms after the last pose: none there
+    for t in links:
+        q = t.transform.rotation
+        np.testing.assert_allclose([t.transform.translation.x, t.transform.translation.y, 2 * math.atan2(q.z, q.w)],
+                                   offset, atol=1e-6)
+
+
 def test_the_scan_is_moved_to_where_the_robot_was_when_the_image_was_taken(tmp_path: Path) -> None:
     """A robot turning at 1 rad/s in front of the door, its camera 40 ms after its laser: the scan's points go
     where the robot was at the image's stamp (the reference's motion between the two), and the door comes out
