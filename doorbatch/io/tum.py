@@ -112,7 +112,9 @@ def _parse_line(line: str) -> tuple[int, list[float]]:
         raise ValueError("quaternion has zero norm")
     stamp = parse_stamp(fields[0])
     if not _INT64_MIN <= stamp <= _INT64_MAX:
-        raise ValueError(f"timestamp {fields[0]!r} is out of the int64 nanosecond range")
+        raise ValueError(f"timestamp {fields[0]!r} is out of the int64 nanosecond range (TUM stamps are seconds; "
+                         f"{fields[0]!r} looks like nanoseconds)" if abs(float(fields[0])) > 1e15 else
+                         f"timestamp {fields[0]!r} is out of the int64 nanosecond range")
     return stamp, values
 
 

@@ -202,6 +202,8 @@ def test_yaml_numbers_written_like_1e_minus_5_are_accepted(tmp_path: Path) -> No
         ("image: m.pgm\nresolution: -1\norigin: [0, 0, 0]\n", None, "m.yaml", "positive"),
         ("image: m.pgm\nresolution: 0.1\norigin: [0, 0, 0]\nmode: fancy\n", None, "m.yaml", "mode"),
         ("image: m.pgm\nresolution: 0.1\norigin: [0, 0, 0]\nnegate: 2\n", None, "m.yaml", "negate"),
+        ("image: m.pgm\nresolution: 0.1\norigin: [0, 0, 0]\noccupied_thresh: 0.1\nfree_thresh: 0.6\n", None,
+         "m.yaml", "swapped"),
         ("origin: [0, 0, 0]\nresolution: 0.1\n", None, "m.yaml", "image"),
         ("image: [unclosed\n", None, "m.yaml", "not valid YAML"),
         ("image: m.pgm\nresolution: 0.1\norigin: [0, 0, 0]\n", b"", "m.pgm", "cannot read"),
