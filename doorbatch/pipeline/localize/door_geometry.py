@@ -190,10 +190,28 @@ def with_unmoved_swing(doors: DoorSet, unmoved: npt.ArrayLike, swing_rad: float,
     if swing_rad <= 0.0 or not unmoved.any():
         return doors
     seen = (lo + hi) / 2
-    opens_pos = unmoved & (seen > side_known_rad)
-    opens_neg = unmoved & (seen < -side_known_rad)
-    unknown = unmoved & ~opens_pos & ~opens_neg
+    unknown = hinge_unknown(unmoved, doors, side_known_rad)
+    opens_pos = unmoved & ~unknown & (seen > 0.0)
+    opens_neg = unmoved & ~unknown & (seen < 0.0)
     hi = np.where(opens_pos | unknown, np.maximum(hi, swing_rad), hi)
     lo = np.where(opens_neg | unknown, np.minimum(lo, -swing_rad), lo)
     return DoorSet(doors.hinge, doors.length, doors.closed_yaw, np.minimum(lo, 0.0), np.maximum(hi, 0.0),
                    doors.door_id)
+
+
+def hinge_unknown(unmoved: npt.ArrayLike, doors: DoorSet, side_known_rad: float) -> npt.NDArray[np.bool_]:
+    """(D,) whether each door never moved while mapping and was seen closed (within ``side_known_rad``): such a
+    leaf shows no hinge, both its ends explain the same hits, so the map's hinge may be its free end."""
+    seen = (np.asarray(doors.angle_min, dtype=np.float64) + np.asarray(doors.angle_max, dtype=np.float64)) / 2
+    return np.asarray(np.asarray(unmoved, dtype=np.bool_) & (np.abs(seen) <= side_known_rad), dtype=np.bool_)
+
+
+def other_end(doors: DoorSet) -> DoorSet:
+    """The doors hinged at their free ends instead: hinge h + L·(cos ψ, sin ψ), closed direction ψ + π, range
+    the closed angle alone; door ids kept."""
+    yaw = np.asarray(doors.closed_yaw, dtype=np.float64)
+    tip = doors.hinge + np.asarray(doors.length)[:, None] * np.stack([np.cos(yaw), np.sin(yaw)], axis=1)
+    n = len(doors)
+    return DoorSet(tip, doors.length, np.arctan2(np.sin(yaw + np.pi), np.cos(yaw + np.pi)), np.zeros(n), np.zeros(n),
+                   doors.ids)
+

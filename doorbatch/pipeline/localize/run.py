@@ -42,7 +42,13 @@ from doorbatch.pipeline.localize.convergence import (
     scan_fit,
     see_through_share,
 )
-from doorbatch.pipeline.localize.door_geometry import subset_doors, with_closed_in_range, with_unmoved_swing
+from doorbatch.pipeline.localize.door_geometry import (
+    hinge_unknown,
+    other_end,
+    subset_doors,
+    with_closed_in_range,
+    with_unmoved_swing,
+)
 from doorbatch.pipeline.localize.door_observation import leaves_outside_range
 from doorbatch.pipeline.localize.likelihood_field import (
     OCCUPIED_AT_LEAST,
@@ -85,6 +91,9 @@ class LocalizationMap:
     # A doorbatch map's pose source (its manifest's): "scanmatch" and "odometry" maps lie in their first pass's
     # odometry frame, not a reference's. None: not known (another tool's map).
     pose_source: str | None = None
+    # (D,) doors that never moved while mapping and were seen closed: their hinge may be at their free end
+    # (door_geometry.hinge_unknown). None: none such.
+    hinge_unknown: npt.NDArray[np.bool_] | None = None
 
     @classmethod
     def of(cls, occ: OccupancyMap, doors: DoorSet, config: LocalizeConfig,
@@ -120,20 +129,20 @@ def load_localization_map(map_path: Path, config: LocalizeConfig) -> Localizatio
     if map_path.is_dir() and not (map_path / "map.yaml").is_file() and not (map_path / "metadata.yaml").is_file():
         raise UsageError(f"--map {map_path}: the folder has no map.yaml (a doorbatch map directory) and is no "
                          f"ROS 2 bag")
+    doors, unknown = DoorSet.empty(), None
     if is_map_log(map_path):
         occ = read_map_topic(map_path, config.map_topic)
-        doors = DoorSet.empty()
     else:
         yaml_path = map_path / "map.yaml" if map_path.is_dir() else map_path
         occ = read_map(yaml_path)
         doors_path = map_doors_file(map_path)
-        doors = DoorSet.empty()
         if doors_path is not None:
-            doors = with_unmoved_swing(read_door_set(doors_path.parent), ~read_door_moved(doors_path.parent),
-                                       math.radians(config.door_unmoved_swing_deg),
-                                       math.radians(config.door_angle_margin_deg))
-    doors = with_closed_in_range(doors)
-    return LocalizationMap.of(occ, doors, config, map_pose_source(map_path))
+            mapped, unmoved = read_door_set(doors_path.parent), ~read_door_moved(doors_path.parent)
+            side_known = math.radians(config.door_angle_margin_deg)
+            doors = with_unmoved_swing(mapped, unmoved, math.radians(config.door_unmoved_swing_deg), side_known)
+            unknown = hinge_unknown(unmoved, mapped, side_known)
+    lmap = LocalizationMap.of(occ, with_closed_in_range(doors), config, map_pose_source(map_path))
+    return replace(lmap, hinge_unknown=unknown) if unknown is not None and unknown.any() else lmap
 
 
 def truth_localization_map(truth_path: Path, config: LocalizeConfig) -> LocalizationMap:
@@ -267,6 +276,22 @@ def outside_range_notes(seen: npt.NDArray[np.float64], doors: DoorSet, min_updat
                      f"{math.degrees(float(doors.angle_max[d])):.0f}° (no mapping pass showed it there): its angle "
                      "there is not estimated and its leaf counts as clutter; a map from passes that show the door "
                      "there knows it")
+    return notes
+
+
+def other_end_notes(seen: npt.NDArray[np.float64], flipped: DoorSet, min_updates: int) -> list[str]:
+    """Warnings for never-moved doors whose leaf was seen swinging about their free end (``seen``: (updates, K)
+    angles from :func:`leaves_outside_range` on :func:`~door_geometry.other_end` of them, NaN where not) in at
+    least ``min_updates`` updates."""
+    notes = []
+    for k in np.flatnonzero(np.sum(np.isfinite(seen), axis=0) >= min_updates).tolist():
+        angles = seen[np.isfinite(seen[:, k]), k]
+        x, y = flipped.hinge[k]
+        angle = math.degrees(float(np.median(angles)))
+        notes.append(f"door {flipped.ids[k]}: its leaf was seen swinging about its other end ({x:.2f}, {y:.2f}), "
+                     f"at {angle:.0f}° from closed in {angles.size} updates: the map has its hinge at the free end (a "
+                     "door that never moved while mapping shows no hinge; mapping passes that show it open tell), so "
+                     "its angle is not estimated and its leaf counts as clutter")
     return notes
 
 
@@ -539,6 +564,10 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
     k_draw = max(1, lc.annotate_particles)
     updated_scans: list[int] = []  # the scan of each update
     outside: list[FloatArray] = []  # per RBPF update, each door's leaf angle where seen outside its range (NaN: not)
+    unknown_rows = (np.flatnonzero(lmap.hinge_unknown) if method == "rbpf" and lmap.hinge_unknown is not None
+                    else np.zeros(0, dtype=np.intp))
+    flipped = other_end(subset_doors(lmap.doors, unknown_rows)) if unknown_rows.size else None
+    tip_seen: list[FloatArray] = []  # per RBPF update, those doors' leaf angle about their free end (NaN: not)
     if progress is not None:
         progress.set_total(len(rec.scans))
     for i in range(len(rec.scans)):
@@ -602,6 +631,9 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
                                         recovery=RecoveryState())  # a fresh start, as AMCL's pf_init
         if method == "rbpf" and len(lmap.doors):
             outside.append(leaves_outside_range(hits, mean, lmap.doors, lc, math.radians(lc.door_behind_hinge_deg)))
+            if flipped is not None:  # a leaf about the free end, where the door update found none about the hinge
+                at_tip = leaves_outside_range(hits, mean, flipped, lc, math.radians(lc.door_behind_hinge_deg))
+                tip_seen.append(np.where(observed[unknown_rows], np.nan, at_tip))
         # a fixed-size draw of the (equally weighted after resampling) particles for the annotated MCAP
         pick = np.linspace(0, len(p) - 1, k_draw).round().astype(np.intp)
         track.add(scan.stamp_ns, mean, cov, odom[i], len(p), diag.neff, dmean, dstd, observed, p.pose[pick])
@@ -620,6 +652,8 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
                         "see frames.odom)")
     if outside:
         warnings += outside_range_notes(np.array(outside), lmap.doors, lc.door_outside_range_min_updates)
+    if tip_seen and flipped is not None:
+        warnings += other_end_notes(np.array(tip_seen), flipped, lc.door_outside_range_min_updates)
     ambiguous = multimodal(state.particles, lc)
     warnings.extend([multimodal_note(state.particles, lc, tracked=init != "global")] if ambiguous else [])
     if init == "global" and converged_ns is not None and lc.rival_check:

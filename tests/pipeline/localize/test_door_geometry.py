@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 from doorbatch.maps import DoorSet
 from doorbatch.pipeline.localize.door_geometry import (
     doors_in_reach,
+    hinge_unknown,
     leaf_endpoints,
     point_to_leaf_distance,
     subset_doors,
@@ -151,4 +152,6 @@ def test_a_never_moved_door_opens_by_the_swing_to_the_side_it_was_seen_open_or_t
     np.testing.assert_allclose(np.degrees(out.angle_min), [-90.0, 0.0, -90.0, 0.0])
     np.testing.assert_allclose(np.degrees(out.angle_max), [0.0, 90.0, 90.0, 40.0])
     assert with_unmoved_swing(doors, unmoved, 0.0, math.radians(10.0)) is doors
+    # only the one seen closed may have its hinge at its free end
+    assert hinge_unknown(unmoved, doors, math.radians(10.0)).tolist() == [False, False, True, False]
 

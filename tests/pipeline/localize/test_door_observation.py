@@ -291,3 +291,36 @@ def test_only_doors_seen_outside_their_range_in_enough_updates_are_warned_of() -
     (note,) = outside_range_notes(seen, doors, 10)
     assert note.startswith("door 0 (hinge 2.00, 1.00): its leaf was seen at -43° in 12 updates, outside its mapped "
                            "range 0° to 46°")
+
+
+@pytest.mark.parametrize(("about_tip_deg", "seen"), [(-60.0, True), (0.0, False)])
+def test_a_leaf_swinging_about_a_never_moved_doors_free_end_is_seen_there(about_tip_deg: float, seen: bool) -> None:
+    """A door closed in every mapping pass shows no hinge, and the map may put it at the free end (a helper's
+    maps: 4 of 6 such doors). Opened about its real hinge, its leaf was clutter and nothing said why. Searched
+    about the other end (``other_end``), the open leaf is found at its angle there; the closed leaf is not."""
+    from doorbatch.pipeline.localize.door_geometry import other_end
+    from doorbatch.pipeline.localize.run import other_end_notes
+
+    config = LocalizeConfig()
+    mapped = DoorSet(np.array([[2.0, 1.0]]), np.array([0.9]), np.array([0.0]), np.array([0.0]), np.array([0.0]),
+                     door_id=np.array([7], np.int32))  # hinge mapped at x = 2.0; the real one is at 2.9
+    flipped = other_end(mapped)
+    np.testing.assert_allclose(flipped.hinge, [[2.9, 1.0]])
+    assert abs(flipped.closed_yaw[0]) == pytest.approx(np.pi)
+    yaw = np.pi + np.radians(about_tip_deg)
+    u = np.array([np.cos(yaw), np.sin(yaw)])
+    leaf = np.array([2.9, 1.0]) + np.linspace(0.08, 0.98, 40)[:, None] * u
+    wall = np.stack([np.linspace(3.0, 5.0, 60), np.full(60, 1.0)], 1)  # beyond the real hinge
+    angle = leaves_outside_range_of(np.concatenate([leaf, wall]), flipped, config)
+    if not seen:
+        assert np.isnan(angle[0])
+        return
+    assert np.degrees(angle[0]) == pytest.approx(about_tip_deg, abs=2.0)
+    (note,) = other_end_notes(np.full((12, 1), angle[0]), flipped, 10)
+    assert note.startswith("door 7: its leaf was seen swinging about its other end (2.90, 1.00), at -60° from closed")
+
+
+def leaves_outside_range_of(points: FloatArray, doors: DoorSet, config: LocalizeConfig) -> FloatArray:
+    from doorbatch.pipeline.localize.door_observation import leaves_outside_range
+
+    return leaves_outside_range(points, np.zeros(3), doors, config, np.radians(config.door_behind_hinge_deg))
