@@ -1,7 +1,9 @@
 """The six Parquet tables of DESIGN.md (Outputs): their exact schemas, a checked writer and reader.
 
 Columns are SI units in the map frame; angles are radians that the producing stage wraps to (−π, π]
-(this module stores them as given and does not rewrap). Unlabelled floats are float64.
+(this module stores them as given and does not rewrap). Unlabelled floats are float64. The writer enforces the
+exact schema; the reader takes what other tools write of the same data (columns by name, in any order, extra
+columns left out, lossless casts: :func:`read_table`) and refuses bad values (:mod:`doorbatch.io.table_values`).
 
 | table | columns |
 | --- | --- |
@@ -18,15 +20,18 @@ Columns are SI units in the map frame; angles are radians that the producing sta
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import pyarrow as pa
+import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from doorbatch.errors import InputDataError
 from doorbatch.io.atomic import atomic_path
+from doorbatch.io.table_values import DOOR_SOURCES, check_values, describe_row
 
 F64 = pa.float64()
 I32 = pa.int32()
@@ -83,11 +88,15 @@ TABLES: dict[str, pa.Schema] = {
 
 # String columns whose values DESIGN.md enumerates: checked on write.
 ALLOWED_VALUES: dict[tuple[str, str], frozenset[str]] = {
-    ("doors", "source"): frozenset({"grid", "em"}),
+    ("doors", "source"): DOOR_SOURCES,
     ("trajectory", "method"): frozenset({"mcl", "rbpf", "odom", "reference"}),
     ("door_poses", "handle_side"): frozenset({"left", "right", "none"}),
     ("door_poses", "fit"): frozenset({"naive", "lsq", "ransac"}),
 }
+
+
+# Tables whose nulls read_table keeps as they are: doorbatch only copies metrics, never computes with them.
+NULLS_KEPT = frozenset({"metrics"})
 
 
 def schema_of(name: str) -> pa.Schema:
@@ -186,42 +195,125 @@ def write_table(name: str, columns: Mapping[str, Any] | pa.Table, dest: Path) ->
         pq.write_table(table, tmp)
 
 
-def _schema_diff(found: pa.Schema, expected: pa.Schema) -> str:
-    """A short description of how ``found`` differs from ``expected``."""
-    missing = [n for n in expected.names if n not in found.names]
-    extra = [n for n in found.names if n not in expected.names]
-    types = [
-        f"{f.name} is {found.field(f.name).type}, expected {f.type}"
-        for f in expected
-        if f.name in found.names and found.field(f.name).type != f.type
-    ]
-    parts = []
+def _plain(column: pa.ChunkedArray) -> pa.ChunkedArray:
+    """A dictionary-encoded column (a pandas categorical, say) as its values; other columns unchanged."""
+    if pa.types.is_dictionary(column.type):
+        return column.cast(column.type.value_type)
+    return column
+
+
+def _castable(src: pa.DataType, dst: pa.DataType) -> bool:
+    """Whether a column of type ``src`` may hold the values of a ``dst`` column: strings of any layout for a
+    string, integers for an integer (their values are checked by the cast), floats or integers for a float64,
+    bools for a bool (an all-null or empty column fits anything; its nulls are judged after)."""
+    if pa.types.is_null(src):
+        return True
+    if pa.types.is_string(dst):
+        return bool(pa.types.is_string(src) or pa.types.is_large_string(src) or pa.types.is_string_view(src))
+    if pa.types.is_integer(dst):
+        return bool(pa.types.is_integer(src))
+    if pa.types.is_floating(dst):
+        return bool(pa.types.is_floating(src) or pa.types.is_integer(src))
+    return bool(pa.types.is_boolean(dst) and pa.types.is_boolean(src))
+
+
+def _conform_column(name: str, field: pa.Field, column: pa.ChunkedArray, path: Path) -> pa.ChunkedArray:
+    """``column`` of the file as the contract's ``field``, losing nothing, or InputDataError."""
+    where = f"{name} table: column {field.name!r}"
+    column = _plain(column)
+    src = column.type
+    # A 0/1 integer column for a bool one is taken: tools without a bool type (CSV converters, R, an
+    # astype(int) in pandas) write flags so, and 0/1 → False/True loses nothing; any other value is refused.
+    if pa.types.is_boolean(field.type) and pa.types.is_integer(src):
+        outside = pc.or_(pc.less(column, pa.scalar(0, src)), pc.greater(column, pa.scalar(1, src)))
+        bad = int(pc.index(outside, True).as_py())
+        if bad >= 0:
+            raise InputDataError(f"{where} is {src} with value {column[bad].as_py()} in row {bad}, expected bool "
+                                 "(or integers 0 and 1)", path=path)
+        return pc.not_equal(column, pa.scalar(0, src))
+    if not _castable(src, field.type):
+        raise InputDataError(f"{where} is {src}, expected {field.type}", path=path)
+    try:
+        return column.cast(field.type, safe=True)
+    except (pa.ArrowException, TypeError, ValueError) as err:
+        reason = str(err).splitlines()[0] if str(err) else type(err).__name__
+        raise InputDataError(f"{where} is {src} with a value that {field.type} cannot hold exactly ({reason}), "
+                             f"expected {field.type}", path=path) from err
+
+
+def _settle_nulls(name: str, table: pa.Table, path: Path) -> pa.Table:
+    """Nulls of ``table`` (with the contract's schema) as doorbatch reads them: NaN in a float64 column, refused
+    in any other column, except in metrics (copied as they are)."""
+    if name in NULLS_KEPT:
+        return table
+    for i, field in enumerate(table.schema):
+        column = table.column(i)
+        if column.null_count == 0:
+            continue
+        if pa.types.is_floating(field.type):
+            # pandas writes NaN as null (pd.read_parquet(p).to_parquet(p) turns every NaN of doorbatch's into one)
+            table = table.set_column(i, field, pc.fill_null(column, float("nan")))
+            continue
+        row = int(pc.index(pc.is_null(column), True).as_py())
+        raise InputDataError(f"{name} table, {describe_row(name, table, row)}: column {field.name!r} is null, "
+                             f"expected a value ({field.type}) in every row", path=path)
+    return table
+
+
+def _pandas_index_hint(schema: pa.Schema, missing: list[str]) -> str:
+    """A hint when pandas kept a missing column as its index in metadata only (a RangeIndex), else ''."""
+    try:
+        pandas = json.loads((schema.metadata or {}).get(b"pandas", b"{}"))
+        names = {i.get("name") for i in pandas.get("index_columns", []) if isinstance(i, dict)}
+    except (ValueError, AttributeError):
+        return ""
+    kept = [n for n in missing if n in names]
+    return f"; pandas stored {kept} as its index only: write with df.reset_index()" if kept else ""
+
+
+def _conform(name: str, found: pa.Table, path: Path) -> pa.Table:
+    """``found`` with exactly table ``name``'s contract columns, in its order and types (see :func:`read_table`)."""
+    expected = schema_of(name)
+    missing = [n for n in expected.names if n not in found.column_names]
     if missing:
-        parts.append(f"missing columns {missing}")
-    if extra:
-        parts.append(f"unexpected columns {extra}")
-    parts += types
-    if not parts:
-        parts = [f"column order {found.names}, expected {expected.names}"]
-    return "; ".join(parts)
+        raise InputDataError(f"{name} table: missing columns {missing} (the file has {found.column_names})"
+                             f"{_pandas_index_hint(found.schema, missing)}", path=path)
+    twice = [n for n in expected.names if found.column_names.count(n) > 1]
+    if twice:
+        raise InputDataError(f"{name} table: columns {twice} appear more than once", path=path)
+    columns = [_conform_column(name, f, found.column(f.name), path) for f in expected]
+    return _settle_nulls(name, pa.Table.from_arrays(columns, schema=expected), path)
 
 
 def read_table(name: str, path: Path) -> pa.Table:
-    """Read the Parquet file ``path`` and check that its schema is exactly table ``name``'s contract.
+    """Read table ``name`` from the Parquet file ``path`` as its contract schema, and check its values.
+
+    Files other tools write are taken when they hold the contract's data: columns are matched by name, in any
+    order; columns the contract lacks are left out; each column is cast to its contract type when that loses
+    nothing (string, large_string or string_view to string; any integer type to int32/int64 when every value
+    fits; float16/float32, and integers that float64 holds exactly, to float64; bool, or integers all 0 or 1,
+    to bool; a dictionary-encoded column by its values). A null in a float64 column reads as NaN (pandas writes
+    NaN so); a null anywhere else is refused (metrics keeps its nulls). Then
+    :func:`~doorbatch.io.table_values.check_values` refuses values doorbatch cannot use.
+
+    Returns:
+        A table with exactly the contract's columns, in its order and types, without schema metadata.
 
     Raises:
         ValueError: ``name`` is not one of :data:`TABLES`.
-        InputDataError: The file is missing, not Parquet, or its schema differs (names the file).
+        InputDataError: The file is missing or not Parquet; a contract column is missing, of another kind
+            (double for int64, string for int32), holds a value its type cannot (2**40 for int32), or a null
+            where one is refused; or a value check fails. One line naming the file and the column.
     """
     expected = schema_of(name)
     path = Path(path)
     if not path.is_file():
         raise InputDataError(f"{name} table: no such file", path=path)
     try:
-        table = pq.read_table(path)
+        names = pq.read_schema(path).names
+        table = pq.read_table(path, columns=[n for n in names if n in expected.names])
     except (OSError, pa.ArrowException) as err:
         raise InputDataError(f"{name} table: not a readable Parquet file: {err}", path=path) from err
-    if not table.schema.equals(expected, check_metadata=False):
-        diff = _schema_diff(table.schema, expected)
-        raise InputDataError(f"not a doorbatch {name} table: {diff}", path=path)
-    return table.replace_schema_metadata(None)
+    table = _conform(name, table, path)
+    check_values(name, table, path)
+    return table
