@@ -82,7 +82,7 @@ def m_step_walls(beams: BeamSet, state: MapState, config: ObjectMapConfig) -> Ob
     for j, wall in enumerate(walls):
         sel = beams.hit & (state.first.cls == WALL) & (state.first.obj == j)
         normal, offset = wall.normal, wall.offset
-        if int(sel.sum()) >= 3:
+        if int(np.count_nonzero(state.e[sel] > 0.0)) >= 3:  # points it explains (weights all 0: no line, NaN)
             normal, offset = fit_line(pts[sel], state.e[sel])
             if normal @ wall.normal < 0.0:
                 normal, offset = -normal, -offset

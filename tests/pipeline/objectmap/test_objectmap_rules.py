@@ -3,6 +3,7 @@ the map prior's parameter counts, the colour variance floor, the door-angle sear
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import replace
 
 import numpy as np
@@ -85,6 +86,24 @@ def test_a_wall_is_kept_only_if_its_hits_pay_for_its_line_segment_and_length(n_h
         assert -2.0 * config.rho_static < cost < 0.0
     new_map = m_step_walls(beams, evaluate(beams, obj_map, config), config)
     assert len(new_map.walls) == (1 if kept else 0)
+
+
+def test_a_wall_whose_hits_all_have_zero_expectation_keeps_its_line() -> None:
+    """A wall whose hits the E-step gives weight 0 (all outliers) has no line to fit: eq. (8)'s weights summed
+    to 0, the fit divided by it (a helper's 100 m floor: RuntimeWarning, NaN) and the wall's line became NaN. It
+    now keeps its line, and the segment DP judges it as before."""
+    config = DoorbatchConfig().em
+    xs = np.linspace(0.0, 2.0, 60)
+    beams = _beams_from(np.zeros(2), np.stack([xs, np.full(60, 2.0)], 1))
+    wall = Wall(np.array([0.0, 1.0]), 2.0, np.array([[-2.0, 0.0]]))
+    obj_map = ObjectMap([wall], [], ClassParams(0.9), 1)
+    state = evaluate(beams, obj_map, config)
+    state = replace(state, e=np.zeros_like(state.e))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        new_map = m_step_walls(beams, state, config)
+    for w in new_map.walls:
+        assert np.isfinite(w.normal).all() and np.isfinite(w.offset)
 
 
 # --- run_em (em.py): a wall M-step that lowers the log posterior is undone ---------------------------------
