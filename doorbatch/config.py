@@ -923,6 +923,10 @@ class ObjectMapConfig(Section):
     door_width_max_m: float = Field(1.3, gt=0.0)
     door_width_init_m: float = Field(0.9, gt=0.0)
     per_door_width: bool = True
+    # A door whose hits scatter about its leaf line by more than this many times the walls' scatter (RMS) is no
+    # door: a leaf is a thin plane, as a wall is (stage.without_thick_leaves). Expert choice: 3, well outside what
+    # one laser gives two planes; a pillar's two faces about their chord scatter 7.3 cm against walls' ~1 cm.
+    leaf_scatter_max_ratio: float = Field(3.0, gt=1.0)
     angle_search_step_deg: float = Field(2.0, gt=0.0)
     # A leaf turns at most this far from its closed direction (keeps the wall behind the hinge out).
     max_opening_deg: float = Field(135.0, gt=0.0, lt=180.0)
