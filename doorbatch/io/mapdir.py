@@ -70,7 +70,8 @@ def manifest_pose_source(manifest: Manifest) -> str | None:
 def map_pose_source(map_path: Path) -> str | None:
     """The pose source a doorbatch map directory was built from (``manifest.json``), or None."""
     folder = map_path if map_path.is_dir() else map_path.parent
-    if not (folder / "manifest.json").is_file() or not (folder / "map.yaml").is_file():
+    yaml_named = map_path.suffix in (".yaml", ".yml") and map_path.is_file()  # a map YAML of any name
+    if not (folder / "manifest.json").is_file() or not (yaml_named or (folder / "map.yaml").is_file()):
         return None
     return manifest_pose_source(Manifest.read(folder / "manifest.json"))
 

@@ -192,7 +192,7 @@ def read_run_dir(run_dir: Path, config: DoorbatchConfig, name: str | None = None
     extra: dict[str, Any] = dict(manifest.extra) if manifest else {}
     inputs = _input_paths(manifest) if manifest else []
     log_path = inputs[0] if inputs else None
-    maps = [p.parent for p in inputs[1:] if p.name == "map.yaml"]
+    maps = [p.parent for p in inputs[1:] if p.name == "doors.parquet"]  # the doors the run used (beside any YAML)
     converged_after = extra.get("converged_after_s")
     reference, truth = _log_sidecars(log_path, config, find_reference, {} if memo is None else memo)
     params = extra.get("params")

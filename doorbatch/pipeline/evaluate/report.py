@@ -443,6 +443,19 @@ def _convergence_rows(run: RunTables, reference: ReferenceTrajectory | None, cfg
     return rows
 
 
+def _unknown_doors_note(run: RunTables) -> str | None:
+    """A warning when the run's door states name doors its map's doors.parquet lacks (a run scored against a map
+    rebuilt or renumbered since): those are not scored; None when every door_id is the map's."""
+    if run.door_states is None or run.map_doors is None:
+        return None
+    unknown = sorted(set(np.unique(run.door_states.door_id).tolist()) - set(run.map_doors.ids.tolist()))
+    if not unknown:
+        return None
+    shown = ", ".join(str(i) for i in unknown[:8]) + (", …" if len(unknown) > 8 else "")
+    return (f"run {run.name}: its door states name door_id {shown}, which its map's doors.parquet lacks (a map "
+            "rebuilt or renumbered since the run?): those doors are not scored")
+
+
 def _other_log_note(run: RunTables, truth: SimTruth) -> str | None:
     """A warning when the run's updates lie outside the time span of the truth's log (``start_ns`` … ``end_ns``): its
     door angles are another log's (``--world`` given the mapping log's truth for a localization run scored the doors
@@ -630,6 +643,8 @@ def evaluate_runs(runs: Sequence[RunTables], config: DoorbatchConfig, *,
         if run_truth is not None and run.door_states is not None and (note := _other_log_note(run, run_truth)):
             warnings.append(note)
             run_truth = None
+        if run_truth is not None and (note := _unknown_doors_note(run)):
+            warnings.append(note)
         state_rows, state_series = _door_state_part(run, run_truth, cfg)
         rows += state_rows
         door_series += state_series

@@ -424,6 +424,11 @@ def test_the_map_yaml_of_a_map_directory_keeps_its_doors(sample_map: Path, tmp_p
         read_table("doors", sample_map / "doors.parquet").column("door_id").to_pylist())
     inputs = [Path(i["path"]).name for i in json.loads((run / "manifest.json").read_text())["inputs"]]
     assert inputs == ["loc_open.mcap", yaml_name, "doors.parquet"]  # every file the run used
+    # and evaluate scores its door states against those doors (a renamed YAML had lost them there: a reviewer)
+    assert main(["evaluate", str(run), "--world", str(SAMPLE_LOGS / "loc_open.truth.yaml"), "-o",
+                 str(tmp_path / "eval"), "-q"]) == 0
+    assert "door_state_error_mean" in read_table("metrics", tmp_path / "eval" / "metrics.parquet").column(
+        "metric").to_pylist()
 
 
 def test_a_folder_without_map_yaml_is_named_as_such(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -574,7 +579,8 @@ def test_a_run_with_one_update_over_many_scans_says_why(sample_map: Path, tmp_pa
     assert any("1 filter update over" in w and "frames.odom" in w for w in warnings)
 
 
-def test_door_states_name_each_door_by_its_door_id_in_the_map(sample_map: Path, tmp_path: Path) -> None:
+def test_door_states_name_each_door_by_its_door_id_in_the_map(sample_map: Path, tmp_path: Path,
+                                                               capsys: pytest.CaptureFixture[str]) -> None:
     """A doors.parquet whose door_id are not the row numbers (a map edited or written by another tool): the
     door states and warnings had named the doors by their rows, so a join on door_id matched nothing or the
     wrong door, and the scoring read them as rows. Now they carry the map's door_id: the same run with the ids
@@ -602,3 +608,9 @@ def test_door_states_name_each_door_by_its_door_id_in_the_map(sample_map: Path, 
     assert named["door_id"] == [100 + 7 * k for k in plain["door_id"]]
     assert named["angle"] == plain["angle"]
     assert scores[0] == scores[1] and scores[0]["door_state_error_mean"] < math.radians(5.0)
+    # the map renumbered again since the run: its door states are not scored, and evaluate says why
+    shutil.copy(sample_map / "doors.parquet", renamed / "doors.parquet")
+    capsys.readouterr()
+    assert main(["evaluate", str(tmp_path / "renamed"), "--reference", str(log), "--world", str(truth), "-o",
+                 str(tmp_path / "stale_eval")]) == 0
+    assert "its door states name door_id 100, 107, 114" in capsys.readouterr().err
