@@ -206,9 +206,12 @@ def read_map_yaml(yaml_path: Path) -> MapYaml:
     x, y, yaw = _origin(fields, yaml_path)
     occupied = _number(fields, "occupied_thresh", yaml_path, 0.65)
     free = _number(fields, "free_thresh", yaml_path, 0.196)
-    if not 0.0 <= free < occupied <= 1.0 and mode != MapMode.RAW.value:  # raw mode reads neither
-        raise InputDataError(f"map YAML needs 0 <= free_thresh < occupied_thresh <= 1, got free_thresh {free}, "
-                             f"occupied_thresh {occupied} (swapped?)", path=yaml_path)
+    # raw mode reads neither; trinary takes equal thresholds (a binary image), scale divides by their difference
+    trinary = mode == MapMode.TRINARY.value
+    if mode != MapMode.RAW.value and not (0.0 <= free <= occupied <= 1.0 and (free < occupied or trinary)):
+        need = "<=" if trinary else "<"
+        raise InputDataError(f"map YAML ({mode} mode) needs 0 <= free_thresh {need} occupied_thresh <= 1, got "
+                             f"free_thresh {free}, occupied_thresh {occupied} (swapped?)", path=yaml_path)
     return MapYaml(
         image=yaml_path.parent / image, resolution_m=resolution, origin_x_m=x, origin_y_m=y,
         origin_yaw_rad=yaw, negate=bool(negate), occupied_thresh=occupied, free_thresh=free, mode=MapMode(mode),

@@ -7,7 +7,7 @@ row (its door_id for doors) and column, and a hint:
 | table | refused |
 | --- | --- |
 | doors | a non-finite hinge_x, hinge_y, length, closed_yaw, angle_min or angle_max; length ≤ 0; an angle outside |
-|       | [−π, π] (degrees, or not wrapped); angle_min > angle_max; a door_id twice; source not grid or em |
+|       | [−π, π] (degrees, or not wrapped); angle_min > angle_max; a door_id < 0 or twice; source not grid or em |
 | trajectory | a non-finite x, y or yaw; yaw outside [−π, π]; stamp_ns not strictly increasing within one |
 |            | (log, method) |
 | door_states | a non-finite angle where observed is true |
@@ -145,6 +145,9 @@ def _check_doors(t: _Table) -> None:
         raise t.fail(row, "angle_min", f"{lo[row]:.6g}, above angle_max {hi[row]:.6g}",
                      "the opening range is angle_min ≤ angle_max (swapped?)")
     ids = t.table.column("door_id").to_numpy()
+    row = _first(ids < 0)
+    if row is not None:  # door_poses' −1 is "no mapped door"
+        raise t.fail(row, "door_id", f"{ids[row]}", "door ids are ≥ 0 (door_poses names an unmatched door −1)")
     _, first_rows = np.unique(ids, return_index=True)
     again = np.ones(ids.size, dtype=bool)
     again[first_rows] = False

@@ -204,6 +204,8 @@ def test_yaml_numbers_written_like_1e_minus_5_are_accepted(tmp_path: Path) -> No
         ("image: m.pgm\nresolution: 0.1\norigin: [0, 0, 0]\nnegate: 2\n", None, "m.yaml", "negate"),
         ("image: m.pgm\nresolution: 0.1\norigin: [0, 0, 0]\noccupied_thresh: 0.1\nfree_thresh: 0.6\n", None,
          "m.yaml", "swapped"),
+        ("image: m.pgm\nresolution: 0.1\norigin: [0, 0, 0]\nmode: scale\noccupied_thresh: 0.5\nfree_thresh: 0.5\n",
+         None, "m.yaml", "scale mode"),
         ("origin: [0, 0, 0]\nresolution: 0.1\n", None, "m.yaml", "image"),
         ("image: [unclosed\n", None, "m.yaml", "not valid YAML"),
         ("image: m.pgm\nresolution: 0.1\norigin: [0, 0, 0]\n", b"", "m.pgm", "cannot read"),
@@ -259,3 +261,13 @@ def test_trinary_mode_averages_alpha_in_as_both_map_servers_do(tmp_path: Path) -
     for mode, expected in (("trinary", [0, 100]), ("scale", [1, 100])):
         (tmp_path / f"{mode}.yaml").write_text(f"image: m.png\nresolution: 0.1\norigin: [0, 0, 0]\nmode: {mode}\n")
         assert read_map(tmp_path / f"{mode}.yaml").occupancy[0].tolist() == expected
+
+
+def test_equal_thresholds_read_a_binary_image_in_trinary_mode(tmp_path: Path) -> None:
+    """free_thresh = occupied_thresh = 0.5 (a binary image, as map_server loads it): dark cells occupied, light
+    free; only scale mode, which divides by their difference, refuses them."""
+    (tmp_path / "m.pgm").write_bytes(encode_pgm(np.array([[0, 254]], dtype=np.uint8)))
+    (tmp_path / "m.yaml").write_text("image: m.pgm\nresolution: 0.1\norigin: [0, 0, 0]\noccupied_thresh: 0.5\n"
+                                     "free_thresh: 0.5\n")
+    assert read_map(tmp_path / "m.yaml").occupancy.tolist() == [[100, 0]]
+

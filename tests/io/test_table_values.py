@@ -86,6 +86,7 @@ def test_valid_doors_and_trajectory_are_taken(tmp_path: Path) -> None:
                                     "wraps to 0.5,"),
     ("angle_min", 2.0, "'angle_min' is 2, above angle_max 0; the opening range is angle_min ≤ angle_max"),
     ("door_id", 4, "'door_id' is 4, as in row 0; door ids must be unique"),
+    ("door_id", -1, "'door_id' is -1; door ids are ≥ 0"),
     ("source", "manual", "'source' is 'manual'; expected one of em, grid"),
 ])
 def test_bad_door_values_are_refused_naming_door_and_column(column: str, value: Any, expected: str,
@@ -93,7 +94,8 @@ def test_bad_door_values_are_refused_naming_door_and_column(column: str, value: 
     message = refusal("doors", doors(**{column: {1: value}}), tmp_path / "doors.parquet")
     assert "doors table, door_id" in message
     assert str(tmp_path / "doors.parquet") in message
-    assert f"door_id {4 if column == 'door_id' else 5} (row 1): column " in message
+    named = {4: 4, -1: -1}.get(value, 5) if column == "door_id" else 5
+    assert f"door_id {named} (row 1): column " in message
     assert re.search(expected, message), message
 
 
