@@ -100,6 +100,15 @@ def write_tum(path: Path, stamp_ns: npt.ArrayLike, x: npt.ArrayLike, y: npt.Arra
     atomic_write_text(path, HEADER + "".join(lines))
 
 
+def _unit_hint(stamp: str) -> str:
+    """What a stamp too large for seconds looks like by its size (a Unix time now is about 1.7e9 s), or ''."""
+    size = abs(float(stamp))
+    for exponent, unit in ((17, "nanoseconds"), (14, "microseconds"), (11, "milliseconds")):
+        if size >= 10.0**exponent:
+            return f" (TUM stamps are seconds; {stamp} looks like {unit})"
+    return ""
+
+
 def _parse_line(line: str) -> tuple[int, list[float]]:
     """Stamp (ns) and the seven floats of one pose line (space- or comma-separated: some tools write CSV)."""
     fields = line.replace(",", " ").split()
@@ -112,9 +121,7 @@ def _parse_line(line: str) -> tuple[int, list[float]]:
         raise ValueError("quaternion has zero norm")
     stamp = parse_stamp(fields[0])
     if not _INT64_MIN <= stamp <= _INT64_MAX:
-        raise ValueError(f"timestamp {fields[0]!r} is out of the int64 nanosecond range (TUM stamps are seconds; "
-                         f"{fields[0]!r} looks like nanoseconds)" if abs(float(fields[0])) > 1e15 else
-                         f"timestamp {fields[0]!r} is out of the int64 nanosecond range")
+        raise ValueError(f"timestamp {fields[0]!r} is out of the int64 nanosecond range{_unit_hint(fields[0])}")
     return stamp, values
 
 

@@ -93,7 +93,9 @@ def test_read_yaw_of_3d_quaternions_and_skips_comments(tmp_path: Path) -> None:
      ("1.0 x 2 3 0 0 0 1", "could not convert"), ("1.0 1 2 3 0 0 0 0", "zero norm"),
      ("nan 1 2 3 0 0 0 1", "not finite"), ("1.0 inf 2 3 0 0 0 1", "non-finite"),
      ("1e20 1 2 3 0 0 0 1", "int64"),
-     ("1700000000000000000 1 2 3 0 0 0 1", "looks like nanoseconds")],
+     ("1700000000000000000 1 2 3 0 0 0 1", "looks like nanoseconds"),
+     ("1700000000000000 1 2 3 0 0 0 1", "looks like microseconds"),
+     ("1700000000000 1 2 3 0 0 0 1", "looks like milliseconds")],
 )
 def test_bad_line_names_file_and_line_number(tmp_path: Path, line: str, message: str) -> None:
     path = tmp_path / "bad.tum"
