@@ -263,13 +263,19 @@ def initial_door_states(doors: DoorSet, n: int, global_start: bool, config: Loca
     return np.broadcast_to(mid, (n, d)).copy(), np.full((n, d), math.radians(config.door_init_sigma_deg) ** 2)
 
 
+def _seen_often(seen: npt.NDArray[np.float64], min_updates: int) -> list[tuple[int, npt.NDArray[np.float64]]]:
+    """The doors (columns of ``seen``: (updates, D) angles, NaN where not seen) seen in at least ``min_updates``
+    updates, each with the angles it was seen at."""
+    often = np.flatnonzero(np.sum(np.isfinite(seen), axis=0) >= min_updates).tolist()
+    return [(d, seen[np.isfinite(seen[:, d]), d]) for d in often]
+
+
 def outside_range_notes(seen: npt.NDArray[np.float64], doors: DoorSet, min_updates: int) -> list[str]:
     """Warnings for doors whose leaf was seen outside its opening range (``seen``: (updates, D) angles from
     :func:`leaves_outside_range`, NaN where not) in at least ``min_updates`` updates: the median angle seen, the
     mapped range and what it costs."""
     notes = []
-    for d in np.flatnonzero(np.sum(np.isfinite(seen), axis=0) >= min_updates).tolist():
-        angles = seen[np.isfinite(seen[:, d]), d]
+    for d, angles in _seen_often(seen, min_updates):
         notes.append(f"door {doors.ids[d]} (hinge {doors.hinge[d, 0]:.2f}, {doors.hinge[d, 1]:.2f}): its leaf was "
                      f"seen at {math.degrees(float(np.median(angles))):.0f}° in {angles.size} updates, outside its "
                      f"mapped range {math.degrees(float(doors.angle_min[d])):.0f}° to "
@@ -284,8 +290,7 @@ def other_end_notes(seen: npt.NDArray[np.float64], flipped: DoorSet, min_updates
     angles from :func:`leaves_outside_range` on :func:`~door_geometry.other_end` of them, NaN where not) in at
     least ``min_updates`` updates."""
     notes = []
-    for k in np.flatnonzero(np.sum(np.isfinite(seen), axis=0) >= min_updates).tolist():
-        angles = seen[np.isfinite(seen[:, k]), k]
+    for k, angles in _seen_often(seen, min_updates):
         x, y = flipped.hinge[k]
         angle = math.degrees(float(np.median(angles)))
         notes.append(f"door {flipped.ids[k]}: its leaf was seen swinging about its other end ({x:.2f}, {y:.2f}), "
