@@ -76,18 +76,20 @@ def door_markers(stamp: int, frame: str, doors: DoorSet, angles: np.ndarray) -> 
     """A MarkerArray of the doors: each leaf at ``angles`` (D,) relative to its closed direction (none where the
     angle is NaN: not known), its opening-range arc and its hinge."""
     markers = []
+    ids = doors.ids.tolist()  # each marker's id is its door's doors.parquet door_id
     for k in range(len(doors)):
         hinge = doors.hinge[k]
         if np.isfinite(angles[k]):
             yaw = doors.closed_yaw[k] + angles[k]
             end = hinge + doors.length[k] * np.array([np.cos(yaw), np.sin(yaw)])
-            markers.append(rm.marker(stamp, frame, "leaves", k, _LINE_LIST, [tuple(hinge), tuple(end)],
+            markers.append(rm.marker(stamp, frame, "leaves", ids[k], _LINE_LIST, [tuple(hinge), tuple(end)],
                                      (0.9, 0.1, 0.1, 1.0), 0.05))
         arc = doors.closed_yaw[k] + np.linspace(doors.angle_min[k], doors.angle_max[k], 16)
         pts = hinge + doors.length[k] * np.stack([np.cos(arc), np.sin(arc)], axis=1)
-        markers.append(rm.marker(stamp, frame, "ranges", k, _LINE_STRIP, [tuple(p) for p in pts],
+        markers.append(rm.marker(stamp, frame, "ranges", ids[k], _LINE_STRIP, [tuple(p) for p in pts],
                                  (1.0, 0.6, 0.0, 0.6), 0.02))
-        markers.append(rm.marker(stamp, frame, "hinges", k, _SPHERE_LIST, [tuple(hinge)], (0.2, 0.2, 0.9, 1.0), 0.1))
+        markers.append(rm.marker(stamp, frame, "hinges", ids[k], _SPHERE_LIST, [tuple(hinge)], (0.2, 0.2, 0.9, 1.0),
+                                 0.1))
     return rm.marker_array(markers)
 
 

@@ -607,6 +607,11 @@ def test_door_states_name_each_door_by_its_door_id_in_the_map(sample_map: Path, 
     named = read_table("door_states", tmp_path / "renamed" / "door_states.parquet").to_pydict()
     assert named["door_id"] == [100 + 7 * k for k in plain["door_id"]]
     assert named["angle"] == plain["angle"]
+    from doorbatch.io.reader import open_log
+
+    with open_log(tmp_path / "renamed" / "annotated.mcap") as reader:  # the door markers carry the ids too
+        ids = {m.id for raw in reader.raw_messages() if raw.topic == "/doorbatch/doors" for m in raw.msg.markers}
+    assert ids == set(named["door_id"])
     assert scores[0] == scores[1] and scores[0]["door_state_error_mean"] < math.radians(5.0)
     # the map renumbered again since the run: its door states are not scored, and evaluate says why
     shutil.copy(sample_map / "doors.parquet", renamed / "doors.parquet")
