@@ -79,19 +79,17 @@ def map_pose_source(map_path: Path) -> str | None:
 def read_door_set(map_dir: Path) -> DoorSet:
     """doors.parquet of a map directory as arrays (any source: grid or em). A map without the file has
     no doors (a plain map_server map from another SLAM tool)."""
-    path = map_dir / "doors.parquet"
-    if not path.exists():
-        return DoorSet.empty()
-    return door_set_of(read_table("doors", path).to_pydict())
+    return read_doors_moved(map_dir)[0]
 
 
-def read_door_moved(map_dir: Path) -> npt.NDArray[np.bool_]:
-    """doors.parquet's ``moved`` column (seen at two or more distinguishable angles), in the rows' order of
-    :func:`read_door_set`; none without the file."""
+def read_doors_moved(map_dir: Path) -> tuple[DoorSet, npt.NDArray[np.bool_]]:
+    """:func:`read_door_set` and, per door, doors.parquet's ``moved`` (seen at two or more distinguishable
+    angles), from one read of the file; no doors without it."""
     path = map_dir / "doors.parquet"
     if not path.exists():
-        return np.zeros(0, dtype=np.bool_)
-    return np.asarray(read_table("doors", path).column("moved").to_pylist(), dtype=np.bool_)
+        return DoorSet.empty(), np.zeros(0, dtype=np.bool_)
+    columns = read_table("doors", path).to_pydict()
+    return door_set_of(columns), np.asarray(columns["moved"], dtype=np.bool_)
 
 
 def door_set_of_previews(doors: Sequence[PreviewDoor]) -> DoorSet:

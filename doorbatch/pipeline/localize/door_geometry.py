@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.maps import DoorSet
 
 FloatArray = npt.NDArray[np.float64]
@@ -184,11 +185,11 @@ def with_unmoved_swing(doors: DoorSet, unmoved: npt.ArrayLike, swing_rad: float,
     Expert choice (the papers give never-moved doors no range): the swing of an office door, 90° by default,
     short of the wall beyond the hinge at 180°, whose segment would otherwise pass the association's gates.
     """
-    lo = np.asarray(doors.angle_min, dtype=np.float64).copy()
-    hi = np.asarray(doors.angle_max, dtype=np.float64).copy()
     unmoved = np.asarray(unmoved, dtype=np.bool_)
     if swing_rad <= 0.0 or not unmoved.any():
         return doors
+    lo = np.asarray(doors.angle_min, dtype=np.float64)
+    hi = np.asarray(doors.angle_max, dtype=np.float64)
     seen = (lo + hi) / 2
     unknown = hinge_unknown(unmoved, doors, side_known_rad)
     opens_pos = unmoved & ~unknown & (seen > 0.0)
@@ -209,9 +210,8 @@ def hinge_unknown(unmoved: npt.ArrayLike, doors: DoorSet, side_known_rad: float)
 def other_end(doors: DoorSet) -> DoorSet:
     """The doors hinged at their free ends instead: hinge h + L·(cos ψ, sin ψ), closed direction ψ + π, range
     the closed angle alone; door ids kept."""
-    yaw = np.asarray(doors.closed_yaw, dtype=np.float64)
-    tip = doors.hinge + np.asarray(doors.length)[:, None] * np.stack([np.cos(yaw), np.sin(yaw)], axis=1)
     n = len(doors)
-    return DoorSet(tip, doors.length, np.arctan2(np.sin(yaw + np.pi), np.cos(yaw + np.pi)), np.zeros(n), np.zeros(n),
+    tip = leaf_endpoints(doors, np.zeros(n))
+    return DoorSet(tip, doors.length, wrap_angle(np.asarray(doors.closed_yaw) + np.pi), np.zeros(n), np.zeros(n),
                    doors.ids)
 

@@ -28,7 +28,7 @@ from doorbatch.geometry.se2 import interpolate_poses
 from doorbatch.io.log_clock import LogClock, long_gaps
 from doorbatch.io.map_server import read_map
 from doorbatch.io.map_topic import read_map_topic
-from doorbatch.io.mapdir import ODOMETRY_FRAME_SOURCES, map_pose_source, read_door_moved, read_door_set
+from doorbatch.io.mapdir import ODOMETRY_FRAME_SOURCES, map_pose_source, read_doors_moved
 from doorbatch.io.pose_topic import StartPose, read_start_poses
 from doorbatch.io.recording import PoseSeries, Recording, load_recording
 from doorbatch.io.roles import is_initial_pose_topic
@@ -137,7 +137,8 @@ def load_localization_map(map_path: Path, config: LocalizeConfig) -> Localizatio
         occ = read_map(yaml_path)
         doors_path = map_doors_file(map_path)
         if doors_path is not None:
-            mapped, unmoved = read_door_set(doors_path.parent), ~read_door_moved(doors_path.parent)
+            mapped, moved = read_doors_moved(doors_path.parent)
+            unmoved = ~moved
             side_known = math.radians(config.door_angle_margin_deg)
             doors = with_unmoved_swing(mapped, unmoved, math.radians(config.door_unmoved_swing_deg), side_known)
             unknown = hinge_unknown(unmoved, mapped, side_known)
