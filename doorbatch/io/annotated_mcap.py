@@ -51,7 +51,8 @@ def write_annotated_mcap(source: Path | Sequence[Path], output: Path, annotation
                          config: DoorbatchConfig | None = None) -> int:
     """Copy ``source`` (one log, or several, e.g. the passes of a mapping run) into ``output`` with
     ``annotations`` merged by log time; returns messages written. The copy is
-    :meth:`~doorbatch.io.reader.LogReader.copied_messages`: Foxglove scans come with the mounts their frames need.
+    :meth:`~doorbatch.io.reader.LogReader.copied_messages`: Foxglove scans come with the mounts their frames need, and
+    each topic keeps the QoS its log records.
 
     ``annotations`` must come in non-decreasing log time (each stage produces them in time order).
     """
@@ -61,6 +62,8 @@ def write_annotated_mcap(source: Path | Sequence[Path], output: Path, annotation
     with ExitStack() as stack:
         readers = [stack.enter_context(open_log(path, config)) for path in sources]
         writer = stack.enter_context(LogWriter(output, LogFormat.MCAP))
+        for reader in readers:
+            writer.keep_offered_qos(reader.offered_qos)
         inputs: Iterator[tuple[int, int, RawMessage | Annotation]] = heapq.merge(
             *(((raw.log_time_ns, 0, raw) for raw in reader.copied_messages()) for reader in readers),
             key=lambda t: t[0])

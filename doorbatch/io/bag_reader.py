@@ -6,12 +6,24 @@ from collections.abc import Collection, Iterator
 from typing import Any
 
 from rosbags.highlevel import AnyReader
+from rosbags.interfaces import Connection, ConnectionExtRosbag1, ConnectionExtRosbag2, Qos
 
 from doorbatch.errors import LogReadError
 from doorbatch.io import foxglove
+from doorbatch.io.qos import ros1_latched_qos
 from doorbatch.io.reader import LogReader, RawMessage
 from doorbatch.io.roles import TopicInfo
 from doorbatch.io.typestore import normalize_msgtype, ros1_typestore, ros2_typestore
+
+
+def _recorded_qos(conn: Connection) -> list[Qos]:
+    """The QoS profiles a bag records for a connection: a ROS 2 bag's ``offered_qos_profiles``, a ROS 1 bag's
+    ``latching`` flag as one (:func:`~doorbatch.io.qos.ros1_latched_qos`)."""
+    if isinstance(conn.ext, ConnectionExtRosbag2):
+        return list(conn.ext.offered_qos_profiles)
+    if isinstance(conn.ext, ConnectionExtRosbag1):
+        return ros1_latched_qos(conn.ext.latching)
+    return []
 
 
 class _AnyBagReader(LogReader):
@@ -25,6 +37,8 @@ class _AnyBagReader(LogReader):
             self.storage = self._storage_name()
         topics: dict[str, TopicInfo] = {}
         for conn in self._reader.connections:
+            if (offered := _recorded_qos(conn)) and conn.topic not in self.offered_qos:
+                self.offered_qos[conn.topic] = offered
             prev = topics.get(conn.topic)
             count = conn.msgcount + (prev.count if prev else 0)
             # foxglove_msgs, as a Foxglove bridge records them, are listed under the ROS 2 type they are read as

@@ -26,7 +26,8 @@ class ConvertSummary:
 def convert_log(source: Path, output: Path, config: DoorbatchConfig | None = None,
                 fmt: LogFormat = LogFormat.MCAP) -> ConvertSummary:
     """Copy every message of ``source`` into ``output``; ROS 1 and Foxglove messages become ROS 2 CDR, with the
-    mounts of Foxglove scans on /tf_static (:meth:`~doorbatch.io.reader.LogReader.copied_messages`).
+    mounts of Foxglove scans on /tf_static (:meth:`~doorbatch.io.reader.LogReader.copied_messages`); each topic keeps
+    the QoS the source records (:attr:`~doorbatch.io.reader.LogReader.offered_qos`).
 
     Raises:
         LogReadError: the source cannot be read.
@@ -36,6 +37,7 @@ def convert_log(source: Path, output: Path, config: DoorbatchConfig | None = Non
     with open_log(source, config) as reader:
         total = sum(t.count for t in reader.topics.values())
         with LogWriter(output, fmt) as writer, progress_bar(total, f"convert {source.name}") as bar:
+            writer.keep_offered_qos(reader.offered_qos)
             for raw in reader.copied_messages():
                 writer.write_raw(raw)
                 counts[raw.topic] = counts.get(raw.topic, 0) + 1

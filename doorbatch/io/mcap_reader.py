@@ -22,6 +22,7 @@ from rosbags.typesys.store import Typestore
 
 from doorbatch.errors import LogReadError
 from doorbatch.io import foxglove
+from doorbatch.io.qos import mcap_channel_qos
 from doorbatch.io.reader import LogReader, RawMessage
 from doorbatch.io.roles import TopicInfo
 from doorbatch.io.typestore import normalize_msgtype, ros1_typestore, ros2_typestore, types_from_schema
@@ -77,6 +78,8 @@ class McapLogReader(LogReader):
                     self._msgtype[cid] = name
                 except LogReadError as err:  # the channel is listed, unread, as any channel we cannot decode
                     self.warnings.append(f"{self.path}: {channel.topic}: {err.reason}; not read")
+            if (offered := mcap_channel_qos(channel.metadata)) and channel.topic not in self.offered_qos:
+                self.offered_qos[channel.topic] = offered
             prev = topics.get(channel.topic)
             count = counts.get(cid, 0) + (prev.count if prev else 0)
             topics[channel.topic] = foxglove.topic_info(channel.topic, name, count, channel.message_encoding,

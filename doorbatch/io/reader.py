@@ -18,6 +18,7 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any, Self, TypeVar
 
+from rosbags.interfaces import Qos
 from rosbags.typesys.store import Typestore
 
 from doorbatch.config import DoorbatchConfig
@@ -70,6 +71,8 @@ class LogReader(ABC):
         self._roles: RoleAssignment | None = None
         self._scan_mounts: dict[str, Transform] | None = None
         self.warnings: list[str] = []  # repairs a reader made (e.g. CARMEN stamps), shown by inspect
+        # per topic, the QoS profiles the log records its publishers offered (none: the log does not say)
+        self.offered_qos: dict[str, list[Qos]] = {}
 
     def __enter__(self) -> Self:
         try:
