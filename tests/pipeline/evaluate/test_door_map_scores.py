@@ -63,3 +63,14 @@ def test_an_occupied_cell_agrees_within_the_tolerance_of_a_truth_wall(column: in
     score = score_static_map(estimate, truth, tolerance_cells=1)
     assert score.observed_cells == 6 and score.spurious_occupied_cells == spurious
     assert math.isclose(score.agreement, agreement)
+
+
+def test_a_map_without_doors_has_no_precision_and_a_truth_without_doors_no_recall() -> None:
+    """No detection against two truth doors: precision is undefined (NaN), not a perfect 1.0, and recall is 0;
+    a detection against a truth with no door counted: precision 0, recall undefined."""
+    truth = _doors([(0.0, 0.0), (3.0, 0.0)], [0.0, 0.0], [0.0, 0.0], [1.5, 1.5])
+    empty = _doors([], [], [], [])
+    score = score_doors(empty, truth, [True, True])
+    assert math.isnan(score.precision) and score.recall == 0.0 and score.missed == [0, 1]
+    score = score_doors(truth, empty, [])
+    assert score.precision == 0.0 and math.isnan(score.recall) and score.false_positives == [0, 1]
