@@ -9,6 +9,7 @@ redoes that step.
 
 from __future__ import annotations
 
+import re
 import secrets
 import shutil
 from collections.abc import Iterator
@@ -75,10 +76,14 @@ def check_output_location(dest: Path, folder: bool) -> None:
         raise UsageError(f"-o {dest}: cannot write in {where}: {err.strerror or err}") from err
 
 
+# ``.<name>.<16 hex>.tmp[<suffix>]`` (staged_dir, atomic.temp_path_for) or ``.<name>.<16 hex>.old``: nothing else,
+# so that a user's ``.notes.old`` or ``.cache.tmp`` in OUT is never taken for one
+_LEFTOVER = re.compile(rf"^\..+\.[0-9a-f]{{16}}({re.escape(TEMP_MARKER)}.*|{re.escape(_OLD_MARKER)})$")
+
+
 def is_leftover(path: Path) -> bool:
     """Whether ``path`` is a temporary file or folder of :func:`staged_dir` or :mod:`doorbatch.io.atomic`."""
-    name = path.name
-    return name.startswith(".") and (TEMP_MARKER in name or name.endswith(_OLD_MARKER))
+    return _LEFTOVER.match(path.name) is not None
 
 
 def remove_leftovers(root: Path) -> list[Path]:

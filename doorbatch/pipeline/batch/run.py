@@ -30,6 +30,7 @@ from doorbatch.io.run_lock import run_lock
 from doorbatch.io.run_log import RUN_LOG, JsonLinesHandler
 from doorbatch.io.staged_dir import remove_leftovers
 from doorbatch.pipeline.batch.executors import open_executor, resolve_workers
+from doorbatch.pipeline.batch.ownership import check_owned_outputs
 from doorbatch.pipeline.batch.plan import REPORT_DIR, SUMMARY_FILE, Step, StepKind, plan_steps
 from doorbatch.pipeline.batch.scheduler import run_steps
 from doorbatch.pipeline.batch.steps import BatchJob, StepOutcome, StepStatus
@@ -170,13 +171,17 @@ def run_dataset(dataset: Dataset, out: Path, config: DoorbatchConfig, execution:
 
     Raises:
         ConfigError: a site named like one of OUT's own entries (``plan.OUT_ENTRIES``).
+        UsageError: OUT holds a folder the run would replace that it did not write, or the dataset's inputs
+            (:func:`~doorbatch.pipeline.batch.ownership.check_owned_outputs`).
         OutputLockedError: another live run holds ``out``.
         OptionalDependencyError: the Dask executor without the ``dask`` extra.
         KeyboardInterrupt: Ctrl-C or SIGTERM; staged folders are removed and completed steps stay.
     """
     out = Path(out).resolve()
     execution = execution or Execution()
-    plan_steps(dataset, list(config.run.methods))  # a dataset that cannot be planned touches nothing in OUT
+    # a dataset that cannot be planned, or an OUT holding folders the run would replace that are not its own,
+    # touches nothing in OUT
+    check_owned_outputs(out, plan_steps(dataset, list(config.run.methods)), dataset)
     with run_lock(out) as (mine, stale), run_log_handler(out), sigterm_as_interrupt():
         log.info("run of %s started", dataset.root, extra={
             "event": "run_started", "dataset": str(dataset.root), "pid": mine.pid, "host": mine.host,

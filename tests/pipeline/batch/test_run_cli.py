@@ -239,3 +239,44 @@ def test_dask_executor_gives_the_local_outputs(tiny: Path, tiny_master: Path, tm
     assert main(["run", str(tiny), "-o", str(out), "--executor", "dask", "--workers", "2", "-q"]) == 0
     assert output_digests(out, tiny) == output_digests(reference_out, tiny_master)
     assert read_run_log(out / "run.log")[0]["executor"] == "dask"
+
+
+def test_an_out_that_holds_the_datasets_logs_where_a_step_writes_is_refused(tiny: Path,
+                                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    """OUT = the dataset folder, whose site keeps its passes in <site>/map/: the map step replaces OUT/<site>/map
+    whole, and would delete the logs. Refused before anything is written; the logs stay."""
+    (tiny / SITE / "map").mkdir(parents=True)
+    shutil.move(tiny / "logs" / "map_pass1.mcap", tiny / SITE / "map" / "map_pass1.mcap")
+    dataset = tiny / "dataset.yaml"
+    dataset.write_text(dataset.read_text().replace("logs/map_pass1.mcap", f"{SITE}/map/map_pass1.mcap"))
+    before = sorted(p.relative_to(tiny) for p in tiny.rglob("*"))
+    code = main(["run", str(tiny), "-o", str(tiny), "-q"])
+    err = capsys.readouterr().err
+    assert code == 2 and f"{SITE}/map/map_pass1.mcap lies inside it" in err
+    assert sorted(p.relative_to(tiny) for p in tiny.rglob("*")) == before
+
+
+@pytest.mark.parametrize("foreign", ["report/q3.pptx", f"{SITE}/runs/loc_open/mcl/notes.txt", "metrics/summary.csv",
+                                     "trajectories/site=corridor/extra.parquet"])
+def test_an_out_whose_folders_hold_files_the_run_did_not_write_is_refused(
+        tiny: Path, tmp_path: Path, foreign: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """A shared OUT where someone keeps a file in a folder the run replaces whole: refused, the file kept."""
+    out = tmp_path / "out"
+    (out / foreign).parent.mkdir(parents=True)
+    (out / foreign).write_text("not doorbatch's")
+    code = main(["run", str(tiny), "-o", str(out), "-q"])
+    err = capsys.readouterr().err
+    assert code == 2 and "did not write" in err and foreign.split("/")[-1] in err
+    assert (out / foreign).read_text() == "not doorbatch's"
+
+
+def test_a_rerun_into_its_own_out_is_not_refused_and_keeps_a_users_dotfiles(
+        tiny_master: Path, reference_out: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """OUT written by doorbatch run is its own (a rerun does nothing); `.notes.old` and `.cache.tmp` beside its
+    outputs are not a killed run's staged folders and stay."""
+    out = Path(shutil.copytree(reference_out, tmp_path / "out"))
+    for name in (".notes.old", f"{SITE}/.cache.tmp"):
+        (out / name).write_text("mine")
+    code, summary = run_json(tiny_master, out, capsys)
+    assert code == 0 and by_status(summary, "up_to_date") == ALL_STEPS
+    assert (out / ".notes.old").read_text() == "mine" and (out / SITE / ".cache.tmp").read_text() == "mine"
