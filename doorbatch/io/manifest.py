@@ -11,7 +11,7 @@ Written into every output folder (DESIGN.md, Outputs). JSON object with the keys
     finished_at        ISO 8601 UTC, or null while running
     stage_seconds      stage name → wall seconds
     warnings           list of strings
-    extra              free-form JSON object
+    extra              free-form JSON object; ``code_sha256``: the hash of doorbatch's source (code_fingerprint)
 
 A folder input (a ROS 2 bag folder) is fingerprinted over every file inside, in sorted relative-path
 order: its size is their total, its hash covers, per file, ``<relative posix path> NUL <size> NUL`` and
@@ -20,6 +20,7 @@ then the file's bytes.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import logging
@@ -57,6 +58,18 @@ def utc_now_iso() -> str:
 
 
 config_hash = tree_hash  # the one canonical hash of a config tree (DoorbatchConfig.hash uses it too)
+
+
+@functools.cache
+def code_fingerprint() -> str:
+    """SHA-256 of doorbatch's own source: every ``.py`` file of the package, by relative path and bytes. Results of
+    other code have another one (``doorbatch_version`` stays the same across commits); ``doorbatch run`` keys its
+    steps on it, so that an upgrade redoes them, and every manifest records it (``extra.code_sha256``)."""
+    root = Path(doorbatch.__file__).parent
+    digest = hashlib.sha256()
+    for path in sorted(p for p in root.rglob("*.py") if "__pycache__" not in p.parts):
+        digest.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+    return digest.hexdigest()
 
 
 def _hash_into(digest: Any, path: Path) -> None:
@@ -150,7 +163,7 @@ class Manifest:
         """
         config_dict = dict(config)
         return cls(config=config_dict, config_hash=config_hash(config_dict),
-                   inputs=[file_fingerprint(p) for p in inputs], extra=dict(extra))
+                   inputs=[file_fingerprint(p) for p in inputs], extra={"code_sha256": code_fingerprint(), **extra})
 
     def add_input(self, path: Path) -> None:
         """Fingerprint one more input."""

@@ -13,7 +13,7 @@ import pytest
 import doorbatch
 from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import InputDataError
-from doorbatch.io.manifest import BLOCK_BYTES, Manifest, StageTimer, config_hash, file_fingerprint
+from doorbatch.io.manifest import BLOCK_BYTES, Manifest, StageTimer, code_fingerprint, config_hash, file_fingerprint
 
 
 def test_file_fingerprint_is_sha256_of_content_across_blocks(tmp_path: Path) -> None:
@@ -85,7 +85,7 @@ def test_manifest_write_read_round_trip(tmp_path: Path) -> None:
     assert data["config"] == config
     assert data["inputs"] == [file_fingerprint(log)]
     assert data["warnings"] == ["stamps repaired in a.mcap"]
-    assert data["extra"] == {"command": "map", "n_doors": 3}
+    assert data["extra"] == {"command": "map", "n_doors": 3, "code_sha256": code_fingerprint()}
     assert set(data["stage_seconds"]) == {"grid"}
     started = datetime.fromisoformat(data["started_at"])
     finished = datetime.fromisoformat(data["finished_at"])
@@ -116,3 +116,27 @@ def test_unserializable_extra_fails_before_writing(tmp_path: Path) -> None:
     with pytest.raises(TypeError):
         manifest.write(tmp_path / "manifest.json")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_the_code_fingerprint_changes_with_any_source_file(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The hash covers every .py file of the package by path and bytes: a copy of the package with one byte
+    changed in one module has another fingerprint; __pycache__ is left out."""
+    import shutil
+
+    import doorbatch as pkg
+    from doorbatch.io import manifest as mf
+
+    copy = Path(shutil.copytree(Path(pkg.__file__).parent, tmp_path / "doorbatch",
+                                ignore=shutil.ignore_patterns("__pycache__")))
+    monkeypatch.setattr(mf.doorbatch, "__file__", str(copy / "__init__.py"))
+    mf.code_fingerprint.cache_clear()
+    same = mf.code_fingerprint()
+    (copy / "__pycache__").mkdir(exist_ok=True)
+    (copy / "__pycache__" / "x.py").write_text("cached")
+    mf.code_fingerprint.cache_clear()
+    assert mf.code_fingerprint() == same
+    errors = copy / "errors.py"
+    errors.write_text(errors.read_text() + "\n")
+    mf.code_fingerprint.cache_clear()
+    assert mf.code_fingerprint() != same
+    mf.code_fingerprint.cache_clear()

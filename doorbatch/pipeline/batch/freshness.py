@@ -3,7 +3,8 @@
 The key is the SHA-256 of the step's identity (kind and parameters such as the method), the content hash
 of every input file (:func:`~doorbatch.io.manifest.file_fingerprint`, by name and SHA-256: moving the
 dataset does not invalidate it), and the hash of the resolved config sections the step depends on (a
-change to ``localize.sigma_hit`` redoes localization, not mapping). Outputs of an upstream step are inputs
+change to ``localize.sigma_hit`` redoes localization, not mapping), and the hash of doorbatch's own source
+(:func:`~doorbatch.io.manifest.code_fingerprint`: an upgrade redoes every step). Outputs of an upstream step are inputs
 of the next by content, so a rerun of mapping that yields the same map leaves localization skipped.
 """
 
@@ -17,7 +18,7 @@ from typing import Any
 
 from doorbatch.config import tree_hash
 from doorbatch.errors import InputDataError
-from doorbatch.io.manifest import Manifest, StageTimer, file_fingerprint
+from doorbatch.io.manifest import Manifest, StageTimer, code_fingerprint, file_fingerprint
 from doorbatch.pipeline.batch.plan import StepKind
 
 MANIFEST = "manifest.json"
@@ -54,18 +55,21 @@ class StepKey:
     params: dict[str, Any]
     sections: tuple[str, ...]
     sections_hash: str
+    code_sha256: str
     inputs: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def digest(self) -> str:
-        """SHA-256 over kind, params, the sections' hash and each input's name and content hash."""
+        """SHA-256 over kind, params, the sections' hash, each input's name and content hash, and doorbatch's own
+        source (an upgrade redoes every step: a version number does not change with each commit)."""
         return tree_hash({"kind": str(self.kind), "params": self.params, "sections_hash": self.sections_hash,
-                          "inputs": [[Path(i["path"]).name, i["sha256"]] for i in self.inputs]})
+                          "inputs": [[Path(i["path"]).name, i["sha256"]] for i in self.inputs],
+                          "code": self.code_sha256})
 
     def record(self) -> dict[str, Any]:
         """The step record stored in the manifest."""
         return {"kind": str(self.kind), "key": self.digest, "params": self.params, "sections": list(self.sections),
-                "sections_hash": self.sections_hash, "inputs": self.inputs}
+                "sections_hash": self.sections_hash, "inputs": self.inputs, "code_sha256": self.code_sha256}
 
 
 def step_key(kind: StepKind, config: Mapping[str, Any], inputs: Sequence[Path],
@@ -79,7 +83,7 @@ def step_key(kind: StepKind, config: Mapping[str, Any], inputs: Sequence[Path],
     """
     sections = STEP_SECTIONS[kind]
     return StepKey(kind, json.loads(json.dumps(dict(params or {}), default=str)), sections,
-                   sections_hash(config, sections), [fingerprint(p) for p in inputs])
+                   sections_hash(config, sections), code_fingerprint(), [fingerprint(p) for p in inputs])
 
 
 def recorded_step(out_dir: Path) -> dict[str, Any] | None:

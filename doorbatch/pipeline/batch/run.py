@@ -26,6 +26,7 @@ from doorbatch.interrupts import sigterm_as_interrupt
 from doorbatch.io.atomic import atomic_write_text
 from doorbatch.io.dataset import Dataset
 from doorbatch.io.fingerprint_cache import read_fingerprint_cache, write_fingerprint_cache
+from doorbatch.io.manifest import utc_now_iso
 from doorbatch.io.run_lock import run_lock
 from doorbatch.io.run_log import RUN_LOG, JsonLinesHandler
 from doorbatch.io.staged_dir import remove_leftovers
@@ -73,6 +74,9 @@ class RunSummary:
     stale_lock: str | None
     failures: list[dict[str, str]] = field(default_factory=list)
     outcomes: list[dict[str, Any]] = field(default_factory=list)
+    started_at: str = ""  # ISO 8601 UTC: a monitor tells this run's summary from an older one
+    finished_at: str = ""
+    status: str = "finished"  # summary.json says "running" from the start of a run until it ends
 
     @property
     def complete(self) -> bool:
@@ -120,7 +124,7 @@ def _log_outcome(step: Step, outcome: StepOutcome) -> None:
 
 
 def _summary(dataset: Dataset, out: Path, steps: list[Step], outcomes: dict[str, StepOutcome], seconds: float,
-             stale: str | None) -> RunSummary:
+             stale: str | None, started_at: str) -> RunSummary:
     counts = {status: sum(o.status is status for o in outcomes.values()) for status in StepStatus}
     report = out / REPORT_DIR / "report.html"
     return RunSummary(
@@ -130,11 +134,11 @@ def _summary(dataset: Dataset, out: Path, steps: list[Step], outcomes: dict[str,
         [{"step": s.id, "status": str(outcomes[s.id].status), "error": outcomes[s.id].error or ""}
          for s in steps if not outcomes[s.id].ok],
         [{"step": s.id, "status": str(outcomes[s.id].status), "seconds": round(outcomes[s.id].seconds, 3)}
-         for s in steps])
+         for s in steps], started_at, utc_now_iso())
 
 
 def _run_locked(dataset: Dataset, out: Path, config: DoorbatchConfig, execution: Execution, force: bool,
-                stale: str | None) -> RunSummary:
+                stale: str | None, started_at: str) -> RunSummary:
     start = time.perf_counter()
     steps = plan_steps(dataset, list(config.run.methods))
     fingerprints = read_fingerprint_cache(out)
@@ -153,7 +157,7 @@ def _run_locked(dataset: Dataset, out: Path, config: DoorbatchConfig, execution:
         outcomes = run_steps(steps, job, executor, on_outcome,
                              lambda s: log.debug("%s: started", s.id, extra={"event": "step_started", "step": s.id}))
     write_fingerprint_cache(out, fingerprints)
-    summary = _summary(dataset, out, steps, outcomes, time.perf_counter() - start, stale)
+    summary = _summary(dataset, out, steps, outcomes, time.perf_counter() - start, stale, started_at)
     atomic_write_text(out / SUMMARY_FILE, _json(asdict(summary)))
     return summary
 
@@ -191,11 +195,15 @@ def run_dataset(dataset: Dataset, out: Path, config: DoorbatchConfig, execution:
         if stale is not None:
             log.warning("took over the stale lock of %s", stale_text,
                         extra={"event": "stale_lock", "holder": stale_text})
+        # until this run ends, summary.json says it runs: a run killed midway leaves that, not the last one's summary
+        atomic_write_text(out / SUMMARY_FILE, _json({"status": "running", "dataset": str(dataset.root), "out": str(out),
+                                                     "pid": mine.pid, "host": mine.host,
+                                                     "started_at": mine.started_at}))
         for path in remove_leftovers(out):
             log.warning("removed %s left by an interrupted run", path, extra={"event": "leftover_removed",
                                                                             "path": str(path)})
         try:
-            summary = _run_locked(dataset, out, config, execution, force, stale_text)
+            summary = _run_locked(dataset, out, config, execution, force, stale_text, mine.started_at)
         except KeyboardInterrupt:
             removed = remove_leftovers(out)
             log.error("run interrupted; removed %d staged folder(s)", len(removed), extra={"event": "run_interrupted"})

@@ -190,11 +190,14 @@ def test_sigterm_midway_leaves_no_partial_output_and_a_rerun_matches(
     assert not [p for p in out.rglob("*") if ".tmp" in p.name or p.name.endswith(".old")]
     assert not (out / LOCK_NAME).exists() and not (out / "report").exists()
     assert read_run_log(out / "run.log")[-1]["event"] == "run_interrupted"
+    assert json.loads((out / "summary.json").read_text())["status"] == "running"  # not a finished run's summary
     for run in (out / SITE / "runs").glob("*/*") if (out / SITE / "runs").exists() else []:
         assert (run / "manifest.json").is_file()  # a run folder is there only when complete
 
     assert subprocess.run(cmd, env=env, capture_output=True, check=False).returncode == 0
     assert output_digests(out, tiny) == output_digests(reference_out, tiny_master)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "finished" and summary["started_at"] < summary["finished_at"]
 
 
 @pytest.mark.parametrize("name", ["report", "metrics", "trajectories"])
@@ -280,3 +283,18 @@ def test_a_rerun_into_its_own_out_is_not_refused_and_keeps_a_users_dotfiles(
     code, summary = run_json(tiny_master, out, capsys)
     assert code == 0 and by_status(summary, "up_to_date") == ALL_STEPS
     assert (out / ".notes.old").read_text() == "mine" and (out / SITE / ".cache.tmp").read_text() == "mine"
+
+
+def test_a_rerun_with_other_doorbatch_code_redoes_every_step(tiny_master: Path, reference_out: Path, tmp_path: Path,
+                                                             monkeypatch: pytest.MonkeyPatch,
+                                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """An upgrade keeps the version number (0.1.0 across commits) and the config: the steps are keyed on the hash of
+    doorbatch's source too, so results of the old code are not taken as up to date."""
+    from doorbatch.pipeline.batch import freshness
+
+    out = Path(shutil.copytree(reference_out, tmp_path / "out"))
+    monkeypatch.setattr(freshness, "code_fingerprint", lambda: "0" * 64)
+    code, summary = run_json(tiny_master, out, capsys)
+    assert code == 0 and by_status(summary, "done") == ALL_STEPS
+    record = json.loads((out / SITE / "map" / "manifest.json").read_text())["extra"]["step"]
+    assert record["code_sha256"] == "0" * 64
