@@ -89,10 +89,14 @@ class IoConfig(Section):
     sweep_check_quantile: float = Field(0.9, gt=0.0, le=1.0)
     # An odometry step farther than odometry_jump_min_m, or turning more than odometry_jump_min_deg, that lands within
     # odometry_restart_at_zero_m of the origin is a driver restarting at zero: it is taken out, with a warning.
-    # Expert choice: a restart lands on (0, 0) to the bit; half a metre is no 50 Hz step of a wheeled base.
+    # Expert choice: a restart standing still lands on (0, 0) to the bit; half a metre is no 50 Hz step of a wheeled
+    # base.
     odometry_jump_min_m: float = Field(0.5, gt=0.0)
     odometry_jump_min_deg: float = Field(30.0, gt=0.0)
     odometry_restart_at_zero_m: float = Field(0.001, ge=0.0)
+    # ... or within this many times the step after it: a restart's first message comes up to a message period after
+    # the driver started again, the robot still moving (hAJ's 50 Hz base: 5 mm). Expert choice: 2 steps.
+    odometry_restart_steps: float = Field(2.0, ge=0.0)
     # A scan in a frame with no transform to base_link is an error unless this says to assume identity.
     assume_identity_laser_tf: bool = False
     # ... or unless this gives the laser's mount in base_link, [x, y, z] in m and [roll, pitch, yaw] in rad (ROS

@@ -112,18 +112,28 @@ def sweep_smear_m(sweep_s: float, stamps_ns: npt.ArrayLike, poses: npt.ArrayLike
     return float((np.quantile(v, quantile) + np.quantile(w, quantile) * range_m) * sweep_s)
 
 
-def odometry_jumps(poses: npt.ArrayLike, min_jump_m: float, min_jump_rad: float, at_zero_m: float
-                   ) -> npt.NDArray[np.intp]:
+RESTART_WINDOW = 5  # steps on either side whose longest tells how far one message period moves the robot
+
+
+def odometry_jumps(poses: npt.ArrayLike, min_jump_m: float, min_jump_rad: float, at_zero_m: float,
+                   restart_steps: float = 0.0) -> npt.NDArray[np.intp]:
     """Indices ``i`` of odometry steps ``i − 1 → i`` no wheel made: a step farther than ``min_jump_m`` or turning
-    more than ``min_jump_rad`` that lands within ``at_zero_m`` of the frame's origin (a driver that restarted, its
-    odometry starting again at (0, 0); the heading may come from a compass). Speed is no test: real logs with
-    coarse or synthesized stamps (CARMEN's) show steps of metres in a fifth of a second."""
+    more than ``min_jump_rad`` that lands near the frame's origin (a driver that restarted, its odometry starting
+    again at (0, 0); the heading may come from a compass). Near: within ``at_zero_m``, or within ``restart_steps``
+    times the longest of the :data:`RESTART_WINDOW` steps before and after it (a restart's first message may come a
+    message period after the driver started again, the robot moving: 5–10 mm at 0.5 m/s and 50 Hz). Speed is no
+    test: real logs with coarse or synthesized stamps (CARMEN's) show steps of metres in a fifth of a second."""
     p = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
     if p.shape[0] < 2:
         return np.zeros(0, dtype=np.intp)
     dist = np.hypot(np.diff(p[:, 0]), np.diff(p[:, 1]))
     turn = np.abs(wrap_angle(np.diff(p[:, 2])))
-    at_zero = np.hypot(p[1:, 0], p[1:, 1]) <= at_zero_m
+    # the robot's step around each step: the longest of the RESTART_WINDOW steps before it and after it (not itself,
+    # nor any other step beyond min_jump_m)
+    padded = np.pad(np.where(dist > min_jump_m, 0.0, dist), RESTART_WINDOW)  # a gap's long step tells nothing
+    windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * RESTART_WINDOW + 1)
+    around = np.maximum(windows[:, :RESTART_WINDOW].max(axis=1), windows[:, RESTART_WINDOW + 1:].max(axis=1))
+    at_zero = np.hypot(p[1:, 0], p[1:, 1]) <= np.maximum(at_zero_m, restart_steps * around)
     return np.flatnonzero(at_zero & ((dist > min_jump_m) | (turn > min_jump_rad))) + 1
 
 

@@ -847,7 +847,7 @@ def without_odometry_jumps(odometry: PoseSeries | None, config: DoorbatchConfig
         return None, None
     io = config.io
     jumps = odometry_jumps(odometry.poses, io.odometry_jump_min_m, math.radians(io.odometry_jump_min_deg),
-                           io.odometry_restart_at_zero_m)
+                           io.odometry_restart_at_zero_m, io.odometry_restart_steps)
     if not jumps.size:
         return odometry, None
     t0 = int(odometry.stamps_ns[0])
@@ -857,7 +857,7 @@ def without_odometry_jumps(odometry: PoseSeries | None, config: DoorbatchConfig
     more = f" and {jumps.size - 5} more" if jumps.size > 5 else ""
     note = (f"the odometry jumps back to (0, 0) {jumps.size} time(s) (at {said}{more} after its start: a driver "
             "that restarted): each jump is taken out, the odometry after it continuing from the pose before "
-            "(io.odometry_jump_min_m, _min_deg, io.odometry_restart_at_zero_m)")
+            "(io.odometry_jump_min_m, _min_deg, io.odometry_restart_at_zero_m, _restart_steps)")
     return replace(odometry, poses=bridged_jumps(odometry.poses, jumps)), note
 
 

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from doorbatch.geometry.odometry import bridged_jumps, odometry_jumps
 from doorbatch.geometry.se2 import compose, relative
 
-JUMP = {"min_jump_m": 0.5, "min_jump_rad": math.radians(30), "at_zero_m": 0.001}
+JUMP = {"min_jump_m": 0.5, "min_jump_rad": math.radians(30), "at_zero_m": 0.001, "restart_steps": 2.0}
 
 
 def _drive(n: int, seed: int) -> np.ndarray:
@@ -51,3 +51,20 @@ def test_long_steps_that_do_not_land_at_zero_are_not_jumps() -> None:
     assert odometry_jumps(poses, **JUMP).size == 0
     near = np.array([[0.1, 0.1, 0.0], [0.0, 0.0, 1.0]])
     assert odometry_jumps(near, **JUMP).tolist() == [1]
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 10_000), st.integers(100, 900), st.floats(-3.0, 3.0))
+def test_a_restart_whose_first_message_comes_a_step_later_is_found(seed: int, at: int, yaw0: float) -> None:
+    """The driver restarts at (0, 0, yaw0) with the robot moving: its first message, at ``at``, already holds one
+    step of motion (up to 2 cm here), so it lands off the origin by more than ``at_zero_m``. Found there, and only
+    there, and bridged as the restart at zero is."""
+    truth = _drive(1000, seed)
+    odom = compose(np.array([25.0, -4.0, 1.0]), truth)
+    odom[at:] = compose(np.array([0.0, 0.0, yaw0]), relative(truth[at - 1], truth[at:]))
+    assert np.hypot(*odom[at, :2]) > JUMP["at_zero_m"] or np.hypot(*(truth[at, :2] - truth[at - 1, :2])) < 1e-3
+    jumps = odometry_jumps(odom, **JUMP)
+    assert jumps.tolist() == [at]
+    fixed = bridged_jumps(odom, jumps)
+    np.testing.assert_allclose(relative(fixed[at:-1], fixed[at + 1:]), relative(truth[at:-1], truth[at + 1:]),
+                               atol=1e-9)
