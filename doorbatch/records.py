@@ -76,6 +76,10 @@ class Pose2D:
     x: float
     y: float
     yaw: float
+    # nav_msgs/Odometry's twist in child_frame_id (m/s, rad/s): a base that fills only the twist leaves the pose at 0
+    vx: float = 0.0
+    vy: float = 0.0
+    wz: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)

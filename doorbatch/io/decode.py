@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Iterator, Sequence
+from dataclasses import replace
 from typing import Any
 
 import cv2
@@ -121,7 +122,9 @@ def _pose2d(header: Any, child: str, pose: Any, log_time_ns: int) -> Pose2D:
 def decode_pose(msg: Any, msgtype: str, log_time_ns: int) -> Pose2D:
     """nav_msgs/Odometry, PoseStamped or PoseWithCovarianceStamped → planar :class:`Pose2D`."""
     if msgtype == ODOMETRY:
-        return _pose2d(msg.header, msg.child_frame_id, msg.pose.pose, log_time_ns)
+        t = msg.twist.twist
+        return replace(_pose2d(msg.header, msg.child_frame_id, msg.pose.pose, log_time_ns), vx=float(t.linear.x),
+                       vy=float(t.linear.y), wz=float(t.angular.z))
     if msgtype == POSE_COV_STAMPED:
         return _pose2d(msg.header, "", msg.pose.pose, log_time_ns)
     return _pose2d(msg.header, "", msg.pose, log_time_ns)

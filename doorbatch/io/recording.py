@@ -19,7 +19,7 @@ import numpy.typing as npt
 from doorbatch.config import DoorbatchConfig, FramesConfig, IoConfig
 from doorbatch.errors import LaserMountError, LogContentError, TransformError
 from doorbatch.geometry.deskew import deskewed_scans
-from doorbatch.geometry.odometry import bridged_jumps, odometry_jumps, sweep_smear_m
+from doorbatch.geometry.odometry import bridged_jumps, integrated_twist, odometry_jumps, sweep_smear_m
 from doorbatch.geometry.rotations import yaw_of_matrix
 from doorbatch.geometry.se2 import compose, interpolate_poses
 from doorbatch.geometry.tf_buffer import TfBuffer
@@ -326,11 +326,40 @@ def base_pose_series(poses: list[Pose2D], tf: TfBuffer, base: str) -> PoseSeries
 def odometry_poses(odom: list[Pose2D], tf: TfBuffer, odometry_topic: bool, frames: FramesConfig
                    ) -> tuple[list[Pose2D], list[str]]:
     """The odometry a reader collected from its odometry topic; without one, the odometry from TF
-    (:func:`tf_odometry`, with the log time of each transform). And the notes for the user."""
-    if odometry_topic:
+    (:func:`tf_odometry`, with the log time of each transform). And the notes for the user.
+
+    A topic whose pose never changes while its twist moves (a base that fills only ``twist``) is dead as a pose:
+    the odometry then comes from TF odom→base_link where that moves, else from its twist integrated
+    (:func:`~doorbatch.geometry.odometry.integrated_twist`), with a note."""
+    if odometry_topic and not _pose_unset_twist_moving(odom):
         return odom, []
     poses, note = tf_odometry(tf, frames.odom, frames.base_link)
-    return poses, [note] if note else []
+    if not odometry_topic:
+        return poses, [note] if note else []
+    if len(poses) >= 2 and np.ptp([[p.x, p.y, p.yaw] for p in poses], axis=0).max() > 0.0:
+        return poses, [f"the odometry topic's pose never changes while its twist says the base moves (a driver that "
+                       f"fills only twist): the odometry is read from TF {frames.odom}→{frames.base_link} instead"]
+    return _twist_poses(odom), ["the odometry topic's pose never changes while its twist says the base moves (a "
+                                "driver that fills only twist), and no TF odom→base_link moves: the odometry is "
+                                "its twist integrated (held between messages)"]
+
+
+def _pose_unset_twist_moving(odom: Sequence[Pose2D]) -> bool:
+    """Whether an odometry topic's pose stays put over the log while its twist is nonzero (in some message)."""
+    if len(odom) < 2:
+        return False
+    first = odom[0]
+    same = all(p.x == first.x and p.y == first.y and p.yaw == first.yaw for p in odom)
+    return same and any(p.vx or p.vy or p.wz for p in odom)
+
+
+def _twist_poses(odom: Sequence[Pose2D]) -> list[Pose2D]:
+    """The odometry messages in time order with their poses from their twists, integrated from the first."""
+    ordered = sorted(odom, key=lambda p: p.stamp_ns or p.log_time_ns)
+    stamps_s = np.array([(p.stamp_ns or p.log_time_ns) * 1e-9 for p in ordered])
+    poses = integrated_twist(stamps_s - stamps_s[0], [p.vx for p in ordered], [p.vy for p in ordered],
+                             [p.wz for p in ordered])
+    return [replace(p, x=float(x), y=float(y), yaw=float(yaw)) for p, (x, y, yaw) in zip(ordered, poses, strict=True)]
 
 
 def robot_pose_series(odom: list[Pose2D], ref: list[Pose2D], tf: TfBuffer, frames: FramesConfig
@@ -671,8 +700,8 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
             mounted = (f"no transform in the log takes the laser frame {scans[0].frame_id!r} to "
                        f"{config.frames.base_link!r}: io.laser_mount {list(config.io.laser_mount)} is used")
         frames, base_note = resolve_base_frame(tf, config.frames)
-        odom, notes = odometry_poses(odom, tf, reader.roles.topic(Role.ODOMETRY) is not None, frames)
-        notes += [f"{path}: {n}" for n in (borrowed, mounted) if n]
+        odom, odom_notes = odometry_poses(odom, tf, reader.roles.topic(Role.ODOMETRY) is not None, frames)
+        notes = [f"{path}: {n}" for n in (*odom_notes, borrowed, mounted) if n]
         notes += model_states_note(reader) if not ref else []
         if reader.roles.topic(Role.REFERENCE) is None:
             ref, note = tf_reference(tf, frames)

@@ -689,3 +689,34 @@ def test_a_laser_stamped_late_is_moved_back_by_the_configured_offset(write_log: 
     np.testing.assert_array_equal(moved.scans.stamps_ns, clean.scans.stamps_ns - 80_000_000)
     assert clean.odometry is not None and moved.odometry is not None
     np.testing.assert_array_equal(moved.odometry.stamps_ns, clean.odometry.stamps_ns)
+
+
+def _twist_only(messages: list, keep_tf: bool) -> list:
+    """The sample log with /odom's pose left at 0 (a base that fills only twist: 1 m/s, 0.1 rad/s) and, unless
+    ``keep_tf``, no TF odom→base_link."""
+    out = []
+    for topic, msgtype, t, msg in messages:
+        if topic == "/odom":
+            msg = m.odometry(t, "odom", "base_link", 0.0, 0.0, 0.0, 1.0, 0.1)
+        if topic == "/tf" and not keep_tf:
+            continue
+        out.append((topic, msgtype, t, msg))
+    return out
+
+
+def test_an_odometry_topic_with_only_its_twist_set_is_read_from_tf_or_integrated(
+        write_log: Callable[..., Path]) -> None:
+    """Its pose never moves while its twist does: with a moving TF odom→base_link, the odometry is that TF; without
+    one, the twist integrated from the first message, an arc of radius v/w = 10 m. Each with a warning."""
+    messages = sample_messages(n_scans=20)
+    from_tf = load_recording(write_log("tf.mcap", _twist_only(messages, keep_tf=True)))
+    plain = load_recording(write_log("plain.mcap", messages))
+    assert from_tf.odometry is not None and plain.odometry is not None
+    np.testing.assert_allclose(from_tf.odometry.poses, plain.odometry.poses, atol=1e-9)
+    assert any("fills only twist" in w and "TF odom→base_link instead" in w for w in from_tf.warnings)
+
+    rec = load_recording(write_log("twist.mcap", _twist_only(messages, keep_tf=False)))
+    assert rec.odometry is not None and any("twist integrated" in w for w in rec.warnings)
+    t = (rec.odometry.stamps_ns - T0 - 100_000_000) * 1e-9
+    arc = np.column_stack([10.0 * np.sin(0.1 * t), 10.0 * (1 - np.cos(0.1 * t)), 0.1 * t])
+    np.testing.assert_allclose(rec.odometry.poses, arc, atol=1e-4)  # the midpoint rule's chord: O(dt³)
