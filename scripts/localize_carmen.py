@@ -104,9 +104,14 @@ def main() -> None:
     ap.add_argument("--init", choices=["reference", "global"], default="reference",
                     help="the filter's start: the first corrected pose, or a uniform cloud over the map's free space")
     args = ap.parse_args()
+    missing = [str(CARMEN / f"{name}-corrected.log.gz") for name in args.logs
+               if not (CARMEN / f"{name}-corrected.log.gz").exists()]
+    if missing:  # an empty table and exit 0 looked like a run
+        raise SystemExit(f"no such CARMEN log: {', '.join(missing)} (the shared datasets are read from beside the "
+                         "checkout, ../shared/datasets/carmen)")
     with tempfile.TemporaryDirectory() as tmp:
         work = args.work or Path(tmp)
-        rows = [row for name in args.logs if (CARMEN / f"{name}-corrected.log.gz").exists()
+        rows = [row for name in args.logs
                 for row in evaluate(name, work, args.seed, args.filter_seed, args.overrides, args.config,
                                     args.init)]
     print(f"drift seed {args.seed}, filter seed {args.filter_seed}, --init {args.init}")
