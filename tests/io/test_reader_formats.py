@@ -208,7 +208,7 @@ def test_annotated_mcap_keeps_inputs_and_adds_annotations(write_log: Callable[..
                         m.pose_with_covariance_stamped(t0 + k, "map", 1.0 * k, 2.0, 0.5, np.eye(6)))
              for k in range(3)]
     out = tmp_path / "annotated.mcap"
-    count = write_annotated_mcap(src, out, notes)
+    count = write_annotated_mcap(src, out, notes).written
     assert count == len(sample_messages()) + 3
     with open_log(out) as reader:
         assert reader.topics["/doorbatch/pose"].count == 3

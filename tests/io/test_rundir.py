@@ -95,3 +95,29 @@ def test_an_mcl_run_shows_the_maps_doors_without_leaves(tmp_path: Path) -> None:
     assert len(arrays) == 5
     spaces = [m.ns for m in arrays[0].markers]  # type: ignore[attr-defined]
     assert sorted(spaces) == ["hinges", "hinges", "ranges", "ranges"]
+
+
+def test_the_logs_own_map_to_odom_is_left_out_where_doorbatchs_replaces_it(tmp_path: Path) -> None:
+    """A log with another localizer's map→odom on /tf (alone, and in one message with odom→base_link): the copy
+    keeps every other transform and only doorbatch's map→odom, so a viewer's map frame does not flip between two."""
+    from doorbatch.io import ros_messages as m
+    from doorbatch.io.annotated_mcap import Annotation
+    from doorbatch.io.reader import open_log
+
+    messages = sample_messages(n_scans=4)
+    foreign = [("/tf", "tf2_msgs/msg/TFMessage", T0 + 1, m.tf_message([m.planar_transform(T0 + 1, "map", "odom",
+                                                                                           5.0, 0.0, 0.0)])),
+               ("/tf", "tf2_msgs/msg/TFMessage", T0 + 2, m.tf_message([
+                   m.planar_transform(T0 + 2, "map", "odom", 5.0, 0.0, 0.0),
+                   m.planar_transform(T0 + 2, "odom", "base_footprint", 0.0, 0.0, 0.0)]))]
+    log = write_messages(tmp_path / "in.mcap", sorted([*messages, *foreign], key=lambda x: x[2]))
+    ours = [Annotation("/tf", "tf2_msgs/msg/TFMessage", T0 + 3,
+                       m.tf_message([m.planar_transform(T0 + 3, "map", "odom", 1.0, 0.0, 0.0)]))]
+    out = tmp_path / "annotated.mcap"
+    copy = write_annotated_mcap(log, out, ours, replaced_tf=[("map", "odom")])
+    with open_log(out) as reader:
+        edges = [(t.header.frame_id, t.child_frame_id, t.transform.translation.x)
+                 for raw in reader.raw_messages(["/tf"]) for t in raw.msg.transforms]
+    assert copy.replaced_transforms == 2
+    assert [e for e in edges if e[:2] == ("map", "odom")] == [("map", "odom", 1.0)]
+    assert ("odom", "base_footprint", 0.0) in edges and sum(e[:2] == ("odom", "base_link") for e in edges) == 4

@@ -291,9 +291,10 @@ def run_doorpose(log_path: Path, out: Path, config: DoorbatchConfig, map_path: P
     with timer("write"):
         out.mkdir(parents=True, exist_ok=True)
         write_door_poses(out / "door_poses.parquet", result)
+        link = frame_link(inputs, config, [e.stamp_ns for e in result.estimates])
         write_annotated_mcap(log_path, out / "annotated.mcap",  # sim-time stamps: beside the input's messages
-                             on_log_clock(doorpose_annotations(result, frame_link(
-                                 inputs, config, [e.stamp_ns for e in result.estimates])), inputs.log_clock), config)
+                             on_log_clock(doorpose_annotations(result, link), inputs.log_clock), config,
+                             replaced_tf=[] if link is None else [(result.frame, link.odom_frame)])
     for w in result.warnings:
         manifest.warn(w)
     matched = [e for e in result.estimates if e.door_id >= 0]
