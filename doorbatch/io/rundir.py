@@ -33,13 +33,20 @@ def trajectory_columns(result: LocalizationResult) -> dict[str, object]:
 
 
 def door_state_columns(result: LocalizationResult) -> dict[str, object]:
-    """door_states.parquet columns (DESIGN schema): one row per update and door."""
-    u, d = result.door_mean.shape
+    """door_states.parquet columns (DESIGN schema): one row per update and door, in time order; with the RBPF's
+    door updates while the pose was held (:attr:`~LocalizationResult.still_doors`) among them."""
+    stamps, mean, std, observed = result.stamps_ns, result.door_mean, result.door_std, result.door_observed
+    still = result.still_doors
+    if still is not None and still.stamps_ns.size:
+        order = np.argsort(np.concatenate([stamps, still.stamps_ns]), kind="stable")
+        stamps = np.concatenate([stamps, still.stamps_ns])[order]
+        mean, std, observed = (np.concatenate([a, b])[order] for a, b in
+                               ((mean, still.mean), (std, still.std), (observed, still.observed)))
+    u, d = mean.shape
     return {
         "log": [result.log] * (u * d), "method": [result.method] * (u * d),
-        "stamp_ns": np.repeat(result.stamps_ns, d), "door_id": np.tile(result.door_id, u),
-        "angle": wrap_angle(result.door_mean.ravel()), "angle_std": result.door_std.ravel(),
-        "observed": result.door_observed.ravel(),
+        "stamp_ns": np.repeat(stamps, d), "door_id": np.tile(result.door_id, u),
+        "angle": wrap_angle(mean.ravel()), "angle_std": std.ravel(), "observed": observed.ravel(),
     }
 
 

@@ -381,6 +381,18 @@ def _sparse_match_note(run: RunTables, matched: int, ref: ReferenceTrajectory, c
     return f"{note}. Stamps on another clock than the reference's? (evaluate.t_offset_s, evo --t_offset)"
 
 
+def _coverage_note(run: RunTables, ref: ReferenceTrajectory, cfg: EvaluateConfig) -> list[str]:
+    """A warning when the run's poses span less than ``min_time_covered_share`` of the reference's time span: its
+    metrics describe that part of the log only."""
+    ref_s = float(ref.stamps_ns[-1] - ref.stamps_ns[0]) / 1e9 if len(ref.stamps_ns) > 1 else 0.0
+    run_s = float(run.stamps_ns[-1] - run.stamps_ns[0]) / 1e9
+    if not ref_s > 0.0 or run_s >= cfg.min_time_covered_share * ref_s:
+        return []
+    return [f"run {run.name}: its {len(run.stamps_ns)} pose(s) span {run_s:.1f} s of the reference's {ref_s:.1f} s "
+            "(evaluate.min_time_covered_share): its metrics describe that part only (a filter that stopped updating: "
+            "odometry that never moved the robot, a run cut short)"]
+
+
 def shifted_in_time(run: RunTables, offset_ns: int) -> RunTables:
     """``run`` with every time it holds moved by ``offset_ns`` (evo's ``--t_offset``: the estimate's stamps)."""
     if not offset_ns:
@@ -616,6 +628,8 @@ def evaluate_runs(runs: Sequence[RunTables], config: DoorbatchConfig, *,
                             "give --reference for a truth")
             ref = None
         alignment = None
+        if ref is not None:
+            warnings += _coverage_note(run, ref, cfg)
         if ref is not None and cfg.reference_at_run_stamps:
             ref = reference_at(ref, run.stamps_ns, round(cfg.global_success_max_reference_gap_s * 1e9))
         if ref is not None:

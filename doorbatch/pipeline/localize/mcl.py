@@ -120,6 +120,7 @@ class StepDiagnostics:
     random_fraction: float  # recovery's injection probability at this step
     n_random: int  # random particles injected
     log_avg_weight: float  # log w_avg of the weighting (nan without update)
+    doors_updated: bool = False  # RBPF: the pose held (not updated), the doors updated from this scan
 
 
 

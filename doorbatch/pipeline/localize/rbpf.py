@@ -110,7 +110,14 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
     none = np.zeros(n_doors, dtype=bool)
     if state.odom_at_update is not None:
         if not (force or update_thresholds_met(state.odom_at_update, odom, config)):
-            return state, StepDiagnostics(False, False, particles.neff(), len(particles), 0.0, 0, math.nan), none
+            if not (config.door_update_when_still and n_doors and last_stamp_s is not None
+                    and standing_still(state.odom_at_update, odom, config)
+                    and active_bandwidth(particles.pose, particles.weight, config) is None):
+                return state, StepDiagnostics(False, False, particles.neff(), len(particles), 0.0, 0, math.nan), none
+            particles, observed = doors_updated_still(particles, stamp_s - last_stamp_s, scan_points_base, doors,
+                                                      config)
+            return (replace(state, particles=particles),
+                    StepDiagnostics(False, False, particles.neff(), len(particles), 0.0, 0, math.nan, True), observed)
         particles = predict(particles, state.odom_at_update, odom, config, rng)
     if last_stamp_s is not None and n_doors:
         cap = math.radians(config.door_init_sigma_deg) ** 2
@@ -155,6 +162,27 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
 
     new_state, diag = finish_step(state, particles, log_avg, odom, config, rng, free, bandwidth)
     return new_state, diag, observed
+
+
+def standing_still(odom_at_update: npt.ArrayLike, odom_now: npt.ArrayLike, config: LocalizeConfig) -> bool:
+    """Whether the odometry has moved the robot by at most ``door_update_still_m`` and ``door_update_still_deg``
+    since the last pose update (the held pose is where the robot is)."""
+    a, b = np.asarray(odom_at_update, dtype=np.float64), np.asarray(odom_now, dtype=np.float64)
+    return bool(math.hypot(b[0] - a[0], b[1] - a[1]) <= config.door_update_still_m
+                and abs(float(wrap_angle(b[2] - a[2]))) <= math.radians(config.door_update_still_deg))
+
+
+def doors_updated_still(particles: ParticleSet, dt_s: float, scan_points_base: npt.ArrayLike, doors: DoorSet,
+                        config: LocalizeConfig) -> tuple[ParticleSet, npt.NDArray[np.bool_]]:
+    """The door half of an RBPF update for a robot that stands still (``door_update_when_still``): each particle's
+    door Gaussians walk for ``dt_s`` and take the scan's polygon measurements (Kalman update, as in
+    :func:`rbpf_step`); poses and weights are left as they are (AMCL's update thresholds hold the pose: a standing
+    robot's scans are one view again, but a door moving in it is news). Returns the particles and (D,) observed."""
+    cap = math.radians(config.door_init_sigma_deg) ** 2
+    var = predict_doors(particles.door_var, max(dt_s, 0.0), config.door_sigma_rad_per_sqrt_s, max_var=cap)
+    update = update_doors(scan_points_base, replace(particles, door_var=var), doors, config)
+    return (replace(particles, door_mean=update.mean, door_var=update.var),
+            np.asarray(update.observed.any(axis=0), dtype=bool))
 
 
 def tracked_log_likelihood(particles: ParticleSet, beams: BeamSet, field: DistanceField, doors: DoorSet,

@@ -13,6 +13,17 @@ FloatArray = npt.NDArray[np.float64]
 
 
 @dataclass(frozen=True)
+class StillDoorStates:
+    """Door estimates of the RBPF's updates that held the pose (the robot standing still; ``door_update_when_still``):
+    stamps_ns (S,), mean and std (S, D) as :class:`LocalizationResult`'s, observed (S, D)."""
+
+    stamps_ns: npt.NDArray[np.int64]
+    mean: FloatArray
+    std: FloatArray
+    observed: npt.NDArray[np.bool_]
+
+
+@dataclass(frozen=True)
 class LocalizationResult:
     """The estimate after every filter update.
 
@@ -47,6 +58,7 @@ class LocalizationResult:
     lost_ns: list[int] = field(default_factory=list)  # stamps at which an episode of being lost began
     odom_frame_id: str = ""  # the frame of the odometry the run moved by ("": not known)
     door_ids: npt.NDArray[np.int32] | None = None  # (D,) the map's door_id of each door column; None: 0 … D − 1
+    still_doors: StillDoorStates | None = None  # door updates between pose updates (None or empty: none)
 
     @property
     def door_id(self) -> npt.NDArray[np.int32]:

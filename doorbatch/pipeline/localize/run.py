@@ -68,7 +68,7 @@ from doorbatch.pipeline.localize.mcl import (
 from doorbatch.pipeline.localize.particles import ParticleSet
 from doorbatch.pipeline.localize.rbpf import rbpf_step
 from doorbatch.pipeline.localize.resampling import RecoveryState
-from doorbatch.pipeline.localize.result import LocalizationResult
+from doorbatch.pipeline.localize.result import LocalizationResult, StillDoorStates
 from doorbatch.pipeline.localize.rival_pose import Rival, RivalOutcome, RivalSearch, find_rival, scan_cloud
 from doorbatch.pipeline.localize.torch_field import check_device
 from doorbatch.pipeline.mapping import pass_poses
@@ -315,6 +315,7 @@ class _Track:
     dstd: list[FloatArray] = field(default_factory=list)
     observed: list[npt.NDArray[np.bool_]] = field(default_factory=list)
     particles: list[FloatArray] = field(default_factory=list)
+    still: list[tuple[int, FloatArray, FloatArray, npt.NDArray[np.bool_]]] = field(default_factory=list)
 
     def add(self, stamp: int, pose: FloatArray, cov: FloatArray, odom: FloatArray, n: int, neff: float,
             dmean: FloatArray, dstd: FloatArray, observed: npt.NDArray[np.bool_], particles: FloatArray) -> None:
@@ -329,6 +330,10 @@ class _Track:
         self.observed.append(observed)
         self.particles.append(particles)
 
+    def add_doors(self, stamp: int, dmean: FloatArray, dstd: FloatArray, observed: npt.NDArray[np.bool_]) -> None:
+        """Door estimates of an update that held the pose (``door_update_when_still``)."""
+        self.still.append((stamp, dmean, dstd, observed))
+
     def result(self, log_name: str, method: str, n_doors: int, converged_ns: int | None, is_ambiguous: bool,
                warnings: list[str], log_clock: LogClock | None = None, lost_ns: list[int] | None = None,
                odom_frame_id: str = "", door_ids: npt.NDArray[np.int32] | None = None) -> LocalizationResult:
@@ -341,7 +346,11 @@ class _Track:
             door_observed=np.asarray(self.observed, dtype=bool).reshape(u, n_doors),
             particles=np.asarray(self.particles), converged_ns=converged_ns, ambiguous=is_ambiguous,
             warnings=warnings, log_clock=log_clock, lost_ns=list(lost_ns or []), odom_frame_id=odom_frame_id,
-            door_ids=door_ids)
+            door_ids=door_ids, still_doors=StillDoorStates(
+                np.asarray([s[0] for s in self.still], dtype=np.int64),
+                np.asarray([s[1] for s in self.still], dtype=np.float64).reshape(len(self.still), n_doors),
+                np.asarray([s[2] for s in self.still], dtype=np.float64).reshape(len(self.still), n_doors),
+                np.asarray([s[3] for s in self.still], dtype=bool).reshape(len(self.still), n_doors)))
 
 
 def start_scan_index(rec: Recording, start: StartPose) -> int:
@@ -599,6 +608,9 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
                                    combination=combination)
             observed = np.zeros(0, dtype=bool)
         if not diag.updated:
+            if diag.doors_updated:  # the robot stands still: the doors were updated, the pose held
+                last_s = stamp_s
+                track.add_doors(scan.stamp_ns, *state.particles.door_estimate(), observed)
             continue
         last_s = stamp_s
         p = state.particles
@@ -799,10 +811,14 @@ def run_localize(log_path: Path, map_path: Path, out: Path, config: DoorbatchCon
             result.warnings.append(f"frames.odom is {config.frames.odom!r} but the log's odometry is in "
                                    f"{odom_frame!r}: annotated.mcap's map→odom transform names {odom_frame!r}, the "
                                    "frame the robot hangs from in the log's own TF tree")
-        write_annotated_mcap(log_path, out / "annotated.mcap",
-                             on_log_clock(run_annotations(result, lmap.occupancy, lmap.doors, config.frames.map,
-                                                          odom_frame), result.log_clock),
-                             config)
+        copy = write_annotated_mcap(log_path, out / "annotated.mcap",
+                                    on_log_clock(run_annotations(result, lmap.occupancy, lmap.doors, config.frames.map,
+                                                                 odom_frame), result.log_clock),
+                                    config, replaced_tf=[(config.frames.map, odom_frame)])
+        if copy.replaced_transforms:
+            result.warnings.append(f"the log's own {config.frames.map}→{odom_frame} ({copy.replaced_transforms} "
+                                   "transforms on /tf: another localizer's) is left out of annotated.mcap, where "
+                                   "doorbatch's own takes its place")
     for w in result.warnings:
         manifest.warn(w)
     manifest.extra.update(result.manifest_extra())

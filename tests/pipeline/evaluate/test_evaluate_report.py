@@ -139,6 +139,19 @@ def test_a_run_stamped_late_is_matched_after_t_offset_and_a_sparse_match_is_told
     assert "400 ms apart" in sparse.warnings[0] and "evaluate.max_time_diff_s=0.2 " in sparse.warnings[0]
 
 
+def test_a_run_that_covers_a_sliver_of_its_reference_is_told() -> None:
+    """One pose (a filter that made one update over a log whose odometry never moved) against a 20 s reference:
+    its APE is a number, but it describes 0 s of the log: a warning names both spans. The whole run: none."""
+    stamps, ref = _straight()
+    reference = ReferenceTrajectory(stamps, ref)
+    one = evaluate_runs([RunTables("one", "l", "rbpf", stamps[:1], ref[:1])], DoorbatchConfig(), reference=reference)
+    assert one.value("one", "associated_poses") == 1
+    assert any("its 1 pose(s) span 0.0 s of the reference's 19.9 s" in w for w in one.warnings), one.warnings
+    half = evaluate_runs([RunTables("part", "l", "rbpf", stamps[:120], ref[:120])], DoorbatchConfig(),
+                         reference=reference)
+    assert not half.warnings
+
+
 def test_a_25_hz_truth_is_interpolated_at_10_hz_updates_when_asked() -> None:
     """Filter updates at scan stamps 13 ms past a 25 Hz truth's, the estimate exactly on the truth, 1 m/s: evo's
     0.01 s pairs some updates (a warning says so), 0.02 s pairs all but up to 20 ms off (2 cm); the reference
