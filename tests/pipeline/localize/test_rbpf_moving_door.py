@@ -12,7 +12,7 @@ from mcl_sim import LASER_X, RES, polyline, rasterize, scan_beams, scan_ranges
 from doorbatch.config import LocalizeConfig
 from doorbatch.maps import DoorSet
 from doorbatch.pipeline.localize.door_observation import DoorUpdate, kalman_update
-from doorbatch.pipeline.localize.likelihood_field import BeamSet, build_distance_field
+from doorbatch.pipeline.localize.likelihood_field import BeamSet, DistanceField, build_distance_field
 from doorbatch.pipeline.localize.mcl import MclState, initial_particles
 from doorbatch.pipeline.localize.particles import ParticleSet
 from doorbatch.pipeline.localize.rbpf import (
@@ -38,15 +38,21 @@ def door_angles_deg(k: int) -> FloatArray:
     return np.array([45.0, FROM_DEG + s * (TO_DEG - FROM_DEG), 45.0])
 
 
-def door_errors_deg(config: LocalizeConfig) -> FloatArray:
-    """|estimate − truth| of door 1 (weighted mean, degrees) after every update along a corridor whose leaves open
-    into it (range 0…90°); exact odometry, so that only the door filter differs between configs."""
+def _corridor() -> tuple[FloatArray, DistanceField, DoorSet]:
+    """The corridor's walls (segments), their distance field, and the three doors (range 0…90°, into it)."""
     walls = np.concatenate([polyline((-1.0, 0.0), (14.0, 0.0)), polyline((-1.0, 2.4), (14.0, 2.4)),
                             polyline((-1.0, 0.0), (-1.0, 2.4))])
     field = build_distance_field(rasterize(walls, (-1.0, 14.0), (0.0, 2.4), margin=RES * 4), 2.0)
     d = len(HINGES_X)
-    doors = DoorSet(np.array([[x, 0.0] for x in HINGES_X]), np.full(d, LEAF), np.zeros(d), np.zeros(d),
-                    np.full(d, math.radians(90.0)))
+    return walls, field, DoorSet(np.array([[x, 0.0] for x in HINGES_X]), np.full(d, LEAF), np.zeros(d), np.zeros(d),
+                                 np.full(d, math.radians(90.0)))
+
+
+def door_errors_deg(config: LocalizeConfig) -> FloatArray:
+    """|estimate − truth| of door 1 (weighted mean, degrees) after every update along a corridor whose leaves open
+    into it (range 0…90°); exact odometry, so that only the door filter differs between configs."""
+    walls, field, doors = _corridor()
+    d = len(HINGES_X)
     truth = np.stack([np.linspace(1.0, 9.0, STEPS), np.full(STEPS, 1.5), np.zeros(STEPS)], axis=1)
     rng = np.random.default_rng(5)
     particles = initial_particles(truth[0], config, rng)
@@ -158,12 +164,8 @@ def still_robot_door_errors_deg(config: LocalizeConfig) -> tuple[FloatArray, Flo
     """A robot standing 2 m before door 1's hinge (exact odometry: every update after the first is below the update
     thresholds) while door 1 swings from 20° to 70°: door 1's error (degrees) after every scan, and how far the
     particles' poses moved over the run (max over particles, m)."""
-    walls = np.concatenate([polyline((-1.0, 0.0), (14.0, 0.0)), polyline((-1.0, 2.4), (14.0, 2.4)),
-                            polyline((-1.0, 0.0), (-1.0, 2.4))])
-    field = build_distance_field(rasterize(walls, (-1.0, 14.0), (0.0, 2.4), margin=RES * 4), 2.0)
+    walls, field, doors = _corridor()
     d = len(HINGES_X)
-    doors = DoorSet(np.array([[x, 0.0] for x in HINGES_X]), np.full(d, LEAF), np.zeros(d), np.zeros(d),
-                    np.full(d, math.radians(90.0)))
     pose = np.array([4.0, 1.5, 0.0])
     rng = np.random.default_rng(5)
     particles = initial_particles(pose, config, rng)
