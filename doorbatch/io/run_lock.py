@@ -4,9 +4,11 @@
 step (written to a temporary file, then hard-linked to the lock name, which fails if the lock exists), so
 a reader never sees an empty lock. A lock whose PID is dead on this host is stale (a killed run): it is
 reported and taken over, and so is one whose PID now belongs to a process started after the lock was
-taken (PIDs are reused after a reboot; Linux tells start times). A lock held by a live process, or by
-another host (whose PIDs cannot be checked), is an :class:`~doorbatch.errors.OutputLockedError` (exit 2:
-the output is in use, retry later).
+taken (PIDs are reused after a reboot; Linux tells start times). The holder also keeps an exclusive ``flock`` on
+the lock file while it runs, which the kernel drops when it dies: a lock of another host (whose PIDs cannot be
+checked: another container, another machine on a shared volume) is stale when no process holds that flock (a run
+killed in a container that is gone). A lock held by a live process is an
+:class:`~doorbatch.errors.OutputLockedError` (exit 2: the output is in use, retry later).
 """
 
 from __future__ import annotations
@@ -94,16 +96,45 @@ def read_lock(path: Path) -> LockInfo | None:
         return None
 
 
+_HELD: dict[Path, int] = {}  # lock path → the open file whose flock this process holds while it runs
+
+
 def _try_create(path: Path, info: LockInfo) -> bool:
+    """Create the lock with ``info``, flocked before it gets its name (so that no one sees it unflocked); the
+    flock is held (:data:`_HELD`) until :func:`release_lock`."""
     tmp = temp_path_for(path)
-    tmp.write_text(json.dumps(asdict(info)) + "\n", encoding="utf-8")
+    fd = os.open(tmp, os.O_CREAT | os.O_EXCL | os.O_RDWR, 0o644)
     try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        os.write(fd, (json.dumps(asdict(info)) + "\n").encode("utf-8"))
         os.link(tmp, path)  # atomic, fails when the lock exists
-        return True
     except FileExistsError:
+        os.close(fd)
         return False
+    except BaseException:
+        os.close(fd)
+        raise
     finally:
         tmp.unlink(missing_ok=True)
+    _HELD[path] = fd
+    return True
+
+
+def flock_held(path: Path) -> bool:
+    """Whether some process holds the lock file's flock (a running holder; the kernel drops it when it dies)."""
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return True
+    except OSError:  # a file system without flock: nothing can be told, so the holder is taken to run
+        return True
+    finally:
+        os.close(fd)  # releases the probe's flock, if it got it
+    return False
 
 
 @contextmanager
@@ -125,7 +156,7 @@ def acquire_lock(folder: Path) -> tuple[LockInfo, LockInfo | None]:
         This process's lock, and the stale lock that was taken over (``None`` if there was none).
 
     Raises:
-        OutputLockedError: a live process on this host, or any process on another host, holds it.
+        OutputLockedError: a live process on this host holds it, or a process on another host that holds its flock.
     """
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / LOCK_NAME
@@ -135,7 +166,8 @@ def acquire_lock(folder: Path) -> tuple[LockInfo, LockInfo | None]:
         if _try_create(path, mine):
             return mine, stale
         held = read_lock(path)
-        if held is not None and (held.host != mine.host or holder_running(held)):
+        running = holder_running(held) if held is not None and held.host == mine.host else flock_held(path)
+        if held is not None and running:
             raise OutputLockedError(f"{folder} is in use by another doorbatch run ({held.describe()}); "
                                     f"if that run is gone, remove {path}")
         stale = held or UNREADABLE
@@ -151,6 +183,9 @@ def release_lock(folder: Path, mine: LockInfo) -> None:
     path = folder / LOCK_NAME
     if read_lock(path) == mine:
         path.unlink(missing_ok=True)
+    fd = _HELD.pop(path, None)
+    if fd is not None:
+        os.close(fd)
 
 
 @contextmanager

@@ -76,10 +76,31 @@ def test_an_unreadable_lock_is_stale(tmp_path: Path) -> None:
     assert stale == LockInfo(-1, "?", "?") and read_lock(tmp_path / LOCK_NAME) == mine
 
 
-def test_a_lock_from_another_host_is_never_taken(tmp_path: Path) -> None:
+def test_a_lock_from_another_host_is_taken_only_when_no_one_holds_its_flock(tmp_path: Path) -> None:
+    """Another host's PID cannot be checked: its holder keeps a flock on the lock while it runs. Held: the output
+    is in use. Not held (a run killed in a container that is gone, whose hostname no later container has): stale,
+    taken over, where it used to refuse every night until someone removed it by hand."""
+    import fcntl
+
     write_lock(tmp_path, dead_pid(), host="some-other-host")
-    with pytest.raises(OutputLockedError, match="some-other-host"):
-        acquire_lock(tmp_path)
+    fd = os.open(tmp_path / LOCK_NAME, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)  # the other host's run, alive
+        with pytest.raises(OutputLockedError, match="some-other-host"):
+            acquire_lock(tmp_path)
+    finally:
+        os.close(fd)
+    mine, stale = acquire_lock(tmp_path)
+    assert stale is not None and stale.host == "some-other-host" and read_lock(tmp_path / LOCK_NAME) == mine
+
+
+def test_a_held_lock_keeps_its_flock_until_released(tmp_path: Path) -> None:
+    """The flock another host probes is held from the lock's creation to its release."""
+    from doorbatch.io.run_lock import flock_held
+
+    with run_lock(tmp_path):
+        assert flock_held(tmp_path / LOCK_NAME)
+    assert not (tmp_path / LOCK_NAME).exists()
 
 
 def test_release_leaves_a_lock_that_is_not_ours(tmp_path: Path) -> None:
