@@ -8,8 +8,10 @@ appended to, so it keeps the history of every run into the same output folder; e
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
+import sys
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -35,19 +37,29 @@ class JsonLinesHandler(logging.Handler):
     def __init__(self, path: Path, level: int = logging.INFO) -> None:
         super().__init__(level)
         path.parent.mkdir(parents=True, exist_ok=True)
+        self.path = path
         self._file: TextIO = path.open("a", encoding="utf-8")
+        self.failed: OSError | None = None  # the first write that failed (a full disk): said once, not per record
 
     def emit(self, record: logging.LogRecord) -> None:
-        """Append the record as one line and flush it."""
+        """Append the record as one line and flush it. A write that fails (no space left) is said once on stderr,
+        and the records after it are dropped: logging's default printed a traceback per record into cron's mail."""
+        if self.failed is not None:
+            return
         try:
             self._file.write(json.dumps(record_fields(record), default=str) + "\n")
             self._file.flush()
+        except OSError as err:
+            self.failed = err
+            sys.stderr.write(f"doorbatch: cannot write {self.path} ({err.strerror or err}); its later events are "
+                             "lost\n")
         except Exception:
             self.handleError(record)
 
     def close(self) -> None:
-        """Close the file."""
-        self._file.close()
+        """Close the file (a full disk may refuse the last flush: said already)."""
+        with contextlib.suppress(OSError):
+            self._file.close()
         super().close()
 
 

@@ -168,6 +168,13 @@ def execute_step(step: Step, job: BatchJob, usable: Sequence[Step] = ()) -> Step
     except DoorbatchError as err:
         return StepOutcome(step.id, StepStatus.FAILED, time.perf_counter() - start, str(err),
                            fingerprints=cache.new)
+    except OSError as err:  # the machine, not the data or the code: a full disk, a file where a folder must go
+        if (interrupt := wrapped_interrupt(err)) is not None:
+            raise interrupt from err
+        where = f" ({err.filename})" if err.filename else ""
+        return StepOutcome(step.id, StepStatus.FAILED, time.perf_counter() - start,
+                           f"cannot write its outputs: {err.strerror or err}{where}", traceback=traceback.format_exc(),
+                           fingerprints=cache.new)
     except Exception as err:  # a bug or an unforeseen data problem: this step fails, the batch goes on
         interrupt = wrapped_interrupt(err)
         if interrupt is not None:

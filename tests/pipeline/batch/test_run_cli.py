@@ -298,3 +298,17 @@ def test_a_rerun_with_other_doorbatch_code_redoes_every_step(tiny_master: Path, 
     assert code == 0 and by_status(summary, "done") == ALL_STEPS
     record = json.loads((out / SITE / "map" / "manifest.json").read_text())["extra"]["step"]
     assert record["code_sha256"] == "0" * 64
+
+
+def test_a_file_where_a_sites_folder_must_go_fails_its_steps_as_the_machines_fault(
+        tiny: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """OUT/<site> is a file: each of the site's steps fails naming what is in the way (exit 4), not as an
+    "internal error" (a bug's wording; the docs promise exit 1 for those)."""
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / SITE).write_text("in the way")
+    code, summary = run_json(tiny, out, capsys)
+    assert code == 4
+    errors = {f["step"]: f["error"] for f in summary["failures"] if f["status"] == "failed"}
+    assert errors[f"map:{SITE}"].startswith("cannot write its outputs: File exists") and SITE in errors[f"map:{SITE}"]
+    assert not any("internal error" in e for e in errors.values())
