@@ -5,7 +5,7 @@ Layout (DESIGN.md, Command line), paths relative to the dataset folder::
     sites:
       office_corridor:
         mapping: [logs/map_pass1.mcap, logs/map_pass2.mcap]       # one pass per log, at least one
-        localization: [logs/loc_closed.mcap]                      # may be empty
+        localization: [logs/loc_closed.mcap, nightly/*.mcap]      # may be empty; a pattern: the logs it matches
         truth: truth/office_corridor.yaml                         # optional
     config: {}                                                    # optional overrides for this dataset
 
@@ -84,7 +84,13 @@ def _paths(root: Path, site: str, key: str, value: Any, where: Path) -> tuple[Pa
         value = [value]
     if not isinstance(value, list) or not all(isinstance(v, str) and v for v in value):
         raise _layout_error(f"sites.{site}.{key} must be a list of paths relative to the dataset", where)
-    return tuple(root / v for v in value)
+    paths: list[Path] = []
+    for v in value:  # a pattern (logs/*.mcap, 2026/**/loc_*.bag) stands for the logs it matches, in name order
+        paths += sorted(root.glob(v)) if _GLOB.search(v) else [root / v]
+    return tuple(dict.fromkeys(paths))  # a log matched twice is one log
+
+
+_GLOB = re.compile(r"[*?\[]")  # a path with these is a pattern
 
 
 def _site(root: Path, name: Any, entry: Any, where: Path) -> Site:
@@ -98,12 +104,14 @@ def _site(root: Path, name: Any, entry: Any, where: Path) -> Site:
                             "(mapping, localization, truth)", where)
     mapping = _paths(root, name, "mapping", entry.get("mapping"), where)
     if not mapping:
-        raise _layout_error(f"sites.{name}.mapping: at least one mapping log is needed", where)
+        raise _layout_error(f"sites.{name}.mapping: at least one mapping log is needed (a pattern that matches "
+                            "none gives none)", where)
     localization = _paths(root, name, "localization", entry.get("localization"), where)
     names = [log_name(p) for p in localization]
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
-        raise _layout_error(f"sites.{name}.localization: two logs share the output name(s) {twice}", where)
+        raise _layout_error(f"sites.{name}.localization: two logs share the output name(s) {twice} (OUT/{name}/runs/"
+                            "<name>: rename one, or list them under two sites)", where)
     truth = entry.get("truth")
     if truth is not None and not (isinstance(truth, str) and truth):
         raise _layout_error(f"sites.{name}.truth must be a path relative to the dataset", where)

@@ -56,3 +56,24 @@ def test_a_folder_without_dataset_yaml_is_named(tmp_path: Path) -> None:
     with pytest.raises(InputDataError, match=r"no dataset\.yaml") as err:
         read_dataset(tmp_path)
     assert str(tmp_path) in str(err.value)
+
+
+def test_a_pattern_stands_for_the_logs_it_matches_so_new_logs_are_picked_up(tmp_path: Path) -> None:
+    """A nightly folder that grows: `nightly/**/loc_*.mcap` lists every log under it in name order (a log matched
+    twice once), and tomorrow's new log without editing dataset.yaml; a mapping pattern that matches nothing is the
+    layout error of no mapping log."""
+    for rel in ("maps/p1.mcap", "maps/p2.mcap", "nightly/2026/11/29/loc_a.mcap", "nightly/2026/11/30/loc_b.mcap",
+                "nightly/README.txt"):
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / rel).write_bytes(b"")
+    (tmp_path / "dataset.yaml").write_text(
+        "sites:\n  s: {mapping: ['maps/p*.mcap'], localization: ['nightly/**/loc_*.mcap', 'nightly/2026/11/29/*']}\n")
+    site = read_dataset(tmp_path).sites[0]
+    assert [p.relative_to(tmp_path).as_posix() for p in site.mapping] == ["maps/p1.mcap", "maps/p2.mcap"]
+    assert [p.name for p in site.localization] == ["loc_a.mcap", "loc_b.mcap"]
+    (tmp_path / "nightly/2026/12/01").mkdir(parents=True)
+    (tmp_path / "nightly/2026/12/01/loc_c.mcap").write_bytes(b"")
+    assert [p.name for p in read_dataset(tmp_path).sites[0].localization] == ["loc_a.mcap", "loc_b.mcap", "loc_c.mcap"]
+    (tmp_path / "dataset.yaml").write_text("sites:\n  s: {mapping: ['maps/q*.mcap']}\n")
+    with pytest.raises(ConfigError, match="at least one mapping log"):
+        read_dataset(tmp_path)
