@@ -21,7 +21,7 @@ from doorbatch.errors import LaserMountError, LogContentError, TransformError
 from doorbatch.geometry.deskew import deskewed_scans
 from doorbatch.geometry.odometry import bridged_jumps, integrated_twist, odometry_jumps, sweep_smear_m
 from doorbatch.geometry.rotations import yaw_of_matrix
-from doorbatch.geometry.se2 import compose, interpolate_poses
+from doorbatch.geometry.se2 import compose, interpolate_poses, inverse
 from doorbatch.geometry.tf_buffer import TfBuffer
 from doorbatch.geometry.veiling import veiling_mask
 from doorbatch.io.decode import MODEL_STATES
@@ -131,6 +131,10 @@ class Recording:
     # log). A later piece continues the one before it: one recording, one odometry frame.
     source_path: str = ""
     piece: int = 0
+    # Where the log's odometry restarts were bridged (bridged_odometry), the rigid motion B that bridging
+    # applied to its last pose (bridged = B ⊕ raw): a next pass whose odometry continues the driver's raw frame
+    # takes B too (mapping.carried_bridges). None: nothing bridged.
+    odometry_bridge: FloatArray | None = None
 
     @property
     def log_path(self) -> str:
@@ -710,7 +714,7 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
         offset_ns = round(config.io.scan_time_offset_s * 1e9)
         scans = [replace(s, stamp_ns=s.stamp_ns + offset_ns) for s in timed.scans] if offset_ns else timed.scans
         odometry, reference = robot_pose_series(timed.odom, timed.ref, tf, frames)
-        odometry, jump_note = without_odometry_jumps(odometry, config)
+        odometry, jump_note, bridge = bridged_odometry(odometry, config)
         notes += [f"{path}: {jump_note}"] if jump_note else []
         warnings = [*reader.warnings, *(f"{path}: {n}" for n in timed.notes), *([base_note] if base_note else []),
                     *notes]
@@ -799,7 +803,7 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
                         "no independent reference (a raw CARMEN log's laser poses are its odometry; a corrected log's "
                         "odometry was replaced by its corrected poses)")
     return Recording(str(path), scan_set, odometry, reference, aligned, warnings, valid, repeats,
-                     timed.log_clock, tuple(tf.static_transforms()))
+                     timed.log_clock, tuple(tf.static_transforms()), odometry_bridge=bridge)
 
 
 def no_sweep_note(sweep_s: float, period_s: float) -> str | None:
@@ -868,17 +872,18 @@ def lost_times_note(stamps_ns: Sequence[int]) -> str | None:
             "synthesizes")
 
 
-def without_odometry_jumps(odometry: PoseSeries | None, config: DoorbatchConfig
-                           ) -> tuple[PoseSeries | None, str | None]:
+def bridged_odometry(odometry: PoseSeries | None, config: DoorbatchConfig
+                     ) -> tuple[PoseSeries | None, str | None, FloatArray | None]:
     """The odometry with its restarts (:func:`~doorbatch.geometry.odometry.odometry_jumps`: a driver that restarted
-    at zero) bridged, and a note naming them; a localizer or scan matcher fed the jump would take it as motion."""
+    at zero) bridged, a note naming them (a localizer or scan matcher fed the jump would take it as motion), and the
+    motion B bridging applied to the last pose (bridged = B ⊕ raw; None where nothing was bridged)."""
     if odometry is None:
-        return None, None
+        return None, None, None
     io = config.io
     jumps = odometry_jumps(odometry.poses, io.odometry_jump_min_m, math.radians(io.odometry_jump_min_deg),
                            io.odometry_restart_at_zero_m, io.odometry_restart_steps)
     if not jumps.size:
-        return odometry, None
+        return odometry, None, None
     t0 = int(odometry.stamps_ns[0])
     steps = np.hypot(*(odometry.poses[jumps, :2] - odometry.poses[jumps - 1, :2]).T)
     said = ", ".join(f"{(int(odometry.stamps_ns[i]) - t0) / 1e9:.1f} s ({d:.2f} m)"
@@ -887,7 +892,8 @@ def without_odometry_jumps(odometry: PoseSeries | None, config: DoorbatchConfig
     note = (f"the odometry jumps back to (0, 0) {jumps.size} time(s) (at {said}{more} after its start: a driver "
             "that restarted): each jump is taken out, the odometry after it continuing from the pose before "
             "(io.odometry_jump_min_m, _min_deg, io.odometry_restart_at_zero_m, _restart_steps)")
-    return replace(odometry, poses=bridged_jumps(odometry.poses, jumps)), note
+    poses = bridged_jumps(odometry.poses, jumps)
+    return replace(odometry, poses=poses), note, compose(poses[-1], inverse(odometry.poses[-1]))
 
 
 def configured_mount(config: DoorbatchConfig, laser_frame: str) -> Transform:

@@ -19,7 +19,6 @@ from __future__ import annotations
 import itertools
 import logging
 from collections.abc import Callable, Sequence
-from dataclasses import replace
 
 import numpy as np
 import numpy.typing as npt
@@ -30,23 +29,11 @@ from doorbatch.geometry.se2 import compose, inverse
 from doorbatch.io.recording import Recording
 from doorbatch.maps import DoorSet, OccupancyMap
 from doorbatch.pipeline.localize.run import LocalizationMap, localize_recording
-from doorbatch.pipeline.mapping import PartialMap, continues
+from doorbatch.pipeline.mapping import PartialMap, continues, moved_odometry
 
 log = logging.getLogger(__name__)
 
 FloatArray = npt.NDArray[np.float64]
-
-
-def moved_odometry(rec: Recording, motion: npt.ArrayLike) -> Recording:
-    """``rec`` with its odometry moved by the rigid ``motion`` T (x, y, yaw): o ↦ T ⊕ o; a reference that repeats
-    the odometry (r = M ⊕ o) then repeats the moved one by M ⊕ T⁻¹. A pass without odometry (a piece of a log
-    matched at constant velocity) has nothing to move."""
-    if rec.odometry is None:
-        return rec
-    t = np.asarray(motion, dtype=np.float64).reshape(3)
-    poses = compose(np.broadcast_to(t, rec.odometry.poses.shape), rec.odometry.poses)
-    repeat = None if rec.odometry_to_reference is None else compose(rec.odometry_to_reference, inverse(t))
-    return replace(rec, odometry=replace(rec.odometry, poses=poses), odometry_to_reference=repeat)
 
 
 def join_passes(recordings: Sequence[Recording], static_map_of: Callable[[Sequence[Recording]], PartialMap],

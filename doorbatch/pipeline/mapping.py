@@ -28,7 +28,7 @@ from doorbatch.config import DoorbatchConfig
 from doorbatch.errors import PipelineError
 from doorbatch.geometry.laser import dropouts, wraps_around
 from doorbatch.geometry.rotations import wrap_angle
-from doorbatch.geometry.se2 import compose, interpolate_poses, rotation_matrix
+from doorbatch.geometry.se2 import compose, interpolate_poses, inverse, rotation_matrix
 from doorbatch.io.preview import PreviewDoor
 from doorbatch.io.recording import Recording, load_passes
 from doorbatch.maps import OccupancyMap
@@ -233,6 +233,42 @@ def mapping_passes(logs: Sequence[Path], config: DoorbatchConfig, with_colors: b
     return paths, split_into_passes(recordings, config.mapping.pass_duration_s), note
 
 
+def moved_odometry(rec: Recording, motion: npt.ArrayLike) -> Recording:
+    """``rec`` with its odometry moved by the rigid ``motion`` T (x, y, yaw): o ↦ T ⊕ o; a reference that repeats
+    the odometry (r = M ⊕ o) then repeats the moved one by M ⊕ T⁻¹. A pass without odometry (a piece of a log
+    matched at constant velocity) has nothing to move."""
+    if rec.odometry is None:
+        return rec
+    t = np.asarray(motion, dtype=np.float64).reshape(3)
+    poses = compose(np.broadcast_to(t, rec.odometry.poses.shape), rec.odometry.poses)
+    repeat = None if rec.odometry_to_reference is None else compose(rec.odometry_to_reference, inverse(t))
+    return replace(rec, odometry=replace(rec.odometry, poses=poses), odometry_to_reference=repeat)
+
+
+def carried_bridges(recordings: Sequence[Recording], config: DoorbatchConfig) -> tuple[list[Recording], list[str]]:
+    """The passes with each odometry restart bridged in one pass carried on to the passes after it that continue the
+    driver's new frame: a pass whose odometry starts where the previous one's *raw* odometry ended (its bridged
+    end moved back by its bridge B⁻¹) is moved by B (:func:`moved_odometry`), so that it continues the bridged one;
+    and a note per pass moved. (A restart bridged in pass 2 left pass 3, recorded on after it, 10.9 m from where
+    pass 2 ended: "disjoint coordinate frames".)"""
+    out = list(recordings[:1])
+    notes: list[str] = []
+    for nxt in recordings[1:]:
+        prev = out[-1]
+        bridge = prev.odometry_bridge
+        if bridge is not None and nxt.odometry is not None and prev.odometry is not None and not continues(
+                prev, nxt, config):
+            raw_prev = replace(prev, odometry=replace(prev.odometry, poses=compose(
+                inverse(bridge), prev.odometry.poses[-1:])))
+            if continues(raw_prev, nxt, config):
+                own = np.zeros(3) if nxt.odometry_bridge is None else nxt.odometry_bridge
+                nxt = replace(moved_odometry(nxt, bridge), odometry_bridge=compose(bridge, own))
+                notes.append(f"{nxt.path}: its odometry continues the frame {Path(prev.path).name}'s driver "
+                             "restarted in: moved as that restart was bridged")
+        out.append(nxt)
+    return out, notes
+
+
 def check_common_frame(recordings: Sequence[Recording], source: str, config: DoorbatchConfig) -> None:
     """Passes must share one map frame.
 
@@ -406,6 +442,9 @@ def build_map(logs: Sequence[Path], config: DoorbatchConfig | None = None,
     if source == "reference":
         warnings += reference_jitter_notes(recordings, config)
     log.info("pose source: %s", source)
+    if source != "reference" and len(recordings) > 1:
+        recordings, carried = carried_bridges(recordings, config)
+        warnings += carried
     if source != "reference" and config.mapping.join_passes and len(recordings) > 1:
         from doorbatch.pipeline.join_passes import join_passes  # it localizes, and localization reads pass poses
 
