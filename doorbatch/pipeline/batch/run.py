@@ -133,7 +133,8 @@ def _summary(dataset: Dataset, out: Path, steps: list[Step], outcomes: dict[str,
         str(report) if outcomes["report"].ok and report.exists() else None, stale,
         [{"step": s.id, "status": str(outcomes[s.id].status), "error": outcomes[s.id].error or ""}
          for s in steps if not outcomes[s.id].ok],
-        [{"step": s.id, "status": str(outcomes[s.id].status), "seconds": round(outcomes[s.id].seconds, 3)}
+        [{"step": s.id, "status": str(outcomes[s.id].status), "seconds": round(outcomes[s.id].seconds, 3),
+          **({"warnings": list(outcomes[s.id].warnings)} if outcomes[s.id].warnings else {})}
          for s in steps], started_at, utc_now_iso())
 
 

@@ -312,3 +312,36 @@ def test_a_file_where_a_sites_folder_must_go_fails_its_steps_as_the_machines_fau
     errors = {f["step"]: f["error"] for f in summary["failures"] if f["status"] == "failed"}
     assert errors[f"map:{SITE}"].startswith("cannot write its outputs: File exists") and SITE in errors[f"map:{SITE}"]
     assert not any("internal error" in e for e in errors.values())
+
+
+def test_a_log_cut_off_mid_write_is_named_in_summary_json(tiny: Path, tmp_path: Path,
+                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    """A log still being written when cron fired (an MCAP cut off mid-chunk, no summary section) is read up to the
+    cut: its steps succeed, and summary.json's outcomes carry the reader's warning (with -q nothing else says so)."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    log = tiny / "logs" / "loc_open.mcap"
+    with log.open("rb") as f:  # in small chunks, as a recorder writes a long log: the cut leaves most of them
+        reader = make_reader(f)
+        messages = list(reader.iter_messages())
+    with (tmp_path / "chunked.mcap").open("wb") as f:
+        writer = Writer(f, chunk_size=4096)
+        writer.start(profile="ros2", library="a recorder")
+        schemas: dict[int, int] = {}
+        channels: dict[int, int] = {}
+        for schema, channel, message in messages:
+            if schema is not None and schema.id not in schemas:
+                schemas[schema.id] = writer.register_schema(schema.name, schema.encoding, schema.data)
+            if channel.id not in channels:
+                channels[channel.id] = writer.register_channel(channel.topic, channel.message_encoding,
+                                                               schemas.get(channel.schema_id, 0), channel.metadata)
+            writer.add_message(channels[channel.id], message.log_time, message.data, message.publish_time)
+        writer.finish()
+    data = (tmp_path / "chunked.mcap").read_bytes()
+    log.write_bytes(data[: int(len(data) * 0.8)])
+    code, printed = run_json(tiny, tmp_path / "out", capsys)
+    assert code == 0 and printed == json.loads((tmp_path / "out" / "summary.json").read_text())
+    said = {o["step"]: o.get("warnings", []) for o in printed["outcomes"]}
+    assert any("no summary section" in w for w in said[f"localize:{SITE}/loc_open/mcl"])
+    assert not any("no summary section" in w for w in said[f"localize:{SITE}/loc_closed/mcl"])
