@@ -86,7 +86,13 @@ def _paths(root: Path, site: str, key: str, value: Any, where: Path) -> tuple[Pa
         raise _layout_error(f"sites.{site}.{key} must be a list of paths relative to the dataset", where)
     paths: list[Path] = []
     for v in value:  # a pattern (logs/*.mcap, 2026/**/loc_*.bag) stands for the logs it matches, in name order
-        paths += sorted(root.glob(v)) if _GLOB.search(v) else [root / v]
+        if not _GLOB.search(v):
+            paths.append(root / v)
+            continue
+        if Path(v).is_absolute():
+            raise _layout_error(f"sites.{site}.{key}: {v!r}: a pattern must be relative to the dataset", where)
+        # as a shell matches: names starting with "." are not (macOS's ._x.mcap, a writer's temporary files)
+        paths += sorted(p for p in root.glob(v) if not any(part.startswith(".") for part in p.relative_to(root).parts))
     return tuple(dict.fromkeys(paths))  # a log matched twice is one log
 
 

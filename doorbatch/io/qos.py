@@ -38,7 +38,10 @@ def ros1_latched_qos(latching: int | str | None) -> list[Qos]:
 
 def mcap_channel_qos(metadata: Mapping[str, str]) -> list[Qos]:
     """The profiles an MCAP channel's ``offered_qos_profiles`` metadata holds (as ``ros2 bag record -s mcap``
-    writes it); none where it is missing or unreadable (a copy then chooses by topic name)."""
+    writes it), or its ROS 1 ``latching`` ("true"/"1", as the ros1 profile records it); none where it says neither
+    (a copy then chooses by topic name)."""
+    if "offered_qos_profiles" not in metadata and "latching" in metadata:
+        return ros1_latched_qos(1 if str(metadata["latching"]).lower() in ("1", "true") else 0)
     text = metadata.get("offered_qos_profiles", "")
     try:
         return list(parse_qos(text)) if text.strip() else []

@@ -13,6 +13,7 @@ killed in a container that is gone). A lock held by a live process is an
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import json
 import logging
@@ -105,7 +106,9 @@ def _try_create(path: Path, info: LockInfo) -> bool:
     tmp = temp_path_for(path)
     fd = os.open(tmp, os.O_CREAT | os.O_EXCL | os.O_RDWR, 0o644)
     try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        # a file system without flock (Lustre without -o flock, NFS without lockd): the link alone
+        with contextlib.suppress(OSError):
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         os.write(fd, (json.dumps(asdict(info)) + "\n").encode("utf-8"))
         os.link(tmp, path)  # atomic, fails when the lock exists
     except FileExistsError:
@@ -122,8 +125,13 @@ def _try_create(path: Path, info: LockInfo) -> bool:
 
 def flock_held(path: Path) -> bool:
     """Whether some process holds the lock file's flock (a running holder; the kernel drops it when it dies)."""
-    try:
-        fd = os.open(path, os.O_RDONLY)
+    try:  # read-write: NFS emulates flock with fcntl locks, whose exclusive kind needs a file open for writing
+        fd = os.open(path, os.O_RDWR)
+    except PermissionError:
+        try:
+            fd = os.open(path, os.O_RDONLY)
+        except OSError:
+            return False
     except OSError:
         return False
     try:

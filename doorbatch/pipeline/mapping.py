@@ -253,8 +253,16 @@ def carried_bridges(recordings: Sequence[Recording], config: DoorbatchConfig) ->
     pass 2 ended: "disjoint coordinate frames".)"""
     out = list(recordings[:1])
     notes: list[str] = []
+    carried: FloatArray | None = None  # the motion the previous recording was moved by
     for nxt in recordings[1:]:
         prev = out[-1]
+        if nxt.continues_piece(prev):  # a later piece of a moved log moves with it
+            if carried is not None:
+                nxt = replace(moved_odometry(nxt, carried), odometry_bridge=None if nxt.odometry_bridge is None
+                              else compose(carried, nxt.odometry_bridge))
+            out.append(nxt)
+            continue
+        carried = None
         bridge = prev.odometry_bridge
         if bridge is not None and nxt.odometry is not None and prev.odometry is not None and not continues(
                 prev, nxt, config):
@@ -263,6 +271,7 @@ def carried_bridges(recordings: Sequence[Recording], config: DoorbatchConfig) ->
             if continues(raw_prev, nxt, config):
                 own = np.zeros(3) if nxt.odometry_bridge is None else nxt.odometry_bridge
                 nxt = replace(moved_odometry(nxt, bridge), odometry_bridge=compose(bridge, own))
+                carried = bridge
                 notes.append(f"{nxt.path}: its odometry continues the frame {Path(prev.path).name}'s driver "
                              "restarted in: moved as that restart was bridged")
         out.append(nxt)

@@ -77,3 +77,16 @@ def test_a_pattern_stands_for_the_logs_it_matches_so_new_logs_are_picked_up(tmp_
     (tmp_path / "dataset.yaml").write_text("sites:\n  s: {mapping: ['maps/q*.mcap']}\n")
     with pytest.raises(ConfigError, match="at least one mapping log"):
         read_dataset(tmp_path)
+
+
+def test_a_pattern_skips_hidden_files_and_must_be_relative(tmp_path: Path) -> None:
+    """As a shell: `logs/*.mcap` leaves out macOS's `._a.mcap` and a writer's `.a.mcap.<hex>.tmp.mcap`; an
+    absolute pattern is a layout error, not a crash."""
+    (tmp_path / "logs").mkdir()
+    for name in ("a.mcap", "._a.mcap", ".a.mcap.0123456789abcdef.tmp.mcap"):
+        (tmp_path / "logs" / name).write_bytes(b"")
+    (tmp_path / "dataset.yaml").write_text("sites:\n  s: {mapping: ['logs/*.mcap']}\n")
+    assert [p.name for p in read_dataset(tmp_path).sites[0].mapping] == ["a.mcap"]
+    (tmp_path / "dataset.yaml").write_text(f"sites:\n  s: {{mapping: ['{tmp_path}/logs/*.mcap']}}\n")
+    with pytest.raises(ConfigError, match="must be relative"):
+        read_dataset(tmp_path)

@@ -170,3 +170,12 @@ def test_a_window_cut_from_a_log_carries_its_latched_message_and_qos(tmp_path: P
     written = copy_window(_ros2_input(tmp_path / "in", StoragePlugin.MCAP), out, 2_000_000_000, 4_000_000_000)
     assert written == 3  # the carried description and the grids at 2 s and 3 s
     assert _kinds(_mcap_qos(out)) == EXPECTED
+
+
+def test_a_ros1_mcap_channel_marked_latching_stays_latched() -> None:
+    """MCAP's ros1 profile records a latched connection as channel metadata `latching: "true"` (or "1")."""
+    from doorbatch.io.qos import is_latched, mcap_channel_qos
+
+    assert is_latched(mcap_channel_qos({"latching": "true", "callerid": "/robot_state_publisher"}))
+    assert is_latched(mcap_channel_qos({"latching": "1"}))
+    assert mcap_channel_qos({"latching": "false"}) == [] and mcap_channel_qos({}) == []

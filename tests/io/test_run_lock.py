@@ -146,3 +146,20 @@ def test_two_runs_taking_over_one_stale_lock_never_both_hold_it(tmp_path: Path,
     b.join()
     assert isinstance(outcome["a"], LockInfo) and isinstance(outcome["b"], OutputLockedError)
     assert original(tmp_path / LOCK_NAME) == outcome["a"]
+
+
+def test_a_file_system_without_flock_still_locks_by_the_link(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """flock failing with ENOLCK (NFS without lockd): the lock is taken by its hard link alone, as before."""
+    import errno
+    import fcntl
+
+    from doorbatch.io import run_lock as rl
+
+    def no_locks(fd: int, op: int) -> None:
+        raise OSError(errno.ENOLCK, "No locks available")
+
+    monkeypatch.setattr(rl.fcntl, "flock", no_locks)
+    assert fcntl.flock is no_locks
+    with run_lock(tmp_path) as (mine, _):
+        assert read_lock(tmp_path / LOCK_NAME) == mine
+    assert not (tmp_path / LOCK_NAME).exists()

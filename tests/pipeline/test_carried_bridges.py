@@ -48,3 +48,17 @@ def test_a_pass_continuing_the_restarted_frame_is_moved_as_the_restart_was_bridg
     np.testing.assert_allclose(passes[1].odometry.poses[0], [6.9, 0.0, 0.0], atol=1e-9)
     check_common_frame(passes, "odometry", config)  # no error
     assert carried_bridges([b, a], config)[1] == []  # nothing bridged before: nothing carried
+
+
+def test_every_piece_of_the_moved_log_moves_with_it(write_log: Callable[..., Path]) -> None:
+    """Pass 2 cut in two pieces (mapping.pass_duration_s): its second piece continues its first (one log), and
+    is moved by the same bridge; it lay 6 m off before, with no error (continues_piece took it as chained)."""
+    one = np.concatenate([5.0 + 0.1 * np.arange(10), 0.1 * np.arange(10)])
+    two = 1.0 + 0.1 * np.arange(20)
+    a = load_recording(write_log("p1.mcap", _with_odometry(one, T0)))
+    b = load_recording(write_log("p2.mcap", _with_odometry(two, T0 + 5_000_000_000)))
+    pieces = [b.take(0, 10, "p2.mcap [0]", 0), b.take(10, 20, "p2.mcap [1]", 1)]
+    passes, _ = carried_bridges([a, *pieces], DoorbatchConfig())
+    assert passes[1].odometry is not None and passes[2].odometry is not None
+    np.testing.assert_allclose(passes[1].odometry.poses[0, 0], 6.9, atol=1e-9)
+    assert passes[2].odometry.poses[0, 0] - passes[1].odometry.poses[-1, 0] < 0.2

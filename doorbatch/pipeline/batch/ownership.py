@@ -3,8 +3,8 @@ replaced whole (:func:`~doorbatch.io.staged_dir.staged_dir`), so an existing one
 someone's report) would be deleted with them.
 
 A step folder is doorbatch's when its manifest.json carries a step record
-(:func:`~doorbatch.pipeline.batch.freshness.recorded_step`); a table folder when it holds only site partitions
-(``site=<name>/part-0.parquet``). No input of the dataset may lie inside a folder the run writes.
+(:func:`~doorbatch.pipeline.batch.freshness.recorded_step`) listing every file in it; a table folder when it holds
+only site partitions (``site=<name>/part-0.parquet``). No input of the dataset may lie inside a folder the run writes.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from doorbatch.errors import UsageError
 from doorbatch.io.dataset import Dataset
 from doorbatch.io.dataset_tables import PART_FILE, PARTITION_KEY
 from doorbatch.io.staged_dir import is_leftover
-from doorbatch.pipeline.batch.freshness import recorded_step
+from doorbatch.pipeline.batch.freshness import MANIFEST, OUTPUTS, recorded_step
 from doorbatch.pipeline.batch.plan import METRICS_DIR, TRAJECTORIES_DIR, Step
 
 
@@ -29,6 +29,19 @@ def _inputs(dataset: Dataset) -> list[Path]:
 
 def _first_file(folder: Path) -> Path | None:
     return next((p for p in sorted(folder.rglob("*")) if p.is_file() and not is_leftover(p)), None)
+
+
+def _foreign_step_file(folder: Path) -> Path | None:
+    """A file in a step's folder that the step did not write: any file where no manifest records the step, else
+    one its record's outputs do not list (a user's notes.md added to OUT/report since)."""
+    record = recorded_step(folder)
+    if record is None:
+        return _first_file(folder)
+    outputs = record.get(OUTPUTS)
+    if not isinstance(outputs, dict):  # a record from before outputs were recorded: its files cannot be told
+        return None
+    return next((p for p in sorted(folder.rglob("*")) if p.is_file() and not is_leftover(p) and p.name != MANIFEST
+                 and p.relative_to(folder).as_posix() not in outputs), None)
 
 
 def _foreign_table_entry(folder: Path) -> Path | None:
@@ -61,8 +74,8 @@ def check_owned_outputs(out: Path, steps: Sequence[Step], dataset: Dataset) -> N
             raise UsageError(f"-o {out}: the run replaces {folder} whole, and the dataset's {path} lies inside it; "
                              "write the run's outputs elsewhere (-o a folder outside the dataset's logs)")
     for folder in step_dirs:
-        if folder.is_dir() and recorded_step(folder) is None and (first := _first_file(folder)) is not None:
-            raise UsageError(f"-o {out}: {folder} holds files doorbatch run did not write (e.g. {first}), and the "
+        if folder.is_dir() and (foreign := _foreign_step_file(folder)) is not None:
+            raise UsageError(f"-o {out}: {folder} holds files doorbatch run did not write (e.g. {foreign}), and the "
                              "run would replace it whole; move them, or write the run's outputs elsewhere")
     for folder in table_dirs:
         if folder.is_dir() and (foreign := _foreign_table_entry(folder)) is not None:

@@ -205,7 +205,14 @@ def run_dataset(dataset: Dataset, out: Path, config: DoorbatchConfig, execution:
                                                                             "path": str(path)})
         try:
             summary = _run_locked(dataset, out, config, execution, force, stale_text, mine.started_at)
-        except KeyboardInterrupt:
+        except BaseException as err:
+            status = "interrupted" if isinstance(err, KeyboardInterrupt) else "failed"
+            atomic_write_text(out / SUMMARY_FILE, _json({"status": status, "dataset": str(dataset.root),
+                                                         "out": str(out), "pid": mine.pid, "host": mine.host,
+                                                         "started_at": mine.started_at,
+                                                         "finished_at": utc_now_iso()}))
+            if not isinstance(err, KeyboardInterrupt):
+                raise
             removed = remove_leftovers(out)
             log.error("run interrupted; removed %d staged folder(s)", len(removed), extra={"event": "run_interrupted"})
             raise

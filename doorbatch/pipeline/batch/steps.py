@@ -173,7 +173,7 @@ def execute_step(step: Step, job: BatchJob, usable: Sequence[Step] = ()) -> Step
             raise interrupt from err
         where = f" ({err.filename})" if err.filename else ""
         return StepOutcome(step.id, StepStatus.FAILED, time.perf_counter() - start,
-                           f"cannot write its outputs: {err.strerror or err}{where}", traceback=traceback.format_exc(),
+                           f"file system: {err.strerror or err}{where}", traceback=traceback.format_exc(),
                            fingerprints=cache.new)
     except Exception as err:  # a bug or an unforeseen data problem: this step fails, the batch goes on
         interrupt = wrapped_interrupt(err)

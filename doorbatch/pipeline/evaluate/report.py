@@ -223,11 +223,15 @@ def _short_labels(paths: set[str]) -> dict[str, str]:
 def run_tables_from_result(result: LocalizationResult, *, name: str | None = None, init: str = "reference",
                            map_doors: DoorSet | None = None, reference: ReferenceTrajectory | None = None,
                            truth: SimTruth | None = None, params: dict[str, Any] | None = None) -> RunTables:
-    """A run in memory (``localize``'s result) as :class:`RunTables`, without writing a run directory."""
-    u, d = result.door_mean.shape
-    states = None if d == 0 else DoorStateTable(
-        np.repeat(result.stamps_ns, d), np.tile(result.door_id, u), result.door_mean.ravel(),
-        result.door_observed.ravel())
+    """A run in memory (``localize``'s result) as :class:`RunTables`, without writing a run directory; its door
+    states are the rows door_states.parquet would hold (:func:`~doorbatch.io.rundir.door_state_columns`: the
+    updates while standing still among them)."""
+    from doorbatch.io.rundir import door_state_columns
+
+    cols = door_state_columns(result)
+    states = None if result.door_mean.shape[1] == 0 else DoorStateTable(
+        np.asarray(cols["stamp_ns"], dtype=np.int64), np.asarray(cols["door_id"], dtype=np.int32),
+        np.asarray(cols["angle"], dtype=np.float64), np.asarray(cols["observed"], dtype=bool))
     return RunTables(name or f"{result.log}/{result.method}", result.log, result.method, result.stamps_ns,
                      result.pose, init, result.converged_ns, result.ambiguous, states, map_doors, reference, truth,
                      dict(params or {}), lost_ns=tuple(result.lost_ns))
@@ -389,8 +393,8 @@ def _coverage_note(run: RunTables, ref: ReferenceTrajectory, cfg: EvaluateConfig
     if not ref_s > 0.0 or run_s >= cfg.min_time_covered_share * ref_s:
         return []
     return [f"run {run.name}: its {len(run.stamps_ns)} pose(s) span {run_s:.1f} s of the reference's {ref_s:.1f} s "
-            "(evaluate.min_time_covered_share): its metrics describe that part only (a filter that stopped updating: "
-            "odometry that never moved the robot, a run cut short)"]
+            "(evaluate.min_time_covered_share): its metrics describe that part only (a robot that stood still for the "
+            "rest, which AMCL's update thresholds leave without poses; odometry that never moved; a run cut short)"]
 
 
 def shifted_in_time(run: RunTables, offset_ns: int) -> RunTables:

@@ -190,7 +190,7 @@ def test_sigterm_midway_leaves_no_partial_output_and_a_rerun_matches(
     assert not [p for p in out.rglob("*") if ".tmp" in p.name or p.name.endswith(".old")]
     assert not (out / LOCK_NAME).exists() and not (out / "report").exists()
     assert read_run_log(out / "run.log")[-1]["event"] == "run_interrupted"
-    assert json.loads((out / "summary.json").read_text())["status"] == "running"  # not a finished run's summary
+    assert json.loads((out / "summary.json").read_text())["status"] == "interrupted"  # not the last run's summary
     for run in (out / SITE / "runs").glob("*/*") if (out / SITE / "runs").exists() else []:
         assert (run / "manifest.json").is_file()  # a run folder is there only when complete
 
@@ -273,6 +273,17 @@ def test_an_out_whose_folders_hold_files_the_run_did_not_write_is_refused(
     assert (out / foreign).read_text() == "not doorbatch's"
 
 
+def test_a_file_added_to_a_folder_the_run_wrote_is_not_deleted_by_the_next_run(
+        tiny_master: Path, reference_out: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """notes.md added to OUT/report after a run: the step's record does not list it, so the next run refuses
+    (a rerun of the report would replace the folder whole) and the file stays."""
+    out = Path(shutil.copytree(reference_out, tmp_path / "out"))
+    (out / "report" / "notes.md").write_text("mine")
+    code = main(["run", str(tiny_master), "-o", str(out), "-q", "--force"])
+    assert code == 2 and "notes.md" in capsys.readouterr().err
+    assert (out / "report" / "notes.md").read_text() == "mine"
+
+
 def test_a_rerun_into_its_own_out_is_not_refused_and_keeps_a_users_dotfiles(
         tiny_master: Path, reference_out: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """OUT written by doorbatch run is its own (a rerun does nothing); `.notes.old` and `.cache.tmp` beside its
@@ -310,7 +321,7 @@ def test_a_file_where_a_sites_folder_must_go_fails_its_steps_as_the_machines_fau
     code, summary = run_json(tiny, out, capsys)
     assert code == 4
     errors = {f["step"]: f["error"] for f in summary["failures"] if f["status"] == "failed"}
-    assert errors[f"map:{SITE}"].startswith("cannot write its outputs: File exists") and SITE in errors[f"map:{SITE}"]
+    assert errors[f"map:{SITE}"].startswith("file system: File exists") and SITE in errors[f"map:{SITE}"]
     assert not any("internal error" in e for e in errors.values())
 
 

@@ -68,12 +68,15 @@ def test_a_multimodal_cloud_is_reported_with_both_hypotheses() -> None:
 
 def test_the_strongest_hypothesis_is_the_heaviest_mode_not_the_heaviest_particle() -> None:
     """A mode of many light particles (92 % of the weight near (-2.45, 0.34)) beside one heavy particle (3 %) and a
-    third mode (5 %): the note names the 92 % mode as the strongest (orebro's named the 3 % particle)."""
+    third mode (5 %): the note names the 92 % mode as the strongest (orebro's named the 3 % particle), and the
+    cloud is not ambiguous (8 % away from it; 97 % away from the heavy particle flagged it)."""
     light = cloud([(-2.45, 0.34, 0.0), (5.0, 0.3, 0.0)], [0.92, 0.05], n=600)
     pose = np.vstack([light.pose, [[-0.64, 0.52, -0.33]]])
     w = np.append(light.weight * 0.97, 0.03)
-    note = multimodal_note(ParticleSet(pose, w, np.zeros((w.size, 0)), np.zeros((w.size, 0))), CONFIG)
+    cloud_ = ParticleSet(pose, w, np.zeros((w.size, 0)), np.zeros((w.size, 0)))
+    note = multimodal_note(cloud_, CONFIG)
     assert "8% of its weight away from its strongest hypothesis (-2.4" in note and "(92%)" in note
+    assert not multimodal(cloud_, CONFIG)  # 8 % away, under ambiguity_min_weight (10 %): the flag agrees
 
 
 def test_a_streak_broken_by_a_wide_cloud_starts_over() -> None:
