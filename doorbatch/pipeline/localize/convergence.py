@@ -61,6 +61,10 @@ def is_multimodal(particles: ParticleSet, radius_m: float, yaw_rad: float, min_w
     symmetric corridor's pose turned by 180° or shifted by a door spacing. (Of the heaviest particle, before: a 3 %
     particle outweighing each of a 97 % mode's made the cloud "ambiguous".)"""
     w, pose = particles.weight, particles.pose
+    # the heaviest mode holds at least what lies near the heaviest particle (one of its candidates): where little
+    # lies away from that particle, less lies away from the mode, and the cheap test decides (every tracked update)
+    if float(w[~_near(pose, pose[int(np.argmax(w))], radius_m, yaw_rad)].sum()) < min_weight:
+        return False
     near = _near(pose, _heaviest_mode(w, pose, radius_m, yaw_rad), radius_m, yaw_rad)
     return float(w[~near].sum()) >= min_weight
 
@@ -79,7 +83,7 @@ def _heaviest_mode(w: npt.NDArray[np.float64], pose: npt.NDArray[np.float64], ra
     """The centre of the hypothesis holding the most weight within ``radius_m`` / ``yaw_rad``, among
     :data:`MODE_CANDIDATES` heaviest particles and as many taken evenly over the set: a mode of many light
     particles outweighs one heavy particle (orebro's note named a 3 % "strongest hypothesis" beside a 92 % one)."""
-    heavy = np.argsort(w)[::-1][:MODE_CANDIDATES]
+    heavy = np.argpartition(w, -min(MODE_CANDIDATES, w.size))[-MODE_CANDIDATES:]
     spread = np.linspace(0, w.size - 1, min(MODE_CANDIDATES, w.size)).astype(np.intp)
     candidates = np.unique(np.concatenate([heavy, spread]))
     mass = [float(w[_near(pose, pose[c], radius_m, yaw_rad)].sum()) for c in candidates]
