@@ -23,6 +23,7 @@ from typing import Any
 
 from doorbatch.config import read_yaml_mapping
 from doorbatch.errors import ConfigError, InputDataError
+from doorbatch.io.run_log import RUN_LOG
 
 DATASET_FILE = "dataset.yaml"
 # a folder name and a hive partition value without escaping; no leading dot (".", "..", hidden leftovers)
@@ -91,12 +92,21 @@ def _paths(root: Path, site: str, key: str, value: Any, where: Path) -> tuple[Pa
             continue
         if Path(v).is_absolute():
             raise _layout_error(f"sites.{site}.{key}: {v!r}: a pattern must be relative to the dataset", where)
-        # as a shell matches: names starting with "." are not (macOS's ._x.mcap, a writer's temporary files)
-        paths += sorted(p for p in root.glob(v) if not any(part.startswith(".") for part in p.relative_to(root).parts))
+        # as a shell matches: names starting with "." are not (macOS's ._x.mcap, a writer's temporary files); nor
+        # are the outputs of a doorbatch run whose OUT lies in the dataset (a folder with its run.log)
+        paths += sorted(p for p in root.glob(v) if not any(part.startswith(".") for part in p.relative_to(root).parts)
+                        and not _in_run_output(p, root))
     return tuple(dict.fromkeys(paths))  # a log matched twice is one log
 
 
 _GLOB = re.compile(r"[*?\[]")  # a path with these is a pattern
+
+
+def _in_run_output(path: Path, root: Path) -> bool:
+    """Whether ``path`` lies in the output folder of a ``doorbatch run`` (one that holds its run.log and
+    summary.json) below ``root``."""
+    return any((folder / RUN_LOG).is_file() and (folder / "summary.json").is_file()
+               for folder in path.parents if folder != root and root in folder.parents)
 
 
 def _site(root: Path, name: Any, entry: Any, where: Path) -> Site:

@@ -356,3 +356,25 @@ def test_a_log_cut_off_mid_write_is_named_in_summary_json(tiny: Path, tmp_path: 
     said = {o["step"]: o.get("warnings", []) for o in printed["outcomes"]}
     assert any("no summary section" in w for w in said[f"localize:{SITE}/loc_open/mcl"])
     assert not any("no summary section" in w for w in said[f"localize:{SITE}/loc_closed/mcl"])
+
+
+def test_a_pattern_over_a_folder_that_holds_out_leaves_the_runs_own_outputs_out(
+        tiny: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """localization: nightly/**/*.mcap with OUT = nightly/out: the second night the pattern also matches the first
+    night's annotated.mcap files; they are left out (a folder with a run's run.log and summary.json is its OUT),
+    and the rerun does nothing."""
+    (tiny / "nightly").mkdir()
+    for name in LOCALIZATION:
+        shutil.move(tiny / "logs" / f"{name}.mcap", tiny / "nightly" / f"{name}.mcap")
+        for suffix in (".truth.tum", ".truth.yaml"):
+            if (tiny / "logs" / f"{name}{suffix}").exists():
+                shutil.move(tiny / "logs" / f"{name}{suffix}", tiny / "nightly" / f"{name}{suffix}")
+    dataset = yaml.safe_load((tiny / "dataset.yaml").read_text())
+    dataset["sites"][SITE]["localization"] = ["nightly/**/*.mcap"]
+    (tiny / "dataset.yaml").write_text(yaml.safe_dump(dataset))
+    out = tiny / "nightly" / "out"
+    code, first = run_json(tiny, out, capsys)
+    assert code == 0 and len(by_status(first, "done")) == len(ALL_STEPS)
+    assert list(out.rglob("annotated.mcap"))
+    code, second = run_json(tiny, out, capsys)
+    assert code == 0 and by_status(second, "up_to_date") == ALL_STEPS
