@@ -120,10 +120,7 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
                     StepDiagnostics(False, False, particles.neff(), len(particles), 0.0, 0, math.nan, True), observed)
         particles = predict(particles, state.odom_at_update, odom, config, rng)
     if last_stamp_s is not None and n_doors:
-        cap = math.radians(config.door_init_sigma_deg) ** 2
-        var = predict_doors(particles.door_var, max(stamp_s - last_stamp_s, 0.0), config.door_sigma_rad_per_sqrt_s,
-                            max_var=cap)
-        particles = replace(particles, door_var=var)
+        particles = walked_doors(particles, stamp_s - last_stamp_s, config)
 
     bandwidth = active_bandwidth(particles.pose, particles.weight, config)
     combination = BeamCombination(config.beam_combination)
@@ -164,6 +161,14 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
     return new_state, diag, observed
 
 
+def walked_doors(particles: ParticleSet, dt_s: float, config: LocalizeConfig) -> ParticleSet:
+    """The particles with their door variances grown by the random walk over ``dt_s`` (var += σ_d²·dt, capped at
+    ``door_init_sigma_deg``²: a door left unobserved is as uncertain as a new one, no more)."""
+    cap = math.radians(config.door_init_sigma_deg) ** 2
+    return replace(particles, door_var=predict_doors(particles.door_var, max(dt_s, 0.0),
+                                                     config.door_sigma_rad_per_sqrt_s, max_var=cap))
+
+
 def standing_still(odom_at_update: npt.ArrayLike, odom_now: npt.ArrayLike, config: LocalizeConfig) -> bool:
     """Whether the odometry has moved the robot by at most ``door_update_still_m`` and ``door_update_still_deg``
     since the last pose update (the held pose is where the robot is)."""
@@ -178,9 +183,7 @@ def doors_updated_still(particles: ParticleSet, dt_s: float, scan_points_base: n
     door Gaussians walk for ``dt_s`` and take the scan's polygon measurements (Kalman update, as in
     :func:`rbpf_step`); poses and weights are left as they are (AMCL's update thresholds hold the pose: a standing
     robot's scans are one view again, but a door moving in it is news). Returns the particles and (D,) observed."""
-    cap = math.radians(config.door_init_sigma_deg) ** 2
-    var = predict_doors(particles.door_var, max(dt_s, 0.0), config.door_sigma_rad_per_sqrt_s, max_var=cap)
-    update = update_doors(scan_points_base, replace(particles, door_var=var), doors, config)
+    update = update_doors(scan_points_base, walked_doors(particles, dt_s, config), doors, config)
     return (replace(particles, door_mean=update.mean, door_var=update.var),
             np.asarray(update.observed.any(axis=0), dtype=bool))
 
