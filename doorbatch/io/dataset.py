@@ -23,7 +23,7 @@ from typing import Any
 
 from doorbatch.config import read_yaml_mapping
 from doorbatch.errors import ConfigError, InputDataError
-from doorbatch.io.run_log import RUN_LOG
+from doorbatch.io.run_log import RUN_LOG, SUMMARY_FILE
 
 DATASET_FILE = "dataset.yaml"
 # a folder name and a hive partition value without escaping; no leading dot (".", "..", hidden leftovers)
@@ -105,7 +105,7 @@ _GLOB = re.compile(r"[*?\[]")  # a path with these is a pattern
 def _in_run_output(path: Path, root: Path) -> bool:
     """Whether ``path`` lies in the output folder of a ``doorbatch run`` (one that holds its run.log and
     summary.json) below ``root``."""
-    return any((folder / RUN_LOG).is_file() and (folder / "summary.json").is_file()
+    return any((folder / RUN_LOG).is_file() and (folder / SUMMARY_FILE).is_file()
                for folder in path.parents if folder != root and root in folder.parents)
 
 

@@ -340,7 +340,7 @@ def odometry_poses(odom: list[Pose2D], tf: TfBuffer, odometry_topic: bool, frame
     poses, note = tf_odometry(tf, frames.odom, frames.base_link)
     if not odometry_topic:
         return poses, [note] if note else []
-    if len(poses) >= 2 and np.ptp([[p.x, p.y, p.yaw] for p in poses], axis=0).max() > 0.0:
+    if _moves(poses):
         return poses, [f"the odometry topic's pose never changes while its twist says the base moves (a driver that "
                        f"fills only twist): the odometry is read from TF {frames.odom}→{frames.base_link} instead"]
     return _twist_poses(odom), ["the odometry topic's pose never changes while its twist says the base moves (a "
@@ -350,11 +350,13 @@ def odometry_poses(odom: list[Pose2D], tf: TfBuffer, odometry_topic: bool, frame
 
 def _pose_unset_twist_moving(odom: Sequence[Pose2D]) -> bool:
     """Whether an odometry topic's pose stays put over the log while its twist is nonzero (in some message)."""
-    if len(odom) < 2:
-        return False
-    first = odom[0]
-    same = all(p.x == first.x and p.y == first.y and p.yaw == first.yaw for p in odom)
-    return same and any(p.vx or p.vy or p.wz for p in odom)
+    return len(odom) >= 2 and not _moves(odom) and any(p.vx or p.vy or p.wz for p in odom)
+
+
+def _moves(poses: Sequence[Pose2D]) -> bool:
+    """Whether the poses' x, y or yaw take more than one value."""
+    xyz = np.array([[p.x, p.y, p.yaw] for p in poses])
+    return len(poses) >= 2 and bool(np.any(xyz != xyz[0]))
 
 
 def _twist_poses(odom: Sequence[Pose2D]) -> list[Pose2D]:

@@ -18,6 +18,7 @@ from typing import Any, TextIO
 from doorbatch.io.manifest import utc_now_iso
 
 RUN_LOG = "run.log"
+SUMMARY_FILE = "summary.json"  # beside run.log: the last run's summary (pipeline.batch.run)
 _STANDARD = set(vars(logging.LogRecord("", 0, "", 0, "", None, None))) | {"message", "asctime"}
 
 

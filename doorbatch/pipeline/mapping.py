@@ -165,22 +165,30 @@ def pass_poses(rec: Recording, source: str, config: DoorbatchConfig) -> PassPose
     return PassPoses(rec.path, stamps, odom, valid, source)
 
 
+def pose_gap(end: npt.ArrayLike, start: npt.ArrayLike) -> tuple[float, float]:
+    """How far pose ``start`` lies from pose ``end``: (m, degrees)."""
+    step = np.asarray(start, dtype=np.float64) - np.asarray(end, dtype=np.float64)
+    return float(np.hypot(step[0], step[1])), abs(math.degrees(float(wrap_angle(step[2]))))
+
+
+def within_continuity(gap: tuple[float, float], config: DoorbatchConfig) -> bool:
+    """Whether a gap (m, degrees) between two odometry poses is one continuous odometry frame
+    (``mapping.odometry_continuity_m`` and ``_deg``)."""
+    return gap[0] <= config.mapping.odometry_continuity_m and gap[1] <= config.mapping.odometry_continuity_deg
+
+
 def odometry_jump(prev: Recording, nxt: Recording) -> tuple[float, float]:
     """How far ``nxt``'s odometry starts from where ``prev``'s ended: (m, degrees); inf where either has none."""
     if prev.odometry is None or nxt.odometry is None:
         return float("inf"), float("inf")
-    step = nxt.odometry.poses[0] - prev.odometry.poses[-1]
-    return float(np.hypot(step[0], step[1])), abs(math.degrees(float(wrap_angle(step[2]))))
+    return pose_gap(prev.odometry.poses[-1], nxt.odometry.poses[0])
 
 
 def continues(prev: Recording, nxt: Recording, config: DoorbatchConfig) -> bool:
     """Whether ``nxt`` continues ``prev`` (one recording split in pieces): the next piece of the same log
     (``mapping.pass_duration_s``), or odometry that starts within ``mapping.odometry_continuity_m`` and ``_deg``
     of where ``prev``'s ended."""
-    if nxt.continues_piece(prev):
-        return True
-    jump_m, jump_deg = odometry_jump(prev, nxt)
-    return jump_m <= config.mapping.odometry_continuity_m and jump_deg <= config.mapping.odometry_continuity_deg
+    return nxt.continues_piece(prev) or within_continuity(odometry_jump(prev, nxt), config)
 
 
 def time_order(recordings: Sequence[Recording], config: DoorbatchConfig) -> list[int] | None:
@@ -266,9 +274,8 @@ def carried_bridges(recordings: Sequence[Recording], config: DoorbatchConfig) ->
         bridge = prev.odometry_bridge
         if bridge is not None and nxt.odometry is not None and prev.odometry is not None and not continues(
                 prev, nxt, config):
-            raw_prev = replace(prev, odometry=replace(prev.odometry, poses=compose(
-                inverse(bridge), prev.odometry.poses[-1:])))
-            if continues(raw_prev, nxt, config):
+            raw_end = compose(inverse(bridge), prev.odometry.poses[-1])  # where the driver's own odometry ended
+            if within_continuity(pose_gap(raw_end, nxt.odometry.poses[0]), config):
                 own = np.zeros(3) if nxt.odometry_bridge is None else nxt.odometry_bridge
                 nxt = replace(moved_odometry(nxt, bridge), odometry_bridge=compose(bridge, own))
                 carried = bridge

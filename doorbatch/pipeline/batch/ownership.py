@@ -9,7 +9,7 @@ only site partitions (``site=<name>/part-0.parquet``). No input of the dataset m
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 
 from doorbatch.errors import UsageError
@@ -27,8 +27,9 @@ def _inputs(dataset: Dataset) -> list[Path]:
     return [p.resolve() for p in paths]
 
 
-def _first_file(folder: Path) -> Path | None:
-    return next((p for p in sorted(folder.rglob("*")) if p.is_file() and not is_leftover(p)), None)
+def _files(folder: Path) -> Iterator[Path]:
+    """The files under ``folder`` in name order, a killed run's staged leftovers left out."""
+    return (p for p in sorted(folder.rglob("*")) if p.is_file() and not is_leftover(p))
 
 
 def _foreign_step_file(folder: Path) -> Path | None:
@@ -36,12 +37,12 @@ def _foreign_step_file(folder: Path) -> Path | None:
     one its record's outputs do not list (a user's notes.md added to OUT/report since)."""
     record = recorded_step(folder)
     if record is None:
-        return _first_file(folder)
+        return next(_files(folder), None)
     outputs = record.get(OUTPUTS)
     if not isinstance(outputs, dict):  # a record from before outputs were recorded: its files cannot be told
         return None
-    return next((p for p in sorted(folder.rglob("*")) if p.is_file() and not is_leftover(p) and p.name != MANIFEST
-                 and p.relative_to(folder).as_posix() not in outputs), None)
+    return next((p for p in _files(folder) if p.name != MANIFEST and p.relative_to(folder).as_posix() not in outputs),
+                None)
 
 
 def _foreign_table_entry(folder: Path) -> Path | None:

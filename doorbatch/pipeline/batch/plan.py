@@ -14,12 +14,11 @@ from pathlib import Path
 from doorbatch.errors import ConfigError
 from doorbatch.io.dataset import DATASET_FILE, Dataset, Site, log_name
 from doorbatch.io.run_lock import LOCK_NAME
-from doorbatch.io.run_log import RUN_LOG
+from doorbatch.io.run_log import RUN_LOG, SUMMARY_FILE
 
 REPORT_DIR = "report"
 METRICS_DIR = "metrics"
 TRAJECTORIES_DIR = "trajectories"
-SUMMARY_FILE = "summary.json"
 # What OUT holds besides one folder per site: no site may take these names.
 OUT_ENTRIES = frozenset({REPORT_DIR, METRICS_DIR, TRAJECTORIES_DIR, SUMMARY_FILE, RUN_LOG, LOCK_NAME})
 

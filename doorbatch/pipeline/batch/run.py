@@ -27,12 +27,12 @@ from doorbatch.io.atomic import atomic_write_text
 from doorbatch.io.dataset import Dataset
 from doorbatch.io.fingerprint_cache import read_fingerprint_cache, write_fingerprint_cache
 from doorbatch.io.manifest import utc_now_iso
-from doorbatch.io.run_lock import run_lock
-from doorbatch.io.run_log import RUN_LOG, JsonLinesHandler
+from doorbatch.io.run_lock import LockInfo, run_lock
+from doorbatch.io.run_log import RUN_LOG, SUMMARY_FILE, JsonLinesHandler
 from doorbatch.io.staged_dir import remove_leftovers
 from doorbatch.pipeline.batch.executors import open_executor, resolve_workers
 from doorbatch.pipeline.batch.ownership import check_owned_outputs
-from doorbatch.pipeline.batch.plan import REPORT_DIR, SUMMARY_FILE, Step, StepKind, plan_steps
+from doorbatch.pipeline.batch.plan import REPORT_DIR, Step, StepKind, plan_steps
 from doorbatch.pipeline.batch.scheduler import run_steps
 from doorbatch.pipeline.batch.steps import BatchJob, StepOutcome, StepStatus
 from doorbatch.progress import Progress, progress_bar
@@ -169,6 +169,13 @@ def _json(data: dict[str, Any]) -> str:
     return json.dumps(data, indent=2) + "\n"
 
 
+def _write_status(out: Path, status: str, dataset: Dataset, mine: LockInfo, **more: str) -> None:
+    """summary.json while no finished run's summary stands: the status, the run (pid, host, start) and ``more``."""
+    atomic_write_text(out / SUMMARY_FILE, _json({"status": status, "dataset": str(dataset.root), "out": str(out),
+                                                 "pid": mine.pid, "host": mine.host, "started_at": mine.started_at,
+                                                 **more}))
+
+
 def run_dataset(dataset: Dataset, out: Path, config: DoorbatchConfig, execution: Execution | None = None, *,
                 force: bool = False) -> RunSummary:
     """Run every step of ``dataset`` into ``out`` (see the module docstring); returns the summary, which
@@ -197,20 +204,15 @@ def run_dataset(dataset: Dataset, out: Path, config: DoorbatchConfig, execution:
             log.warning("took over the stale lock of %s", stale_text,
                         extra={"event": "stale_lock", "holder": stale_text})
         # until this run ends, summary.json says it runs: a run killed midway leaves that, not the last one's summary
-        atomic_write_text(out / SUMMARY_FILE, _json({"status": "running", "dataset": str(dataset.root), "out": str(out),
-                                                     "pid": mine.pid, "host": mine.host,
-                                                     "started_at": mine.started_at}))
+        _write_status(out, "running", dataset, mine)
         for path in remove_leftovers(out):
             log.warning("removed %s left by an interrupted run", path, extra={"event": "leftover_removed",
                                                                             "path": str(path)})
         try:
             summary = _run_locked(dataset, out, config, execution, force, stale_text, mine.started_at)
         except BaseException as err:
-            status = "interrupted" if isinstance(err, KeyboardInterrupt) else "failed"
-            atomic_write_text(out / SUMMARY_FILE, _json({"status": status, "dataset": str(dataset.root),
-                                                         "out": str(out), "pid": mine.pid, "host": mine.host,
-                                                         "started_at": mine.started_at,
-                                                         "finished_at": utc_now_iso()}))
+            _write_status(out, "interrupted" if isinstance(err, KeyboardInterrupt) else "failed", dataset, mine,
+                          finished_at=utc_now_iso())
             if not isinstance(err, KeyboardInterrupt):
                 raise
             removed = remove_leftovers(out)
