@@ -97,6 +97,11 @@ class IoConfig(Section):
     # ... or within this many times the step after it: a restart's first message comes up to a message period after
     # the driver started again, the robot still moving (hAJ's 50 Hz base: 5 mm). Expert choice: 2 steps.
     odometry_restart_steps: float = Field(2.0, ge=0.0)
+    # A step farther than odometry_jump_min_m and this many times the longest step in the RESTART_WINDOW periods on
+    # either side, in about one message period, put the robot elsewhere (an EKF's set_pose): taken out as a restart
+    # is, with a warning. 0 turns it off. Expert choice: 10 (the restart test's ratio; no step of the CARMEN logs or
+    # the simulator's is above 3).
+    odometry_teleport_steps: float = Field(10.0, ge=0.0)
     # A scan in a frame with no transform to base_link is an error unless this says to assume identity.
     assume_identity_laser_tf: bool = False
     # ... or unless this gives the laser's mount in base_link, [x, y, z] in m and [roll, pitch, yaw] in rad (ROS

@@ -130,17 +130,45 @@ def odometry_jumps(poses: npt.ArrayLike, min_jump_m: float, min_jump_rad: float,
         return np.zeros(0, dtype=np.intp)
     dist = np.hypot(np.diff(p[:, 0]), np.diff(p[:, 1]))
     turn = np.abs(wrap_angle(np.diff(p[:, 2])))
-    # the robot's step around each step: the longest of the RESTART_WINDOW steps before it and after it (not itself,
-    # nor any other step beyond min_jump_m)
-    padded = np.pad(np.where(dist > min_jump_m, 0.0, dist), RESTART_WINDOW)  # a gap's long step tells nothing
-    windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * RESTART_WINDOW + 1)
-    around = np.maximum(windows[:, :RESTART_WINDOW].max(axis=1), windows[:, RESTART_WINDOW + 1:].max(axis=1))
+    around = _longest_step_around(np.where(dist > min_jump_m, 0.0, dist))  # a gap's long step tells nothing
     landing = np.hypot(p[1:, 0], p[1:, 1])
     # landing a step or two off the origin: a restart only where the step is no motion of this robot's (ten of its
     # steps and more; orebro's coarse 0.3-0.5 m steps pass within a metre of its origin, and are none)
     moving_restart = (landing <= restart_steps * around) & (dist > RESTART_STEP_RATIO * around)
     at_zero = (landing <= at_zero_m) | moving_restart
     return np.flatnonzero(at_zero & ((dist > min_jump_m) | (turn > min_jump_rad))) + 1
+
+
+TELEPORT_MAX_PERIODS = 3.0  # a step that took longer than this many message periods is a gap: motion unseen, kept
+
+
+def odometry_teleports(stamps_s: npt.ArrayLike, poses: npt.ArrayLike, min_jump_m: float, steps_ratio: float
+                       ) -> npt.NDArray[np.intp]:
+    """Indices ``i`` of odometry steps ``i − 1 → i`` that put the robot elsewhere instead of moving it: farther than
+    ``min_jump_m`` and ``steps_ratio`` times the longest of the :data:`RESTART_WINDOW` steps before and after it,
+    within :data:`TELEPORT_MAX_PERIODS` median message periods (a pose set from outside: robot_localization's
+    set_pose, a driver's fault; no base brakes from ten times its speed in one period). A step over a longer time is
+    a gap in the messages (motion unseen, kept); a step among steps as long is motion (orebro's coarse 0.3–3.3 m
+    steps come in runs). A set pose that turns without moving is not found (a turn in one period can be real)."""
+    t = np.asarray(stamps_s, dtype=np.float64).reshape(-1)
+    p = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    if p.shape[0] < 2 or steps_ratio <= 0.0:
+        return np.zeros(0, dtype=np.intp)
+    dist = np.hypot(np.diff(p[:, 0]), np.diff(p[:, 1]))
+    dt = np.diff(t)
+    period = float(np.median(dt[dt > 0.0])) if (dt > 0.0).any() else 0.0
+    sudden = dt <= TELEPORT_MAX_PERIODS * period
+    return np.flatnonzero(sudden & (dist > min_jump_m) & (dist > steps_ratio * _longest_step_around(dist))) + 1
+
+
+def _longest_step_around(dist: FloatArray) -> FloatArray:
+    """(K,) the longest of the :data:`RESTART_WINDOW` steps before and after each of ``dist`` (not itself): how far
+    one message period moves the robot there."""
+    padded = np.pad(dist, RESTART_WINDOW)
+    windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * RESTART_WINDOW + 1)
+    before, after = windows[:, :RESTART_WINDOW].max(axis=1), windows[:, RESTART_WINDOW + 1:].max(axis=1)
+    longest: FloatArray = np.maximum(before, after)
+    return longest
 
 
 def bridged_jumps(poses: npt.ArrayLike, jumps: npt.ArrayLike) -> FloatArray:

@@ -19,9 +19,15 @@ import numpy.typing as npt
 from doorbatch.config import DoorbatchConfig, FramesConfig, IoConfig
 from doorbatch.errors import LaserMountError, LogContentError, TransformError
 from doorbatch.geometry.deskew import deskewed_scans
-from doorbatch.geometry.odometry import bridged_jumps, integrated_twist, odometry_jumps, sweep_smear_m
+from doorbatch.geometry.odometry import (
+    bridged_jumps,
+    integrated_twist,
+    odometry_jumps,
+    odometry_teleports,
+    sweep_smear_m,
+)
 from doorbatch.geometry.rotations import yaw_of_matrix
-from doorbatch.geometry.se2 import compose, interpolate_poses, inverse
+from doorbatch.geometry.se2 import compose, interpolate_poses, inverse, relative
 from doorbatch.geometry.tf_buffer import TfBuffer
 from doorbatch.geometry.veiling import veiling_mask
 from doorbatch.io.decode import MODEL_STATES
@@ -877,24 +883,36 @@ def lost_times_note(stamps_ns: Sequence[int]) -> str | None:
 def bridged_odometry(odometry: PoseSeries | None, config: DoorbatchConfig
                      ) -> tuple[PoseSeries | None, str | None, FloatArray | None]:
     """The odometry with its restarts (:func:`~doorbatch.geometry.odometry.odometry_jumps`: a driver that restarted
-    at zero) bridged, a note naming them (a localizer or scan matcher fed the jump would take it as motion), and the
-    motion B bridging applied to the last pose (bridged = B ⊕ raw; None where nothing was bridged)."""
+    at zero) and its set poses (:func:`~doorbatch.geometry.odometry.odometry_teleports`) bridged, a note naming them
+    (a localizer or scan matcher fed the jump would take it as motion), and the motion B bridging applied to the last
+    pose (bridged = B ⊕ raw; None where nothing was bridged)."""
     if odometry is None:
         return None, None, None
     io = config.io
-    jumps = odometry_jumps(odometry.poses, io.odometry_jump_min_m, math.radians(io.odometry_jump_min_deg),
-                           io.odometry_restart_at_zero_m, io.odometry_restart_steps)
-    if not jumps.size:
+    restarts = odometry_jumps(odometry.poses, io.odometry_jump_min_m, math.radians(io.odometry_jump_min_deg),
+                              io.odometry_restart_at_zero_m, io.odometry_restart_steps)
+    teleports = np.setdiff1d(odometry_teleports(odometry.stamps_ns / 1e9, odometry.poses, io.odometry_jump_min_m,
+                                                io.odometry_teleport_steps), restarts)
+    if not restarts.size and not teleports.size:
         return odometry, None, None
     t0 = int(odometry.stamps_ns[0])
-    steps = np.hypot(*(odometry.poses[jumps, :2] - odometry.poses[jumps - 1, :2]).T)
-    said = ", ".join(f"{(int(odometry.stamps_ns[i]) - t0) / 1e9:.1f} s ({d:.2f} m)"
-                     for i, d in list(zip(jumps, steps, strict=True))[:5])
-    more = f" and {jumps.size - 5} more" if jumps.size > 5 else ""
-    note = (f"the odometry jumps back to (0, 0) {jumps.size} time(s) (at {said}{more} after its start: a driver "
-            "that restarted): each jump is taken out, the odometry after it continuing from the pose before "
-            "(io.odometry_jump_min_m, _min_deg, io.odometry_restart_at_zero_m, _restart_steps)")
-    poses = bridged_jumps(odometry.poses, jumps)
+
+    def said(jumps: npt.NDArray[np.intp]) -> str:
+        steps = relative(odometry.poses[jumps - 1], odometry.poses[jumps])
+        each = ", ".join(f"{(int(odometry.stamps_ns[i]) - t0) / 1e9:.1f} s ({math.hypot(s[0], s[1]):.2f} m, "
+                         f"{math.degrees(s[2]):.0f}°)" for i, s in zip(jumps[:5], steps[:5], strict=True))
+        return f"at {each}{f' and {jumps.size - 5} more' if jumps.size > 5 else ''} after its start"
+
+    notes = []
+    if restarts.size:
+        notes.append(f"the odometry jumps back to (0, 0) {restarts.size} time(s) ({said(restarts)}: a driver that "
+                     "restarted)")
+    if teleports.size:
+        notes.append(f"the odometry jumps elsewhere within a message period {teleports.size} time(s) "
+                     f"({said(teleports)}: a pose set from outside, e.g. an EKF's set_pose)")
+    note = ("; ".join(notes) + ": each jump is taken out, the odometry after it continuing from the pose before "
+            "(io.odometry_jump_min_m, _min_deg, io.odometry_restart_at_zero_m, _restart_steps, _teleport_steps)")
+    poses = bridged_jumps(odometry.poses, np.union1d(restarts, teleports))
     return replace(odometry, poses=poses), note, compose(poses[-1], inverse(odometry.poses[-1]))
 
 

@@ -254,11 +254,11 @@ def moved_odometry(rec: Recording, motion: npt.ArrayLike) -> Recording:
 
 
 def carried_bridges(recordings: Sequence[Recording], config: DoorbatchConfig) -> tuple[list[Recording], list[str]]:
-    """The passes with each odometry restart bridged in one pass carried on to the passes after it that continue the
-    driver's new frame: a pass whose odometry starts where the previous one's *raw* odometry ended (its bridged
-    end moved back by its bridge B⁻¹) is moved by B (:func:`moved_odometry`), so that it continues the bridged one;
-    and a note per pass moved. (A restart bridged in pass 2 left pass 3, recorded on after it, 10.9 m from where
-    pass 2 ended: "disjoint coordinate frames".)"""
+    """The passes with each odometry jump bridged in one pass (a restart, a set pose) carried on to the passes after it
+    that continue the jump's new frame: a pass whose odometry starts where the previous one's *raw* odometry ended
+    (its bridged end moved back by its bridge B⁻¹) is moved by B (:func:`moved_odometry`), so that it continues the
+    bridged one; and a note per pass moved. (A restart bridged in pass 2 left pass 3, recorded on after it, 10.9 m
+    from where pass 2 ended: "disjoint coordinate frames".)"""
     out = list(recordings[:1])
     notes: list[str] = []
     carried: FloatArray | None = None  # the motion the previous recording was moved by
@@ -279,8 +279,8 @@ def carried_bridges(recordings: Sequence[Recording], config: DoorbatchConfig) ->
                 own = np.zeros(3) if nxt.odometry_bridge is None else nxt.odometry_bridge
                 nxt = replace(moved_odometry(nxt, bridge), odometry_bridge=compose(bridge, own))
                 carried = bridge
-                notes.append(f"{nxt.path}: its odometry continues the frame {Path(prev.path).name}'s driver "
-                             "restarted in: moved as that restart was bridged")
+                notes.append(f"{nxt.path}: its odometry continues the frame {Path(prev.path).name}'s odometry "
+                             "jumped to: moved as that jump was bridged")
         out.append(nxt)
     return out, notes
 

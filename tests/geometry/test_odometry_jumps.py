@@ -8,7 +8,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from doorbatch.geometry.odometry import bridged_jumps, odometry_jumps
+from doorbatch.geometry.odometry import bridged_jumps, odometry_jumps, odometry_teleports
 from doorbatch.geometry.se2 import compose, relative
 
 JUMP = {"min_jump_m": 0.5, "min_jump_rad": math.radians(30), "at_zero_m": 0.001, "restart_steps": 2.0}
@@ -68,3 +68,36 @@ def test_a_restart_whose_first_message_comes_a_step_later_is_found(seed: int, at
     fixed = bridged_jumps(odom, jumps)
     np.testing.assert_allclose(relative(fixed[at:-1], fixed[at + 1:]), relative(truth[at:-1], truth[at + 1:]),
                                atol=1e-9)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 10_000), st.integers(100, 900), st.floats(2.0, 20.0), st.floats(-3.0, 3.0),
+       st.floats(-math.pi, math.pi))
+def test_a_pose_set_from_outside_is_found_and_bridged(seed: int, at: int, dist_m: float, bearing: float,
+                                                      yaw_jump: float) -> None:
+    """An EKF's set_pose at step ``at``: the odometry goes on from a pose ``dist_m`` away, turned, within one
+    50 Hz period. Found there and only there (not a restart: it lands far from (0, 0)), and bridged."""
+    truth = _drive(1000, seed)
+    odom = compose(np.array([25.0, -4.0, 1.0]), truth)
+    moved = compose(np.array([dist_m * math.cos(bearing), dist_m * math.sin(bearing), yaw_jump]), odom[at - 1])
+    odom[at:] = compose(moved, relative(truth[at - 1], truth[at:]))
+    stamps = np.arange(1000) * 0.02
+    assert odometry_jumps(odom, **JUMP).size == 0
+    jumps = odometry_teleports(stamps, odom, 0.5, 10.0)
+    assert jumps.tolist() == [at]
+    fixed = bridged_jumps(odom, jumps)
+    np.testing.assert_allclose(relative(fixed[at:-1], fixed[at + 1:]), relative(truth[at:-1], truth[at + 1:]),
+                               atol=1e-9)
+
+
+def test_steps_after_a_gap_or_among_long_steps_are_no_set_pose() -> None:
+    """3 m over a 6 s gap in the messages (the robot drove on unseen), 3 m steps among 0.4 m ones (orebro's coarse
+    steps), a 57° turn in one period: none is a set pose. The same 3 m in one period among 2 cm steps is one."""
+    t = np.array([0.0, 0.2, 0.4, 6.4, 6.6, 6.8])
+    gap = np.array([[0, 0, 0], [0.02, 0, 0], [0.04, 0, 0], [3.04, 0, 0], [3.06, 0, 0], [3.08, 0, 1.0]])
+    assert odometry_teleports(t, gap, 0.5, 10.0).size == 0
+    coarse = np.cumsum(np.array([[0.4, 0, 0]] * 6 + [[3.0, 0, 0]] + [[0.4, 0, 0]] * 6), axis=0)
+    assert odometry_teleports(np.arange(13) * 0.2, coarse, 0.5, 10.0).size == 0
+    t_even = np.arange(6) * 0.2
+    assert odometry_teleports(t_even, gap, 0.5, 10.0).tolist() == [3]
+    assert odometry_teleports(t_even, gap, 0.5, 0.0).size == 0
