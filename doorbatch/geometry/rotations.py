@@ -28,6 +28,17 @@ def transform_matrix(translation: npt.ArrayLike, q_xyzw: npt.ArrayLike) -> Float
     return mat
 
 
+def transform_matrices(translations: npt.ArrayLike, q_xyzw: npt.ArrayLike) -> FloatArray:
+    """(N, 4, 4) :func:`transform_matrix` of each row of ``translations`` (N, 3) and ``q_xyzw`` (N, 4), with the
+    same arithmetic, element by element."""
+    q = np.asarray(q_xyzw, dtype=np.float64).reshape(-1, 4)
+    mats = np.zeros((q.shape[0], 4, 4))
+    mats[:, 3, 3] = 1.0
+    mats[:, :3, :3] = np.moveaxis(quaternion_to_matrix(q.T), -1, 0)  # (3, 3, N) from the (4, N) columns
+    mats[:, :3, 3] = np.asarray(translations, dtype=np.float64).reshape(-1, 3)
+    return mats
+
+
 def invert_transform(mat: FloatArray) -> FloatArray:
     """Inverse of a rigid 4×4 transform: [Rᵀ, −Rᵀt]."""
     inv = np.eye(4)

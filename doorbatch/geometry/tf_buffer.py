@@ -15,9 +15,10 @@ import bisect
 from dataclasses import dataclass, field
 
 import numpy as np
+import numpy.typing as npt
 
 from doorbatch.errors import TransformError
-from doorbatch.geometry.rotations import FloatArray, invert_transform, slerp, transform_matrix
+from doorbatch.geometry.rotations import FloatArray, invert_transform, slerp, transform_matrices, transform_matrix
 from doorbatch.records import Transform
 
 _STILL_M = 1e-6  # a dynamic edge whose translation spans less than this (m) ...
@@ -124,6 +125,13 @@ class TfBuffer:
     def log_times(self, child: str) -> list[int]:
         """When the log recorded each transform of :meth:`stamps` (ns; 0 where not known)."""
         return list(self._edges[child].log_times)
+
+    def samples(self, child: str) -> tuple[npt.NDArray[np.int64], FloatArray]:
+        """The edge into ``child`` as recorded: its stamps (N,) and 4×4 transforms (N, 4, 4), each what
+        :meth:`lookup` gives at that stamp (KeyError: ``child`` has no parent)."""
+        edge = self._edges[child]
+        return np.asarray(edge.stamps, dtype=np.int64), transform_matrices(np.asarray(edge.translations),
+                                                                           np.asarray(edge.rotations))
 
     def chain(self, frame: str) -> list[str]:
         """``frame`` and its ancestors up to the root of its tree, child first.

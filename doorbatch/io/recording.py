@@ -141,6 +141,17 @@ class Recording:
     # applied to its last pose (bridged = B ⊕ raw): a next pass whose odometry continues the driver's raw frame
     # takes B too (mapping.carried_bridges). None: nothing bridged.
     odometry_bridge: FloatArray | None = None
+    # base_link's pose in the odometry's frame as the log's TF tree holds it (TF where the tree has that frame above
+    # base_link, else the odometry as read, before any bridging): what a map→odom written beside the log's own
+    # odom→base_link is computed against, so that a viewer draws the robot at the estimate (:attr:`drawn_odometry`).
+    # None: the odometry itself.
+    logged_odometry: PoseSeries | None = None
+
+    @property
+    def drawn_odometry(self) -> PoseSeries | None:
+        """The odometry a viewer of the log draws the robot from (:attr:`logged_odometry`, else :attr:`odometry`):
+        bridging a restart or moving a pass onto the map changes :attr:`odometry`, not the log's TF tree."""
+        return self.odometry if self.logged_odometry is None else self.logged_odometry
 
     @property
     def log_path(self) -> str:
@@ -160,6 +171,7 @@ class Recording:
         t0, t1 = int(self.scans.stamps_ns[start]), int(self.scans.stamps_ns[stop - 1])
         return replace(self, path=path, source_path=self.log_path, piece=piece, scans=self.scans.take(start, stop),
                        odometry=None if self.odometry is None else self.odometry.around(t0, t1),
+                       logged_odometry=None if self.logged_odometry is None else self.logged_odometry.around(t0, t1),
                        reference=None if self.reference is None else self.reference.around(t0, t1),
                        colors=None if self.colors is None else self.colors[start:stop],
                        color_valid=None if self.color_valid is None else self.color_valid[start:stop],
@@ -205,6 +217,8 @@ def _tf_poses(tf: TfBuffer, frame: str, base: str) -> list[Pose2D]:
     edges too, each with the log time of its transform (for the clock check, :func:`on_one_clock`)."""
     chain = tf.chain(base)
     edges = [c for c in chain[:chain.index(frame)] if not tf.is_static(c)]
+    if len(edges) == 1:  # one dynamic edge (odom → base_footprint, mounts static): all its samples at once
+        return _one_edge_poses(tf, frame, base, edges[0])
     logged: dict[int, int] = {}  # stamp → when the log recorded it
     for c in edges:
         for t, g in zip(tf.stamps(c), tf.log_times(c), strict=True):
@@ -217,6 +231,21 @@ def _tf_poses(tf: TfBuffer, frame: str, base: str) -> list[Pose2D]:
             continue
         poses.append(Pose2D(t, logged[t], frame, base, float(x), float(y), float(yaw)))
     return poses
+
+
+def _one_edge_poses(tf: TfBuffer, frame: str, base: str, edge: str) -> list[Pose2D]:
+    """:func:`_tf_poses` where ``edge`` is the one dynamic edge between ``frame`` and ``base``: the lookup's
+    products (static edges below it, its sample, static edges above it, base up) taken for all its samples at once."""
+    stamps, samples = tf.samples(edge)
+    if not stamps.size:
+        return []
+    t = int(stamps[0])
+    parent = tf.chain(edge)[1]
+    mats = samples @ tf.lookup(edge, base, t)
+    mats = tf.lookup(frame, parent, t) @ mats if parent != frame else mats
+    yaw = np.arctan2(mats[:, 1, 0], mats[:, 0, 0])
+    return [Pose2D(int(s), int(g), frame, base, float(x), float(y), float(a))
+            for s, g, x, y, a in zip(stamps, tf.log_times(edge), mats[:, 0, 3], mats[:, 1, 3], yaw, strict=True)]
 
 
 def tf_odometry(tf: TfBuffer, odom: str, base: str) -> tuple[list[Pose2D], str | None]:
@@ -295,6 +324,18 @@ def missing_laser_tf_hint(tf: TfBuffer, base: str, laser: str | None = None) -> 
         return (f"the TF tree has no frame {base!r} (it has {', '.join(sorted(tf.frames))}): set frames.base_link "
                 f"to the robot's base frame{example}")
     return "io.assume_identity_laser_tf=true assumes the laser at the base origin"
+
+
+def tree_odometry(tf: TfBuffer, odometry: PoseSeries | None, base: str) -> PoseSeries | None:
+    """``base``'s pose in the odometry's frame from the TF tree (:func:`_tf_poses`), where the tree has that frame
+    above ``base`` with a dynamic edge between them (an odometry topic beside an EKF's odom→base_link on /tf: the
+    tree is the EKF's); else None."""
+    if odometry is None or base not in tf.frames or odometry.frame_id not in tf.chain(base)[1:]:
+        return None
+    chain = tf.chain(base)
+    if all(tf.is_static(c) for c in chain[:chain.index(odometry.frame_id)]):
+        return None
+    return pose_series(_tf_poses(tf, odometry.frame_id, base))
 
 
 def odometry_frame_note(frame: str, odom: str, base: str) -> str:
@@ -722,6 +763,7 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
         offset_ns = round(config.io.scan_time_offset_s * 1e9)
         scans = [replace(s, stamp_ns=s.stamp_ns + offset_ns) for s in timed.scans] if offset_ns else timed.scans
         odometry, reference = robot_pose_series(timed.odom, timed.ref, tf, frames)
+        logged = tree_odometry(tf, odometry, frames.base_link) or odometry
         odometry, jump_note, bridge = bridged_odometry(odometry, config)
         notes += [f"{path}: {jump_note}"] if jump_note else []
         warnings = [*reader.warnings, *(f"{path}: {n}" for n in timed.notes), *([base_note] if base_note else []),
@@ -811,7 +853,8 @@ def load_recording(path: Path, config: DoorbatchConfig | None = None, with_color
                         "no independent reference (a raw CARMEN log's laser poses are its odometry; a corrected log's "
                         "odometry was replaced by its corrected poses)")
     return Recording(str(path), scan_set, odometry, reference, aligned, warnings, valid, repeats,
-                     timed.log_clock, tuple(tf.static_transforms()), odometry_bridge=bridge)
+                     timed.log_clock, tuple(tf.static_transforms()), odometry_bridge=bridge,
+                     logged_odometry=None if logged is odometry else logged)
 
 
 def no_sweep_note(sweep_s: float, period_s: float) -> str | None:

@@ -104,11 +104,12 @@ def run_annotations(result: LocalizationResult, occ: OccupancyMap, doors: DoorSe
                     odom_frame: str = "odom", path_every: int = 10) -> Iterator[Annotation]:
     """The /doorbatch/* messages of a run in time order: the map once, then per update the pose with its
     covariance, the decimated particles, the doors at their estimated angles (an MCL run's without leaves: it
-    estimates none), map→odom, and every
-    ``path_every`` updates (and at the end) the path so far."""
+    estimates none), map→odom (against the odometry the log's TF tree holds, so that a viewer draws the robot at the
+    estimate), and every ``path_every`` updates (and at the end) the path so far."""
     if not len(result):
         return
     t0 = int(result.stamps_ns[0])
+    odom = result.odom if result.drawn_odom is None else result.drawn_odom  # the robot drawn from the log's TF tree
     yield Annotation("/doorbatch/map", "nav_msgs/msg/OccupancyGrid", t0,
                      rm.occupancy_grid(t0, map_frame, occ.occupancy, occ.resolution_m, occ.origin_x_m,
                                        occ.origin_y_m, occ.origin_yaw_rad))
@@ -126,7 +127,7 @@ def run_annotations(result: LocalizationResult, occ: OccupancyMap, doors: DoorSe
             angles = result.door_mean[i] if result.door_mean.shape[1] == len(doors) else np.full(len(doors), np.nan)
             yield Annotation("/doorbatch/doors", "visualization_msgs/msg/MarkerArray", t,
                              door_markers(t, map_frame, doors, angles))
-        yield map_to_odom_tf(t, result.pose[i], result.odom[i], map_frame, odom_frame)
+        yield map_to_odom_tf(t, result.pose[i], odom[i], map_frame, odom_frame)
         if i % path_every == path_every - 1 or i == len(result) - 1:
             yield Annotation("/doorbatch/path", "nav_msgs/msg/Path", t,
                              path_so_far(t, map_frame, result.stamps_ns[: i + 1], result.pose[: i + 1]))

@@ -49,8 +49,8 @@ def _mapped_passes(recordings: Sequence[Recording], door_map: DoorMap, door_angl
     for t, (rec, p) in enumerate(zip(recordings, door_map.passes, strict=True)):
         stamps, poses = p.stamps_ns[p.valid], p.poses[p.valid]
         odom = None
-        if rec.odometry is not None:
-            at, ok = interpolate_poses(rec.odometry.stamps_ns, rec.odometry.poses, stamps)
+        if (drawn := rec.drawn_odometry) is not None:  # the log's tree: bridging and joining move rec.odometry only
+            at, ok = interpolate_poses(drawn.stamps_ns, drawn.poses, stamps)
             odom = at if ok.all() else None
         out.append(MappedPass(stamps, poses, odom, door_angles[t], rec.log_clock))
     return out

@@ -250,7 +250,8 @@ def moved_odometry(rec: Recording, motion: npt.ArrayLike) -> Recording:
     t = np.asarray(motion, dtype=np.float64).reshape(3)
     poses = compose(np.broadcast_to(t, rec.odometry.poses.shape), rec.odometry.poses)
     repeat = None if rec.odometry_to_reference is None else compose(rec.odometry_to_reference, inverse(t))
-    return replace(rec, odometry=replace(rec.odometry, poses=poses), odometry_to_reference=repeat)
+    return replace(rec, odometry=replace(rec.odometry, poses=poses), odometry_to_reference=repeat,
+                   logged_odometry=rec.drawn_odometry)  # the log's tree stays where it was
 
 
 def carried_bridges(recordings: Sequence[Recording], config: DoorbatchConfig) -> tuple[list[Recording], list[str]]:

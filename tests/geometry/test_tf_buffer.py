@@ -6,8 +6,9 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
 
 from doorbatch.errors import TransformError
 from doorbatch.geometry.rotations import invert_transform, transform_matrix, yaw_of_matrix
@@ -80,3 +81,38 @@ def test_transform_times_inverse_is_identity(qx: float, x: float, y: float, yaw:
     q /= np.linalg.norm(q)
     mat = transform_matrix([x, y, 0.5], q)
     np.testing.assert_allclose(mat @ invert_transform(mat), np.eye(4), atol=1e-9)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 10_000), st.integers(1, 40), st.booleans(), st.booleans())
+def test_an_edges_samples_are_its_lookups_and_odometry_poses_are_the_trees(seed: int, n: int, above: bool,
+                                                                           below: bool) -> None:
+    """odom (→ odom_shift, static, tilted) → base_footprint (dynamic, n samples) (→ base_link, static, tilted): an
+    edge's samples are what a lookup gives at their stamps, to the bit, and the odometry read off the tree
+    (recording._tf_poses, all samples at once) is each stamp's lookup of base_link in odom, its planar part."""
+    from doorbatch.io.recording import _planar, _tf_poses
+
+    rng = np.random.default_rng(seed)
+    tf = TfBuffer()
+    parent = "odom"
+    if above:
+        tf.add(Transform(0, "odom", "odom_shift", rng.normal(size=3), Rotation.random(random_state=seed).as_quat(),
+                         True))
+        parent = "odom_shift"
+    stamps = np.sort(rng.choice(10**9, size=n, replace=False)).astype(np.int64)
+    for t in stamps:
+        q = Rotation.from_euler("z", rng.uniform(-3, 3)).as_quat()
+        tf.add(Transform(int(t), parent, "base_footprint", np.r_[rng.normal(size=2), 0.0], q, False))
+    base = "base_footprint"
+    if below:
+        tf.add(Transform(0, "base_footprint", "base_link", rng.normal(size=3), Rotation.from_euler(
+            "xyz", rng.uniform(-0.2, 0.2, 3)).as_quat(), True))
+        base = "base_link"
+    got_stamps, mats = tf.samples("base_footprint")
+    assert got_stamps.tolist() == stamps.tolist()
+    for t, mat in zip(stamps, mats, strict=True):
+        assert np.array_equal(mat, tf.lookup(parent, "base_footprint", int(t)))
+    poses = _tf_poses(tf, "odom", base)
+    assert [p.stamp_ns for p in poses] == stamps.tolist()
+    for p in poses:
+        np.testing.assert_allclose([p.x, p.y, p.yaw], _planar(tf.lookup("odom", base, p.stamp_ns)), atol=1e-12)

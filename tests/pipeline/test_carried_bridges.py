@@ -62,3 +62,19 @@ def test_every_piece_of_the_moved_log_moves_with_it(write_log: Callable[..., Pat
     assert passes[1].odometry is not None and passes[2].odometry is not None
     np.testing.assert_allclose(passes[1].odometry.poses[0, 0], 6.9, atol=1e-9)
     assert passes[2].odometry.poses[0, 0] - passes[1].odometry.poses[-1, 0] < 0.2
+
+
+def test_the_odometry_drawn_keeps_the_restart_the_filter_is_spared(write_log: Callable[..., Path]) -> None:
+    """Bridging moves the odometry the mapper and the filter use, not the log: the odometry a viewer of the log
+    draws the robot from (and annotated map→odom is computed against) still jumps back to 0 at the restart."""
+    one = np.concatenate([5.0 + 0.1 * np.arange(10), 0.1 * np.arange(10)])
+    a = load_recording(write_log("p1.mcap", _with_odometry(one, T0)))
+    assert a.odometry is not None and a.drawn_odometry is not None
+    np.testing.assert_allclose(a.odometry.poses[:, 0], 5.0 + 0.1 * np.concatenate([np.arange(10), 9 + np.arange(10)]),
+                               atol=1e-9)
+    np.testing.assert_allclose(a.drawn_odometry.poses[:, 0], one, atol=1e-9)
+    moved = carried_bridges([a, load_recording(write_log("p2.mcap", _with_odometry(1.0 + 0.1 * np.arange(20),
+                                                                                    T0 + 5_000_000_000)))],
+                            DoorbatchConfig())[0][1]
+    assert moved.drawn_odometry is not None
+    np.testing.assert_allclose(moved.drawn_odometry.poses[:, 0], 1.0 + 0.1 * np.arange(20), atol=1e-9)

@@ -59,6 +59,9 @@ class LocalizationResult:
     odom_frame_id: str = ""  # the frame of the odometry the run moved by ("": not known)
     door_ids: npt.NDArray[np.int32] | None = None  # (D,) the map's door_id of each door column; None: 0 … D − 1
     still_doors: StillDoorStates | None = None  # door updates between pose updates (None or empty: none)
+    # (U, 3) base_link's pose in the odometry frame as the log's TF tree holds it at each update
+    # (Recording.drawn_odometry), for annotated.mcap's map→odom; None: ``odom`` (a bridged restart is not in the tree)
+    drawn_odom: FloatArray | None = None
 
     @property
     def door_id(self) -> npt.NDArray[np.int32]:

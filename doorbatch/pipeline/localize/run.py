@@ -682,8 +682,13 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
     if init != "global" and converged_ns is not None and track.stamps:  # a tracked start: its first update, which
         converged_ns = max(converged_ns, track.stamps[0])  # odometry that begins after the first scan puts later
     n_doors = state.particles.n_doors
-    return track.result(Path(log_path).name, method, n_doors, converged_ns, ambiguous, warnings,
-                        rec.log_clock, lost_ns, rec.odometry.frame_id, lmap.doors.ids[:n_doors])
+    result = track.result(Path(log_path).name, method, n_doors, converged_ns, ambiguous, warnings,
+                          rec.log_clock, lost_ns, rec.odometry.frame_id, lmap.doors.ids[:n_doors])
+    drawn = rec.drawn_odometry
+    if drawn is None or drawn is rec.odometry or not len(result):
+        return result
+    at, ok = interpolate_poses(drawn.stamps_ns, drawn.poses, result.stamps_ns, int(config.mapping.max_pose_gap_s * 1e9))
+    return replace(result, drawn_odom=np.where(ok[:, None], at, result.odom))  # where the tree has no pose: as read
 
 
 @dataclass(frozen=True)

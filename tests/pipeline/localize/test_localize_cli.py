@@ -627,3 +627,60 @@ def test_door_states_name_each_door_by_its_door_id_in_the_map(sample_map: Path, 
     assert main(["evaluate", str(tmp_path / "renamed"), "--reference", str(log), "--world", str(truth), "-o",
                  str(tmp_path / "stale_eval")]) == 0
     assert "its door states name door_id 100, 107, 114" in capsys.readouterr().err
+
+
+def _tf_moved(tmp_path: Path, shift: Callable[[float], tuple[float, float, float]]) -> Path:
+    """loc_open.mcap with /tf's odom→base_link moved by ``shift(t)`` (x, y, yaw in odom; t s from the first
+    message) and /odom left as it was: an EKF's tree beside the wheels' topic, or a driver whose restart the
+    topic does not show."""
+    from doorbatch.geometry.rotations import quaternion_to_matrix, yaw_of_matrix
+    from doorbatch.geometry.se2 import compose
+    from doorbatch.io import ros_messages
+    from doorbatch.io.log_writer import LogWriter
+    from doorbatch.io.reader import open_log
+
+    log = tmp_path / "tf_moved.mcap"
+    t0 = None
+    with open_log(SAMPLE_LOGS / "loc_open.mcap") as reader, LogWriter(log) as writer:
+        for raw in reader.raw_messages():
+            t0 = raw.log_time_ns if t0 is None else t0
+            msg = raw.msg
+            if raw.topic == "/tf":
+                moved = []
+                for tr in msg.transforms:
+                    if (tr.header.frame_id, tr.child_frame_id) == ("odom", "base_link"):
+                        q = tr.transform.rotation
+                        p = compose(np.array(shift((raw.log_time_ns - t0) / 1e9)), np.array(
+                            [tr.transform.translation.x, tr.transform.translation.y,
+                             yaw_of_matrix(quaternion_to_matrix([q.x, q.y, q.z, q.w]))]))
+                        stamp = tr.header.stamp.sec * 1_000_000_000 + tr.header.stamp.nanosec
+                        tr = ros_messages.planar_transform(stamp, "odom", "base_link", *p)
+                    moved.append(tr)
+                msg = ros_messages.tf_message(moved)
+            writer.write(raw.topic, raw.msgtype, raw.log_time_ns, msg, raw.store)
+    return log
+
+
+def _drawn_off_m(run: Path) -> np.ndarray:
+    """Per update, how far from the estimate a viewer draws base_link from annotated.mcap's own TF tree (its
+    map→odom, the log's odom→base_link)."""
+    from doorbatch.io.reader import open_log
+    from doorbatch.io.recording import read_transforms
+
+    with open_log(run / "annotated.mcap") as reader:
+        tf = read_transforms(reader, DoorbatchConfig())
+    traj = read_table("trajectory", run / "trajectory.parquet").to_pydict()
+    drawn = np.array([tf.lookup("map", "base_link", int(t))[:2, 3] for t in traj["stamp_ns"]])
+    return np.hypot(drawn[:, 0] - np.asarray(traj["x"]), drawn[:, 1] - np.asarray(traj["y"]))
+
+
+def test_annotated_map_to_odom_puts_the_robot_of_the_logs_tf_tree_at_the_estimate(sample_map: Path,
+                                                                                   tmp_path: Path) -> None:
+    """/odom from the wheels, /tf odom→base_link from an EKF that drifts from them (5 cm/s along x, 1°/s): the
+    run moves by /odom, but annotated.mcap's map→odom is put on the tree a viewer draws the robot from. It had been
+    computed against /odom: hAJ's robot was drawn 2.3 m from the estimate."""
+    log = _tf_moved(tmp_path, lambda t: (0.05 * t, 0.0, math.radians(1.0) * t))
+    run = tmp_path / "run"
+    assert main(["localize", str(log), "--map", str(sample_map), "-o", str(run), "--method", "mcl", "-q"]) == 0
+    off = _drawn_off_m(run)
+    assert off.size > 50 and off.max() < 1e-3
