@@ -46,7 +46,9 @@ class Context:
     def summary(self, line: str, data: dict[str, Any]) -> None:
         """The one-line summary at the end of a command, or the JSON summary with ``--json``."""
         if self.as_json:
-            click.echo(json.dumps(data, indent=2, default=str))
+            from doorbatch.io.json_text import strict_json
+
+            click.echo(strict_json(data))
         elif not self.quiet:
             click.echo(line)
 
@@ -120,12 +122,13 @@ def cli() -> None:
 def inspect_cmd(ctx: Context, log_path: Path) -> None:
     """Topics, types, counts, rates, duration, detected roles and problems of LOG."""
     from doorbatch.io.inspect import inspect_log
+    from doorbatch.io.json_text import strict_json
     from doorbatch.progress import progress_bar
 
     with progress_bar(None, f"inspect {log_path.name}") as bar:
         report = inspect_log(log_path, ctx.config, progress=bar.update)
     if ctx.as_json:
-        click.echo(json.dumps(report.to_dict(), indent=2))
+        click.echo(strict_json(report.to_dict()))
     elif not ctx.quiet:
         click.echo(_format_report(report))
     if report.errors:

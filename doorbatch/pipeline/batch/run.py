@@ -26,6 +26,7 @@ from doorbatch.interrupts import sigterm_as_interrupt
 from doorbatch.io.atomic import atomic_write_text
 from doorbatch.io.dataset import Dataset
 from doorbatch.io.fingerprint_cache import read_fingerprint_cache, write_fingerprint_cache
+from doorbatch.io.json_text import strict_json
 from doorbatch.io.manifest import utc_now_iso
 from doorbatch.io.run_lock import LockInfo, run_lock
 from doorbatch.io.run_log import RUN_LOG, SUMMARY_FILE, JsonLinesHandler
@@ -164,9 +165,7 @@ def _run_locked(dataset: Dataset, out: Path, config: DoorbatchConfig, execution:
 
 
 def _json(data: dict[str, Any]) -> str:
-    import json
-
-    return json.dumps(data, indent=2) + "\n"
+    return strict_json(data) + "\n"
 
 
 def _write_status(out: Path, status: str, dataset: Dataset, mine: LockInfo, **more: str) -> None:

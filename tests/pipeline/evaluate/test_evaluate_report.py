@@ -298,8 +298,14 @@ def test_evaluate_cli_writes_the_report_directory(tmp_path: Path, capsys: pytest
     code = main(["evaluate", str(tmp_path / "runs" / "mcl"), str(tmp_path / "runs" / "rbpf"), "-o", str(out),
                  "--json"])
     assert code == 0
-    summary = json.loads(capsys.readouterr().out)
+
+    def not_json(word: str) -> None:
+        raise AssertionError(f"{word} is not JSON (JSON.parse, jq refuse it)")
+
+    summary = json.loads(capsys.readouterr().out, parse_constant=not_json)
     assert summary["runs"] == 2
+    never_lost = [r["value"] for r in summary["metrics"] if r["metric"] == "time_to_lost_s"]
+    assert never_lost == [None, None]  # NaN in metrics.parquet: no number, null
     table = read_table("metrics", out / "metrics.parquet").to_pydict()
     rmse = {r: v for r, m, v in zip(table["run"], table["metric"], table["value"], strict=True)
             if m == "ape_trans_rmse"}
