@@ -36,6 +36,13 @@ class _AnyBagReader(LogReader):
         if self._reader.connections:
             self.storage = self._storage_name()
         topics: dict[str, TopicInfo] = {}
+        known = self._reader.typestore.fielddefs
+        # a type the bag does not define and the store does not know (a Humble bag's custom message): its topic is
+        # listed, not read, as an MCAP channel without a schema is (rosbag2 itself skips such topics when it plays)
+        self._unread = {c.topic: c.msgtype for c in self._reader.connections if c.msgtype not in known}
+        for topic, msgtype in self._unread.items():
+            self.warnings.append(f"{self.path}: {topic}: type {msgtype} is neither defined in the bag nor a type "
+                                 "doorbatch knows; not read")
         for conn in self._reader.connections:
             if (offered := _recorded_qos(conn)) and conn.topic not in self.offered_qos:
                 self.offered_qos[conn.topic] = offered
@@ -43,7 +50,7 @@ class _AnyBagReader(LogReader):
             count = conn.msgcount + (prev.count if prev else 0)
             # foxglove_msgs, as a Foxglove bridge records them, are listed under the ROS 2 type they are read as
             topics[conn.topic] = foxglove.topic_info(conn.topic, normalize_msgtype(conn.msgtype), count,
-                                                     "ros1" if self._ros1 else "cdr")
+                                                     "ros1" if self._ros1 else "cdr", conn.topic not in self._unread)
         self._topics = topics
 
     def _storage_name(self) -> str:
@@ -72,7 +79,7 @@ class _AnyBagReader(LogReader):
         reader = self._reader
         if reader is None:
             raise LogReadError("reader is not open", path=self.path)
-        conns = [c for c in reader.connections if topics is None or c.topic in topics]
+        conns = [c for c in reader.connections if (topics is None or c.topic in topics) and c.topic not in self._unread]
         if not conns:
             return
         for conn, log_time, data in reader.messages(connections=conns, start=start_ns, stop=stop_ns):
@@ -113,7 +120,16 @@ class Rosbag2Reader(_AnyBagReader):
             hint = (f"; a recording stopped before it wrote metadata.yaml leaves its MCAP readable as a file: "
                     f"give {files[0]}" if len(files) == 1 else "")
             raise LogReadError(f"folder is not a ROS 2 bag (no metadata.yaml){hint}", path=self.path)
-        super().open()
+        try:
+            super().open()
+        except KeyError as err:  # rosbags 0.11 maps a definition's encoding by name: rosbag2 writes 'unknown'
+            if err.args != ("unknown",):
+                raise
+            raise LogReadError("its message_definitions give the encoding 'unknown' (rosbag2 writes that for a "
+                               "type it found no definition of while recording, a custom message), which the "
+                               "rosbags library cannot open: record with that message package sourced, or convert "
+                               "the bag leaving the topic out (ros2 bag convert, exclude_topics)",
+                               path=self.path) from err
 
     def _storage_name(self) -> str:
         reader = self._reader

@@ -68,10 +68,13 @@ class McapLogReader(LogReader):
             kind = foxglove.foxglove_kind(name)
             if channel.message_encoding in _ROS_ENCODINGS and schema is not None:
                 ros1 = _ROS_ENCODINGS[channel.message_encoding]
-                self._store_of[cid] = self._register_schema(ros1, name, schema.data.decode("utf-8", "replace"),
-                                                            schema.encoding)
-                self._msgtype[cid] = name
-                self._ros1[cid] = ros1
+                try:
+                    self._store_of[cid] = self._register_schema(ros1, name, schema.data.decode("utf-8", "replace"),
+                                                                schema.encoding)
+                    self._msgtype[cid] = name
+                    self._ros1[cid] = ros1
+                except LogReadError as err:  # a custom type recorded without its definition: listed, not read
+                    self.warnings.append(f"{self.path}: {channel.topic}: {err.reason}; not read")
             elif kind is not None and schema is not None:
                 try:
                     self._payload[cid] = foxglove.payload_decoder(schema, channel.message_encoding)
@@ -162,7 +165,8 @@ class McapLogReader(LogReader):
         elif name in base.fielddefs:  # schema-less channel of a well-known type
             types = {k: v for k, v in base.fielddefs.items() if k == name or k.split("/")[0] != ""}
         else:
-            raise LogReadError(f"channel of type {name} has an empty schema", path=self.path)
+            raise LogReadError(f"channel of type {name} has an empty schema (no definition) and is not a type "
+                               "doorbatch knows", path=self.path)
         store.register({k: v for k, v in types.items() if k not in store.types})
         return store
 

@@ -11,6 +11,7 @@ import pytest
 from mcap.writer import Writer as McapWriter
 
 from doorbatch.config import DoorPoseConfig
+from doorbatch.errors import LogReadError
 from doorbatch.io.annotated_mcap import Annotation, write_annotated_mcap
 from doorbatch.io.convert import convert_log
 from doorbatch.io.reader import RawMessage, open_log
@@ -305,3 +306,93 @@ def test_compressed_logs_read_like_plain_ones(write_log: Callable[..., Path], tm
     roles, records = _read(packed)
     assert roles == ref_roles
     _assert_same_records(records, ref)
+
+
+def _with_custom_topic(src: Path, dst: Path, fmt: str) -> None:
+    """``src`` (a ROS 2 bag folder) copied to ``dst`` with a /battery2 topic of a custom type whose definition the
+    log does not hold, as rosbag2 records one where the message package was not sourced: ``humble``, a bag folder
+    of Humble's layout (metadata version 5: no definitions stored at all); ``unknown``, Jazzy's (a definition of
+    encoding 'unknown', empty); ``mcap``, an MCAP whose channel has an empty schema."""
+    import sqlite3
+
+    import yaml
+    from rosbags.rosbag2 import Reader, Writer
+
+    custom, payload = "my_robot_msgs/msg/BatteryState2", b"\x00\x01\x00\x00" + bytes(8)
+    with Reader(src) as reader:
+        messages = list(reader.messages())
+        if fmt == "mcap":
+            with dst.open("wb") as f:
+                writer = McapWriter(f)
+                writer.start(profile="ros2", library="test")
+                ids = {c.id: writer.register_channel(c.topic, "cdr", writer.register_schema(
+                    c.msgtype, "ros2msg", c.msgdef.data.encode())) for c in reader.connections}
+                battery_id = writer.register_channel("/battery2", "cdr", writer.register_schema(custom, "ros2msg", b""))
+                for k, (conn, t, data) in enumerate(messages):
+                    writer.add_message(ids[conn.id], log_time=t, publish_time=t, data=data)
+                    if k % 10 == 0:
+                        writer.add_message(battery_id, log_time=t, publish_time=t, data=payload)
+                writer.finish()
+            return
+        with Writer(dst, version=8) as bag:
+            conns = {c.id: bag.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data, rihs01=c.digest,
+                                              serialization_format="cdr") for c in reader.connections}
+            battery = bag.add_connection("/battery2", custom, msgdef="float32 voltage\nfloat32 current",
+                                         rihs01="RIHS01_" + "ab" * 32, serialization_format="cdr")
+            for k, (conn, t, data) in enumerate(messages):
+                bag.write(conns[conn.id], t, data)
+                if k % 10 == 0:
+                    bag.write(battery, t, payload)
+    db = next(dst.glob("*.db3"))
+    meta = yaml.safe_load((dst / "metadata.yaml").read_text())
+    info = meta["rosbag2_bagfile_information"]
+    with sqlite3.connect(db) as c:
+        if fmt == "unknown":
+            c.execute("update message_definitions set encoding='unknown', encoded_message_definition='' "
+                      "where topic_type=?", (custom,))
+        else:  # Humble's layout: no definitions, no type hashes, schema version 3
+            c.execute("drop table message_definitions")
+            c.execute("create table topics2(id INTEGER PRIMARY KEY, name TEXT NOT NULL, type TEXT NOT NULL, "
+                      "serialization_format TEXT NOT NULL, offered_qos_profiles TEXT NOT NULL)")
+            c.execute("insert into topics2 select id, name, type, serialization_format, offered_qos_profiles "
+                      "from topics")
+            c.execute("drop table topics")
+            c.execute("alter table topics2 rename to topics")
+            c.execute("update schema set schema_version=3, ros_distro='humble'")
+            c.execute("drop table metadata")
+            info["version"] = 5
+            for t in info["topics_with_message_count"]:
+                topic = t["topic_metadata"]
+                topic.pop("type_description_hash", None)
+                topic["offered_qos_profiles"] = yaml.safe_dump(topic["offered_qos_profiles"])
+            info.pop("custom_data", None)
+            info.pop("ros_distro", None)
+    (dst / "metadata.yaml").write_text(yaml.safe_dump(meta, sort_keys=False))
+
+
+@pytest.mark.parametrize("fmt", ["humble", "mcap"])
+def test_a_topic_of_a_custom_type_without_definition_is_skipped_with_a_warning(write_log: Callable[..., Path],
+                                                                               tmp_path: Path, fmt: str) -> None:
+    """A robot's own message type, recorded where its package was not sourced: the log holds no definition of it.
+    The log is read as without the topic, with a warning naming it (every command had refused the whole log)."""
+    plain = write_log(FORMATS["rosbag2"], fmt="rosbag2")
+    custom = tmp_path / ("custom" if fmt == "humble" else "custom.mcap")
+    _with_custom_topic(plain, custom, fmt)
+    roles, records = _read(custom)
+    assert roles == _read(plain)[0]
+    _assert_same_records(records, _read(plain)[1])
+    with open_log(custom) as reader:
+        list(reader.raw_messages())  # a copy of the log (annotated.mcap, convert) reads every topic it can
+        assert reader.topics["/battery2"].msgtype == "my_robot_msgs/msg/BatteryState2"
+        said = [w for w in reader.warnings if "/battery2" in w]
+    assert len(said) == 1 and "not read" in said[0]
+
+
+def test_a_jazzy_bag_with_an_unknown_definition_is_refused_with_the_reason(write_log: Callable[..., Path],
+                                                                           tmp_path: Path) -> None:
+    """rosbag2 on Jazzy records a type it found no definition of with the encoding 'unknown', which the rosbags
+    library cannot open (a KeyError: 'unknown' had been the whole message). The error says what and what to do."""
+    custom = tmp_path / "custom"
+    _with_custom_topic(write_log(FORMATS["rosbag2"], fmt="rosbag2"), custom, "unknown")
+    with pytest.raises(LogReadError, match=r"encoding 'unknown'.*exclude_topics"):
+        _read(custom)
