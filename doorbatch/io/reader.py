@@ -189,8 +189,15 @@ class LogReader(ABC):
 
     def _skipped(self, bad: dict[str, list[LogContentError]], seen: Counter[str]) -> None:
         """After a complete pass: a topic whose messages could not be read raises the first one's error when they
-        are most of its messages (:func:`most_are_bad`), else gets a warning in ``warnings``."""
+        are most of its messages (:func:`most_are_bad`), else gets a warning in ``warnings``; a colour topic detected
+        by its type (no ``topics.colors``) only gets a warning."""
         for topic, errors in bad.items():
+            guessed_colors = (self.roles.role_of().get(topic) is Role.COLORS and self.topics_config.colors is None)
+            if most_are_bad(len(errors), seen[topic]) and guessed_colors:
+                # beam colours are optional, and the one PointCloud2 taken for them may be a lidar's cloud
+                self.warnings.append(f"{self.path}: {topic}, taken for beam colours by its type, is no colour cloud "
+                                     f"({errors[0].reason}): no beam colours read (topics.colors names the topic)")
+                continue
             if most_are_bad(len(errors), seen[topic]):
                 raise errors[0]
             self.warnings.append(f"{self.path}: {len(errors)} of {seen[topic]} messages on {topic} skipped, "

@@ -33,6 +33,29 @@ def test_recording_holds_scans_poses_and_colors(write_log: Callable[..., Path]) 
     np.testing.assert_allclose(pts[hit], np.stack([r * np.cos(ang) + 0.2, r * np.sin(ang)], 1)[hit], atol=1e-6)
 
 
+def test_a_lidar_cloud_taken_for_colours_by_its_type_is_left_out_with_a_warning(
+        write_log: Callable[..., Path]) -> None:
+    """A 3D lidar's /velodyne_points (x, y, z, intensity) beside the scan: the only PointCloud2, so taken for beam
+    colours, where it has no rgb. It had made `doorbatch map` refuse the log; now the log is read without colours,
+    with a warning. Named as the colour topic in the config, it is still an error."""
+    from dataclasses import replace as with_field
+
+    messages = []
+    for topic, msgtype, t, msg in sample_messages(n_scans=6, beams=91):
+        if topic.startswith("/camera"):  # no camera: the cloud is the only source of colours there is
+            continue
+        if topic == "/scan_colors":
+            topic = "/velodyne_points"
+            msg.fields = [with_field(f, name="intensity") if f.name == "rgb" else f for f in msg.fields]
+        messages.append((topic, msgtype, t, msg))
+    path = write_log("lidar.mcap", messages)
+    rec = load_recording(path, with_colors=True)
+    assert rec.colors is None and len(rec.scans) == 6
+    assert any("/velodyne_points" in w and "no colour cloud" in w for w in rec.warnings)
+    with pytest.raises(LogContentError, match="rgb"):
+        load_recording(path, load_config(overrides=["topics.colors=/velodyne_points"]), with_colors=True)
+
+
 def test_missing_laser_transform_is_an_error_unless_assumed(write_log: Callable[..., Path]) -> None:
     path = write_log("notf.mcap", [m for m in sample_messages(3) if m[0] != "/tf_static"])
     with pytest.raises(LogContentError, match="laser"):
