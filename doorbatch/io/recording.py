@@ -532,6 +532,22 @@ def clock_steps(stamps_ns: Sequence[int], log_ns: Sequence[int], step_s: float) 
     return out
 
 
+def clock_restarts(stamps_ns: Sequence[int], log_ns: Sequence[int], back_s: float) -> list[tuple[int, float]]:
+    """Where a topic's header stamps go back by more than ``back_s`` and stay back while the recorder's clock goes
+    on (message index, step in s): a simulator relaunched within one recording (its sim time starting at 0 again).
+    Stay back: the next five stamps (or all, nearer the end) lie below the one before the step, so that one message
+    stamped late or logged out of order is none. Unset stamps (0) and unknown log times are left out."""
+    t = np.asarray(stamps_ns, dtype=np.int64)
+    g = np.asarray(log_ns, dtype=np.int64)
+    keep = np.flatnonzero((t != 0) & (g != 0))
+    t, g = t[keep], g[keep]
+    out = []
+    for i in np.flatnonzero((np.diff(t) < -back_s * 1e9) & (np.diff(g) >= 0)).tolist():
+        if np.all(t[i + 1:i + 6] < t[i] - back_s * 1e9):
+            out.append((int(keep[i + 1]), float(t[i + 1] - t[i]) / 1e9))
+    return out
+
+
 def clock_ahead_s(scan_stamps_ns: Sequence[int], scan_log_ns: Sequence[int], odom_stamps_ns: Sequence[int],
                   odom_log_ns: Sequence[int], warn_s: float, mismatch_s: float) -> float | None:
     """How far the scans' median (stamp − log time) exceeds the odometry's, in s, over the log time both span,
@@ -638,6 +654,11 @@ def clock_fault(timing: Timing, io: IoConfig) -> tuple[bool, str | None]:
     (:func:`clock_steps`; every scan and pose is then timed by its log time), with its warning; else the warning
     for scans stamped ahead of their odometry (:func:`clock_ahead_s`, unless ``io.scan_time_offset_s`` is set);
     (False, None) when neither."""
+    restarts = {name: found for name, found in (("scan", clock_restarts(*timing[:2], io.clock_mismatch_s)),
+                                                ("odometry", clock_restarts(*timing[2:], io.clock_mismatch_s)))
+                if found}
+    if restarts:
+        return True, _clock_steps_note(restarts, timing[1][0] if timing[1] else 0, timing, restarted=True)
     steps = {name: found for name, found in (("scan", clock_steps(*timing[:2], io.clock_step_s)),
                                              ("odometry", clock_steps(*timing[2:], io.clock_step_s))) if found}
     if steps:
@@ -647,17 +668,20 @@ def clock_fault(timing: Timing, io: IoConfig) -> tuple[bool, str | None]:
     return False, None
 
 
-def _clock_steps_note(steps: dict[str, list[tuple[int, float]]], first_log_ns: int, timing: Timing) -> str:
-    """The warning for header stamps that step (:func:`clock_steps`), by topic: the first step's size and when."""
+def _clock_steps_note(steps: dict[str, list[tuple[int, float]]], first_log_ns: int, timing: Timing,
+                      restarted: bool = False) -> str:
+    """The warning for header stamps that step (:func:`clock_steps`) or start again (:func:`clock_restarts`,
+    ``restarted``), by topic: the first step's size and when."""
     parts = []
     for name, found in steps.items():
         index, step = found[0]
         logged = (timing[1] if name == "scan" else timing[3])[index]
-        parts.append(f"{name} header stamps step by {step:+.2f} s against the recorder's clock "
-                     f"{(logged - first_log_ns) / 1e9:.1f} s into the log"
+        parts.append(f"{name} header stamps {'go back' if restarted else 'step'} by {step:+.2f} s against the "
+                     f"recorder's clock {(logged - first_log_ns) / 1e9:.1f} s into the log"
                      + (f" ({len(found)} steps)" if len(found) > 1 else ""))
-    return (f"{'; '.join(parts)}: a clock that was set (an NTP step?); every scan and pose is timed by its log time "
-            "instead")
+    why = ("a simulator relaunched within the recording, its time starting again?" if restarted
+           else "a clock that was set (an NTP step?)")
+    return f"{'; '.join(parts)}: {why}; every scan and pose is timed by its log time instead"
 
 
 def _clock_ahead_note(ahead_s: float) -> str:

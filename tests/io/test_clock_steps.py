@@ -11,7 +11,7 @@ import pytest
 
 from doorbatch.config import DoorbatchConfig
 from doorbatch.io import ros_messages as m
-from doorbatch.io.recording import clock_ahead_s, clock_steps, load_recording
+from doorbatch.io.recording import clock_ahead_s, clock_restarts, clock_steps, load_recording
 from tests.conftest import sample_messages
 
 S = 1_000_000_000
@@ -94,3 +94,43 @@ def test_a_log_whose_clock_steps_is_timed_by_its_log_times(write_log: Callable[.
     assert steps.max() == steps.min() == 100_000_000  # no 2 s hole: the scans' log times, 0.1 s apart
     plain = load_recording(write_log("plain.mcap", sample_messages(30)), DoorbatchConfig())
     assert not any("header stamps step" in w or "runs ahead" in w for w in plain.warnings)
+
+
+def test_a_simulator_relaunched_within_a_recording_is_a_restart_of_its_clock() -> None:
+    """Gazebo relaunched 250 s of recording later: sim time starts again at 0 while the recorder's clock goes on.
+    Found where it starts again; a message logged out of order, or one stamped 3 s late, is none."""
+    sim = np.round(np.arange(100) * 0.1 * S).astype(np.int64) + S // 100
+    stamps = np.r_[sim[:60], sim[:40]]
+    log = T0 + np.r_[np.round(np.arange(60) * 0.1 * S), 250 * S + np.round(np.arange(40) * 0.1 * S)].astype(np.int64)
+    ((index, back),) = clock_restarts(stamps, log, 1.0)
+    assert index == 60 and back == pytest.approx(-5.9)
+    one_late = sim.copy()
+    one_late[50] -= 3 * S
+    swapped = sim.copy()
+    swapped[[20, 21]] = swapped[[21, 20]]
+    plain_log = T0 + np.round(np.arange(100) * 0.1 * S).astype(np.int64)
+    for series in ((one_late, plain_log), (swapped, plain_log), (sim, plain_log)):
+        assert clock_restarts(*series, 1.0) == []
+
+
+def test_a_log_of_two_launches_is_timed_by_its_log_times(write_log: Callable[..., Path]) -> None:
+    """hAL's one recording of two Gazebo launches: sorted by stamp, the second launch's scans interleaved with the
+    first's (a smeared map and a 20 m trajectory, exit 0). Now every scan and pose is timed by its log time, in
+    the order they were recorded, with a warning."""
+    first, second = sample_messages(20), sample_messages(20)
+    t_first, t_second = first[0][2], first[0][2] + 250 * S
+    messages = list(first)
+    for topic, msgtype, t, msg in second:
+        header = getattr(msg, "header", None)
+        if header is not None:
+            msg.header = m.header(header.stamp.sec * S + header.stamp.nanosec - t_first + S // 100, header.frame_id)
+        messages.append((topic, msgtype, t - t_first + t_second, msg))
+    for k, (topic, msgtype, t, msg) in enumerate(messages[:len(first)]):
+        header = getattr(msg, "header", None)
+        if header is not None:  # the first launch's sim time from 0 too
+            msg.header = m.header(header.stamp.sec * S + header.stamp.nanosec - t_first + S // 100, header.frame_id)
+            messages[k] = (topic, msgtype, t, msg)
+    rec = load_recording(write_log("relaunched.mcap", messages), DoorbatchConfig())
+    assert any("go back by" in w and "relaunched" in w for w in rec.warnings)
+    assert np.all(np.diff(rec.scans.stamps_ns) > 0) and len(rec.scans) == 40
+    assert rec.scans.stamps_ns[20] - rec.scans.stamps_ns[19] > 200 * S  # the second launch after the first
