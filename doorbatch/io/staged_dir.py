@@ -51,6 +51,37 @@ def staged_dir(dest: Path) -> Iterator[Path]:
     shutil.rmtree(old, ignore_errors=True)
 
 
+@contextmanager
+def staged_files(dest: Path) -> Iterator[Path]:
+    """Yield an empty temporary folder beside ``dest`` for a command's output files; when the ``with`` body returns,
+    each is renamed into ``dest`` (created where missing), replacing an entry of its name, and the temporary folder
+    is removed. Other entries of ``dest`` stay (a user's own files).
+
+    When the body raises (or is interrupted: Ctrl-C, SIGTERM), the temporary folder is removed and ``dest`` is as
+    it was: an interrupted command leaves no new folder half written, and no folder with some files of the new run
+    beside the rest of the old one (a manifest that does not describe the trajectory beside it).
+
+    Raises:
+        OSError: the folder cannot be created, or an entry renamed.
+    """
+    dest = Path(dest)
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    tmp = _sibling(dest, TEMP_MARKER)
+    tmp.mkdir()
+    try:
+        yield tmp
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    dest.mkdir(exist_ok=True)
+    for item in sorted(tmp.iterdir()):
+        target = dest / item.name
+        if item.is_dir() and target.is_dir():
+            shutil.rmtree(target)
+        item.replace(target)
+    tmp.rmdir()
+
+
 def check_output_location(dest: Path, folder: bool) -> None:
     """Fail early, before any work, where ``dest`` (an output folder, or file) could not be written: a file
     where a folder must go or the other way round, an existing file among its parents, or a folder in which

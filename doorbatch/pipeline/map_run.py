@@ -18,6 +18,7 @@ from doorbatch.io.manifest import Manifest
 from doorbatch.io.mapdir import MappedPass, door_set_of_previews, mapping_annotations, write_map_dir
 from doorbatch.io.object_map import read_classes, write_classes, write_walls
 from doorbatch.io.recording import Recording
+from doorbatch.io.staged_dir import staged_files
 from doorbatch.pipeline.door_rows import DoorRow, em_rows, grid_rows, with_grid_doors
 from doorbatch.pipeline.mapping import DoorMap, build_map, mapping_passes, without_leaves
 from doorbatch.pipeline.objectmap.stage import ObjectMapResult, em_stage
@@ -128,37 +129,38 @@ def run_map(logs: Sequence[Path], out: Path, config: DoorbatchConfig, stages: Se
         door_map.stage_seconds["em"] = time.perf_counter() - t0
     trajectories = [p.poses[p.valid] for p in door_map.passes]
     walls = [w.endpoints() for w in em.object_map.walls if w.segments.size] if em is not None else []
-    files = write_map_dir(out, door_map.static_map, [r.door for r in rows], [r.n_observations for r in rows],
-                          [r.source for r in rows], trajectories, walls=np.concatenate(walls) if walls else None)
-    if em is not None:
-        write_walls(out / "walls.parquet", em.object_map.walls)
-        write_classes(out / "classes.json", em.object_map.classes)
-        files += [out / "walls.parquet", out / "classes.json"]
-        manifest.extra["em"] = {"beams": em.n_beams, "log_posterior": em.log_posterior,
-                                "walls": len(em.object_map.walls), "doors": len(em.doors),
-                                "grid_doors": len(door_map.doors),
-                                "grid_doors_kept": sum(r.source == "grid" for r in rows),
-                                "classes_given": classes is not None,
-                                "scan_stride": em.strides[0], "beam_stride": em.strides[1],
-                                "final_beams": em.final_beams, "final_scan_thinning": em.final_scan_thinning,
-                                "final_scan_stride": em.final_strides[0], "final_beam_stride": em.final_strides[1]}
-        if classes is not None and classes.has_color and not em.object_map.classes.has_color:
-            manifest.warn(f"em: {classes_file} has colour classes, but "
-                          f"{'em.use_color is off' if not config.em.use_color else 'the logs have no beam colours'}: "
-                          "its widths only were applied")
-        if em.final_scan_thinning > 1:
-            manifest.warn(f"em: the final wall step kept 1 scan in {em.final_scan_thinning} ({em.final_beams} beams; "
-                          f"em.final_max_beams {config.em.final_max_beams})")
-    if mcap and recordings is not None:
-        files.append(_write_mapping_mcap(logs, recordings, door_map, rows, out / "annotated.mcap", config))
-    _remove_stale_map_files(out, files, logs)
-    manifest.extra["optional_files"] = [f.name for f in files if f.name in OPTIONAL_MAP_FILES]
-    manifest.extra["pose_source"] = door_map.pose_source
-    for w in door_map.warnings:
-        manifest.warn(w)
-    manifest.stage_seconds.update(door_map.stage_seconds)
-    manifest.finish()
-    manifest.write(out / "manifest.json")
+    with staged_files(out) as stage:  # an interrupted write leaves ``out`` as it was
+        files = write_map_dir(stage, door_map.static_map, [r.door for r in rows], [r.n_observations for r in rows],
+                              [r.source for r in rows], trajectories, walls=np.concatenate(walls) if walls else None)
+        if em is not None:
+            write_walls(stage / "walls.parquet", em.object_map.walls)
+            write_classes(stage / "classes.json", em.object_map.classes)
+            files += [stage / "walls.parquet", stage / "classes.json"]
+            manifest.extra["em"] = {"beams": em.n_beams, "log_posterior": em.log_posterior,
+                                    "walls": len(em.object_map.walls), "doors": len(em.doors),
+                                    "grid_doors": len(door_map.doors),
+                                    "grid_doors_kept": sum(r.source == "grid" for r in rows),
+                                    "classes_given": classes is not None,
+                                    "scan_stride": em.strides[0], "beam_stride": em.strides[1],
+                                    "final_beams": em.final_beams, "final_scan_thinning": em.final_scan_thinning,
+                                    "final_scan_stride": em.final_strides[0], "final_beam_stride": em.final_strides[1]}
+            if classes is not None and classes.has_color and not em.object_map.classes.has_color:
+                why = "em.use_color is off" if not config.em.use_color else "the logs have no beam colours"
+                manifest.warn(f"em: {classes_file} has colour classes, but {why}: its widths only were applied")
+            if em.final_scan_thinning > 1:
+                manifest.warn(f"em: the final wall step kept 1 scan in {em.final_scan_thinning} ({em.final_beams} "
+                              f"beams; em.final_max_beams {config.em.final_max_beams})")
+        if mcap and recordings is not None:
+            files.append(_write_mapping_mcap(logs, recordings, door_map, rows, stage / "annotated.mcap", config))
+        files = [out / f.name for f in files]
+        _remove_stale_map_files(out, files, logs)
+        manifest.extra["optional_files"] = [f.name for f in files if f.name in OPTIONAL_MAP_FILES]
+        manifest.extra["pose_source"] = door_map.pose_source
+        for w in door_map.warnings:
+            manifest.warn(w)
+        manifest.stage_seconds.update(door_map.stage_seconds)
+        manifest.finish()
+        manifest.write(stage / "manifest.json")
     summary = MapRunSummary(str(out), door_map.pose_source, len(rows), len(door_map.passes),
                             [str(f) for f in [*files, out / "manifest.json"]], door_map.warnings)
     return door_map, summary

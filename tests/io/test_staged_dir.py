@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from doorbatch.io.atomic import atomic_write_text, temp_path_for
-from doorbatch.io.staged_dir import is_leftover, remove_leftovers, staged_dir
+from doorbatch.io.staged_dir import is_leftover, remove_leftovers, staged_dir, staged_files
 
 
 def test_a_finished_step_replaces_the_folder(tmp_path: Path) -> None:
@@ -32,6 +32,42 @@ def test_a_failed_or_interrupted_step_leaves_the_folder_as_it_was(tmp_path: Path
         raise error
     assert [p.name for p in dest.iterdir()] == ["old.txt"]
     assert [p.name for p in tmp_path.iterdir()] == ["map"]
+
+
+def test_a_commands_files_replace_theirs_and_leave_the_users(tmp_path: Path) -> None:
+    """``doorbatch localize -o run`` into a folder of an earlier run and a user's notes: the new files replace the
+    old ones of their names, the notes stay; a new folder is made whole at the end."""
+    dest = tmp_path / "run"
+    dest.mkdir()
+    (dest / "manifest.json").write_text("old")
+    (dest / "notes.txt").write_text("mine")
+    with staged_files(dest) as stage:
+        (stage / "manifest.json").write_text("new")
+        (stage / "trajectory.tum").write_text("new")
+        assert (dest / "manifest.json").read_text() == "old"
+    assert {p.name: p.read_text() for p in dest.iterdir()} == {"manifest.json": "new", "trajectory.tum": "new",
+                                                                "notes.txt": "mine"}
+    fresh = tmp_path / "deep" / "fresh"
+    with staged_files(fresh) as stage:
+        assert not fresh.exists()
+        (stage / "map.yaml").write_text("new")
+    assert [p.name for p in fresh.iterdir()] == ["map.yaml"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["deep", "run"]
+
+
+@pytest.mark.parametrize("error", [RuntimeError("write failed"), KeyboardInterrupt()])
+def test_an_interrupted_command_leaves_its_output_folder_as_it_was(tmp_path: Path, error: BaseException) -> None:
+    """hAM's SIGTERM while localize wrote annotated.mcap: the new trajectory had stood beside the old run's
+    manifest, and a new folder was left with some files and no manifest. Now neither folder is touched."""
+    dest, fresh = tmp_path / "run", tmp_path / "fresh"
+    dest.mkdir()
+    (dest / "manifest.json").write_text("old")
+    for folder in (dest, fresh):
+        with pytest.raises(type(error)), staged_files(folder) as stage:
+            (stage / "trajectory.parquet").write_text("new")
+            raise error
+    assert [(p.name, p.read_text()) for p in dest.iterdir()] == [("manifest.json", "old")]
+    assert [p.name for p in tmp_path.iterdir()] == ["run"]
 
 
 def test_leftovers_of_a_killed_run_are_removed_and_outputs_kept(tmp_path: Path) -> None:

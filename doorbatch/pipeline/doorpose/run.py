@@ -268,6 +268,7 @@ def run_doorpose(log_path: Path, out: Path, config: DoorbatchConfig, map_path: P
     from doorbatch.io.doorpose_rundir import doorpose_annotations, write_door_poses
     from doorbatch.io.manifest import Manifest, StageTimer
     from doorbatch.io.mapdir import read_door_set
+    from doorbatch.io.staged_dir import staged_files
     from doorbatch.pipeline.doorpose.yolo import detect_image
 
     dc = config.doorpose.model_copy(update={k: v for k, v in (("detector", detector), ("fit", fit)) if v})
@@ -288,21 +289,21 @@ def run_doorpose(log_path: Path, out: Path, config: DoorbatchConfig, map_path: P
     doors = read_door_set(map_path) if map_path is not None else None
     with timer("doorpose"):
         result = estimate_door_poses(inputs, config, doors, LineFit(dc.fit), progress)
-    with timer("write"):
-        out.mkdir(parents=True, exist_ok=True)
-        write_door_poses(out / "door_poses.parquet", result)
-        link = frame_link(inputs, config, [e.stamp_ns for e in result.estimates])
-        write_annotated_mcap(log_path, out / "annotated.mcap",  # sim-time stamps: beside the input's messages
-                             on_log_clock(doorpose_annotations(result, link), inputs.log_clock), config,
-                             replaced_tf=[] if link is None else [(result.frame, link.odom_frame)])
-    for w in result.warnings:
-        manifest.warn(w)
-    matched = [e for e in result.estimates if e.door_id >= 0]
-    angles = {k: float(np.median([e.door_angle for e in matched if e.door_id == k]))
-              for k in sorted({e.door_id for e in matched})}
-    manifest.extra.update({"door_poses": len(result), "matched": len(matched), "door_angles": angles})
-    manifest.finish(timer)
-    manifest.write(out / "manifest.json")
+    with staged_files(out) as stage:  # an interrupted write leaves ``out`` as it was
+        with timer("write"):
+            write_door_poses(stage / "door_poses.parquet", result)
+            link = frame_link(inputs, config, [e.stamp_ns for e in result.estimates])
+            write_annotated_mcap(log_path, stage / "annotated.mcap",  # sim-time stamps: beside the input's messages
+                                 on_log_clock(doorpose_annotations(result, link), inputs.log_clock), config,
+                                 replaced_tf=[] if link is None else [(result.frame, link.odom_frame)])
+        for w in result.warnings:
+            manifest.warn(w)
+        matched = [e for e in result.estimates if e.door_id >= 0]
+        angles = {k: float(np.median([e.door_angle for e in matched if e.door_id == k]))
+                  for k in sorted({e.door_id for e in matched})}
+        manifest.extra.update({"door_poses": len(result), "matched": len(matched), "door_angles": angles})
+        manifest.finish(timer)
+        manifest.write(stage / "manifest.json")
     files = [str(out / f) for f in ("door_poses.parquet", "annotated.mcap", "manifest.json")]
     summary = DoorPoseRunSummary(str(out), result.fit, result.frame, result.images, result.paired, len(result),
                                  len(matched), angles, files)

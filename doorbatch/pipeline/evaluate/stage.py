@@ -36,6 +36,7 @@ from doorbatch.io.run_reader import (
     split_pose_topic_run,
 )
 from doorbatch.io.sim_truth import read_truth
+from doorbatch.io.staged_dir import staged_files
 from doorbatch.pipeline.evaluate.report import Evaluation, MapTables, RunTables, evaluate_runs
 
 
@@ -118,18 +119,19 @@ def evaluate_run_dirs(run_dirs: Sequence[Path], out_dir: Path, config: Doorbatch
     timer = StageTimer()
     with timer("metrics"):
         evaluation = evaluate_runs(runs, config, reference=ref, truth=world, maps=maps).with_title(title)
-    with timer("report"):
-        write_report(evaluation, out_dir)
-    for run in runs:
-        if ref is None and run.reference is None:
-            manifest.warn(f"run {run.name}: no reference trajectory (none beside its log, no --reference): "
-                          f"convergence metrics only")
-    references = [r for r in (ref, *(run.reference for run in runs)) if r is not None]
-    for warning in dict.fromkeys(w for r in references for w in r.warnings):  # once each, in order
-        manifest.warn(warning)
-    for warning in evaluation.warnings:
-        manifest.warn(warning)
-    manifest.extra.update({"runs": len(runs), "maps": len(maps)})
-    manifest.finish(timer)
-    manifest.write(out_dir / "manifest.json")
+    with staged_files(out_dir) as stage:  # an interrupted write leaves ``out_dir`` as it was
+        with timer("report"):
+            write_report(evaluation, stage)
+        for run in runs:
+            if ref is None and run.reference is None:
+                manifest.warn(f"run {run.name}: no reference trajectory (none beside its log, no --reference): "
+                              f"convergence metrics only")
+        references = [r for r in (ref, *(run.reference for run in runs)) if r is not None]
+        for warning in dict.fromkeys(w for r in references for w in r.warnings):  # once each, in order
+            manifest.warn(warning)
+        for warning in evaluation.warnings:
+            manifest.warn(warning)
+        manifest.extra.update({"runs": len(runs), "maps": len(maps)})
+        manifest.finish(timer)
+        manifest.write(stage / "manifest.json")
     return evaluation

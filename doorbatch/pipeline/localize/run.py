@@ -66,7 +66,7 @@ from doorbatch.pipeline.localize.mcl import (
     mcl_step,
 )
 from doorbatch.pipeline.localize.particles import ParticleSet
-from doorbatch.pipeline.localize.rbpf import rbpf_step
+from doorbatch.pipeline.localize.rbpf import rbpf_step, standing_still
 from doorbatch.pipeline.localize.resampling import RecoveryState
 from doorbatch.pipeline.localize.result import LocalizationResult, StillDoorStates
 from doorbatch.pipeline.localize.rival_pose import Rival, RivalOutcome, RivalSearch, find_rival, scan_cloud
@@ -493,6 +493,18 @@ def init_cell_note(occ: OccupancyMap, init: tuple[float, float, float]) -> str |
     return note
 
 
+def stopped_since(stamps_ns: npt.NDArray[np.int64], odom: FloatArray, ok: npt.NDArray[np.bool_], i: int,
+                  lc: LocalizeConfig) -> bool:
+    """Whether the robot has stood still at scan ``i`` for ``door_update_stopped_s``: the odometry of every scan in
+    that window moved it by at most ``door_update_still_m`` and ``_deg`` from scan ``i``'s (a window the scans do not
+    cover, at the log's start, is not)."""
+    since = int(stamps_ns[i]) - round(lc.door_update_stopped_s * 1e9)
+    j = int(np.searchsorted(stamps_ns, since, side="left"))
+    if j >= i or (j == 0 and int(stamps_ns[0]) > since) or not ok[j:i + 1].all():
+        return False
+    return all(standing_still(odom[k], odom[i], lc) for k in range(j, i))
+
+
 def with_laser_odometry(rec: Recording, config: DoorbatchConfig) -> Recording:
     """A recording without odometry given its scans matched at constant velocity as the motion input (laser
     odometry, as robots without wheel encoders feed AMCL from a scan matcher), with a warning.
@@ -601,8 +613,12 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
         stamp_s = scan.stamp_ns / 1e9
         first = state.odom_at_update is None
         if method == "rbpf":
+            held = state.odom_at_update
+            stopped_off = (lc.door_update_when_still and held is not None and len(lmap.doors) > 0
+                           and stopped_since(rec.scans.stamps_ns, odom, odom_ok, i, lc)
+                           and not standing_still(held, odom[i], lc))
             state, diag, observed = rbpf_step(state, odom[i], stamp_s, last_s, beams, rec.scans.hits_base(i),
-                                              lmap.field, lmap.doors, lc, rng, free, force=first)
+                                              lmap.field, lmap.doors, lc, rng, free, force=first or stopped_off)
         else:
             state, diag = mcl_step(state, odom[i], beams, lmap.field, lc, rng, free, force=first,
                                    combination=combination)
@@ -801,6 +817,7 @@ def run_localize(log_path: Path, map_path: Path, out: Path, config: DoorbatchCon
     from doorbatch.io.annotated_mcap import on_log_clock, write_annotated_mcap
     from doorbatch.io.manifest import Manifest, StageTimer
     from doorbatch.io.rundir import run_annotations, write_run_tables
+    from doorbatch.io.staged_dir import staged_files
 
     inputs = [log_path, *map_input_files(map_path)]
     manifest = Manifest.start(config.as_dict(), inputs, command="localize", method=method, init=init)
@@ -809,27 +826,29 @@ def run_localize(log_path: Path, map_path: Path, out: Path, config: DoorbatchCon
         lmap = load_localization_map(map_path, config.localize)
     with timer("localize"):
         result = localize(log_path, lmap, config, method, parse_init(init), progress)
-    with timer("write"):
-        files = write_run_tables(out, result)
-        odom_frame = result.odom_frame_id or config.frames.odom
-        if odom_frame != config.frames.odom:
-            result.warnings.append(f"frames.odom is {config.frames.odom!r} but the log's odometry is in "
-                                   f"{odom_frame!r}: annotated.mcap's map→odom transform names {odom_frame!r}, the "
-                                   "frame the robot hangs from in the log's own TF tree")
-        copy = write_annotated_mcap(log_path, out / "annotated.mcap",
-                                    on_log_clock(run_annotations(result, lmap.occupancy, lmap.doors, config.frames.map,
-                                                                 odom_frame), result.log_clock),
-                                    config, replaced_tf=[(config.frames.map, odom_frame)])
-        if copy.replaced_transforms:
-            result.warnings.append(f"the log's own {config.frames.map}→{odom_frame} ({copy.replaced_transforms} "
-                                   "transforms on /tf: another localizer's) is left out of annotated.mcap, where "
-                                   "doorbatch's own takes its place")
-    for w in result.warnings:
-        manifest.warn(w)
-    manifest.extra.update(result.manifest_extra())
-    converged_s = manifest.extra["converged_after_s"]
-    manifest.finish(timer)
-    manifest.write(out / "manifest.json")
+    with staged_files(out) as stage:  # an interrupted write leaves ``out`` as it was
+        with timer("write"):
+            files = write_run_tables(stage, result)
+            odom_frame = result.odom_frame_id or config.frames.odom
+            if odom_frame != config.frames.odom:
+                result.warnings.append(f"frames.odom is {config.frames.odom!r} but the log's odometry is in "
+                                       f"{odom_frame!r}: annotated.mcap's map→odom transform names {odom_frame!r}, "
+                                       "the frame the robot hangs from in the log's own TF tree")
+            copy = write_annotated_mcap(log_path, stage / "annotated.mcap",
+                                        on_log_clock(run_annotations(result, lmap.occupancy, lmap.doors,
+                                                                     config.frames.map, odom_frame), result.log_clock),
+                                        config, replaced_tf=[(config.frames.map, odom_frame)])
+            if copy.replaced_transforms:
+                result.warnings.append(f"the log's own {config.frames.map}→{odom_frame} ({copy.replaced_transforms} "
+                                       "transforms on /tf: another localizer's) is left out of annotated.mcap, where "
+                                       "doorbatch's own takes its place")
+        for w in result.warnings:
+            manifest.warn(w)
+        manifest.extra.update(result.manifest_extra())
+        converged_s = manifest.extra["converged_after_s"]
+        manifest.finish(timer)
+        manifest.write(stage / "manifest.json")
+    files = [out / f.name for f in files]
     summary = LocalizeRunSummary(str(out), method, len(result), float(result.n_particles.mean()),
                                  result.converged_ns is not None, converged_s, result.ambiguous,
                                  list(manifest.extra["lost_after_s"]), len(result.warnings),

@@ -684,3 +684,25 @@ def test_annotated_map_to_odom_puts_the_robot_of_the_logs_tf_tree_at_the_estimat
     assert main(["localize", str(log), "--map", str(sample_map), "-o", str(run), "--method", "mcl", "-q"]) == 0
     off = _drawn_off_m(run)
     assert off.size > 50 and off.max() < 1e-3
+
+
+def test_localize_interrupted_while_writing_leaves_the_run_folder_as_it_was(
+        sample_map: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """SIGTERM while annotated.mcap was written (minutes on an hour's log): exit 130, and the earlier run in the
+    folder untouched. Before, its trajectory had been replaced while its manifest stayed (hAM)."""
+    import doorbatch.io.annotated_mcap as annotated
+
+    run = tmp_path / "run"
+    run.mkdir()
+    earlier = {"manifest.json": "{}", "trajectory.tum": "0 0 0 0 0 0 0 1\n", "notes.txt": "mine"}
+    for name, text in earlier.items():
+        (run / name).write_text(text)
+
+    def killed(*_: Any, **__: Any) -> None:
+        raise KeyboardInterrupt("signal 15")
+
+    monkeypatch.setattr(annotated, "write_annotated_mcap", killed)
+    assert main(["localize", str(SAMPLE_LOGS / "loc_open.mcap"), "--map", str(sample_map), "-o", str(run),
+                 "--method", "mcl", "--particles", "300", "-q"]) == 130
+    assert {p.name: p.read_text() for p in run.iterdir()} == earlier
+    assert [p.name for p in tmp_path.iterdir()] == ["run"]

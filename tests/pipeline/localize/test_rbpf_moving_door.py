@@ -206,3 +206,24 @@ def test_a_door_that_swings_in_front_of_a_standing_robot_is_followed_and_the_pos
     assert np.nanmax(followed[after]) < 4.0, followed[after]
     assert np.nanmin(held[after]) > 40.0, held[after]
     np.testing.assert_array_equal(moved, 0.0)
+
+
+def test_a_robot_that_crept_past_its_last_update_and_stopped_is_stopped() -> None:
+    """hAM's charging stop: the robot crept 8 cm after its last pose update, then stood 300 s, and got no door
+    update at all (still is measured from the last pose update). ``stopped_since`` tells the stop from the odometry
+    of the last ``door_update_stopped_s``: localize then updates the pose once where the robot stopped, and the
+    doors on every scan after. Driving slowly (3 cm/s) is no stop; nor is a window the scans do not cover."""
+    from doorbatch.pipeline.localize.run import stopped_since
+
+    config = LocalizeConfig()
+    stamps = (np.arange(40) * 0.1 * 1e9).astype(np.int64)
+    x = np.minimum(np.arange(40) * 0.02, 0.4)  # 0.2 m/s until 2 s, then standing
+    odom = np.stack([x, np.zeros(40), np.zeros(40)], axis=1)
+    ok = np.ones(40, dtype=bool)
+    stopped = [stopped_since(stamps, odom, ok, i, config) for i in range(40)]
+    assert stopped == [False] * 25 + [True] * 15  # from 0.5 s after the stop on
+    slow = np.stack([np.arange(40) * 0.003, np.zeros(40), np.zeros(40)], axis=1)  # 3 cm/s
+    assert not any(stopped_since(stamps, slow, ok, i, config) for i in range(40))
+    gap = ok.copy()
+    gap[30] = False
+    assert not stopped_since(stamps, odom, gap, 32, config)
