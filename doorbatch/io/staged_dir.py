@@ -27,6 +27,19 @@ def _sibling(dest: Path, marker: str) -> Path:
 
 
 @contextmanager
+def _staging(dest: Path) -> Iterator[Path]:
+    """An empty temporary folder beside ``dest`` (its parents created), removed when the ``with`` body raises."""
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    tmp = _sibling(dest, TEMP_MARKER)
+    tmp.mkdir()
+    try:
+        yield tmp
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
+@contextmanager
 def staged_dir(dest: Path) -> Iterator[Path]:
     """Yield an empty temporary folder; when the ``with`` body returns it replaces ``dest``.
 
@@ -36,14 +49,8 @@ def staged_dir(dest: Path) -> Iterator[Path]:
         OSError: the folder cannot be created or renamed.
     """
     dest = Path(dest)
-    dest.parent.mkdir(parents=True, exist_ok=True)
-    tmp = _sibling(dest, TEMP_MARKER)
-    tmp.mkdir()
-    try:
+    with _staging(dest) as tmp:
         yield tmp
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     old = _sibling(dest, _OLD_MARKER)
     if dest.exists():
         dest.rename(old)
@@ -65,14 +72,8 @@ def staged_files(dest: Path) -> Iterator[Path]:
         OSError: the folder cannot be created, or an entry renamed.
     """
     dest = Path(dest)
-    dest.parent.mkdir(parents=True, exist_ok=True)
-    tmp = _sibling(dest, TEMP_MARKER)
-    tmp.mkdir()
-    try:
+    with _staging(dest) as tmp:
         yield tmp
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     dest.mkdir(exist_ok=True)
     for item in sorted(tmp.iterdir()):
         target = dest / item.name
