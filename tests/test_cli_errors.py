@@ -335,6 +335,20 @@ def test_a_bag_folder_without_metadata_names_its_mcap(write_log: Callable[..., P
     assert main(["inspect", str(mcap)]) == 0
 
 
+def test_a_sqlite_bag_without_metadata_or_given_by_its_file_says_what_to_give(
+        write_log: Callable[..., Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A ROS 2 bag's .db3 given as the log, and a killed sqlite3 recording (no metadata.yaml): each message says
+    what to do (the folder; ``ros2 bag reindex``), where they had said only "not a log doorbatch can read" and
+    "folder is not a ROS 2 bag" (hAL)."""
+    bag = write_log("bag", fmt="rosbag2")
+    db3 = next(bag.glob("*.db3"))
+    code, err = _run(capsys, "inspect", str(db3))
+    assert code == 3 and "give the bag's folder" in _one_line(err) and str(bag) in err
+    (bag / "metadata.yaml").unlink()
+    code, err = _run(capsys, "inspect", str(bag))
+    assert code == 3 and "no metadata.yaml" in _one_line(err) and "ros2 bag reindex" in err
+
+
 _OUTPUT_COMMANDS = [
     ["map", str(REPO / "datasets/sample/logs/map_pass1.mcap"), "--stages", "grid"],
     ["convert", str(REPO / "datasets/sample/logs/map_pass1.mcap")],

@@ -117,8 +117,10 @@ class Rosbag2Reader(_AnyBagReader):
     def open(self) -> None:
         if not (self.path / "metadata.yaml").exists():
             files = sorted(self.path.glob("*.mcap"))
+            db3 = sorted(self.path.glob("*.db3"))
             hint = (f"; a recording stopped before it wrote metadata.yaml leaves its MCAP readable as a file: "
-                    f"give {files[0]}" if len(files) == 1 else "")
+                    f"give {files[0]}" if len(files) == 1 else "; a recording stopped before it wrote metadata.yaml: "
+                    f"`ros2 bag reindex {self.path}` writes it" if db3 else "")
             raise LogReadError(f"folder is not a ROS 2 bag (no metadata.yaml){hint}", path=self.path)
         try:
             super().open()

@@ -291,6 +291,8 @@ def _format_key(path: Path) -> str:
         return ".bag"
     if key in (".mcap", ".bag"):
         raise LogReadError(f"not a valid {key[1:].upper()} file (bad magic bytes)", path=path)
+    if key == ".db3" and "dir" in _READERS:  # one file of a ROS 2 bag: the bag is its folder, metadata.yaml beside
+        raise LogReadError(f"a ROS 2 bag's database file: give the bag's folder, {path.parent}", path=path)
     if key not in _READERS:
         raise LogReadError(
             f"not a log doorbatch can read (supported: {', '.join(supported_formats())})", path=path
