@@ -251,6 +251,13 @@ def test_door_state_error_over_all_matched_doors_shows_doors_never_observed() ->
     ev = evaluate_runs([run], DoorbatchConfig(), truth=mapping_log)
     assert math.isnan(ev.value("r", "door_state_error_mean")) and math.isnan(ev.value("r", "door_state_error_all_mean"))
     assert len(ev.warnings) == 1 and "door states not scored" in ev.warnings[0] and "map.mcap" in ev.warnings[0]
+    # A truth whose log's span covers only the run's later part (hAL: another launch whose sim time also starts near
+    # 0; 0.56 rad scored for a 0.005 rad run, without a word): scored, with a warning naming the share outside.
+    later = replace(truth, start_ns=int(stamps[20]), files={"log": "other_launch.mcap"})
+    ev = evaluate_runs([run], DoorbatchConfig(), truth=later)
+    assert len(ev.warnings) == 1 and "40 % of its updates lie outside" in ev.warnings[0]
+    assert "other_launch.mcap" in ev.warnings[0]
+    assert not evaluate_runs([run], DoorbatchConfig(), truth=truth).warnings  # the run's own truth: no word
 
 
 def test_error_along_the_corridor_averages_runs_per_bin() -> None:
