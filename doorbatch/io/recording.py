@@ -1046,8 +1046,9 @@ def with_shared_no_return_code(recordings: Sequence[Recording], config: Doorbatc
     for rec in recordings:
         stop = start + len(rec.scans)
         if note and np.isposinf(rec.scans.range_max).any():  # a pass with scans that state none
+            together = f"the {len(recordings)} passes together: " if len(recordings) > 1 else ""
             rec = replace(rec, scans=replace(rec.scans, range_max=coded[start:stop]),
-                          warnings=[*rec.warnings, f"{rec.path}: {note}"])
+                          warnings=[*rec.warnings, f"{rec.path}: {together}{note}"])
         out.append(rec)
         start = stop
     return out
@@ -1126,15 +1127,17 @@ def with_no_return_code(ranges: Sequence[npt.ArrayLike], range_max: FloatArray,
         n_finite += finite.size
         code = max(code, float(finite.max())) if finite.size else code
     if n_finite == 0:
-        return range_max, f"{unstated.size} of {range_max.size} scans state no range_max and have no finite reading"
+        return range_max, (f"{unstated.size} of {range_max.size} scans state no finite range_max (none, NaN or inf) "
+                           "and have no finite reading")
     at_code = sum(int(np.count_nonzero(r == code)) for r in scans)
     if at_code < max(io.no_return_code_min_readings, io.no_return_code_min_share * n_finite):
-        return range_max, (f"{unstated.size} of {range_max.size} scans state no range_max and their readings show no "
-                           "no-return code: every finite reading is a hit (the localizers take "
+        return range_max, (f"{unstated.size} of {range_max.size} scans state no finite range_max (none, NaN or inf) "
+                           "and no finite reading repeats as a no-return code (their no-returns, if any, are inf or "
+                           "NaN): every finite reading is a hit (the localizers take "
                            "localize.laser_max_range_fallback)")
     out = range_max.copy()
     out[unstated] = code
-    return out, (f"{unstated.size} of {range_max.size} scans state no range_max, and {at_code} of their "
+    return out, (f"{unstated.size} of {range_max.size} scans state no finite range_max, and {at_code} of their "
                  f"{n_finite} finite readings are exactly their largest, {code:g} m: read as the laser's no-return "
                  "code and range_max (io.no_return_code_min_readings, _share)")
 
