@@ -273,7 +273,7 @@ def localize_cmd(ctx: Context, log_path: Path, map_path: Path, output: Path, met
         lc = lc.model_copy(update={"max_particles": particles, "global_particles": particles,
                                    "min_particles": min(lc.min_particles, particles)})
     config = ctx.config.model_copy(update={"localize": lc})
-    with progress_bar(None, "localize", unit="scan") as bar:
+    with progress_bar(None, f"localize: reading {log_path.name}", unit="scan") as bar:
         _, summary = run_localize(log_path, map_path, output, config, method or lc.method, init, bar)
     lost = ", ".join(f"{t:.1f}" for t in summary.lost_after_s)
     ctx.summary(f"{summary.method}: {summary.updates} updates, {summary.mean_particles:.0f} particles on average"

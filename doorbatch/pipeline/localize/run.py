@@ -596,6 +596,7 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
     flipped = other_end(subset_doors(lmap.doors, unknown_rows)) if unknown_rows.size else None
     tip_seen: list[FloatArray] = []  # per RBPF update, those doors' leaf angle about their free end (NaN: not)
     if progress is not None:
+        progress.describe("localize")
         progress.set_total(len(rec.scans))
     for i in range(len(rec.scans)):
         if progress is not None:
@@ -826,6 +827,8 @@ def run_localize(log_path: Path, map_path: Path, out: Path, config: DoorbatchCon
         lmap = load_localization_map(map_path, config.localize)
     with timer("localize"):
         result = localize(log_path, lmap, config, method, parse_init(init), progress)
+    if progress is not None:
+        progress.describe("localize: writing annotated.mcap")
     with staged_files(out) as stage:  # an interrupted write leaves ``out`` as it was
         with timer("write"):
             files = write_run_tables(stage, result)
