@@ -123,8 +123,10 @@ def run_annotations(result: LocalizationResult, occ: OccupancyMap, doors: DoorSe
         p = result.particles[i]
         yield Annotation("/doorbatch/particles", "geometry_msgs/msg/PoseArray", t,
                          rm.pose_array(t, map_frame, p[:, 0], p[:, 1], p[:, 2]))
-        if len(doors):  # MCL estimates no door: hinges and opening ranges only
-            angles = result.door_mean[i] if result.door_mean.shape[1] == len(doors) else np.full(len(doors), np.nan)
+        estimated = result.door_mean.shape[1] == len(doors)
+        if len(doors) and (estimated or i == 0):  # MCL estimates no door: hinges and opening ranges, once (they
+            # do not change; per update they had been a third of an hour's annotated.mcap, hAM)
+            angles = result.door_mean[i] if estimated else np.full(len(doors), np.nan)
             yield Annotation("/doorbatch/doors", "visualization_msgs/msg/MarkerArray", t,
                              door_markers(t, map_frame, doors, angles))
         yield map_to_odom_tf(t, result.pose[i], odom[i], map_frame, odom_frame)
