@@ -130,7 +130,7 @@ def odometry_jumps(poses: npt.ArrayLike, min_jump_m: float, min_jump_rad: float,
         return np.zeros(0, dtype=np.intp)
     dist = np.hypot(np.diff(p[:, 0]), np.diff(p[:, 1]))
     turn = np.abs(wrap_angle(np.diff(p[:, 2])))
-    around = _longest_step_around(np.where(dist > min_jump_m, 0.0, dist))  # a gap's long step tells nothing
+    around = np.maximum(*_steps_around(np.where(dist > min_jump_m, 0.0, dist)))  # a gap's long step tells nothing
     landing = np.hypot(p[1:, 0], p[1:, 1])
     # landing a step or two off the origin: a restart only where the step is no motion of this robot's (ten of its
     # steps and more; orebro's coarse 0.3-0.5 m steps pass within a metre of its origin, and are none)
@@ -149,26 +149,33 @@ def odometry_teleports(stamps_s: npt.ArrayLike, poses: npt.ArrayLike, min_jump_m
     within :data:`TELEPORT_MAX_PERIODS` median message periods (a pose set from outside: robot_localization's
     set_pose, a driver's fault; no base brakes from ten times its speed in one period). A step over a longer time is
     a gap in the messages (motion unseen, kept); a step among steps as long is motion (orebro's coarse 0.3–3.3 m
-    steps come in runs). A set pose that turns without moving is not found (a turn in one period can be real)."""
+    steps come in runs), and so is one after steps of nothing while those after it move (an odometry that froze and
+    caught up). A set pose that turns without moving is not found (a turn in one period can be real)."""
     t = np.asarray(stamps_s, dtype=np.float64).reshape(-1)
     p = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
     if p.shape[0] < 2 or steps_ratio <= 0.0:
         return np.zeros(0, dtype=np.intp)
     dist = np.hypot(np.diff(p[:, 0]), np.diff(p[:, 1]))
     dt = np.diff(t)
-    period = float(np.median(dt[dt > 0.0])) if (dt > 0.0).any() else 0.0
-    sudden = dt <= TELEPORT_MAX_PERIODS * period
-    return np.flatnonzero(sudden & (dist > min_jump_m) & (dist > steps_ratio * _longest_step_around(dist))) + 1
+    if not (dt > 0.0).any():  # no stamps to tell a set pose from a gap by
+        return np.zeros(0, dtype=np.intp)
+    sudden = dt <= TELEPORT_MAX_PERIODS * float(np.median(dt[dt > 0.0]))
+    # an odometry that stood frozen while the robot moved on (a stalled encoder link catching up in one step) is no
+    # set pose: the steps before are nothing, those after are motion
+    before, after = _steps_around(dist)
+    frozen = (before == 0.0) & (after > 0.0)
+    jumps = sudden & ~frozen & (dist > min_jump_m) & (dist > steps_ratio * np.maximum(before, after))
+    return np.flatnonzero(jumps) + 1
 
 
-def _longest_step_around(dist: FloatArray) -> FloatArray:
-    """(K,) the longest of the :data:`RESTART_WINDOW` steps before and after each of ``dist`` (not itself): how far
-    one message period moves the robot there."""
+def _steps_around(dist: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """(K,) each, the longest of the :data:`RESTART_WINDOW` steps before and the longest of those after each of
+    ``dist`` (not itself): how far one message period moves the robot there."""
     padded = np.pad(dist, RESTART_WINDOW)
     windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * RESTART_WINDOW + 1)
-    before, after = windows[:, :RESTART_WINDOW].max(axis=1), windows[:, RESTART_WINDOW + 1:].max(axis=1)
-    longest: FloatArray = np.maximum(before, after)
-    return longest
+    before: FloatArray = windows[:, :RESTART_WINDOW].max(axis=1)
+    after: FloatArray = windows[:, RESTART_WINDOW + 1:].max(axis=1)
+    return before, after
 
 
 def bridged_jumps(poses: npt.ArrayLike, jumps: npt.ArrayLike) -> FloatArray:

@@ -543,7 +543,7 @@ def clock_restarts(stamps_ns: Sequence[int], log_ns: Sequence[int], back_s: floa
     t, g = t[keep], g[keep]
     out = []
     for i in np.flatnonzero((np.diff(t) < -back_s * 1e9) & (np.diff(g) >= 0)).tolist():
-        if np.all(t[i + 1:i + 6] < t[i] - back_s * 1e9):
+        if i + 6 <= t.size and np.all(t[i + 1:i + 6] < t[i] - back_s * 1e9):  # five after it, not a late last one
             out.append((int(keep[i + 1]), float(t[i + 1] - t[i]) / 1e9))
     return out
 

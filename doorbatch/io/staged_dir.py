@@ -27,19 +27,6 @@ def _sibling(dest: Path, marker: str) -> Path:
 
 
 @contextmanager
-def _staging(dest: Path) -> Iterator[Path]:
-    """An empty temporary folder beside ``dest`` (its parents created), removed when the ``with`` body raises."""
-    dest.parent.mkdir(parents=True, exist_ok=True)
-    tmp = _sibling(dest, TEMP_MARKER)
-    tmp.mkdir()
-    try:
-        yield tmp
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-
-
-@contextmanager
 def staged_dir(dest: Path) -> Iterator[Path]:
     """Yield an empty temporary folder; when the ``with`` body returns it replaces ``dest``.
 
@@ -49,8 +36,14 @@ def staged_dir(dest: Path) -> Iterator[Path]:
         OSError: the folder cannot be created or renamed.
     """
     dest = Path(dest)
-    with _staging(dest) as tmp:
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    tmp = _sibling(dest, TEMP_MARKER)
+    tmp.mkdir()
+    try:
         yield tmp
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
     old = _sibling(dest, _OLD_MARKER)
     if dest.exists():
         dest.rename(old)
@@ -60,27 +53,37 @@ def staged_dir(dest: Path) -> Iterator[Path]:
 
 @contextmanager
 def staged_files(dest: Path) -> Iterator[Path]:
-    """Yield an empty temporary folder beside ``dest`` for a command's output files; when the ``with`` body returns,
-    each is renamed into ``dest`` (created where missing), replacing an entry of its name, and the temporary folder
-    is removed. Other entries of ``dest`` stay (a user's own files).
+    """Yield an empty temporary folder inside ``dest`` (created where missing) for a command's output files; when
+    the ``with`` body returns, each is renamed into ``dest``, replacing an entry of its name, and the temporary
+    folder is removed. Other entries of ``dest`` stay (a user's own files). Inside, not beside: ``-o .`` has no
+    sibling, a folder the user may write in may sit in one the user may not (``-o ~``), and a mount point
+    (a container's ``-o /out``) is another file system than its parent's.
 
-    When the body raises (or is interrupted: Ctrl-C, SIGTERM), the temporary folder is removed and ``dest`` is as
-    it was: an interrupted command leaves no new folder half written, and no folder with some files of the new run
-    beside the rest of the old one (a manifest that does not describe the trajectory beside it).
+    When the body raises (or is interrupted: Ctrl-C, SIGTERM), the temporary folder is removed, and ``dest`` too
+    where this made it: an interrupted command leaves no new folder half written, and no folder with some files of
+    the new run beside the rest of the old one (a manifest that does not describe the trajectory beside it).
 
     Raises:
         OSError: the folder cannot be created, or an entry renamed.
     """
     dest = Path(dest)
-    with _staging(dest) as tmp:
+    made = not dest.exists()
+    dest.mkdir(parents=True, exist_ok=True)
+    tmp = dest / f".doorbatch.{secrets.token_hex(8)}{TEMP_MARKER}"
+    tmp.mkdir()
+    try:
         yield tmp
-    dest.mkdir(exist_ok=True)
-    for item in sorted(tmp.iterdir()):
-        target = dest / item.name
-        if item.is_dir() and target.is_dir():
-            shutil.rmtree(target)
-        item.replace(target)
-    tmp.rmdir()
+    except BaseException:
+        shutil.rmtree(dest if made else tmp, ignore_errors=True)
+        raise
+    try:
+        for item in sorted(tmp.iterdir()):
+            target = dest / item.name
+            if item.is_dir() and target.is_dir():
+                shutil.rmtree(target)
+            item.replace(target)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
 
 
 def check_output_location(dest: Path, folder: bool) -> None:

@@ -50,9 +50,14 @@ def _mapped_passes(recordings: Sequence[Recording], door_map: DoorMap, door_angl
     for t, (rec, p) in enumerate(zip(recordings, door_map.passes, strict=True)):
         stamps, poses = p.stamps_ns[p.valid], p.poses[p.valid]
         odom = None
-        if (drawn := rec.drawn_odometry) is not None:  # the log's tree: bridging and joining move rec.odometry only
-            at, ok = interpolate_poses(drawn.stamps_ns, drawn.poses, stamps)
-            odom = at if ok.all() else None
+        # the log's tree (bridging and joining move rec.odometry only), else the odometry used, where it covers all
+        for series in (rec.drawn_odometry, rec.odometry):
+            if series is None:
+                continue
+            at, ok = interpolate_poses(series.stamps_ns, series.poses, stamps)
+            if ok.all():
+                odom = at
+                break
         out.append(MappedPass(stamps, poses, odom, door_angles[t], rec.log_clock))
     return out
 
@@ -74,13 +79,18 @@ def _write_mapping_mcap(logs: Sequence[Path], recordings: Sequence[Recording], d
 OPTIONAL_MAP_FILES = ("walls.parquet", "classes.json", "annotated.mcap")
 
 
-def _remove_stale_map_files(out: Path, written: Sequence[Path], logs: Sequence[Path]) -> None:
-    """The optional files the last ``doorbatch map`` into ``out`` wrote (its manifest's ``optional_files``) that
-    this run did not: they would pass for this map's. Never a file the user put there, never an input."""
+def _optional_files_written(out: Path) -> list[str]:
+    """The optional files the last ``doorbatch map`` into ``out`` wrote (its manifest's ``optional_files``)."""
     try:
-        earlier = Manifest.read(out / "manifest.json").extra.get("optional_files", [])
+        return list(Manifest.read(out / "manifest.json").extra.get("optional_files", []))
     except (OSError, InputDataError, ValueError):
-        earlier = []
+        return []
+
+
+def _remove_stale_map_files(out: Path, earlier: Sequence[str], written: Sequence[Path], logs: Sequence[Path]) -> None:
+    """The optional files an earlier map into ``out`` wrote (``earlier``: :func:`_optional_files_written`, read
+    before this run's files came in) that this run did not: they would pass for this map's. Never a file the user
+    put there, never an input."""
     inputs = {Path(p).resolve() for p in logs}
     for name in OPTIONAL_MAP_FILES:
         path = out / name
@@ -129,6 +139,7 @@ def run_map(logs: Sequence[Path], out: Path, config: DoorbatchConfig, stages: Se
         door_map.stage_seconds["em"] = time.perf_counter() - t0
     trajectories = [p.poses[p.valid] for p in door_map.passes]
     walls = [w.endpoints() for w in em.object_map.walls if w.segments.size] if em is not None else []
+    earlier = _optional_files_written(out)
     with staged_files(out) as stage:  # an interrupted write leaves ``out`` as it was
         files = write_map_dir(stage, door_map.static_map, [r.door for r in rows], [r.n_observations for r in rows],
                               [r.source for r in rows], trajectories, walls=np.concatenate(walls) if walls else None)
@@ -153,7 +164,6 @@ def run_map(logs: Sequence[Path], out: Path, config: DoorbatchConfig, stages: Se
         if mcap and recordings is not None:
             files.append(_write_mapping_mcap(logs, recordings, door_map, rows, stage / "annotated.mcap", config))
         files = [out / f.name for f in files]
-        _remove_stale_map_files(out, files, logs)
         manifest.extra["optional_files"] = [f.name for f in files if f.name in OPTIONAL_MAP_FILES]
         manifest.extra["pose_source"] = door_map.pose_source
         for w in door_map.warnings:
@@ -161,6 +171,7 @@ def run_map(logs: Sequence[Path], out: Path, config: DoorbatchConfig, stages: Se
         manifest.stage_seconds.update(door_map.stage_seconds)
         manifest.finish()
         manifest.write(stage / "manifest.json")
+    _remove_stale_map_files(out, earlier, files, logs)  # once this map's files are all in
     summary = MapRunSummary(str(out), door_map.pose_source, len(rows), len(door_map.passes),
                             [str(f) for f in [*files, out / "manifest.json"]], door_map.warnings)
     return door_map, summary

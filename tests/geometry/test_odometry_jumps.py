@@ -101,3 +101,16 @@ def test_steps_after_a_gap_or_among_long_steps_are_no_set_pose() -> None:
     t_even = np.arange(6) * 0.2
     assert odometry_teleports(t_even, gap, 0.5, 10.0).tolist() == [3]
     assert odometry_teleports(t_even, gap, 0.5, 0.0).size == 0
+    assert odometry_teleports(np.zeros(6), gap, 0.5, 10.0).size == 0  # no stamps: a gap cannot be told from it
+
+
+def test_an_odometry_that_froze_and_caught_up_is_no_set_pose() -> None:
+    """A reviewer's case: the encoder link stalls for 1.2 s at 50 Hz (stamps go on, the pose stands), then the
+    ticks land in one 0.6 m step and the robot drives on. That is motion, not a set pose: kept."""
+    x = np.r_[np.arange(200) * 0.01, np.full(60, 1.99), 2.59 + np.arange(100) * 0.01]
+    poses = np.stack([x, np.zeros_like(x), np.zeros_like(x)], axis=1)
+    assert odometry_teleports(np.arange(x.size) * 0.02, poses, 0.5, 10.0).size == 0
+    moving = x.copy()
+    moving[200:] = x[199] + np.arange(160) * 0.01 + 6.0 * (np.arange(160) >= 60)  # a set pose while moving: found
+    poses = np.stack([moving, np.zeros_like(x), np.zeros_like(x)], axis=1)
+    assert odometry_teleports(np.arange(x.size) * 0.02, poses, 0.5, 10.0).tolist() == [260]

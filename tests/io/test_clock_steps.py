@@ -109,7 +109,9 @@ def test_a_simulator_relaunched_within_a_recording_is_a_restart_of_its_clock() -
     swapped = sim.copy()
     swapped[[20, 21]] = swapped[[21, 20]]
     plain_log = T0 + np.round(np.arange(100) * 0.1 * S).astype(np.int64)
-    for series in ((one_late, plain_log), (swapped, plain_log), (sim, plain_log)):
+    last_late = sim.copy()
+    last_late[-1] -= 3 * S  # the last message stamped 3 s early (a reviewer's case): nothing after it to stay back
+    for series in ((one_late, plain_log), (swapped, plain_log), (sim, plain_log), (last_late, plain_log)):
         assert clock_restarts(*series, 1.0) == []
 
 

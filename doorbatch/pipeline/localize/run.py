@@ -24,6 +24,7 @@ import numpy.typing as npt
 from doorbatch.config import DoorbatchConfig, LocalizeConfig, parse_init
 from doorbatch.errors import InputDataError, PipelineError, UsageError
 from doorbatch.geometry.odometry import sideways_share
+from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.geometry.se2 import interpolate_poses
 from doorbatch.io.log_clock import LogClock, long_gaps
 from doorbatch.io.map_server import read_map
@@ -493,16 +494,23 @@ def init_cell_note(occ: OccupancyMap, init: tuple[float, float, float]) -> str |
     return note
 
 
+STOPPED_SHARE = 0.2  # of door_update_still_m and _deg: the most a stopped robot's odometry moves in the window
+
+
 def stopped_since(stamps_ns: npt.NDArray[np.int64], odom: FloatArray, ok: npt.NDArray[np.bool_], i: int,
                   lc: LocalizeConfig) -> bool:
     """Whether the robot has stood still at scan ``i`` for ``door_update_stopped_s``: the odometry of every scan in
-    that window moved it by at most ``door_update_still_m`` and ``_deg`` from scan ``i``'s (a window the scans do not
-    cover, at the log's start, is not)."""
+    that window within :data:`STOPPED_SHARE` of ``door_update_still_m`` and ``_deg`` of scan ``i``'s (2 mm, 0.1°:
+    a docking approach at 1 cm/s is no stop, which would get a pose update per centimetre); a window the scans do
+    not cover, at the log's start, is none."""
     since = int(stamps_ns[i]) - round(lc.door_update_stopped_s * 1e9)
     j = int(np.searchsorted(stamps_ns, since, side="left"))
     if j >= i or (j == 0 and int(stamps_ns[0]) > since) or not ok[j:i + 1].all():
         return False
-    return all(standing_still(odom[k], odom[i], lc) for k in range(j, i))
+    step = np.hypot(odom[j:i, 0] - odom[i, 0], odom[j:i, 1] - odom[i, 1])
+    turn = np.abs(wrap_angle(odom[j:i, 2] - odom[i, 2]))
+    return bool(np.all(step <= STOPPED_SHARE * lc.door_update_still_m)
+                and np.all(turn <= math.radians(STOPPED_SHARE * lc.door_update_still_deg)))
 
 
 def with_laser_odometry(rec: Recording, config: DoorbatchConfig) -> Recording:
@@ -705,7 +713,7 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
     if drawn is None or drawn is rec.odometry or not len(result):
         return result
     at, ok = interpolate_poses(drawn.stamps_ns, drawn.poses, result.stamps_ns, int(config.mapping.max_pose_gap_s * 1e9))
-    return replace(result, drawn_odom=np.where(ok[:, None], at, result.odom))  # where the tree has no pose: as read
+    return replace(result, drawn_odom=np.where(ok[:, None], at, result.odom))  # where the tree has none: the used
 
 
 @dataclass(frozen=True)
