@@ -765,10 +765,12 @@ class LocalizeConfig(Section):
     door_update_still_m: float = Field(0.01, ge=0.0)
     door_update_still_deg: float = Field(0.5, ge=0.0)
     # A robot that crept past door_update_still_m after its last pose update and then stopped (hAM: 3-11 cm before
-    # a 300 s charging stop, which got no door update at all) gets one pose update where it stopped: stopped is
-    # within door_update_still_m and _deg over this window. Expert choice: 0.5 s, so that a base driving slowly
-    # (faster than 2 cm/s) is not updated on every scan.
+    # a 300 s charging stop, which got no door update at all) gets one pose update where it stopped: stopped is its
+    # odometry within door_update_stopped_m and _deg over door_update_stopped_s. Expert choice: 2 mm and 0.1° over
+    # 0.5 s, so that a docking approach (1 cm/s and slower, down to 4 mm/s) is not updated on every centimetre.
     door_update_stopped_s: float = Field(0.5, gt=0.0)
+    door_update_stopped_m: float = Field(0.002, ge=0.0)
+    door_update_stopped_deg: float = Field(0.1, ge=0.0)
     door_init_sigma_deg: float = Field(30.0, gt=0.0)
     # A measured angle whose innovation² exceeds this χ² (1 dof) times (P + R) means the door was moved: its variance
     # is raised to door_init_sigma_deg² before the Kalman update (door_observation.kalman_update). 10.83: p = 0.001.

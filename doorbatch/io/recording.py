@@ -535,8 +535,9 @@ def clock_steps(stamps_ns: Sequence[int], log_ns: Sequence[int], step_s: float) 
 def clock_restarts(stamps_ns: Sequence[int], log_ns: Sequence[int], back_s: float) -> list[tuple[int, float]]:
     """Where a topic's header stamps go back by more than ``back_s`` and stay back while the recorder's clock goes
     on (message index, step in s): a simulator relaunched within one recording (its sim time starting at 0 again).
-    Stay back: the next five stamps (or all, nearer the end) lie below the one before the step, so that one message
-    stamped late or logged out of order is none. Unset stamps (0) and unknown log times are left out."""
+    Stay back: the next five stamps lie below the one before the step, so that one message stamped late or logged
+    out of order is none (nor a step with fewer than five after it). Unset stamps (0) and unknown log times are left
+    out."""
     t = np.asarray(stamps_ns, dtype=np.int64)
     g = np.asarray(log_ns, dtype=np.int64)
     keep = np.flatnonzero((t != 0) & (g != 0))

@@ -494,23 +494,20 @@ def init_cell_note(occ: OccupancyMap, init: tuple[float, float, float]) -> str |
     return note
 
 
-STOPPED_SHARE = 0.2  # of door_update_still_m and _deg: the most a stopped robot's odometry moves in the window
-
-
 def stopped_since(stamps_ns: npt.NDArray[np.int64], odom: FloatArray, ok: npt.NDArray[np.bool_], i: int,
                   lc: LocalizeConfig) -> bool:
     """Whether the robot has stood still at scan ``i`` for ``door_update_stopped_s``: the odometry of every scan in
-    that window within :data:`STOPPED_SHARE` of ``door_update_still_m`` and ``_deg`` of scan ``i``'s (2 mm, 0.1°:
-    a docking approach at 1 cm/s is no stop, which would get a pose update per centimetre); a window the scans do
-    not cover, at the log's start, is none."""
+    that window within ``door_update_stopped_m`` and ``_deg`` of scan ``i``'s (a docking approach at 1 cm/s is no
+    stop, which would get a pose update per centimetre); a window the scans do not cover, at the log's start, is
+    none."""
     since = int(stamps_ns[i]) - round(lc.door_update_stopped_s * 1e9)
     j = int(np.searchsorted(stamps_ns, since, side="left"))
     if j >= i or (j == 0 and int(stamps_ns[0]) > since) or not ok[j:i + 1].all():
         return False
     step = np.hypot(odom[j:i, 0] - odom[i, 0], odom[j:i, 1] - odom[i, 1])
     turn = np.abs(wrap_angle(odom[j:i, 2] - odom[i, 2]))
-    return bool(np.all(step <= STOPPED_SHARE * lc.door_update_still_m)
-                and np.all(turn <= math.radians(STOPPED_SHARE * lc.door_update_still_deg)))
+    return bool(np.all(step <= lc.door_update_stopped_m)
+                and np.all(turn <= math.radians(lc.door_update_stopped_deg)))
 
 
 def with_laser_odometry(rec: Recording, config: DoorbatchConfig) -> Recording:
@@ -623,11 +620,11 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
         first = state.odom_at_update is None
         if method == "rbpf":
             held = state.odom_at_update
-            stopped_off = (lc.door_update_when_still and held is not None and len(lmap.doors) > 0
-                           and stopped_since(rec.scans.stamps_ns, odom, odom_ok, i, lc)
-                           and not standing_still(held, odom[i], lc))
+            stopped_past_update = (lc.door_update_when_still and held is not None and len(lmap.doors) > 0
+                                   and stopped_since(rec.scans.stamps_ns, odom, odom_ok, i, lc)
+                                   and not standing_still(held, odom[i], lc))
             state, diag, observed = rbpf_step(state, odom[i], stamp_s, last_s, beams, rec.scans.hits_base(i),
-                                              lmap.field, lmap.doors, lc, rng, free, force=first or stopped_off)
+                                              lmap.field, lmap.doors, lc, rng, free, force=first or stopped_past_update)
         else:
             state, diag = mcl_step(state, odom[i], beams, lmap.field, lc, rng, free, force=first,
                                    combination=combination)
@@ -713,7 +710,7 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
     if drawn is None or drawn is rec.odometry or not len(result):
         return result
     at, ok = interpolate_poses(drawn.stamps_ns, drawn.poses, result.stamps_ns, int(config.mapping.max_pose_gap_s * 1e9))
-    return replace(result, drawn_odom=np.where(ok[:, None], at, result.odom))  # where the tree has none: the used
+    return replace(result, drawn_odom=np.where(ok[:, None], at, result.odom))  # where the tree has none: the used one
 
 
 @dataclass(frozen=True)
