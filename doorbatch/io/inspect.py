@@ -220,7 +220,8 @@ def inspect_log(path: Path, config: DoorbatchConfig | None = None,
         tf, tf_note = buffered_transforms(transforms, reader.scan_origin_mounts().values(), config)
         problems.extend(Problem(Severity.WARNING, None, w) for w in [*reader.warnings, *([tf_note] if tf_note else [])])
         topics = [
-            TopicReport(info.name, info.schema or info.msgtype, stats.get(info.name, _TopicStats()).count,
+            TopicReport(info.name, info.schema or info.msgtype,  # a topic not read (no definition): the index's count
+                        stats[info.name].count if info.name in stats else info.count,
                         _rate(stats.get(info.name)), role_of[info.name].value if info.name in role_of else None,
                         _read_as(info, roles.reasons.get(info.name) if info.name in role_of else _unused_hint(info)))
             for info in sorted(reader.topics.values(), key=lambda t: t.name)

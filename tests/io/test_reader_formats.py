@@ -386,6 +386,10 @@ def test_a_topic_of_a_custom_type_without_definition_is_skipped_with_a_warning(w
         assert reader.topics["/battery2"].msgtype == "my_robot_msgs/msg/BatteryState2"
         said = [w for w in reader.warnings if "/battery2" in w]
     assert len(said) == 1 and "not read" in said[0]
+    from doorbatch.io.inspect import inspect_log
+
+    listed = {t.name: t for t in inspect_log(custom).topics}["/battery2"]
+    assert listed.count == reader.topics["/battery2"].count > 0  # the index's count, not 0 (it is not read)
 
 
 def test_a_jazzy_bag_with_an_unknown_definition_is_refused_with_the_reason(write_log: Callable[..., Path],
