@@ -192,14 +192,13 @@ class LogReader(ABC):
         are most of its messages (:func:`most_are_bad`), else gets a warning in ``warnings``; a colour topic detected
         by its type (no ``topics.colors``) only gets a warning."""
         for topic, errors in bad.items():
-            guessed_colors = (self.roles.role_of().get(topic) is Role.COLORS and self.topics_config.colors is None)
-            if most_are_bad(len(errors), seen[topic]) and guessed_colors:
+            if most_are_bad(len(errors), seen[topic]):
+                if self.roles.role_of().get(topic) is not Role.COLORS or self.topics_config.colors is not None:
+                    raise errors[0]
                 # beam colours are optional, and the one PointCloud2 taken for them may be a lidar's cloud
                 self.warnings.append(f"{self.path}: {topic}, taken for beam colours by its type, is no colour cloud "
                                      f"({errors[0].reason}): no beam colours read (topics.colors names the topic)")
                 continue
-            if most_are_bad(len(errors), seen[topic]):
-                raise errors[0]
             self.warnings.append(f"{self.path}: {len(errors)} of {seen[topic]} messages on {topic} skipped, "
                                  f"unusable (first: {errors[0].reason})")
 

@@ -330,9 +330,9 @@ def tree_odometry(tf: TfBuffer, odometry: PoseSeries | None, base: str) -> PoseS
     """``base``'s pose in the odometry's frame from the TF tree (:func:`_tf_poses`), where the tree has that frame
     above ``base`` with a dynamic edge between them (an odometry topic beside an EKF's odom→base_link on /tf: the
     tree is the EKF's); else None."""
-    if odometry is None or base not in tf.frames or odometry.frame_id not in tf.chain(base)[1:]:
+    chain = tf.chain(base) if base in tf.frames else []
+    if odometry is None or odometry.frame_id not in chain[1:]:
         return None
-    chain = tf.chain(base)
     if all(tf.is_static(c) for c in chain[:chain.index(odometry.frame_id)]):
         return None
     return pose_series(_tf_poses(tf, odometry.frame_id, base))

@@ -472,35 +472,31 @@ def _unknown_doors_note(run: RunTables) -> str | None:
             "rebuilt or renumbered since the run?): those doors are not scored")
 
 
-def _other_log_note(run: RunTables, truth: SimTruth) -> str | None:
-    """A warning when the run's updates lie outside the time span of the truth's log (``start_ns`` … ``end_ns``): its
-    door angles are another log's (``--world`` given the mapping log's truth for a localization run scored the doors
-    against the mapping passes' angles, without a word); None when they overlap."""
-    first, last = int(run.stamps_ns[0]), int(run.stamps_ns[-1])
-    if truth.end_ns <= truth.start_ns or (first <= truth.end_ns and last >= truth.start_ns):
-        return None
-    log = truth.files.get("log", "another log")
-    return (f"run {run.name}: door states not scored: the truth's log ({log}) spans {truth.start_ns / 1e9:.1f}-"
-            f"{truth.end_ns / 1e9:.1f} s and the run's updates {first / 1e9:.1f}-{last / 1e9:.1f} s, so its door "
-            f"angles are another log's (give --world the truth of the log {run.log} was localized in)")
-
-
 PARTLY_OUTSIDE_SHARE = 0.05  # of a run's updates outside its truth's log span: the truth is likely another log's
 
 
-def _partly_other_log_note(run: RunTables, truth: SimTruth) -> str | None:
-    """A warning when more than :data:`PARTLY_OUTSIDE_SHARE` of the run's updates lie outside the time span of the
-    truth's log, though some lie in it (:func:`_other_log_note` refuses a run that lies wholly outside): a truth
-    of a log whose sim time also starts near 0 (hAL's relaunched simulator) scored 0.56 rad for a 0.005 rad run."""
+def _truth_span_note(run: RunTables, truth: SimTruth) -> tuple[str | None, bool]:
+    """A warning where the run's updates lie outside the time span of the truth's log (``start_ns`` … ``end_ns``),
+    and whether its door states are scored. Wholly outside: not scored, its door angles are another log's
+    (``--world`` given the mapping log's truth for a localization run had scored the doors against the mapping
+    passes' angles, without a word). More than :data:`PARTLY_OUTSIDE_SHARE` outside: scored, with a warning (a
+    truth of a log whose sim time also starts near 0, hAL's relaunched simulator, scored 0.56 rad for a 0.005 rad
+    run). (None, True) where the spans agree."""
     if truth.end_ns <= truth.start_ns or not run.stamps_ns.size:
-        return None
+        return None, True
+    first, last = int(run.stamps_ns[0]), int(run.stamps_ns[-1])
+    log = truth.files.get("log", "another log")
+    span = f"{truth.start_ns / 1e9:.1f}-{truth.end_ns / 1e9:.1f} s"
+    if first > truth.end_ns or last < truth.start_ns:
+        return (f"run {run.name}: door states not scored: the truth's log ({log}) spans {span} and the run's updates "
+                f"{first / 1e9:.1f}-{last / 1e9:.1f} s, so its door angles are another log's (give --world the truth "
+                f"of the log {run.log} was localized in)"), False
     outside = float(np.mean((run.stamps_ns < truth.start_ns) | (run.stamps_ns > truth.end_ns)))
     if outside <= PARTLY_OUTSIDE_SHARE:
-        return None
-    log = truth.files.get("log", "another log")
+        return None, True
     return (f"run {run.name}: {100 * outside:.0f} % of its updates lie outside the time span of the truth's log "
-            f"({log}, {truth.start_ns / 1e9:.1f}-{truth.end_ns / 1e9:.1f} s): its door states are scored against "
-            f"angles that may be another log's (give --world the truth of the log {run.log} was localized in)")
+            f"({log}, {span}): its door states are scored against angles that may be another log's (give --world "
+            f"the truth of the log {run.log} was localized in)"), True
 
 
 def _door_state_part(run: RunTables, truth: SimTruth | None, cfg: EvaluateConfig
@@ -676,11 +672,10 @@ def evaluate_runs(runs: Sequence[RunTables], config: DoorbatchConfig, *,
                                       errs.ape_m, errs.ape_rad))
         rows += _convergence_rows(run, ref, cfg, alignment)
         run_truth = truth if truth is not None else run.truth
-        if run_truth is not None and run.door_states is not None and (note := _other_log_note(run, run_truth)):
-            warnings.append(note)
-            run_truth = None
-        if run_truth is not None and run.door_states is not None and (note := _partly_other_log_note(run, run_truth)):
-            warnings.append(note)
+        if run_truth is not None and run.door_states is not None:
+            note, scored = _truth_span_note(run, run_truth)
+            warnings += [note] if note else []
+            run_truth = run_truth if scored else None
         if run_truth is not None and (note := _unknown_doors_note(run)):
             warnings.append(note)
         state_rows, state_series = _door_state_part(run, run_truth, cfg)

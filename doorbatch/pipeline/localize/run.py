@@ -621,8 +621,8 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
         if method == "rbpf":
             held = state.odom_at_update
             stopped_past_update = (lc.door_update_when_still and held is not None and len(lmap.doors) > 0
-                                   and stopped_since(rec.scans.stamps_ns, odom, odom_ok, i, lc)
-                                   and not standing_still(held, odom[i], lc))
+                                   and not standing_still(held, odom[i], lc)  # the cheap test first: every scan
+                                   and stopped_since(rec.scans.stamps_ns, odom, odom_ok, i, lc))
             state, diag, observed = rbpf_step(state, odom[i], stamp_s, last_s, beams, rec.scans.hits_base(i),
                                               lmap.field, lmap.doors, lc, rng, free, force=first or stopped_past_update)
         else:
