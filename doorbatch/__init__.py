@@ -1,10 +1,35 @@
-"""doorbatch: door-aware maps, localization with door states, door poses and metrics from robot logs."""
+"""doorbatch: door-aware maps, localization with door states, door poses and metrics from robot logs.
 
+The library calls of a notebook (README, "Library use"), imported on first use so that ``import doorbatch``
+stays cheap::
+
+    config = doorbatch.load_config()                 # the defaults; or load_config(Path("my.yaml"), ["k.x=1"])
+    door_map = doorbatch.build_map(["pass1.mcap", "pass2.mcap"], config)
+    result = doorbatch.localize("run.mcap", door_map, config, method="rbpf")
+"""
+
+from importlib import import_module
 from importlib.metadata import PackageNotFoundError, version
+from typing import Any
 
 try:
     __version__ = version("doorbatch")
 except PackageNotFoundError:  # running from a source tree that was never installed
     __version__ = "0.0.0+unknown"
 
-__all__ = ["__version__"]
+_LAZY = {
+    "load_config": "doorbatch.config",
+    "DoorbatchConfig": "doorbatch.config",
+    "build_map": "doorbatch.pipeline.mapping",
+    "localize": "doorbatch.pipeline.localize.run",
+    "load_localization_map": "doorbatch.pipeline.localize.run",
+}
+
+__all__ = ["__version__", *_LAZY]
+
+
+def __getattr__(name: str) -> Any:
+    """The library calls of :data:`_LAZY`, imported when first asked for (PEP 562)."""
+    if name in _LAZY:
+        return getattr(import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'doorbatch' has no attribute {name!r}")

@@ -330,6 +330,15 @@ def pixels_to_occupancy(pixels: UInt8Array, meta: MapYaml) -> Int8Array:
     return np.select([occupied, free, opaque], [OCCUPIED, 0, scaled], UNKNOWN).astype(np.int8)
 
 
+def as_written(map: OccupancyMap, *, occupied_thresh: float = 0.65, free_thresh: float = 0.196) -> OccupancyMap:
+    """``map`` as :func:`write_map` and :func:`read_map` give it back (trinary: 100, 0, −1), without files."""
+    meta = MapYaml(Path(), map.resolution_m, map.origin_x_m, map.origin_y_m, map.origin_yaw_rad,
+                   occupied_thresh=occupied_thresh, free_thresh=free_thresh)
+    occupancy = pixels_to_occupancy(trinary_image(map.occupancy, occupied_thresh, free_thresh), meta)
+    return OccupancyMap(occupancy=occupancy, resolution_m=map.resolution_m, origin_x_m=map.origin_x_m,
+                        origin_y_m=map.origin_y_m, origin_yaw_rad=map.origin_yaw_rad)
+
+
 def read_map(yaml_path: Path) -> OccupancyMap:
     """Read a map_server map (YAML + the image it names) into an :class:`OccupancyMap`.
 

@@ -433,7 +433,7 @@ def static_map_of(recordings: Sequence[Recording], source: str, config: Doorbatc
     return PartialMap(occupancy, passes[-1].poses[both[-1]], odometry.poses[both[-1]])
 
 
-def build_map(logs: Sequence[Path], config: DoorbatchConfig | None = None,
+def build_map(logs: Sequence[Path | str] | Path | str, config: DoorbatchConfig | None = None,
               progress: Callable[[int], object] | None = None,
               recordings: Sequence[Recording] | None = None) -> DoorMap:
     """Door-augmented occupancy grid from logs, each one pass (doors stationary within a pass; or cut into passes
@@ -445,11 +445,12 @@ def build_map(logs: Sequence[Path], config: DoorbatchConfig | None = None,
         InputDataError: a log cannot be read or has no scans.
     """
     config = config or DoorbatchConfig()
+    paths = [Path(logs)] if isinstance(logs, str | Path) else [Path(p) for p in logs]
     seconds: dict[str, float] = {}
     t0 = time.perf_counter()
     ordered = None
     if recordings is None:
-        _, recordings, ordered = mapping_passes(logs, config)
+        _, recordings, ordered = mapping_passes(paths, config)
     seconds["read"] = time.perf_counter() - t0
     for rec in recordings:
         log.info("%s: %d scans, odometry %s, reference %s", rec.path, len(rec.scans),

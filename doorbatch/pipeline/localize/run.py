@@ -27,13 +27,14 @@ from doorbatch.geometry.odometry import sideways_share
 from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.geometry.se2 import interpolate_poses
 from doorbatch.io.log_clock import LogClock, long_gaps
-from doorbatch.io.map_server import read_map
+from doorbatch.io.map_server import as_written, read_map
 from doorbatch.io.map_topic import read_map_topic
-from doorbatch.io.mapdir import ODOMETRY_FRAME_SOURCES, map_pose_source, read_doors_moved
+from doorbatch.io.mapdir import ODOMETRY_FRAME_SOURCES, door_set_of_previews, map_pose_source, read_doors_moved
 from doorbatch.io.pose_topic import StartPose, read_start_poses
 from doorbatch.io.recording import PoseSeries, Recording, load_recording
 from doorbatch.io.roles import is_initial_pose_topic
 from doorbatch.maps import DoorSet, OccupancyMap
+from doorbatch.pipeline.door_rows import grid_rows
 from doorbatch.pipeline.localize.clusters import heaviest_cluster_mean
 from doorbatch.pipeline.localize.convergence import (
     ConvergenceMonitor,
@@ -72,7 +73,7 @@ from doorbatch.pipeline.localize.resampling import RecoveryState
 from doorbatch.pipeline.localize.result import LocalizationResult, StillDoorStates
 from doorbatch.pipeline.localize.rival_pose import Rival, RivalOutcome, RivalSearch, find_rival, scan_cloud
 from doorbatch.pipeline.localize.torch_field import check_device
-from doorbatch.pipeline.mapping import pass_poses
+from doorbatch.pipeline.mapping import DoorMap, pass_poses
 from doorbatch.progress import Progress
 
 log = logging.getLogger(__name__)
@@ -138,12 +139,35 @@ def load_localization_map(map_path: Path, config: LocalizeConfig) -> Localizatio
         occ = read_map(yaml_path)
         doors_path = map_doors_file(map_path)
         if doors_path is not None:
-            mapped, moved = read_doors_moved(doors_path.parent)
-            unmoved = ~moved
-            side_known = math.radians(config.door_angle_margin_deg)
-            doors = with_unmoved_swing(mapped, unmoved, math.radians(config.door_unmoved_swing_deg), side_known)
-            unknown = hinge_unknown(unmoved, mapped, side_known)
-    lmap = LocalizationMap.of(occ, with_closed_in_range(doors), config, map_pose_source(map_path))
+            doors, unknown = _localized_doors(*read_doors_moved(doors_path.parent), config)
+    return _with_doors(occ, doors, unknown, config, map_pose_source(map_path))
+
+
+def localization_map_of(door_map: DoorMap, config: LocalizeConfig) -> LocalizationMap:
+    """The map :func:`~doorbatch.pipeline.mapping.build_map` returns as :func:`load_localization_map` reads it
+    back from the map directory ``doorbatch map`` writes of it (its grid stage's doors; the static map
+    trinary, as map.pgm holds it), without files: a notebook's ``localize(log, build_map(logs))``."""
+    rows = grid_rows(door_map.doors, len(door_map.passes))
+    mapped = door_set_of_previews([r.door for r in rows])
+    doors, unknown = _localized_doors(mapped, np.array([r.door.moved for r in rows], dtype=np.bool_), config)
+    return _with_doors(as_written(door_map.static_map), doors, unknown, config, door_map.pose_source)
+
+
+def _localized_doors(mapped: DoorSet, moved: npt.NDArray[np.bool_], config: LocalizeConfig
+                     ) -> tuple[DoorSet, npt.NDArray[np.bool_]]:
+    """A map's doors as localization takes them: those that never moved may swing a little either way
+    (:func:`with_unmoved_swing`), and which end of such a door is its hinge may be unknown (:func:`hinge_unknown`)."""
+    unmoved = ~moved
+    side_known = math.radians(config.door_angle_margin_deg)
+    doors = with_unmoved_swing(mapped, unmoved, math.radians(config.door_unmoved_swing_deg), side_known)
+    return doors, hinge_unknown(unmoved, mapped, side_known)
+
+
+def _with_doors(occ: OccupancyMap, doors: DoorSet, unknown: npt.NDArray[np.bool_] | None, config: LocalizeConfig,
+                pose_source: str | None) -> LocalizationMap:
+    """:meth:`LocalizationMap.of` with the doors' closed direction in their range, and the doors whose hinge end
+    is unknown (None or none: not kept)."""
+    lmap = LocalizationMap.of(occ, with_closed_in_range(doors), config, pose_source)
     return replace(lmap, hinge_unknown=unknown) if unknown is not None and unknown.any() else lmap
 
 
@@ -394,16 +418,26 @@ def _reset_indices(rec: Recording, resets: Sequence[StartPose], first_i: int) ->
     return at
 
 
-def localize(log_path: Path, lmap: LocalizationMap, config: DoorbatchConfig, method: str = "rbpf",
+def localize(log_path: Path | str, lmap: LocalizationMap | DoorMap | Path | str,
+             config: DoorbatchConfig | None = None, method: str = "rbpf",
              init: str | tuple[float, float, float] = "reference",
              progress: Progress | None = None) -> LocalizationResult:
     """Run MCL or the RBPF over a log (:func:`localize_recording` of the log's recording). ``init`` may also
     name a pose topic of the log (``/initialpose``): its first message is the start (:mod:`doorbatch.io.pose_topic`).
+    ``lmap``: a :class:`LocalizationMap`, what :func:`~doorbatch.pipeline.mapping.build_map` returns
+    (:func:`localization_map_of`), or what ``--map`` takes (:func:`load_localization_map`). ``config`` None: the
+    defaults.
 
     Raises:
         PipelineError: --init reference without a reference, or a start pose after the last scan.
         UsageError: an unknown method, or an init topic the log lacks or that holds no pose.
     """
+    config = config or DoorbatchConfig()
+    log_path = Path(log_path)
+    if isinstance(lmap, DoorMap):
+        lmap = localization_map_of(lmap, config.localize)
+    elif isinstance(lmap, str | Path):
+        lmap = load_localization_map(Path(lmap), config.localize)
     if method not in ("mcl", "rbpf"):
         raise UsageError(f"--method {method!r}: expected rbpf or mcl")
     if isinstance(init, tuple) and not lmap.occupancy.contains(lmap.occupancy.world_to_cell(init[:2])):
