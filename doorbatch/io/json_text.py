@@ -5,26 +5,31 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 
-def strict_json(data: Any, indent: int | None = 2) -> str:
+def strict_json(data: Any, indent: int | None = 2, default: Callable[[Any], Any] = str) -> str:
     """``data`` as JSON text (no trailing newline), every non-finite float as null; NumPy values as their Python
-    ones, paths as text, anything else JSON cannot hold as its ``str``."""
-    return json.dumps(_finite(data), indent=indent, allow_nan=False)
+    ones, anything else JSON cannot hold as ``default`` makes it (its ``str``: a path, an enum as its text).
+
+    Raises:
+        Whatever ``default`` raises (a TypeError for what it cannot represent).
+    """
+    return json.dumps(_finite(data, default), indent=indent, allow_nan=False)
 
 
-def _finite(value: Any) -> Any:
+def _finite(value: Any, default: Callable[[Any], Any]) -> Any:
     if isinstance(value, np.ndarray | np.generic):
         value = value.tolist()
     if isinstance(value, float):
         return value if math.isfinite(value) else None
     if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
+        return {k: _finite(v, default) for k, v in value.items()}
     if isinstance(value, list | tuple):
-        return [_finite(v) for v in value]
+        return [_finite(v, default) for v in value]
     if value is None or isinstance(value, bool | int | str):
         return value
-    return str(value)  # a path, an enum: their text (as json.dumps(default=str) wrote them)
+    return _finite(default(value), default)

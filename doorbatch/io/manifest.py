@@ -32,12 +32,11 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, Self
 
-import numpy as np
-
 import doorbatch
 from doorbatch.config import tree_hash
 from doorbatch.errors import InputDataError
 from doorbatch.io.atomic import atomic_write_text
+from doorbatch.io.json_text import strict_json
 
 log = logging.getLogger(__name__)
 
@@ -131,9 +130,7 @@ class StageTimer:
 
 
 def _json_default(value: Any) -> Any:
-    """JSON for NumPy scalars and arrays, and paths."""
-    if isinstance(value, np.generic | np.ndarray):
-        return value.tolist()
+    """JSON for paths."""
     if isinstance(value, Path):
         return str(value)
     raise TypeError(f"{type(value).__name__} is not JSON serializable")
@@ -188,12 +185,13 @@ class Manifest:
         return {key: data[key] for key in order}
 
     def to_json(self) -> str:
-        """The manifest as indented JSON text ending in a newline.
+        """The manifest as indented JSON text ending in a newline, strict JSON (a NaN or infinity as null, which
+        jq and JSON.parse read; :func:`~doorbatch.io.json_text.strict_json`).
 
         Raises:
             TypeError: ``extra`` or ``config`` holds something JSON cannot represent.
         """
-        return json.dumps(self.to_dict(), indent=2, default=_json_default, allow_nan=True) + "\n"
+        return strict_json(self.to_dict(), default=_json_default) + "\n"
 
     def write(self, path: Path) -> None:
         """Write ``manifest.json`` atomically."""

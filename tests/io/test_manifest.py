@@ -110,6 +110,21 @@ def test_read_rejects_foreign_files(tmp_path: Path, text: str, message: str) -> 
     assert info.value.path == str(path)
 
 
+def test_a_nan_or_infinity_is_written_as_null_which_strict_parsers_read(tmp_path: Path) -> None:
+    manifest = Manifest.start({"localize": {"laser_max_range_fallback": float("inf")}})
+    manifest.extra.update(log_posterior=float("nan"), lost_after_s=[1.5, float("-inf")], size=np.float32("nan"))
+    manifest.write(tmp_path / "manifest.json")
+
+    def refuse(name: str) -> None:
+        raise ValueError(f"{name} is not JSON")
+
+    data = json.loads((tmp_path / "manifest.json").read_text(), parse_constant=refuse)
+    assert data["config"] == {"localize": {"laser_max_range_fallback": None}}
+    assert (data["extra"]["log_posterior"], data["extra"]["lost_after_s"], data["extra"]["size"]) == (None, [1.5, None],
+                                                                                                        None)
+    assert Manifest.read(tmp_path / "manifest.json").extra["lost_after_s"] == [1.5, None]
+
+
 def test_unserializable_extra_fails_before_writing(tmp_path: Path) -> None:
     manifest = Manifest.start({})
     manifest.extra["bad"] = object()
