@@ -10,7 +10,12 @@ stays cheap::
 
 from importlib import import_module
 from importlib.metadata import PackageNotFoundError, version
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # what type checkers and editors see of the lazy names below
+    from doorbatch.config import DoorbatchConfig, load_config
+    from doorbatch.pipeline.localize.run import load_localization_map, localize
+    from doorbatch.pipeline.mapping import build_map
 
 try:
     __version__ = version("doorbatch")
@@ -25,7 +30,7 @@ _LAZY = {
     "load_localization_map": "doorbatch.pipeline.localize.run",
 }
 
-__all__ = ["__version__", *_LAZY]
+__all__ = ["DoorbatchConfig", "__version__", "build_map", "load_config", "load_localization_map", "localize"]
 
 
 def __getattr__(name: str) -> Any:
@@ -33,3 +38,8 @@ def __getattr__(name: str) -> Any:
     if name in _LAZY:
         return getattr(import_module(_LAZY[name]), name)
     raise AttributeError(f"module 'doorbatch' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    """The package's public names, the lazy ones too (tab completion in a notebook)."""
+    return sorted(__all__)

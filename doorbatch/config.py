@@ -17,6 +17,7 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any, Literal
 
+import numpy as np
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
@@ -1230,8 +1231,8 @@ def _ros1_launch_tree(path: Path, args: Mapping[str, str] | None = None) -> dict
 
 
 def load_config(
-    config_file: Path | None = None,
-    overrides: Iterable[str] = (),
+    config_file: Path | str | None = None,
+    overrides: Iterable[str] | str = (),
     extra: Mapping[str, Any] | None = None,
     extra_source: str = "config",
     launch_args: Mapping[str, str] | None = None,
@@ -1249,6 +1250,7 @@ def load_config(
     """
     tree: dict[str, Any] = {}
     source = "config"
+    config_file = None if config_file is None else Path(config_file)
     if launch_args and (config_file is None or not is_launch_file(config_file)):
         raise ConfigError("launch args are for a ROS 1 launch file given as --config")
     if config_file is not None:
@@ -1266,7 +1268,7 @@ def load_config(
             if ros1 is not None:  # a ROS 1 amcl file: translated, doorbatch sections over it
                 ros1 = {k: v for k, v in ros1.items() if k not in own}
                 tree = deep_merge(logged(translate_ros1_amcl_parameters(ros1, source), source, "ROS 1 amcl").tree, own)
-    overrides = list(overrides)
+    overrides = [overrides] if isinstance(overrides, str) else list(overrides)  # one "key=value", not its letters
     if extra:
         tree = deep_merge(tree, extra)
     for text in overrides:
@@ -1277,3 +1279,41 @@ def load_config(
         return DoorbatchConfig.model_validate(tree)
     except ValidationError as err:
         raise _explain(err, source) from err
+
+
+def config_of(config: DoorbatchConfig | Mapping[str, Any] | None) -> DoorbatchConfig:
+    """What a library call takes as its config: None (the defaults), a :class:`DoorbatchConfig`
+    (:func:`load_config`), or a mapping of sections as a YAML file holds them, checked as a file is.
+
+    Raises:
+        ConfigError: a mapping with an unknown key or a wrong value.
+        UsageError: anything else (a section alone, a path: give ``load_config(path)``).
+    """
+    if config is None:
+        return DoorbatchConfig()
+    if isinstance(config, DoorbatchConfig):
+        return config
+    if isinstance(config, Mapping):
+        return load_config(extra=config, extra_source="the config mapping")
+    raise UsageError(f"config: expected a DoorbatchConfig (doorbatch.load_config(...)), a mapping of sections or "
+                     f"None, got {type(config).__name__}")
+
+
+def start_of(init: object) -> str | tuple[float, float, float]:
+    """A library call's localization start: what :func:`parse_init` takes, or any sequence of three finite numbers
+    (a tuple, a list, a NumPy array: x, y, yaw in radians) as a tuple.
+
+    Raises:
+        UsageError: anything else.
+    """
+    if isinstance(init, str):
+        return parse_init(init)
+    try:
+        values = np.asarray(init, dtype=np.float64)
+    except (TypeError, ValueError):
+        values = np.zeros(0)
+    if values.shape != (3,) or not np.isfinite(values).all():
+        raise UsageError(f"init {init!r}: expected reference, global, a pose topic (/initialpose) or a pose "
+                         f"(x, y, yaw) of three finite numbers")
+    x, y, yaw = (float(v) for v in values)
+    return (x, y, yaw)

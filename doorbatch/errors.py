@@ -91,4 +91,10 @@ class OptionalDependencyError(DoorbatchError):
     exit_code = ExitCode.USAGE
 
     def __init__(self, module: str, extra: str) -> None:
+        self.module, self.extra = module, extra
         super().__init__(f'{module} is not installed: pip install "doorbatch[{extra}]"')
+
+    def __reduce__(self) -> tuple[type[OptionalDependencyError], tuple[str, str]]:
+        """Rebuilt from its two arguments (pickle's default passes the message alone: a process pool's worker
+        raising it broke the pool)."""
+        return type(self), (self.module, self.extra)

@@ -3,6 +3,7 @@ on what it returned, as ``doorbatch map`` then ``doorbatch localize --map`` woul
 
 from __future__ import annotations
 
+import pickle
 from pathlib import Path
 
 import numpy as np
@@ -10,7 +11,8 @@ import pytest
 
 import doorbatch
 from doorbatch.cli import main
-from doorbatch.config import DoorbatchConfig, LocalizeConfig
+from doorbatch.config import DoorbatchConfig, LocalizeConfig, config_of, start_of
+from doorbatch.errors import ConfigError, OptionalDependencyError, UsageError
 from doorbatch.pipeline.localize.run import load_localization_map, localization_map_of
 from doorbatch.pipeline.mapping import DoorMap
 from tests.conftest import REPO
@@ -52,6 +54,7 @@ def test_localize_takes_the_built_map_its_directory_or_a_loaded_map_alike(built:
         assert np.array_equal(from_memory.pose, other.pose)
         assert np.array_equal(from_memory.door_mean, other.door_mean, equal_nan=True)
     assert from_memory.method == "rbpf" and len(from_memory.stamps_ns) > 100
+    assert repr(from_memory).startswith("LocalizationResult(log=") and len(repr(from_memory)) < 300
     assert np.isfinite(from_memory.door_mean).any()
 
 
@@ -67,3 +70,54 @@ def test_the_library_calls_are_named_on_the_package() -> None:
     assert doorbatch.load_config().localize.max_particles == DoorbatchConfig().localize.max_particles
     with pytest.raises(AttributeError):
         _ = doorbatch.no_such_call
+
+
+@pytest.mark.parametrize("init", [[1.2, 0.0, 0.5], np.array([1.2, 0.0, 0.5]), "1.2,0,0.5", (1, 0, 0.5)])
+def test_a_start_pose_is_the_same_in_any_form(init: object) -> None:
+    assert start_of(init) == (1.2 if not isinstance(init, tuple) else 1.0, 0.0, 0.5)
+
+
+@pytest.mark.parametrize("init", ["Reference", (1.0, 2.0), [1.0, float("nan"), 0.0], np.zeros((3, 1)), None, "1,2"])
+def test_a_start_in_no_known_form_is_a_usage_error(init: object) -> None:
+    with pytest.raises(UsageError, match="init"):
+        start_of(init)
+
+
+def test_an_off_map_start_as_a_list_is_refused_as_the_tuple_is(built: tuple[DoorMap, Path]) -> None:
+    door_map, _ = built
+    for init in ([500.0, 500.0, 0.0], (500.0, 500.0, 0.0)):
+        with pytest.raises(UsageError, match="outside the map"):
+            doorbatch.localize(SAMPLE_LOGS / "loc_open.mcap", door_map, init=init)
+
+
+def test_a_config_may_be_a_mapping_of_sections_checked_as_a_file_is(tmp_path: Path) -> None:
+    assert config_of({"localize": {"max_particles": 700}}).localize.max_particles == 700
+    assert config_of(None) == DoorbatchConfig()
+    with pytest.raises(ConfigError, match="max_particls"):
+        config_of({"localize": {"max_particls": 700}})
+    with pytest.raises(UsageError, match="LocalizeConfig"):
+        config_of(LocalizeConfig())  # type: ignore[arg-type]
+    with pytest.raises(UsageError, match="no log given"):
+        doorbatch.build_map([])
+    path = tmp_path / "my.yaml"
+    path.write_text("localize:\n  max_particles: 900\n")
+    assert doorbatch.load_config(str(path), "seed=3").localize.max_particles == 900
+    assert doorbatch.load_config(overrides="seed=3").seed == 3
+
+
+def test_load_localization_map_takes_a_path_as_text_and_the_whole_config(built: tuple[DoorMap, Path]) -> None:
+    _, map_dir = built
+    whole = doorbatch.load_localization_map(str(map_dir), DoorbatchConfig())
+    section = doorbatch.load_localization_map(map_dir, LocalizeConfig())
+    assert np.array_equal(whole.field.dist, section.field.dist) and len(whole.doors) == len(section.doors)
+
+
+def test_an_optional_dependency_error_crosses_a_process_boundary() -> None:
+    err = pickle.loads(pickle.dumps(OptionalDependencyError("torch", "torch")))
+    assert isinstance(err, OptionalDependencyError)
+    assert str(err) == 'torch is not installed: pip install "doorbatch[torch]"'
+
+
+def test_results_show_as_one_line(built: tuple[DoorMap, Path]) -> None:
+    door_map, _ = built
+    assert repr(door_map).startswith("DoorMap(pose_source='reference', passes=3, doors=") and len(repr(door_map)) < 200

@@ -17,15 +17,16 @@ import itertools
 import logging
 import math
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from doorbatch.config import DoorbatchConfig
-from doorbatch.errors import PipelineError
+from doorbatch.config import DoorbatchConfig, config_of
+from doorbatch.errors import PipelineError, UsageError
 from doorbatch.geometry.laser import dropouts, wraps_around
 from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.geometry.se2 import compose, interpolate_poses, inverse, rotation_matrix
@@ -71,6 +72,13 @@ class DoorMap:
     warnings: list[str] = field(default_factory=list)
     stage_seconds: dict[str, float] = field(default_factory=dict)
     grid: LogOddsGrid | None = None  # the final mapping state the static map came from
+
+    def __repr__(self) -> str:
+        """A line a notebook can show (the arrays' own repr runs to tens of thousands of characters)."""
+        occ = self.static_map
+        return (f"DoorMap(pose_source={self.pose_source!r}, passes={len(self.passes)}, doors={len(self.doors)}, "
+                f"static_map={occ.height}x{occ.width} cells of {occ.resolution_m:g} m, "
+                f"warnings={len(self.warnings)})")
 
 
 def reference_coverage(rec: Recording, max_gap_s: float) -> float:
@@ -433,19 +441,24 @@ def static_map_of(recordings: Sequence[Recording], source: str, config: Doorbatc
     return PartialMap(occupancy, passes[-1].poses[both[-1]], odometry.poses[both[-1]])
 
 
-def build_map(logs: Sequence[Path | str] | Path | str, config: DoorbatchConfig | None = None,
+def build_map(logs: Sequence[Path | str] | Path | str, config: DoorbatchConfig | Mapping[str, Any] | None = None,
               progress: Callable[[int], object] | None = None,
               recordings: Sequence[Recording] | None = None) -> DoorMap:
     """Door-augmented occupancy grid from logs, each one pass (doors stationary within a pass; or cut into passes
     of ``mapping.pass_duration_s``: :mod:`~doorbatch.pipeline.time_passes`);
     ``recordings``: the logs already loaded (the em stage loads them with colours).
 
+    ``config``: as :func:`~doorbatch.config.config_of` takes it (None: the defaults).
+
     Raises:
         PipelineError: no usable pose source, or passes in disjoint coordinate frames.
         InputDataError: a log cannot be read or has no scans.
+        UsageError: no log given; ConfigError: a config mapping with an unknown key or a wrong value.
     """
-    config = config or DoorbatchConfig()
+    config = config_of(config)
     paths = [Path(logs)] if isinstance(logs, str | Path) else [Path(p) for p in logs]
+    if not paths and not recordings:
+        raise UsageError("build_map: no log given")
     seconds: dict[str, float] = {}
     t0 = time.perf_counter()
     ordered = None

@@ -37,6 +37,11 @@ class LocalizationResult:
         particles: (U, K, 3) a decimated draw of the particles per update (for the annotated MCAP).
         converged_ns: first stamp at which the filter counted as converged (None: never; tracking runs
             start converged); ambiguous: global localization ended with several distinct hypotheses.
+        warnings: what the run found wrong with its input or its course (a command writes them to its manifest).
+        lost_ns: the stamps at which an episode of being lost began.
+        door_ids: (D,) the map's door_id of each door column (:attr:`door_id`).
+        still_doors: the RBPF's door estimates at scans where the robot stood still and the pose was held;
+            door_states.parquet holds these rows and those of the updates, in time order.
     """
 
     log: str
@@ -78,3 +83,10 @@ class LocalizationResult:
 
     def __len__(self) -> int:
         return int(self.stamps_ns.shape[0])
+
+    def __repr__(self) -> str:
+        """A line a notebook can show (the arrays' own repr runs to tens of thousands of characters)."""
+        span = (int(self.stamps_ns[-1]) - int(self.stamps_ns[0])) / 1e9 if len(self) else 0.0
+        return (f"LocalizationResult(log={self.log!r}, method={self.method!r}, updates={len(self)}, "
+                f"span_s={span:.1f}, doors={self.door_mean.shape[1]}, lost={len(self.lost_ns)}, "
+                f"warnings={len(self.warnings)})")

@@ -14,14 +14,15 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from doorbatch.config import DoorbatchConfig, LocalizeConfig, parse_init
+from doorbatch.config import DoorbatchConfig, LocalizeConfig, config_of, parse_init, start_of
 from doorbatch.errors import InputDataError, PipelineError, UsageError
 from doorbatch.geometry.odometry import sideways_share
 from doorbatch.geometry.rotations import wrap_angle
@@ -124,10 +125,13 @@ def map_input_files(map_path: Path) -> list[Path]:
     return [map_path / "map.yaml" if (map_path / "map.yaml").is_file() else map_path, *([doors] if doors else [])]
 
 
-def load_localization_map(map_path: Path, config: LocalizeConfig) -> LocalizationMap:
+def load_localization_map(map_path: Path | str, config: LocalizeConfig | DoorbatchConfig | None = None
+                          ) -> LocalizationMap:
     """A map directory (map.yaml + doors.parquet), a map_server YAML file from any SLAM tool, or a log with a
     nav_msgs/OccupancyGrid topic (``config.map_topic``; :mod:`doorbatch.io.map_topic`), such as the bag of a Nav2
-    session."""
+    session. ``config``: the localize section, or the whole config (None: the defaults)."""
+    map_path = Path(map_path)
+    config = (config.localize if isinstance(config, DoorbatchConfig) else config) or LocalizeConfig()
     if map_path.is_dir() and not (map_path / "map.yaml").is_file() and not (map_path / "metadata.yaml").is_file():
         raise UsageError(f"--map {map_path}: the folder has no map.yaml (a doorbatch map directory) and is no "
                          f"ROS 2 bag")
@@ -419,21 +423,24 @@ def _reset_indices(rec: Recording, resets: Sequence[StartPose], first_i: int) ->
 
 
 def localize(log_path: Path | str, lmap: LocalizationMap | DoorMap | Path | str,
-             config: DoorbatchConfig | None = None, method: str = "rbpf",
-             init: str | tuple[float, float, float] = "reference",
+             config: DoorbatchConfig | Mapping[str, Any] | None = None, method: str = "rbpf",
+             init: str | tuple[float, float, float] | Sequence[float] = "reference",
              progress: Progress | None = None) -> LocalizationResult:
     """Run MCL or the RBPF over a log (:func:`localize_recording` of the log's recording). ``init`` may also
     name a pose topic of the log (``/initialpose``): its first message is the start (:mod:`doorbatch.io.pose_topic`).
     ``lmap``: a :class:`LocalizationMap`, what :func:`~doorbatch.pipeline.mapping.build_map` returns
-    (:func:`localization_map_of`), or what ``--map`` takes (:func:`load_localization_map`). ``config`` None: the
-    defaults.
+    (:func:`localization_map_of`), or what ``--map`` takes (:func:`load_localization_map`). ``config``: as
+    :func:`~doorbatch.config.config_of` takes it (None: the defaults). ``init``: as ``--init`` takes it, or a pose
+    (x, y, yaw) as any sequence of three numbers (:func:`~doorbatch.config.start_of`).
 
     Raises:
         PipelineError: --init reference without a reference, or a start pose after the last scan.
-        UsageError: an unknown method, or an init topic the log lacks or that holds no pose.
+        UsageError: an unknown method or init, or an init topic the log lacks or that holds no pose.
+        ConfigError: a config mapping with an unknown key or a wrong value.
     """
-    config = config or DoorbatchConfig()
+    config = config_of(config)
     log_path = Path(log_path)
+    init = start_of(init)
     if isinstance(lmap, DoorMap):
         lmap = localization_map_of(lmap, config.localize)
     elif isinstance(lmap, str | Path):
