@@ -120,12 +120,15 @@ def run_map(logs: Sequence[Path], out: Path, config: DoorbatchConfig, stages: Se
     if mcap and (out / "annotated.mcap").resolve() in {Path(p).resolve() for p in logs}:
         raise UsageError(f"--mcap would write {out / 'annotated.mcap'}, which is one of the logs: choose another -o")
     classes = read_classes(classes_file) if classes_file is not None else None
+    t0 = time.perf_counter()
     logs, recordings, ordered = mapping_passes(logs, config, with_colors=stages is None or "em" in stages)
+    read_s = time.perf_counter() - t0
     stages = default_stages(recordings) if stages is None else list(stages)
     if classes is not None and "em" not in stages:
         raise UsageError("--classes applies to the em stage: add it with --stages grid,em")
     manifest = Manifest.start(config.as_dict(), logs, command="map", stages=list(stages))
     door_map = build_map(logs, config, progress, recordings)
+    door_map.stage_seconds["read"] = read_s  # build_map read nothing: the logs were read above, with colours
     if ordered:
         door_map = replace(door_map, warnings=[ordered, *door_map.warnings])
     rows = grid_rows(door_map.doors, len(door_map.passes))
