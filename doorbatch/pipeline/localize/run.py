@@ -609,8 +609,8 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
     lc = config.localize
     rng = np.random.default_rng(config.seed if lc.seed is None else lc.seed)
     log_path = Path(rec.path)
-    log.info("%s: %s over %d scans, %d map doors, start %s", rec.path, method, len(rec.scans),
-             len(lmap.doors) if method == "rbpf" else 0, init)
+    log.info("%s: %s over %d scans, %d map doors%s, start %s", rec.path, method, len(rec.scans), len(lmap.doors),
+             "" if method == "rbpf" else " (mcl does not estimate them)", init)
     if rec.odometry is None:
         rec = with_laser_odometry(rec, config)
     assert rec.odometry is not None
