@@ -763,6 +763,10 @@ class LocalizeConfig(Section):
     # most door_update_still_m and door_update_still_deg since the last pose update (the held pose is then where the
     # robot is; between the updates of a moving robot it is not, and its door measurements would be off).
     door_update_when_still: bool = True
+    # door_states.parquet's `observed`: the particles holding at least this share of the weight took a measurement of
+    # the door in that scan. Any particle (as before) flagged a door that a few stray particles' polygons matched
+    # while the estimate stayed at its prior (hAO: 50° ± 30° "observed" at the first update, truth 100°).
+    door_observed_min_share: float = Field(0.5, gt=0.0, le=1.0)
     door_update_still_m: float = Field(0.01, ge=0.0)
     door_update_still_deg: float = Field(0.5, ge=0.0)
     # A robot that crept past door_update_still_m after its last pose update and then stopped (hAM: 3-11 cm before

@@ -88,7 +88,7 @@ from doorbatch.pipeline.localize.smoothing import (
 def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_stamp_s: float | None,
               beams: BeamSet, scan_points_base: npt.ArrayLike, field: DistanceField, doors: DoorSet,
               config: LocalizeConfig, rng: np.random.Generator, free: FreeCells | None = None,
-              force: bool = False) -> tuple[MclState, StepDiagnostics, npt.NDArray[np.bool_]]:
+              force: bool = False) -> tuple[MclState, StepDiagnostics, npt.NDArray[np.float64]]:
     """One RBPF update.
 
     Args:
@@ -102,12 +102,13 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
         force: update although the update thresholds are not met.
 
     Returns:
-        The new state, the step's diagnostics, and (D,) whether each door was observed by any particle.
+        The new state, the step's diagnostics, and (D,) each door's observed share: the weight of the particles
+        that took a measurement of it (:func:`observed_share`; 0 for all without a door update).
     """
     odom = np.asarray(odom_now, dtype=np.float64).reshape(3)
     particles = state.particles
     n_doors = particles.n_doors
-    none = np.zeros(n_doors, dtype=bool)
+    none = np.zeros(n_doors, dtype=np.float64)
     if state.odom_at_update is not None:
         if not (force or update_thresholds_met(state.odom_at_update, odom, config)):
             if not (config.door_update_when_still and n_doors and last_stamp_s is not None
@@ -150,7 +151,7 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
         else:
             update = update_doors(scan_points_base, particles, doors, config)
         particles = replace(particles, door_mean=update.mean, door_var=update.var)
-        observed = np.asarray(update.observed.any(axis=0), dtype=bool)
+        observed = observed_share(particles.weight, update.observed)
         if spread.global_door_term if global_phase else config.tracking_door_prior:
             prior = DoorPrior.from_config(config) if global_phase else None
             mean, var = condition_doors_on_beams(particles, beams, field, doors, config, prior,
@@ -159,6 +160,13 @@ def rbpf_step(state: MclState, odom_now: npt.ArrayLike, stamp_s: float, last_sta
 
     new_state, diag = finish_step(state, particles, log_avg, odom, config, rng, free, bandwidth)
     return new_state, diag, observed
+
+
+def observed_share(weight: npt.ArrayLike, observed: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    """(D,) per door the share of the weight (N,) held by the particles that observed it (``observed`` (N, D)):
+    Σᵢ wᵢ·[door d observed from particle i] / Σᵢ wᵢ."""
+    w = np.asarray(weight, dtype=np.float64)
+    return np.asarray(w @ np.asarray(observed, dtype=np.float64) / w.sum(), dtype=np.float64)
 
 
 def walked_doors(particles: ParticleSet, dt_s: float, config: LocalizeConfig) -> ParticleSet:
@@ -178,14 +186,15 @@ def standing_still(odom_at_update: npt.ArrayLike, odom_now: npt.ArrayLike, confi
 
 
 def doors_updated_still(particles: ParticleSet, dt_s: float, scan_points_base: npt.ArrayLike, doors: DoorSet,
-                        config: LocalizeConfig) -> tuple[ParticleSet, npt.NDArray[np.bool_]]:
+                        config: LocalizeConfig) -> tuple[ParticleSet, npt.NDArray[np.float64]]:
     """The door half of an RBPF update for a robot that stands still (``door_update_when_still``): each particle's
     door Gaussians walk for ``dt_s`` and take the scan's polygon measurements (Kalman update, as in
     :func:`rbpf_step`); poses and weights are left as they are (AMCL's update thresholds hold the pose: a standing
-    robot's scans are one view again, but a door moving in it is news). Returns the particles and (D,) observed."""
+    robot's scans are one view again, but a door moving in it is news). Returns the particles and (D,) each
+    door's observed share (:func:`observed_share`)."""
     update = update_doors(scan_points_base, walked_doors(particles, dt_s, config), doors, config)
     return (replace(particles, door_mean=update.mean, door_var=update.var),
-            np.asarray(update.observed.any(axis=0), dtype=bool))
+            observed_share(particles.weight, update.observed))
 
 
 def tracked_log_likelihood(particles: ParticleSet, beams: BeamSet, field: DistanceField, doors: DoorSet,

@@ -664,12 +664,13 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
             stopped_past_update = (lc.door_update_when_still and held is not None and len(lmap.doors) > 0
                                    and not standing_still(held, odom[i], lc)  # the cheap test first: every scan
                                    and stopped_since(rec.scans.stamps_ns, odom, odom_ok, i, lc))
-            state, diag, observed = rbpf_step(state, odom[i], stamp_s, last_s, beams, rec.scans.hits_base(i),
-                                              lmap.field, lmap.doors, lc, rng, free, force=first or stopped_past_update)
+            state, diag, share = rbpf_step(state, odom[i], stamp_s, last_s, beams, rec.scans.hits_base(i),
+                                           lmap.field, lmap.doors, lc, rng, free, force=first or stopped_past_update)
+            observed = share >= lc.door_observed_min_share  # door_states' flag; any particle's is share > 0
         else:
             state, diag = mcl_step(state, odom[i], beams, lmap.field, lc, rng, free, force=first,
                                    combination=combination)
-            observed = np.zeros(0, dtype=bool)
+            observed = share = np.zeros(0, dtype=bool)
         if not diag.updated:
             if diag.doors_updated:  # the robot stands still: the doors were updated, the pose held
                 last_s = stamp_s
@@ -714,7 +715,7 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
             outside.append(leaves_outside_range(hits, mean, lmap.doors, lc, math.radians(lc.door_behind_hinge_deg)))
             if flipped is not None:  # a leaf about the free end, where the door update found none about the hinge
                 at_tip = leaves_outside_range(hits, mean, flipped, lc, math.radians(lc.door_behind_hinge_deg))
-                tip_seen.append(np.where(observed[unknown_rows], np.nan, at_tip))
+                tip_seen.append(np.where(share[unknown_rows] > 0, np.nan, at_tip))
         # a fixed-size draw of the (equally weighted after resampling) particles for the annotated MCAP
         pick = np.linspace(0, len(p) - 1, k_draw).round().astype(np.intp)
         track.add(scan.stamp_ns, mean, cov, odom[i], len(p), diag.neff, dmean, dstd, observed, p.pose[pick])

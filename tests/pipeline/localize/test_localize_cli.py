@@ -63,6 +63,12 @@ def test_localize_tracks_the_open_doors_log(sample_map: Path, tmp_path: Path, me
     updates = set(read_table("trajectory", run / "trajectory.parquet").to_pydict()["stamp_ns"])
     assert len(updates) == summary["updates"] and updates <= set(stamps.tolist())
     assert np.all(np.diff(stamps) >= 0) and len(stamps) % n_doors == 0 and len(stamps) > summary["updates"] * n_doors
+    # a door flagged observed took a measurement: its estimate is no longer the prior's width (any particle's
+    # match flagged a door at its prior, mid-range ± 30°, at the first update; door_observed_min_share)
+    observed = np.asarray(states["observed"])
+    assert observed.any()
+    prior_rad = math.radians(LocalizeConfig().door_init_sigma_deg)
+    assert np.all(np.asarray(states["angle_std"])[observed] < 0.9 * prior_rad)
 
 
 @pytest.mark.parametrize(("method", "init"), [("rbpf", "reference"), ("mcl", "global")])

@@ -16,7 +16,7 @@ from doorbatch.pipeline.localize.door_prior import unobserved_door_variance
 from doorbatch.pipeline.localize.likelihood_field import build_distance_field, endpoint_distances
 from doorbatch.pipeline.localize.mcl import MclState
 from doorbatch.pipeline.localize.particles import ParticleSet
-from doorbatch.pipeline.localize.rbpf import condition_doors_on_beams, rbpf_step
+from doorbatch.pipeline.localize.rbpf import condition_doors_on_beams, observed_share, rbpf_step
 
 FloatArray = npt.NDArray[np.float64]
 HINGES_X = (3.0, 6.0, 9.0, 12.0)
@@ -97,3 +97,10 @@ def test_end_points_outside_the_sector_a_leaf_can_sweep_do_not_move_its_door() -
     mean, var = condition_doors_on_beams(particles, beams, field, doors, config)
     np.testing.assert_array_equal(mean, particles.door_mean)
     np.testing.assert_array_equal(var, particles.door_var)
+
+
+def test_a_doors_observed_share_is_the_weight_of_the_particles_that_measured_it() -> None:
+    weight = np.array([0.5, 0.3, 0.2])
+    observed = np.array([[True, False], [False, False], [True, True]])
+    assert np.allclose(observed_share(weight, observed), [0.7, 0.2])
+    assert np.allclose(observed_share(2 * weight, observed), [0.7, 0.2])  # weights need not be normalized
