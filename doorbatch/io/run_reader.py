@@ -267,5 +267,6 @@ def read_map_dir(map_dir: Path, name: str | None = None) -> MapTables:
         return MapTables(name or map_dir.name, read_door_set(map_dir), truth, pose_source=pose_source)
     table = read_table("doors", map_dir / "doors.parquet").to_pydict()
     return MapTables(name or map_dir.name, door_set_of(table), truth,
-                     source="em" if "em" in table["source"] else "grid", pose_source=pose_source)
+                     source="em" if "em" in table["source"] else "grid", pose_source=pose_source,
+                     moved=np.asarray(table["moved"], dtype=np.bool_))
 

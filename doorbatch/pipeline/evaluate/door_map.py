@@ -1,4 +1,5 @@
-"""Door-map scoring against ground truth: match by hinge distance, then hinge, length and range errors.
+"""Door-map scoring against ground truth: match by hinge distance, then hinge, length and range errors (a door
+that never moved at whichever end of its leaf is nearer: its hinge cannot be seen).
 
 A detected door matches the nearest unmatched truth door whose hinge lies within ``max_hinge_distance_m``
 (greedy by distance). Only truth doors seen at two or more distinguishable angles (``moved``) should be
@@ -18,6 +19,7 @@ import numpy.typing as npt
 from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.io.sim_truth import SimTruth
 from doorbatch.maps import DoorSet, OccupancyMap
+from doorbatch.pipeline.localize.door_geometry import other_end
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -65,11 +67,38 @@ def match_by_hinge(detected_hinge: npt.ArrayLike, truth_hinge: npt.ArrayLike, ma
     return matched, dist
 
 
+def nearer_ends(detected: DoorSet, hinge_unknown: npt.ArrayLike, truth_hinge: npt.ArrayLike) -> DoorSet:
+    """``detected`` with each door of ``hinge_unknown`` (D,) hinged at whichever end of its closed leaf lies nearer a
+    truth hinge (:func:`~doorbatch.pipeline.localize.door_geometry.other_end`): a door that never moved shows no
+    hinge, and the em stage's choice of end is a guess, as localization treats it."""
+    unknown = np.asarray(hinge_unknown, dtype=bool)
+    tru = np.asarray(truth_hinge, dtype=np.float64).reshape(-1, 2)
+    if not unknown.any() or not len(tru):
+        return detected
+    flipped = other_end(detected)
+
+    def nearest(points: FloatArray) -> FloatArray:
+        return np.asarray(np.linalg.norm(points[:, None, :] - tru[None, :, :], axis=2).min(axis=1))
+
+    flip = unknown & (nearest(flipped.hinge) < nearest(detected.hinge))
+
+    def pick(a: npt.ArrayLike, b: npt.ArrayLike) -> FloatArray:
+        a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+        return np.where(flip.reshape((-1,) + (1,) * (a.ndim - 1)), b, a)
+
+    return DoorSet(pick(detected.hinge, flipped.hinge), np.asarray(detected.length, dtype=np.float64),
+                   pick(detected.closed_yaw, flipped.closed_yaw), pick(detected.angle_min, flipped.angle_min),
+                   pick(detected.angle_max, flipped.angle_max), detected.door_id)
+
+
 def score_doors(detected: DoorSet, truth: DoorSet, moved: npt.ArrayLike,
-                max_hinge_distance_m: float = 0.3) -> DoorScore:
+                max_hinge_distance_m: float = 0.3, hinge_unknown: npt.ArrayLike | None = None) -> DoorScore:
     """Precision over all detections, recall over the truth doors that moved, and errors of the matches. A map
     with no doors has no precision, and a truth with no counted door no recall (NaN): an empty doors.parquet
-    scored 1.0 looked perfect beside a recall of 0."""
+    scored 1.0 looked perfect beside a recall of 0. Doors of ``hinge_unknown`` are scored at whichever leaf end
+    is nearer a truth hinge (:func:`nearer_ends`)."""
+    if hinge_unknown is not None:
+        detected = nearer_ends(detected, hinge_unknown, truth.hinge)
     moved_mask = np.asarray(moved, dtype=bool)
     matched, dist = match_by_hinge(detected.hinge, truth.hinge, max_hinge_distance_m)
     true_pos = [(i, j) for i, j in matched if moved_mask[j]]

@@ -58,6 +58,7 @@ from doorbatch.pipeline.evaluate.trajectory_metrics import (
     statistics,
     trajectory_errors,
 )
+from doorbatch.pipeline.localize.door_geometry import hinge_unknown
 from doorbatch.pipeline.localize.result import LocalizationResult
 
 FloatArray = npt.NDArray[np.float64]
@@ -250,6 +251,8 @@ class MapTables:
     # The poses the map was built from (its manifest's pose_source): scanmatch and odometry maps lie in their first
     # pass's odometry frame, not a truth's world frame.
     pose_source: str | None = None
+    # (D,) doors.parquet's moved (seen at two or more distinguishable angles); None: not known (all taken as moved).
+    moved: npt.NDArray[np.bool_] | None = None
 
 
 @dataclass(frozen=True)
@@ -545,7 +548,10 @@ def _map_rows(door_map: MapTables, truth: SimTruth | None, cfg: DoorbatchConfig)
     # the truth doors recall counts (doors_truth): those the laser saw at two angles; every door for a truth that
     # does not say, and for EM, which also finds doors that never moved (paper 001)
     counted = np.ones(len(moved), dtype=bool) if every_door else moved
-    score = score_doors(door_map.doors, truth_set, counted, max_m)
+    # a door that never moved and was seen closed shows no hinge: the map's hinge may be its free end
+    unknown = None if door_map.moved is None else hinge_unknown(
+        ~door_map.moved, door_map.doors, math.radians(cfg.localize.door_angle_margin_deg))
+    score = score_doors(door_map.doors, truth_set, counted, max_m, unknown)
     extra = []
     if truth.leaf_observations is not None and door_map.source == "em":
         found = np.zeros(len(moved), dtype=bool)

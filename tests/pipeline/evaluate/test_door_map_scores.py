@@ -74,3 +74,18 @@ def test_a_map_without_doors_has_no_precision_and_a_truth_without_doors_no_recal
     assert math.isnan(score.precision) and score.recall == 0.0 and score.missed == [0, 1]
     score = score_doors(truth, empty, [])
     assert score.precision == 0.0 and math.isnan(score.recall) and score.false_positives == [0, 1]
+
+
+def test_a_door_that_never_moved_is_scored_at_the_nearer_end_of_its_leaf() -> None:
+    # truth: hinges at x = 0 and x = 5, leaves 0.9 m along +x, closed. The map's second door never moved and has its
+    # hinge at the free end (5.9, 0) looking back (−x): the same leaf. The first moved: its hinge is known.
+    truth = _doors([(0.0, 0.0), (5.0, 0.0)], [0.0, 0.0], [0.0, 0.0], [1.5, 0.0])
+    detected = _doors([(0.0, 0.0), (5.9, 0.0)], [0.0, math.pi], [0.0, 0.0], [1.5, 0.0])
+    blind = score_doors(detected, truth, [True, True])
+    assert blind.precision == 0.5 and blind.missed == [1]
+    score = score_doors(detected, truth, [True, True], hinge_unknown=[False, True])
+    assert score.precision == 1.0 and score.recall == 1.0
+    assert np.allclose(score.hinge_error_m, 0.0, atol=1e-9) and np.allclose(score.range_error_rad, 0.0, atol=1e-9)
+    # a door whose hinge is known keeps it: the first door mapped at its free end is not moved onto the truth
+    wrong_end = _doors([(0.9, 0.0)], [math.pi], [0.0], [1.5])
+    assert score_doors(wrong_end, truth, [True, True], hinge_unknown=[False]).precision == 0.0
