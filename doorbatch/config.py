@@ -1139,8 +1139,11 @@ class DoorbatchConfig(Section):
 
 
 def tree_hash(tree: Mapping[str, Any]) -> str:
-    """SHA-256 of a config tree (plain data) in canonical JSON."""
-    text = json.dumps(tree, sort_keys=True, separators=(",", ":"))
+    """SHA-256 of a config tree (plain data) in canonical JSON, a non-finite number as its text (as manifest.json
+    writes the tree: :func:`~doorbatch.io.json_text.nonfinite_as_text`)."""
+    from doorbatch.io.json_text import nonfinite_as_text
+
+    text = json.dumps(nonfinite_as_text(dict(tree)), sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode()).hexdigest()
 
 

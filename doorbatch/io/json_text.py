@@ -33,3 +33,16 @@ def _finite(value: Any, default: Callable[[Any], Any]) -> Any:
     if value is None or isinstance(value, bool | int | str):
         return value
     return _finite(default(value), default)
+
+
+def nonfinite_as_text(value: Any) -> Any:
+    """``value`` (plain data) with every non-finite float as the text ``"inf"``, ``"-inf"`` or ``"nan"``, which
+    strict JSON holds and a config model reads back as the float (a config value of inf means "no limit": null
+    would not read back, and would hash apart from the config it came from)."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return "nan" if math.isnan(value) else ("inf" if value > 0 else "-inf")
+    if isinstance(value, dict):
+        return {k: nonfinite_as_text(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [nonfinite_as_text(v) for v in value]
+    return value

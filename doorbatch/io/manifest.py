@@ -36,7 +36,7 @@ import doorbatch
 from doorbatch.config import tree_hash
 from doorbatch.errors import InputDataError
 from doorbatch.io.atomic import atomic_write_text
-from doorbatch.io.json_text import strict_json
+from doorbatch.io.json_text import nonfinite_as_text, strict_json
 
 log = logging.getLogger(__name__)
 
@@ -186,12 +186,15 @@ class Manifest:
 
     def to_json(self) -> str:
         """The manifest as indented JSON text ending in a newline, strict JSON (a NaN or infinity as null, which
-        jq and JSON.parse read; :func:`~doorbatch.io.json_text.strict_json`).
+        jq and JSON.parse read; :func:`~doorbatch.io.json_text.strict_json`; in ``config`` as the text "inf", which
+        reads back as the config and hashes as it).
 
         Raises:
             TypeError: ``extra`` or ``config`` holds something JSON cannot represent.
         """
-        return strict_json(self.to_dict(), default=_json_default) + "\n"
+        data = self.to_dict()
+        data["config"] = nonfinite_as_text(data["config"])  # "inf" reads back as the config's float; null would not
+        return strict_json(data, default=_json_default) + "\n"
 
     def write(self, path: Path) -> None:
         """Write ``manifest.json`` atomically."""

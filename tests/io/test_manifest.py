@@ -119,7 +119,10 @@ def test_a_nan_or_infinity_is_written_as_null_which_strict_parsers_read(tmp_path
         raise ValueError(f"{name} is not JSON")
 
     data = json.loads((tmp_path / "manifest.json").read_text(), parse_constant=refuse)
-    assert data["config"] == {"localize": {"laser_max_range_fallback": None}}
+    # a config's inf ("no limit") as its text: it reads back as the config, and hashes as it
+    assert data["config"] == {"localize": {"laser_max_range_fallback": "inf"}}
+    assert data["config_hash"] == config_hash(data["config"]) == config_hash(manifest.config)
+    assert DoorbatchConfig.model_validate(data["config"]).localize.laser_max_range_fallback == float("inf")
     assert (data["extra"]["log_posterior"], data["extra"]["lost_after_s"], data["extra"]["size"]) == (None, [1.5, None],
                                                                                                         None)
     assert Manifest.read(tmp_path / "manifest.json").extra["lost_after_s"] == [1.5, None]
