@@ -44,6 +44,9 @@ def by_status(summary: dict, status: str) -> set[str]:
 def test_run_writes_maps_runs_reports_and_hive_tables(reference_out: Path) -> None:
     out = reference_out
     assert (out / SITE / "map" / "map.yaml").is_file() and (out / SITE / "map" / "doors.parquet").is_file()
+    # the map doorbatch map would build: the logs have beam colours, so the em stage too (run.map_stages null)
+    assert json.loads((out / SITE / "map" / "manifest.json").read_text())["extra"]["stages"] == ["grid", "em"]
+    assert (out / SITE / "map" / "walls.parquet").is_file()
     for log in LOCALIZATION:
         for method in METHODS:
             run = out / SITE / "runs" / log / method
