@@ -41,5 +41,5 @@ def __getattr__(name: str) -> Any:
 
 
 def __dir__() -> list[str]:
-    """The package's public names, the lazy ones too (tab completion in a notebook)."""
-    return sorted(__all__)
+    """The package's names, the lazy ones too (tab completion in a notebook)."""
+    return sorted({*globals(), *__all__})

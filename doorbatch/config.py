@@ -1319,11 +1319,13 @@ def start_of(init: object) -> str | tuple[float, float, float]:
     if isinstance(init, str):
         return parse_init(init)
     try:
-        values = np.asarray(init, dtype=np.float64)
-    except (TypeError, ValueError):
+        given = np.asarray(init)
+        values = given.astype(np.float64) if given.dtype.kind in "iuf" else np.zeros(0)  # not bools, not text
+    except (TypeError, ValueError, OverflowError):
         values = np.zeros(0)
     if values.shape != (3,) or not np.isfinite(values).all():
-        raise UsageError(f"init {init!r}: expected reference, global, a pose topic (/initialpose) or a pose "
+        what = repr(init) if len(repr(init)) <= 80 else type(init).__name__
+        raise UsageError(f"init {what}: expected reference, global, a pose topic (/initialpose) or a pose "
                          f"(x, y, yaw) of three finite numbers")
     x, y, yaw = (float(v) for v in values)
     return (x, y, yaw)

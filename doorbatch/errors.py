@@ -94,7 +94,7 @@ class OptionalDependencyError(DoorbatchError):
         self.module, self.extra = module, extra
         super().__init__(f'{module} is not installed: pip install "doorbatch[{extra}]"')
 
-    def __reduce__(self) -> tuple[type[OptionalDependencyError], tuple[str, str]]:
-        """Rebuilt from its two arguments (pickle's default passes the message alone: a process pool's worker
-        raising it broke the pool)."""
-        return type(self), (self.module, self.extra)
+    def __reduce__(self) -> tuple[type[OptionalDependencyError], tuple[str, str], dict[str, object]]:
+        """Rebuilt from its two arguments and its attributes (pickle's default passes the message alone: a process
+        pool's worker raising it broke the pool)."""
+        return type(self), (self.module, self.extra), self.__dict__

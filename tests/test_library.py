@@ -77,7 +77,8 @@ def test_a_start_pose_is_the_same_in_any_form(init: object) -> None:
     assert start_of(init) == (1.2 if not isinstance(init, tuple) else 1.0, 0.0, 0.5)
 
 
-@pytest.mark.parametrize("init", ["Reference", (1.0, 2.0), [1.0, float("nan"), 0.0], np.zeros((3, 1)), None, "1,2"])
+@pytest.mark.parametrize("init", ["Reference", (1.0, 2.0), [1.0, float("nan"), 0.0], np.zeros((3, 1)), None, "1,2",
+                                  [True, False, True], ["1", "2", "3"], [10**400, 0, 0]])
 def test_a_start_in_no_known_form_is_a_usage_error(init: object) -> None:
     with pytest.raises(UsageError, match="init"):
         start_of(init)
@@ -113,8 +114,10 @@ def test_load_localization_map_takes_a_path_as_text_and_the_whole_config(built: 
 
 
 def test_an_optional_dependency_error_crosses_a_process_boundary() -> None:
-    err = pickle.loads(pickle.dumps(OptionalDependencyError("torch", "torch")))
-    assert isinstance(err, OptionalDependencyError)
+    raised = OptionalDependencyError("torch", "torch")
+    raised.add_note("while localizing run.mcap")
+    err = pickle.loads(pickle.dumps(raised))
+    assert isinstance(err, OptionalDependencyError) and err.__notes__ == ["while localizing run.mcap"]
     assert str(err) == 'torch is not installed: pip install "doorbatch[torch]"'
 
 

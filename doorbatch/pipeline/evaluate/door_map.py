@@ -19,7 +19,7 @@ import numpy.typing as npt
 from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.io.sim_truth import SimTruth
 from doorbatch.maps import DoorSet, OccupancyMap
-from doorbatch.pipeline.localize.door_geometry import other_end
+from doorbatch.pipeline.localize.door_geometry import leaf_endpoints, other_end
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -67,20 +67,26 @@ def match_by_hinge(detected_hinge: npt.ArrayLike, truth_hinge: npt.ArrayLike, ma
     return matched, dist
 
 
-def nearer_ends(detected: DoorSet, hinge_unknown: npt.ArrayLike, truth_hinge: npt.ArrayLike) -> DoorSet:
-    """``detected`` with each door of ``hinge_unknown`` (D,) hinged at whichever end of its closed leaf lies nearer a
-    truth hinge (:func:`~doorbatch.pipeline.localize.door_geometry.other_end`): a door that never moved shows no
-    hinge, and the em stage's choice of end is a guess, as localization treats it."""
+def nearer_ends(detected: DoorSet, hinge_unknown: npt.ArrayLike, truth: DoorSet, max_hinge_distance_m: float
+                ) -> DoorSet:
+    """``detected`` with each door of ``hinge_unknown`` (D,) hinged at the other end of its closed leaf
+    (:func:`~doorbatch.pipeline.localize.door_geometry.other_end`) where that is a truth door's leaf: its free end
+    then lies within ``max_hinge_distance_m`` of a truth hinge and its hinge of that door's closed free end, while
+    its own hinge is farther from every truth hinge. A door that never moved shows no hinge, and the em stage's
+    choice of end is a guess, as localization treats it; a leaf across a doorway is no door either way."""
     unknown = np.asarray(hinge_unknown, dtype=bool)
-    tru = np.asarray(truth_hinge, dtype=np.float64).reshape(-1, 2)
-    if not unknown.any() or not len(tru):
+    if not unknown.any() or not len(truth):
         return detected
     flipped = other_end(detected)
+    truth_tip = leaf_endpoints(truth, np.zeros(len(truth)))
 
-    def nearest(points: FloatArray) -> FloatArray:
-        return np.asarray(np.linalg.norm(points[:, None, :] - tru[None, :, :], axis=2).min(axis=1))
+    def distances(points: FloatArray, to: FloatArray) -> FloatArray:
+        return np.asarray(np.linalg.norm(points[:, None, :] - to[None, :, :], axis=2))
 
-    flip = unknown & (nearest(flipped.hinge) < nearest(detected.hinge))
+    to_hinge = distances(flipped.hinge, truth.hinge)  # (D, T): the flipped door's hinge to each truth hinge
+    same_leaf = (to_hinge <= max_hinge_distance_m) & (distances(detected.hinge, truth_tip) <= max_hinge_distance_m)
+    flip = unknown & same_leaf.any(axis=1) & (np.where(same_leaf, to_hinge, np.inf).min(axis=1)
+                                              < distances(detected.hinge, truth.hinge).min(axis=1))
 
     def pick(a: npt.ArrayLike, b: npt.ArrayLike) -> FloatArray:
         a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
@@ -98,7 +104,7 @@ def score_doors(detected: DoorSet, truth: DoorSet, moved: npt.ArrayLike,
     scored 1.0 looked perfect beside a recall of 0. Doors of ``hinge_unknown`` are scored at whichever leaf end
     is nearer a truth hinge (:func:`nearer_ends`)."""
     if hinge_unknown is not None:
-        detected = nearer_ends(detected, hinge_unknown, truth.hinge)
+        detected = nearer_ends(detected, hinge_unknown, truth, max_hinge_distance_m)
     moved_mask = np.asarray(moved, dtype=bool)
     matched, dist = match_by_hinge(detected.hinge, truth.hinge, max_hinge_distance_m)
     true_pos = [(i, j) for i, j in matched if moved_mask[j]]

@@ -166,7 +166,11 @@ def observed_share(weight: npt.ArrayLike, observed: npt.ArrayLike) -> npt.NDArra
     """(D,) per door the share of the weight (N,) held by the particles that observed it (``observed`` (N, D)):
     Σᵢ wᵢ·[door d observed from particle i] / Σᵢ wᵢ."""
     w = np.asarray(weight, dtype=np.float64)
-    return np.asarray(w @ np.asarray(observed, dtype=np.float64) / w.sum(), dtype=np.float64)
+    seen = np.asarray(observed, dtype=np.float64).reshape(w.shape[0], -1)
+    total = float(w.sum())
+    if not total > 0.0:  # no particle, or none with weight: no door measured
+        return np.zeros(seen.shape[1], dtype=np.float64)
+    return np.asarray(np.clip(w @ seen / total, 0.0, 1.0), dtype=np.float64)
 
 
 def walked_doors(particles: ParticleSet, dt_s: float, config: LocalizeConfig) -> ParticleSet:

@@ -33,7 +33,8 @@ class LocalizationResult:
         odom: (U, 3) the odometry pose at each update (for the map→odom transform).
         n_particles: (U,) particles after the update; neff: (U,) effective sample size before resampling.
         door_mean, door_std: (U, D) per door the weighted angle (rad, relative to closed_yaw) and std;
-        door_observed: (U, D) whether the door was observed in that update's scan (any particle).
+        door_observed: (U, D) whether the door was measured in that update's scan by particles holding at least
+            ``localize.door_observed_min_share`` of the weight.
         particles: (U, K, 3) a decimated draw of the particles per update (for the annotated MCAP).
         converged_ns: first stamp at which the filter counted as converged (None: never; tracking runs
             start converged); ambiguous: global localization ended with several distinct hypotheses.

@@ -666,7 +666,9 @@ def localize_recording(rec: Recording, lmap: LocalizationMap, config: DoorbatchC
                                    and stopped_since(rec.scans.stamps_ns, odom, odom_ok, i, lc))
             state, diag, share = rbpf_step(state, odom[i], stamp_s, last_s, beams, rec.scans.hits_base(i),
                                            lmap.field, lmap.doors, lc, rng, free, force=first or stopped_past_update)
-            observed = share >= lc.door_observed_min_share  # door_states' flag; any particle's is share > 0
+            # door_states' flag (less 1e-9: a share of every particle sums to 1 only within round-off); share > 0
+            # is what any particle with weight saw
+            observed = share >= lc.door_observed_min_share - 1e-9
         else:
             state, diag = mcl_step(state, odom[i], beams, lmap.field, lc, rng, free, force=first,
                                    combination=combination)

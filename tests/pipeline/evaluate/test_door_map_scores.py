@@ -89,3 +89,7 @@ def test_a_door_that_never_moved_is_scored_at_the_nearer_end_of_its_leaf() -> No
     # a door whose hinge is known keeps it: the first door mapped at its free end is not moved onto the truth
     wrong_end = _doors([(0.9, 0.0)], [math.pi], [0.0], [1.5])
     assert score_doors(wrong_end, truth, [True, True], hinge_unknown=[False]).precision == 0.0
+    # a never-moved leaf across the first doorway (hinged 1.1 m off the truth hinge, pointing back at it): its free
+    # end lies 0.2 m from the truth hinge, but it is not the truth's leaf, flipped or not (rev40)
+    across = _doors([(0.0, 1.1)], [-math.pi / 2], [0.0], [0.0])
+    assert score_doors(across, truth, [True, True], hinge_unknown=[True]).precision == 0.0

@@ -458,7 +458,7 @@ def _map_metrics(out: Path) -> dict[str, float]:
     return dict(zip(table["metric"], table["value"], strict=True))
 
 
-def _map_dir(folder: Path, doors: DoorSet, source: str = "grid") -> Path:
+def _map_dir(folder: Path, doors: DoorSet, source: str = "grid", moved: list[bool] | None = None) -> Path:
     import shutil
 
     from doorbatch.io.parquet import write_table
@@ -471,7 +471,8 @@ def _map_dir(folder: Path, doors: DoorSet, source: str = "grid") -> Path:
     write_table("doors", {"door_id": np.arange(n, dtype=np.int32), "hinge_x": doors.hinge[:, 0],
                           "hinge_y": doors.hinge[:, 1], "length": doors.length, "closed_yaw": doors.closed_yaw,
                           "angle_min": doors.angle_min, "angle_max": doors.angle_max,
-                          "n_observations": np.full(n, 5, np.int32), "source": [source] * n, "moved": [True] * n},
+                          "n_observations": np.full(n, 5, np.int32), "source": [source] * n,
+                          "moved": [True] * n if moved is None else moved},
                 folder / "doors.parquet")
     manifest = Manifest.start(DoorbatchConfig().as_dict(), [SAMPLE_LOGS / "map_pass1.mcap"], command="map")
     manifest.write(folder / "manifest.json")
@@ -685,6 +686,30 @@ def test_em_door_maps_count_the_doors_that_never_moved(tmp_path: Path) -> None:
     # the same doors as a grid map: the never-moved ones are not what the grid stage may report
     assert got[("grid", "door_precision")] == pytest.approx(moved.sum() / len(keep))
     assert ("grid", "door_recall_never_moved") not in got
+
+
+def test_an_em_door_that_never_moved_counts_at_either_end_of_its_leaf(tmp_path: Path) -> None:
+    """An em stage's never-moved door seen closed shows no hinge: mapped at its free end (doors.parquet's moved
+    false), it is the truth's door, not a false positive 0.9 m off (hAO: precision 0.5-0.8 on em_corridor)."""
+    from doorbatch.io.sim_truth import read_truth
+    from doorbatch.pipeline.evaluate.door_map import truth_doors
+    from doorbatch.pipeline.localize.door_geometry import other_end
+
+    doors, moved = truth_doors(read_truth(SAMPLE_LOGS / "map.truth.yaml"),
+                               math.radians(DoorbatchConfig().doors.min_opening_deg))
+    seen_closed = ~moved & (np.abs(doors.angle_min + doors.angle_max) / 2 <= math.radians(5.0))
+    assert seen_closed.any()
+    tip = other_end(doors)
+    flip = seen_closed[:, None]
+    mapped = DoorSet(np.where(flip, tip.hinge, doors.hinge), doors.length,
+                     np.where(seen_closed, tip.closed_yaw, doors.closed_yaw),
+                     np.where(seen_closed, 0.0, doors.angle_min), np.where(seen_closed, 0.0, doors.angle_max))
+    out = tmp_path / "report"
+    assert main(["evaluate", str(_map_dir(tmp_path / "em", mapped, "em", moved.tolist())), "-o", str(out), "-q"]) == 0
+    table = read_table("metrics", out / "metrics.parquet").to_pydict()
+    got = dict(zip(table["metric"], table["value"], strict=True))
+    assert got["door_precision"] == 1.0 and got["door_recall"] == 1.0 and got["door_recall_never_moved"] == 1.0
+    assert got["door_hinge_error_mean"] < 1e-6
 
 
 def test_a_truth_without_leaf_observations_scores_doors_by_position(tmp_path: Path) -> None:

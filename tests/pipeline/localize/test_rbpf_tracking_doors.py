@@ -104,3 +104,6 @@ def test_a_doors_observed_share_is_the_weight_of_the_particles_that_measured_it(
     observed = np.array([[True, False], [False, False], [True, True]])
     assert np.allclose(observed_share(weight, observed), [0.7, 0.2])
     assert np.allclose(observed_share(2 * weight, observed), [0.7, 0.2])  # weights need not be normalized
+    assert np.array_equal(observed_share(np.zeros(3), observed), [0.0, 0.0])  # no weight: nothing measured
+    every = np.random.default_rng(3).dirichlet(np.ones(2000))
+    assert observed_share(every, np.ones((2000, 1), dtype=bool))[0] <= 1.0  # a share, never above all of it
