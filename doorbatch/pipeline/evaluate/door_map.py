@@ -1,5 +1,6 @@
 """Door-map scoring against ground truth: match by hinge distance, then hinge, length and range errors (a door
-that never moved at whichever end of its leaf is nearer: its hinge cannot be seen).
+that never moved and was seen closed shows no hinge: it is matched at the other end of its leaf where that leaf is
+a truth door's, :func:`nearer_ends`).
 
 A detected door matches the nearest unmatched truth door whose hinge lies within ``max_hinge_distance_m``
 (greedy by distance). Only truth doors seen at two or more distinguishable angles (``moved``) should be
@@ -101,8 +102,8 @@ def score_doors(detected: DoorSet, truth: DoorSet, moved: npt.ArrayLike,
                 max_hinge_distance_m: float = 0.3, hinge_unknown: npt.ArrayLike | None = None) -> DoorScore:
     """Precision over all detections, recall over the truth doors that moved, and errors of the matches. A map
     with no doors has no precision, and a truth with no counted door no recall (NaN): an empty doors.parquet
-    scored 1.0 looked perfect beside a recall of 0. Doors of ``hinge_unknown`` are scored at whichever leaf end
-    is nearer a truth hinge (:func:`nearer_ends`)."""
+    scored 1.0 looked perfect beside a recall of 0. Doors of ``hinge_unknown`` are scored at the other end of
+    their leaf where that leaf is a truth door's (:func:`nearer_ends`)."""
     if hinge_unknown is not None:
         detected = nearer_ends(detected, hinge_unknown, truth, max_hinge_distance_m)
     moved_mask = np.asarray(moved, dtype=bool)
