@@ -37,9 +37,10 @@ log = logging.getLogger(__name__)
 
 
 class Section(BaseModel):
-    """Base of every config section: frozen, unknown keys forbidden."""
+    """Base of every config section: frozen, unknown keys forbidden, no NaN or infinity unless a field says what it
+    means (a fuzzed .inf or .nan reached int() or an array size as an internal error)."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 class TopicsConfig(Section):
@@ -1029,7 +1030,7 @@ class DoorPoseConfig(Section):
     # Sec. III-B "evaluate if a valid door was detected": an estimate narrower or wider than a door (standard
     # leaves are 0.6-1.25 m) is not one (a false box, or a line fitted to an obstacle); 0 and inf disable it.
     door_width_min_m: float = Field(0.5, ge=0.0)
-    door_width_max_m: float = Field(1.4, gt=0.0)
+    door_width_max_m: float = Field(1.4, gt=0.0, allow_inf_nan=True)
     # Added to every detection message's stamp (s): a detector that stamps its boxes when it publishes them, late by
     # its latency, takes minus that latency (-0.1 for 100 ms), as io.scan_time_offset_s for scans. Nothing in the
     # stamps tells a latency of whole camera periods (the boxes then carry the stamp of a later image).

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+from pydantic import BaseModel
 
 from doorbatch.config import DoorbatchConfig, load_config
 from doorbatch.errors import ConfigError
@@ -64,3 +65,29 @@ def test_values_no_step_could_run_with_are_config_errors(override: str, named: s
 def test_a_pose_and_a_topic_are_valid_run_inits() -> None:
     assert load_config(overrides=["run.init=1.5,-2,0.3"]).run.init == "1.5,-2,0.3"
     assert load_config(overrides=["run.init=/initialpose"]).run.init == "/initialpose"
+
+
+def _float_keys() -> list[str]:
+    """Every config key whose value is a number with a fraction (float, or float or None)."""
+    keys = []
+    for name, section in DoorbatchConfig.model_fields.items():
+        model = section.annotation
+        if not isinstance(model, type) or not issubclass(model, BaseModel):
+            continue
+        keys += [f"{name}.{key}" for key, info in model.model_fields.items()
+                 if info.annotation in (float, float | None)]
+    return keys
+
+
+def test_no_config_number_takes_nan_or_infinity_unless_it_says_what_it_means() -> None:
+    # a fuzzer's .inf or .nan reached int() or an array size: an internal error, or a hang (hAP)
+    keys = _float_keys()
+    assert len(keys) > 100
+    allowed = {"doorpose.door_width_max_m"}  # inf: no upper width (config comment)
+    for key in keys:
+        for value in (".nan", ".inf", "-.inf"):
+            if key in allowed:
+                continue
+            with pytest.raises(ConfigError, match="finite number"):
+                load_config(overrides=[f"{key}={value}"])
+    assert load_config(overrides=["doorpose.door_width_max_m=.inf"]).doorpose.door_width_max_m == float("inf")

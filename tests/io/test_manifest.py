@@ -111,7 +111,7 @@ def test_read_rejects_foreign_files(tmp_path: Path, text: str, message: str) -> 
 
 
 def test_a_nan_or_infinity_is_written_as_null_which_strict_parsers_read(tmp_path: Path) -> None:
-    manifest = Manifest.start({"localize": {"laser_max_range_fallback": float("inf")}})
+    manifest = Manifest.start({"doorpose": {"door_width_max_m": float("inf")}})
     manifest.extra.update(log_posterior=float("nan"), lost_after_s=[1.5, float("-inf")], size=np.float32("nan"))
     manifest.write(tmp_path / "manifest.json")
 
@@ -120,9 +120,9 @@ def test_a_nan_or_infinity_is_written_as_null_which_strict_parsers_read(tmp_path
 
     data = json.loads((tmp_path / "manifest.json").read_text(), parse_constant=refuse)
     # a config's inf ("no limit") as its text: it reads back as the config, and hashes as it
-    assert data["config"] == {"localize": {"laser_max_range_fallback": "inf"}}
+    assert data["config"] == {"doorpose": {"door_width_max_m": "inf"}}
     assert data["config_hash"] == config_hash(data["config"]) == config_hash(manifest.config)
-    assert DoorbatchConfig.model_validate(data["config"]).localize.laser_max_range_fallback == float("inf")
+    assert DoorbatchConfig.model_validate(data["config"]).doorpose.door_width_max_m == float("inf")
     assert (data["extra"]["log_posterior"], data["extra"]["lost_after_s"], data["extra"]["size"]) == (None, [1.5, None],
                                                                                                         None)
     assert Manifest.read(tmp_path / "manifest.json").extra["lost_after_s"] == [1.5, None]
