@@ -648,3 +648,25 @@ def test_the_manifests_read_stage_covers_reading_the_logs(write_log: Callable[..
     out = tmp_path / "map"
     assert main(["map", str(write_log("a.mcap")), "-o", str(out), "--stages", "grid", "-q"]) == 0
     assert json.loads((out / "manifest.json").read_text())["stage_seconds"]["read"] >= 0.3
+
+
+def test_a_door_search_with_no_direction_to_try_maps_without_doors_there(tmp_path: Path) -> None:
+    # doors.max_rotation_deg 1e-9 leaves a lone leaf's partner search no yaw to try: np.split of nothing gave one
+    # empty run, indexed (IndexError, exit 1; hAP's config fuzzer on 10 s of each sample pass)
+    from mcap.reader import make_reader
+
+    from doorbatch.io.split import copy_window
+
+    logs = []
+    for k in (1, 2, 3):
+        src = SAMPLE_LOGS / f"map_pass{k}.mcap"
+        with src.open("rb") as f:
+            summary = make_reader(f).get_summary()
+        assert summary is not None and summary.statistics is not None
+        t0 = summary.statistics.message_start_time
+        logs.append(tmp_path / f"pass{k}.mcap")
+        copy_window(src, logs[-1], t0, t0 + 10_000_000_000)
+    out = tmp_path / "map"
+    assert main(["map", *map(str, logs), "-o", str(out), "--stages", "grid", "-q",
+                 "--set", "doors.max_rotation_deg=1e-9"]) == 0
+    assert (out / "map.pgm").is_file()

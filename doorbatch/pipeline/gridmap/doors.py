@@ -768,7 +768,7 @@ def _static_states(grid: LogOddsGrid, occupied: BoolArray, hinge: FloatArray, mo
     found: list[tuple[FloatArray, float]] = []
     lo, hi = _unwrapped_arc(start, span, yaws)  # the arc held so far, on the yaws' axis
     runs = np.split(np.arange(yaws.size), np.flatnonzero(np.diff(ok.astype(np.int8)) != 0) + 1)
-    for run in sorted((r for r in runs if ok[r[0]]), key=lambda r: -float(frac[r].max())):
+    for run in sorted((r for r in runs if r.size and ok[r[0]]), key=lambda r: -float(frac[r].max())):  # none: no yaw
         tries, extent = _run_directions(run, frac, float(yaws[run[0]]), float(yaws[1] - yaws[0]), gap)
         end = None
         for phi in tries:
@@ -971,7 +971,7 @@ def _partner_from(grid: LogOddsGrid, occupied: BoolArray, raw: BoolArray, g: _Hi
     breaks = (np.diff(ok.astype(np.int8)) != 0) | (np.diff(yaws) > math.radians(1.5))  # the gap about the leaf
     runs = np.split(np.arange(yaws.size), np.flatnonzero(breaks) + 1)
     gap = math.radians(config.angle_cluster_gap_deg)
-    for run in sorted((r for r in runs if ok[r[0]]), key=lambda r: -float(frac[r].max())):
+    for run in sorted((r for r in runs if r.size and ok[r[0]]), key=lambda r: -float(frac[r].max())):  # none: no yaw
         tries, extent = _run_directions(run, frac, float(yaws[run[0]]), math.radians(1.0), gap)
         for phi in tries:
             found = _refine_partner(grid, occupied, g, mode_yaw, hinge, phi, length, config, extent)
