@@ -1066,7 +1066,8 @@ class DoorPoseConfig(Section):
     k_beta: float = Field(-1.5, lt=0.0)
     max_linear_mps: float = Field(0.3, gt=0.0)
     max_angular_rps: float = Field(1.0, gt=0.0)
-    control_rate_hz: float = Field(10.0, gt=0.0)
+    # A real controller's rate (1-100 Hz); beyond these bounds the simulated approach ran for hours (hAP: 1e-9, 1e9).
+    control_rate_hz: float = Field(10.0, ge=0.1, le=1000.0)
     # Sec. III-C: "initial" estimates the goal once; "continuous" re-estimates until this close (0.2 m).
     goal_updating: Literal["initial", "continuous"] = "continuous"
     stop_updating_within_m: float = Field(0.2, ge=0.0)

@@ -472,3 +472,30 @@ def test_inspect_says_where_the_reference_comes_from(write_log: Callable[..., Pa
         path = write_log(name, msgs)
         assert main(["inspect", str(path), "--json"]) == 0
         assert json.loads(capsys.readouterr().out)["reference"] == expected
+
+
+def test_running_out_of_memory_is_one_line_that_names_the_likely_config_values(
+        write_log: Callable[..., Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    # hAP's config fuzzer: grid.growth_margin_m=1e9 asked numpy for 29 TiB, reported as an "internal error"
+    import doorbatch.cli as cli_module
+    import doorbatch.pipeline.map_run as map_run
+
+    def too_big(*_: object, **__: object) -> None:
+        raise MemoryError("Unable to allocate 29.1 TiB for an array with shape (400, 20000000575)")
+
+    monkeypatch.setattr(map_run, "build_map", too_big)
+    monkeypatch.setattr(cli_module, "CRASH_LOG", tmp_path / "crash.log")
+    assert main(["map", str(write_log("a.mcap")), "-o", str(tmp_path / "map"), "--stages", "grid", "-q"]) == 1
+    line = capsys.readouterr().err.strip().splitlines()[-1]
+    assert line.startswith("error: out of memory (Unable to allocate 29.1 TiB") and "grid resolution" in line
+    assert "internal error" not in line and "MemoryError" in (tmp_path / "crash.log").read_text()
+
+
+@pytest.mark.parametrize("rate", ["1e-9", "1e9"])
+def test_a_controller_rate_no_robot_runs_is_a_config_error(rate: str) -> None:
+    from doorbatch.config import load_config
+    from doorbatch.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="control_rate_hz"):
+        load_config(overrides=[f"doorpose.control_rate_hz={rate}"])
