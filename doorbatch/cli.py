@@ -432,15 +432,12 @@ def _main(argv: list[str] | None) -> int:
     except KeyboardInterrupt:
         click.echo("interrupted", err=True)
         return 130
-    except MemoryError as err:  # the machine's limit, reached by a log or by a config value far from its default
+    except Exception as err:  # a bug, or the machine's memory: one line here, the traceback in the crash log
         CRASH_LOG.write_text(traceback.format_exc())
-        click.echo(f"error: out of memory ({err or 'MemoryError'}): a config value far from its default (a grid "
-                   f"resolution, a search step or window, a particle count) may ask for this much; traceback in "
-                   f"{CRASH_LOG}", err=True)
-        return 1
-    except Exception as err:  # a bug: one line here, the traceback in the crash log
-        CRASH_LOG.write_text(traceback.format_exc())
-        click.echo(f"error: internal error ({type(err).__name__}: {err}); traceback in {CRASH_LOG}", err=True)
+        what = (f"out of memory ({err or 'MemoryError'}): a config value far from its default (a grid resolution, a "
+                f"search step or window, a particle count) may ask for this much" if isinstance(err, MemoryError)
+                else f"internal error ({type(err).__name__}: {err})")
+        click.echo(f"error: {what}; traceback in {CRASH_LOG}", err=True)
         return 1
     return 0
 

@@ -30,6 +30,7 @@ from doorbatch.amcl_params import (
     translate_ros2_parameter_file,
 )
 from doorbatch.errors import ConfigError, UsageError
+from doorbatch.io.json_text import nonfinite_as_text
 from doorbatch.io.ros1_launch import is_launch_file, read_launch_node
 from doorbatch.records import class_name
 
@@ -1146,8 +1147,6 @@ class DoorbatchConfig(Section):
 def tree_hash(tree: Mapping[str, Any]) -> str:
     """SHA-256 of a config tree (plain data) in canonical JSON, a non-finite number as its text (as manifest.json
     writes the tree: :func:`~doorbatch.io.json_text.nonfinite_as_text`)."""
-    from doorbatch.io.json_text import nonfinite_as_text
-
     text = json.dumps(nonfinite_as_text(dict(tree)), sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode()).hexdigest()
 

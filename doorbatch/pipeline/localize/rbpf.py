@@ -184,9 +184,17 @@ def walked_doors(particles: ParticleSet, dt_s: float, config: LocalizeConfig) ->
 def standing_still(odom_at_update: npt.ArrayLike, odom_now: npt.ArrayLike, config: LocalizeConfig) -> bool:
     """Whether the odometry has moved the robot by at most ``door_update_still_m`` and ``door_update_still_deg``
     since the last pose update (the held pose is where the robot is)."""
-    a, b = np.asarray(odom_at_update, dtype=np.float64), np.asarray(odom_now, dtype=np.float64)
-    return bool(math.hypot(b[0] - a[0], b[1] - a[1]) <= config.door_update_still_m
-                and abs(float(wrap_angle(b[2] - a[2]))) <= math.radians(config.door_update_still_deg))
+    return bool(within_of(odom_at_update, odom_now, config.door_update_still_m, config.door_update_still_deg).all())
+
+
+def within_of(poses: npt.ArrayLike, pose: npt.ArrayLike, max_m: float, max_deg: float) -> npt.NDArray[np.bool_]:
+    """(K,) whether each of ``poses`` (K, 3) (or one (3,)) lies within ``max_m`` and ``max_deg`` of ``pose``
+    (distance, and heading along the shorter arc)."""
+    a = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    b = np.asarray(pose, dtype=np.float64).reshape(3)
+    step = np.hypot(a[:, 0] - b[0], a[:, 1] - b[1])
+    turn = np.abs(wrap_angle(a[:, 2] - b[2]))
+    return np.asarray((step <= max_m) & (turn <= math.radians(max_deg)), dtype=np.bool_)
 
 
 def doors_updated_still(particles: ParticleSet, dt_s: float, scan_points_base: npt.ArrayLike, doors: DoorSet,

@@ -25,7 +25,6 @@ import numpy.typing as npt
 from doorbatch.config import DoorbatchConfig, LocalizeConfig, config_of, parse_init, start_of
 from doorbatch.errors import InputDataError, PipelineError, UsageError
 from doorbatch.geometry.odometry import sideways_share
-from doorbatch.geometry.rotations import wrap_angle
 from doorbatch.geometry.se2 import interpolate_poses
 from doorbatch.io.log_clock import LogClock, long_gaps
 from doorbatch.io.map_server import as_written, read_map
@@ -69,7 +68,7 @@ from doorbatch.pipeline.localize.mcl import (
     mcl_step,
 )
 from doorbatch.pipeline.localize.particles import ParticleSet
-from doorbatch.pipeline.localize.rbpf import rbpf_step, standing_still
+from doorbatch.pipeline.localize.rbpf import rbpf_step, standing_still, within_of
 from doorbatch.pipeline.localize.resampling import RecoveryState
 from doorbatch.pipeline.localize.result import LocalizationResult, StillDoorStates
 from doorbatch.pipeline.localize.rival_pose import Rival, RivalOutcome, RivalSearch, find_rival, scan_cloud
@@ -545,10 +544,7 @@ def stopped_since(stamps_ns: npt.NDArray[np.int64], odom: FloatArray, ok: npt.ND
     j = int(np.searchsorted(stamps_ns, since, side="left"))
     if j >= i or (j == 0 and int(stamps_ns[0]) > since) or not ok[j:i + 1].all():
         return False
-    step = np.hypot(odom[j:i, 0] - odom[i, 0], odom[j:i, 1] - odom[i, 1])
-    turn = np.abs(wrap_angle(odom[j:i, 2] - odom[i, 2]))
-    return bool(np.all(step <= lc.door_update_stopped_m)
-                and np.all(turn <= math.radians(lc.door_update_stopped_deg)))
+    return bool(within_of(odom[j:i], odom[i], lc.door_update_stopped_m, lc.door_update_stopped_deg).all())
 
 
 def with_laser_odometry(rec: Recording, config: DoorbatchConfig) -> Recording:
