@@ -24,12 +24,10 @@ def strict_json(data: Any, indent: int | None = 2, default: Callable[[Any], Any]
 def _finite(value: Any, default: Callable[[Any], Any]) -> Any:
     if isinstance(value, np.ndarray | np.generic):
         value = value.tolist()
+    if isinstance(value, dict | list | tuple):
+        return _walk(value, lambda v: _finite(v, default))
     if isinstance(value, float):
         return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: _finite(v, default) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_finite(v, default) for v in value]
     if value is None or isinstance(value, bool | int | str):
         return value
     return _finite(default(value), default)
@@ -39,10 +37,15 @@ def nonfinite_as_text(value: Any) -> Any:
     """``value`` (plain data) with every non-finite float as the text ``"inf"``, ``"-inf"`` or ``"nan"``, which
     strict JSON holds and a config model reads back as the float (a config value of inf means "no limit": null
     would not read back, and would hash apart from the config it came from)."""
+    if isinstance(value, dict | list | tuple):
+        return _walk(value, nonfinite_as_text)
     if isinstance(value, float) and not math.isfinite(value):
         return "nan" if math.isnan(value) else ("inf" if value > 0 else "-inf")
-    if isinstance(value, dict):
-        return {k: nonfinite_as_text(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [nonfinite_as_text(v) for v in value]
     return value
+
+
+def _walk(container: dict[Any, Any] | list[Any] | tuple[Any, ...], leaf: Callable[[Any], Any]) -> Any:
+    """A dict's values or a list's (a tuple's, as a list) each through ``leaf``."""
+    if isinstance(container, dict):
+        return {k: leaf(v) for k, v in container.items()}
+    return [leaf(v) for v in container]
